@@ -122,6 +122,10 @@ impl<'a> BinCursor<'a> {
         if let Some(order) = self.order {
             return order;
         }
+        if raw == [0; 4] {
+            // Zero reads the same either way: decide on a later value.
+            return ByteOrder::Little;
+        }
         let left = self.remaining() as i64;
         let plausible = |v: i32| v >= 0 && (v as i64) * (per_unit as i64) <= left;
         let le = i32::from_le_bytes(raw);

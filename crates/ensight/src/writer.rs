@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::binary::ByteOrder;
 use crate::case::VarType;
 use crate::error::{Error, Result};
 
@@ -72,6 +73,7 @@ pub struct CaseWriter {
     placement: Placement,
     variables: Vec<(String, VarType)>,
     times: Vec<f64>,
+    order: ByteOrder,
 }
 
 impl CaseWriter {
@@ -86,11 +88,6 @@ impl CaseWriter {
                 return Err(Error::Request(format!("variable {v:?}: only scalar and vector variables can be written")));
             }
         }
-        if placement == Placement::Measured {
-            // The model geometry of a measured-only case: no nodes, no parts.
-            let geo = empty_geometry(format);
-            atomic_write(&dir.join(format!("{name}.geo")), &geo)?;
-        }
         Ok(CaseWriter {
             dir: dir.to_path_buf(),
             name: name.to_string(),
@@ -98,7 +95,14 @@ impl CaseWriter {
             placement,
             variables: variables.iter().map(|(n, t)| ((*n).to_string(), *t)).collect(),
             times: Vec::new(),
+            order: ByteOrder::Little,
         })
+    }
+
+    /// Byte order of binary files (little-endian unless asked; big-endian for old Unix solvers).
+    pub fn with_byte_order(mut self, order: ByteOrder) -> Self {
+        self.order = order;
+        self
     }
 
     pub fn case_path(&self) -> PathBuf {
@@ -131,13 +135,18 @@ impl CaseWriter {
         if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(Error::Request(format!("particle {i} has a non-finite coordinate {:?}", positions[i])));
         }
+        if step == 0 && self.placement == Placement::Measured {
+            // The model geometry of a measured-only case: no nodes, no parts.
+            let geo = empty_geometry(self.format, self.order);
+            atomic_write(&self.dir.join(format!("{}.geo", self.name)), &geo)?;
+        }
         let (geo_stem, geo) = match self.placement {
-            Placement::PointPart => ("geo", point_geometry(self.format, positions)),
-            Placement::Measured => ("mgeo", measured_geometry(self.format, positions)),
+            Placement::PointPart => ("geo", point_geometry(self.format, self.order, positions)),
+            Placement::Measured => ("mgeo", measured_geometry(self.format, self.order, positions)),
         };
         atomic_write(&self.dir.join(self.step_name(geo_stem, step)), &geo)?;
         for v in variables {
-            let bytes = variable_file(self.format, self.placement, v);
+            let bytes = variable_file(self.format, self.order, self.placement, v);
             atomic_write(&self.dir.join(self.step_name(v.name(), step)), &bytes)?;
         }
         self.times.push(time);
@@ -192,13 +201,22 @@ pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
 struct Out {
     binary: bool,
     gold: bool,
+    order: ByteOrder,
     bytes: Vec<u8>,
     text: String,
 }
 
 impl Out {
-    fn new(format: WriteFormat) -> Out {
-        Out { binary: format.binary(), gold: format.gold(), bytes: Vec::new(), text: String::new() }
+    fn new(format: WriteFormat, order: ByteOrder) -> Out {
+        Out { binary: format.binary(), gold: format.gold(), order, bytes: Vec::new(), text: String::new() }
+    }
+
+    fn word(&mut self, bits: u32) {
+        let b = match self.order {
+            ByteOrder::Little => bits.to_le_bytes(),
+            ByteOrder::Big => bits.to_be_bytes(),
+        };
+        self.bytes.extend_from_slice(&b);
     }
 
     fn string(&mut self, s: &str) {
@@ -216,7 +234,7 @@ impl Out {
     /// A count or part number alone on its line: `%8d` (EnSight 6) or `%10d` (Gold).
     fn int(&mut self, v: usize) {
         if self.binary {
-            self.bytes.extend_from_slice(&(v as i32).to_le_bytes());
+            self.word(v as u32);
         } else if self.gold {
             let _ = writeln!(self.text, "{v:10}");
         } else {
@@ -234,7 +252,7 @@ impl Out {
     fn floats(&mut self, values: impl Iterator<Item = f32>, per_line: usize) {
         if self.binary {
             for v in values {
-                self.bytes.extend_from_slice(&v.to_le_bytes());
+                self.word(v.to_bits());
             }
             return;
         }
@@ -280,8 +298,8 @@ fn header(out: &mut Out) {
     out.string("element id assign");
 }
 
-fn empty_geometry(format: WriteFormat) -> Vec<u8> {
-    let mut out = Out::new(format);
+fn empty_geometry(format: WriteFormat, order: ByteOrder) -> Vec<u8> {
+    let mut out = Out::new(format, order);
     header(&mut out);
     if !out.gold {
         out.string("coordinates");
@@ -290,9 +308,9 @@ fn empty_geometry(format: WriteFormat) -> Vec<u8> {
     out.finish()
 }
 
-fn point_geometry(format: WriteFormat, positions: &[[f32; 3]]) -> Vec<u8> {
+fn point_geometry(format: WriteFormat, order: ByteOrder, positions: &[[f32; 3]]) -> Vec<u8> {
     let n = positions.len();
-    let mut out = Out::new(format);
+    let mut out = Out::new(format, order);
     header(&mut out);
     if out.gold {
         out.string("part");
@@ -316,9 +334,9 @@ fn point_geometry(format: WriteFormat, positions: &[[f32; 3]]) -> Vec<u8> {
     out.finish()
 }
 
-fn measured_geometry(format: WriteFormat, positions: &[[f32; 3]]) -> Vec<u8> {
+fn measured_geometry(format: WriteFormat, order: ByteOrder, positions: &[[f32; 3]]) -> Vec<u8> {
     let n = positions.len();
-    let mut out = Out::new(format);
+    let mut out = Out::new(format, order);
     if out.binary {
         out.string("C Binary");
     }
@@ -326,7 +344,9 @@ fn measured_geometry(format: WriteFormat, positions: &[[f32; 3]]) -> Vec<u8> {
     out.string("particle coordinates");
     if out.binary {
         out.int(n);
-        out.bytes.extend((1..=n as i32).flat_map(i32::to_le_bytes));
+        for id in 1..=n {
+            out.word(id as u32);
+        }
         out.floats(positions.iter().flatten().copied(), 3);
     } else {
         let _ = writeln!(out.text, "{n:8}");
@@ -341,8 +361,8 @@ fn measured_geometry(format: WriteFormat, positions: &[[f32; 3]]) -> Vec<u8> {
     out.finish()
 }
 
-fn variable_file(format: WriteFormat, placement: Placement, var: &VarData<'_>) -> Vec<u8> {
-    let mut out = Out::new(format);
+fn variable_file(format: WriteFormat, order: ByteOrder, placement: Placement, var: &VarData<'_>) -> Vec<u8> {
+    let mut out = Out::new(format, order);
     out.string(var.name());
     let per_part = out.gold && placement == Placement::PointPart;
     if per_part {
