@@ -1,1 +1,13 @@
+//! Synthetic particle scenes whose true surface is known in closed form, moving in time, and
+//! scenes built to break naive MLS. Pure maths: no files, no formats.
 
+mod ray;
+mod sampling;
+mod scene;
+mod truth;
+
+pub use glam::{DMat3, DVec3};
+pub use ray::{Hit, Ray};
+pub use sampling::{fibonacci_sphere, fibonacci_torus};
+pub use scene::{DENSITY, Droplet, Extra, GRAVITY, HardCases, Particles, Scene, SceneError, SceneKind, SceneSpec};
+pub use truth::{Truth, Wave, height, height_gradient};

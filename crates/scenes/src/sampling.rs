@@ -1,0 +1,64 @@
+//! Near-uniform point sets on the unit sphere, a torus and a unit square.
+
+use glam::{DVec2, DVec3};
+use std::f64::consts::{PI, TAU};
+
+/// The golden ratio's fractional step, for Fibonacci lattices.
+const GOLDEN: f64 = 0.618_033_988_749_894_8;
+
+/// `n` points of a spherical Fibonacci lattice on the unit sphere (also their normals).
+pub fn fibonacci_sphere(n: usize) -> Vec<DVec3> {
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = TAU * ((i as f64 * GOLDEN).fract());
+            DVec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+/// `n` (u, v) angles of a Fibonacci lattice on a torus, with v distributed by the area element
+/// (R + r cos v) so that the points are near-uniform on the surface.
+pub fn fibonacci_torus(n: usize, major: f64, minor: f64) -> Vec<DVec2> {
+    (0..n)
+        .map(|i| {
+            let target = (i as f64 + 0.5) / n as f64;
+            // Invert CDF(v) = (R v + r sin v) / (2πR) by Newton from the uniform guess.
+            let mut v = TAU * target;
+            for _ in 0..30 {
+                let f = (major * v + minor * v.sin()) / (TAU * major) - target;
+                let df = (major + minor * v.cos()) / (TAU * major);
+                v -= f / df;
+            }
+            let u = TAU * ((i as f64 * GOLDEN).fract());
+            DVec2::new(u, v.rem_euclid(TAU))
+        })
+        .collect()
+}
+
+/// A regular grid over [0, a] × [0, b] with spacing close to `s`, cell centred.
+pub fn grid(a: f64, b: f64, s: f64) -> Vec<DVec2> {
+    let nx = ((a / s).round() as usize).max(1);
+    let ny = ((b / s).round() as usize).max(1);
+    let mut out = Vec::with_capacity(nx * ny);
+    for j in 0..ny {
+        for i in 0..nx {
+            out.push(DVec2::new((i as f64 + 0.5) * a / nx as f64, (j as f64 + 0.5) * b / ny as f64));
+        }
+    }
+    out
+}
+
+/// Surface area of a torus.
+pub fn torus_area(major: f64, minor: f64) -> f64 {
+    4.0 * PI * PI * major * minor
+}
+
+/// Knud Thomsen's approximation of an ellipsoid's area (relative error ≤ 1.1 %), used only to
+/// report a mean spacing.
+pub fn ellipsoid_area(r: DVec3) -> f64 {
+    let p = 1.6075;
+    let (a, b, c) = (r.x.powf(p), r.y.powf(p), r.z.powf(p));
+    4.0 * PI * ((a * b + a * c + b * c) / 3.0).powf(1.0 / p)
+}
