@@ -1,1 +1,35 @@
-fn main() {}
+//! slosh: a thin binary over the library crates. Flags are parsed in `cli`, validated into
+//! settings in `config`, and each subcommand lives in its own module.
+
+mod cli;
+mod config;
+mod generate;
+mod import;
+mod info;
+mod output;
+
+use anyhow::Result;
+use clap::Parser;
+
+use crate::cli::{Cli, Command};
+
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
+        Command::Info(args) => {
+            let mut case = slosh_ensight::Case::open(&args.case)?;
+            case.set_byte_order(args.byte_order.map(Into::into));
+            info::run(&case, args.json)
+        }
+    }
+}

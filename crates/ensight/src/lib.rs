@@ -27,7 +27,7 @@ pub use error::{Error, Location, Result};
 pub use geometry::{ElementBlock, Geometry, IdMode, Part};
 pub use source::FileBytes;
 pub use variables::Measured;
-pub use writer::{CaseWriter, Placement, VarData, WriteFormat};
+pub use writer::{CaseWriter, Placement, VarData, WriteFormat, atomic_write};
 
 /// Entry points for fuzzing: parse bytes as each kind of file, never panicking.
 pub mod fuzzing {

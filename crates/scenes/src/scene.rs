@@ -216,6 +216,16 @@ impl Scene {
         };
         let waves = if matches!(spec.kind, SceneKind::Tank | SceneKind::Droplets) { tank_waves() } else { Vec::new() };
         let mut scene = Scene { spec, spacing, waves, droplets: Vec::new() };
+        if matches!(scene.spec.kind, SceneKind::Tank | SceneKind::Droplets) {
+            // The area/volume estimate ignores lattice rounding and the wavy top: calibrate on
+            // the real count so that `points` is what the user gets (to about 1 %).
+            let target = scene.spec.points as f64;
+            for _ in 0..3 {
+                let mut count = Particles::default();
+                scene.tank_particles(0.0, &mut scene.rng(0, 1), &mut count);
+                scene.spacing *= (count.len() as f64 / target).cbrt();
+            }
+        }
         scene.droplets = scene.make_droplets();
         Ok(scene)
     }

@@ -1,0 +1,111 @@
+//! Point clouds from PLY (ASCII or binary) and OBJ files, with normals where the file has them.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use ply_rs_bw::parser::Parser;
+use ply_rs_bw::ply::{DefaultElement, Property};
+
+/// Positions and (unit, or `None` where the file has none) normals.
+#[derive(Debug, Default)]
+pub struct PointCloud {
+    pub positions: Vec<[f64; 3]>,
+    pub normals: Option<Vec<[f64; 3]>>,
+}
+
+pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let cloud = match ext.as_deref() {
+        Some("ply") => read_ply(path)?,
+        Some("obj") => read_obj(path)?,
+        _ => bail!("{}: expected a .ply or .obj file", path.display()),
+    };
+    if cloud.positions.is_empty() {
+        bail!("{}: no vertices found", path.display());
+    }
+    if let Some(i) = cloud.positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        bail!("{}: vertex {i} has a non-finite coordinate {:?}", path.display(), cloud.positions[i]);
+    }
+    Ok(cloud)
+}
+
+fn number(p: &Property) -> Option<f64> {
+    Some(match *p {
+        Property::Float(v) => f64::from(v),
+        Property::Double(v) => v,
+        Property::Char(v) => f64::from(v),
+        Property::UChar(v) => f64::from(v),
+        Property::Short(v) => f64::from(v),
+        Property::UShort(v) => f64::from(v),
+        Property::Int(v) => f64::from(v),
+        Property::UInt(v) => f64::from(v),
+        _ => return None,
+    })
+}
+
+fn read_ply(path: &Path) -> Result<PointCloud> {
+    let file = std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let mut reader = std::io::BufReader::new(file);
+    let ply = Parser::<DefaultElement>::new()
+        .read_ply(&mut reader)
+        .map_err(|e| anyhow::anyhow!("{}: not a readable PLY file: {e}", path.display()))?;
+    let vertices = ply.payload.get("vertex").with_context(|| format!("{}: PLY file without a `vertex` element", path.display()))?;
+    let get = |v: &DefaultElement, k: &str| v.get(k).and_then(number);
+    let mut cloud = PointCloud::default();
+    let has_normals = vertices.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
+    let mut normals = Vec::new();
+    for (i, v) in vertices.iter().enumerate() {
+        let (Some(x), Some(y), Some(z)) = (get(v, "x"), get(v, "y"), get(v, "z")) else {
+            bail!("{}: vertex {i} lacks numeric x, y, z", path.display());
+        };
+        cloud.positions.push([x, y, z]);
+        if has_normals {
+            normals.push([get(v, "nx").unwrap_or(0.0), get(v, "ny").unwrap_or(0.0), get(v, "nz").unwrap_or(0.0)]);
+        }
+    }
+    if has_normals {
+        cloud.normals = Some(normals.into_iter().map(normalise).collect());
+    }
+    Ok(cloud)
+}
+
+fn read_obj(path: &Path) -> Result<PointCloud> {
+    let options = tobj::LoadOptions { single_index: false, triangulate: false, ignore_points: false, ignore_lines: false };
+    let (models, _) = tobj::load_obj(path, &options).map_err(|e| anyhow::anyhow!("{}: not a readable OBJ file: {e}", path.display()))?;
+    let mut cloud = PointCloud::default();
+    let mut normals: Vec<[f64; 3]> = Vec::new();
+    let mut any_normals = false;
+    for m in &models {
+        let mesh = &m.mesh;
+        let base = cloud.positions.len();
+        let count = mesh.positions.len() / 3;
+        cloud.positions.extend(mesh.positions.chunks_exact(3).map(|c| [f64::from(c[0]), f64::from(c[1]), f64::from(c[2])]));
+        normals.resize(base + count, [0.0; 3]);
+        // Face corners pair a vertex index with a normal index; accumulate per vertex.
+        if !mesh.normals.is_empty() && mesh.normal_indices.len() == mesh.indices.len() {
+            any_normals = true;
+            for (&vi, &ni) in mesh.indices.iter().zip(&mesh.normal_indices) {
+                let n = &mesh.normals[3 * ni as usize..3 * ni as usize + 3];
+                let acc = &mut normals[base + vi as usize];
+                for k in 0..3 {
+                    acc[k] += f64::from(n[k]);
+                }
+            }
+        } else if !mesh.normals.is_empty() && mesh.normals.len() == mesh.positions.len() {
+            any_normals = true;
+            for (acc, n) in normals[base..].iter_mut().zip(mesh.normals.chunks_exact(3)) {
+                *acc = [f64::from(n[0]), f64::from(n[1]), f64::from(n[2])];
+            }
+        }
+    }
+    if any_normals {
+        cloud.normals = Some(normals.into_iter().map(normalise).collect());
+    }
+    Ok(cloud)
+}
+
+/// Unit length; zero stays zero (the reader of the result decides what a zero normal means).
+fn normalise(n: [f64; 3]) -> [f64; 3] {
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if len > 0.0 && len.is_finite() { [n[0] / len, n[1] / len, n[2] / len] } else { [0.0; 3] }
+}
