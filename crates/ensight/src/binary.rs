@@ -203,10 +203,6 @@ pub(crate) struct Words<'a> {
 }
 
 impl Words<'_> {
-    pub fn len(&self) -> usize {
-        self.raw.len() / 4
-    }
-
     pub fn offset_of(&self, i: usize) -> u64 {
         (self.start + 4 * i) as u64
     }
@@ -221,35 +217,67 @@ impl Words<'_> {
         self.order.i32(b)
     }
 
-    /// Appends every value as f32, no allocation per value.
+    /// Appends every value as f32: one bulk copy, plus a byte swap for foreign byte order.
     pub fn extend_f32(&self, out: &mut Vec<f32>) {
-        out.reserve(self.len());
-        let chunks = self.raw.chunks_exact(4);
-        match self.order {
-            ByteOrder::Little => out.extend(
-                chunks.map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
-            ),
-            ByteOrder::Big => out.extend(
-                chunks.map(|c| f32::from_be_bytes([c[0], c[1], c[2], c[3]])),
-            ),
-        }
+        copy_words(self.raw, self.order, out);
     }
 
     /// Appends consecutive triples (x, y, z interleaved) as vectors.
     pub fn extend_vec3(&self, out: &mut Vec<[f32; 3]>) {
-        out.reserve(self.len() / 3);
-        let chunks = self.raw.chunks_exact(12);
-        let f = match self.order {
-            ByteOrder::Little => f32::from_le_bytes,
-            ByteOrder::Big => f32::from_be_bytes,
+        copy_words(self.raw, self.order, out);
+    }
+
+    /// Appends every value as an unsigned 32-bit integer (raw bits of the file's i32).
+    pub fn extend_u32(&self, out: &mut Vec<u32>) {
+        copy_words(self.raw, self.order, out);
+    }
+}
+
+/// Copies whole 4-byte words into `out` (a Pod type made of them) and fixes their byte order:
+/// memcpy speed, no per-value work in the native order.
+fn copy_words<T: bytemuck::Pod + bytemuck::Zeroable>(raw: &[u8], order: ByteOrder, out: &mut Vec<T>) {
+    let item = size_of::<T>();
+    debug_assert!(item % 4 == 0);
+    let n = raw.len() / item;
+    let start = out.len();
+    out.reserve(n);
+    // SAFETY: `reserve` made room for n more items; exactly n * size_of::<T>() bytes are
+    // copied into that room, and any bit pattern is a valid `T` (Pod), so the first n spare
+    // items are initialised before `set_len` exposes them. Skipping the zero fill that a safe
+    // `resize` would do saves a full pass over the step's largest arrays.
+    unsafe {
+        std::ptr::copy_nonoverlapping(raw.as_ptr(), out.as_mut_ptr().add(start).cast::<u8>(), n * item);
+        out.set_len(start + n);
+    }
+    let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out[start..]);
+    if order != ByteOrder::native() {
+        let words: &mut [u32] = match bytemuck::try_cast_slice_mut(dst) {
+            Ok(w) => w,
+            Err(_) => return swap_unaligned(dst),
         };
-        out.extend(chunks.map(|c| {
-            [
-                f([c[0], c[1], c[2], c[3]]),
-                f([c[4], c[5], c[6], c[7]]),
-                f([c[8], c[9], c[10], c[11]]),
-            ]
-        }));
+        for w in words {
+            *w = w.swap_bytes();
+        }
+    }
+}
+
+/// Index of the first NaN or Inf; a branch-free scan by blocks, exact search only on a hit.
+pub(crate) fn first_non_finite(values: &[f32]) -> Option<usize> {
+    const EXP: u32 = 0x7f80_0000;
+    const BLOCK: usize = 1024;
+    for (b, block) in values.chunks(BLOCK).enumerate() {
+        // Masked exponents are ≤ EXP; their maximum reaches EXP only for NaN or Inf.
+        let worst = block.iter().map(|v| v.to_bits() & EXP).fold(0, u32::max);
+        if worst == EXP {
+            return block.iter().position(|v| !v.is_finite()).map(|i| b * BLOCK + i);
+        }
+    }
+    None
+}
+
+fn swap_unaligned(bytes: &mut [u8]) {
+    for w in bytes.chunks_exact_mut(4) {
+        w.reverse();
     }
 }
 

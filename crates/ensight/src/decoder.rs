@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use crate::ascii::AsciiCursor;
-use crate::binary::{BinCursor, ByteOrder};
+use crate::binary::{BinCursor, ByteOrder, first_non_finite};
 use crate::error::{Error, Location, Result};
 
 /// Reads the pieces EnSight files are made of, whatever their encoding.
@@ -22,6 +22,8 @@ pub(crate) trait Decoder {
     fn count(&mut self, what: &str, bytes_per_item: usize) -> Result<usize>;
     fn ints(&mut self, n: usize, out: &mut Vec<i64>, what: &str) -> Result<()>;
     fn skip_ints(&mut self, n: usize, what: &str) -> Result<()>;
+    /// Binary only: `n` integers as raw u32 bits in bulk; returns the array's byte offset.
+    fn u32s(&mut self, n: usize, out: &mut Vec<u32>, what: &str) -> Result<usize>;
     /// Floats appended to `out`; `finite` refuses NaN and Inf with the value's location.
     fn floats(&mut self, n: usize, out: &mut Vec<f32>, what: &str, finite: bool) -> Result<()>;
     /// `n` interleaved (x, y, z) triples appended to `out`.
@@ -69,6 +71,14 @@ impl Decoder for Ascii<'_> {
             self.cursor.int(self.int_width, what)?;
         }
         Ok(())
+    }
+    fn u32s(&mut self, n: usize, out: &mut Vec<u32>, what: &str) -> Result<usize> {
+        out.reserve(n);
+        for _ in 0..n {
+            let v = self.cursor.int(self.int_width, what)?;
+            out.push(u32::try_from(v).unwrap_or(u32::MAX));
+        }
+        Ok(0)
     }
     fn floats(&mut self, n: usize, out: &mut Vec<f32>, what: &str, finite: bool) -> Result<()> {
         self.cursor.floats(n, out, what, finite)
@@ -122,12 +132,17 @@ impl Decoder for BinCursor<'_> {
     fn skip_ints(&mut self, n: usize, what: &str) -> Result<()> {
         self.words(n, what).map(|_| ())
     }
+    fn u32s(&mut self, n: usize, out: &mut Vec<u32>, what: &str) -> Result<usize> {
+        let words = self.words(n, what)?;
+        words.extend_u32(out);
+        Ok(words.start)
+    }
     fn floats(&mut self, n: usize, out: &mut Vec<f32>, what: &str, finite: bool) -> Result<()> {
         let words = self.words(n, what)?;
         let start = out.len();
         words.extend_f32(out);
         if finite {
-            if let Some(k) = out[start..].iter().position(|v| !v.is_finite()) {
+            if let Some(k) = first_non_finite(&out[start..]) {
                 return Err(Error::parse(
                     BinCursor::path(self),
                     Location::Byte(words.offset_of(k)),
@@ -146,13 +161,13 @@ impl Decoder for BinCursor<'_> {
         let start = out.len();
         words.extend_vec3(out);
         if finite {
-            if let Some(k) = out[start..].iter().position(|v| !v.iter().all(|c| c.is_finite())) {
-                let c = out[start + k].iter().position(|c| !c.is_finite()).unwrap_or(0);
+            let flat: &[f32] = bytemuck::cast_slice(&out[start..]);
+            if let Some(k) = first_non_finite(flat) {
                 return Err(Error::parse(
                     BinCursor::path(self),
-                    Location::Byte(words.offset_of(3 * k + c)),
+                    Location::Byte(words.offset_of(k)),
                     format!("a finite number ({what})"),
-                    out[start + k][c].to_string(),
+                    flat[k].to_string(),
                 ));
             }
         }

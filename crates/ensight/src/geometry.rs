@@ -10,7 +10,7 @@ use crate::binary::{ByteOrder, Encoding};
 use crate::case::Format;
 use crate::decoder::Decoder;
 use crate::elements::{is_element_keyword, nodes_per_element};
-use crate::error::{Error, Result, quote};
+use crate::error::{Error, Location, Result, quote};
 
 /// How a geometry file lists node or element ids.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -157,13 +157,11 @@ fn read_e6_body(d: &mut dyn Decoder, g: &mut Geometry, finite: bool) -> Result<(
             .ok_or_else(|| d.error("\"part <number>\"", &quote(line.as_bytes())))?;
         let description = d.text("part description")?;
         let mut part = Part { number, description, nodes: 0..nn, blocks: Vec::new(), point_nodes: Vec::new() };
-        read_element_blocks(d, g.element_ids, true, &mut part, |raw| {
-            let idx = match &id_to_index {
-                Some(map) => map.get(&raw).copied(),
-                None => (1..=nn as i64).contains(&raw).then(|| (raw - 1) as u32),
-            };
-            idx.ok_or_else(|| format!("node {raw}, which is not among the {nn} nodes"))
-        })?;
+        let nodes = match &id_to_index {
+            Some(map) => NodeRefs::Ids(map),
+            None => NodeRefs::Positions { count: nn, first: 0 },
+        };
+        read_element_blocks(d, g.element_ids, true, &mut part, &nodes)?;
         g.parts.push(part);
     }
     Ok(())
@@ -208,19 +206,55 @@ fn read_gold_body(d: &mut dyn Decoder, g: &mut Geometry, finite: bool) -> Result
             }
         }
         let mut part = Part { number, description, nodes: start..start + nn, blocks: Vec::new(), point_nodes: Vec::new() };
-        read_element_blocks(d, g.element_ids, false, &mut part, |raw| {
-            if (1..=nn as i64).contains(&raw) {
-                Ok((start + raw as usize - 1) as u32)
-            } else {
-                Err(format!("node {raw}, which is not among the part's {nn} nodes"))
-            }
-        })?;
+        read_element_blocks(d, g.element_ids, false, &mut part, &NodeRefs::Positions { count: nn, first: start })?;
         g.parts.push(part);
     }
     Ok(())
 }
 
-/// Reads the element blocks of a part; `point` connectivity is resolved by `node_index`,
+/// How connectivity names nodes: by 1-based position among `count` nodes that start at
+/// `first` in the geometry's node array, or by the ids the file gave them.
+#[derive(Debug)]
+enum NodeRefs<'a> {
+    Positions { count: usize, first: usize },
+    Ids(&'a HashMap<i64, u32>),
+}
+
+impl NodeRefs<'_> {
+    fn resolve(&self, raw: i64) -> Result<u32, String> {
+        match *self {
+            NodeRefs::Positions { count, first } => {
+                if (1..=count as i64).contains(&raw) {
+                    Ok((first + raw as usize - 1) as u32)
+                } else {
+                    Err(format!("node {raw}, which is not among the {count} nodes"))
+                }
+            }
+            NodeRefs::Ids(map) => map.get(&raw).copied().ok_or_else(|| format!("node id {raw}, which no node has")),
+        }
+    }
+
+    /// Resolves raw 1-based references in place; on failure, the index of the bad one.
+    fn resolve_all(&self, refs: &mut [u32]) -> Result<(), (usize, String)> {
+        if let NodeRefs::Positions { count, first } = *self {
+            // Common case: one vectorisable range check, then one shift.
+            let (lo, hi) = refs.iter().fold((u32::MAX, 0), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            if refs.is_empty() || (lo >= 1 && (hi as usize) <= count && first + count <= u32::MAX as usize) {
+                let shift = first as u32;
+                for v in refs.iter_mut() {
+                    *v = *v - 1 + shift;
+                }
+                return Ok(());
+            }
+        }
+        for (k, v) in refs.iter_mut().enumerate() {
+            *v = self.resolve(i64::from(*v as i32)).map_err(|e| (k, e))?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads the element blocks of a part; `point` connectivity is resolved through `nodes`,
 /// every other type is read past. EnSight 6 ASCII starts each element's line with its id
 /// (`e6`); everything else lists the ids as a block before the connectivity.
 fn read_element_blocks(
@@ -228,7 +262,7 @@ fn read_element_blocks(
     element_ids: IdMode,
     e6: bool,
     part: &mut Part,
-    node_index: impl Fn(i64) -> Result<u32, String>,
+    nodes: &NodeRefs<'_>,
 ) -> Result<()> {
     let ids = element_ids.listed();
     while let Some(kw) = d.peek_keyword() {
@@ -283,21 +317,19 @@ fn read_element_blocks(
                         conn.clear();
                         d.ints(npe, &mut conn, &format!("{kind} connectivity"))?;
                         if is_point {
-                            let i = node_index(conn[0]).map_err(|e| d.error("a node of this geometry", &e))?;
+                            let i = nodes.resolve(conn[0]).map_err(|e| d.error("a node of this geometry", &e))?;
                             part.point_nodes.push(i);
                         }
                     }
+                } else if is_point {
+                    // Bulk decode, then resolve every reference in one pass.
+                    let first = part.point_nodes.len();
+                    let start = d.u32s(count, &mut part.point_nodes, "point connectivity")?;
+                    nodes.resolve_all(&mut part.point_nodes[first..]).map_err(|(k, e)| {
+                        Error::parse(d.path(), Location::Byte((start + 4 * k) as u64), "a node of this geometry", e)
+                    })?;
                 } else {
-                    if is_point {
-                        let mut conn = Vec::with_capacity(count);
-                        d.ints(count, &mut conn, "point connectivity")?;
-                        for &raw in &conn {
-                            let i = node_index(raw).map_err(|e| d.error("a node of this geometry (in the point connectivity before here)", &e))?;
-                            part.point_nodes.push(i);
-                        }
-                    } else {
-                        d.skip_ints(count * npe, &format!("{kind} connectivity"))?;
-                    }
+                    d.skip_ints(count * npe, &format!("{kind} connectivity"))?;
                 }
             }
             (_, None) => return Err(d.error("a known element type", &quote(kind.as_bytes()))),
