@@ -5,7 +5,11 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 #[derive(Debug, Parser)]
-#[command(name = "slosh", version, about = "Ray traced MLS surfaces for particle simulation time series")]
+#[command(
+    name = "slosh",
+    version,
+    about = "Ray traced MLS surfaces for particle simulation time series"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,

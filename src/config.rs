@@ -47,7 +47,10 @@ pub struct GenConfig {
 impl GenConfig {
     pub fn from_args(a: &GenArgs) -> Result<GenConfig> {
         let source = if a.scene == "from-file" {
-            let input = a.input.clone().context("`slosh gen from-file` needs the PLY or OBJ file to convert")?;
+            let input = a
+                .input
+                .clone()
+                .context("`slosh gen from-file` needs the PLY or OBJ file to convert")?;
             GenSource::File(input)
         } else {
             if a.input.is_some() {
@@ -76,14 +79,21 @@ impl GenConfig {
                 density_jump: a.density_jump,
                 isolated: a.isolated,
             };
-            GenSource::Scene { spec, steps: a.steps }
+            GenSource::Scene {
+                spec,
+                steps: a.steps,
+            }
         };
         Ok(GenConfig {
             source,
             out: a.out.clone(),
             format: a.format.into(),
             byte_order: a.byte_order.into(),
-            placement: if a.measured { Placement::Measured } else { Placement::PointPart },
+            placement: if a.measured {
+                Placement::Measured
+            } else {
+                Placement::PointPart
+            },
         })
     }
 }

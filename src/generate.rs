@@ -35,7 +35,11 @@ struct TruthStep {
     surface: Truth,
 }
 
-const VARIABLES: [(&str, VarType); 3] = [("normal", VarType::Vector), ("pressure", VarType::Scalar), ("surface", VarType::Scalar)];
+const VARIABLES: [(&str, VarType); 3] = [
+    ("normal", VarType::Vector),
+    ("pressure", VarType::Scalar),
+    ("surface", VarType::Scalar),
+];
 
 pub fn run(cfg: &GenConfig) -> Result<()> {
     match &cfg.source {
@@ -45,13 +49,16 @@ pub fn run(cfg: &GenConfig) -> Result<()> {
 }
 
 fn to_f32(v: &[slosh_scenes::DVec3]) -> Vec<[f32; 3]> {
-    v.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect()
+    v.iter()
+        .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
 }
 
 fn gen_scene(cfg: &GenConfig, spec: &SceneSpec, steps: usize) -> Result<()> {
     let scene = Scene::new(spec.clone())?;
     let name = spec.kind.name();
-    let mut writer = CaseWriter::create(&cfg.out, name, cfg.format, cfg.placement, &VARIABLES)?.with_byte_order(cfg.byte_order);
+    let mut writer = CaseWriter::create(&cfg.out, name, cfg.format, cfg.placement, &VARIABLES)?
+        .with_byte_order(cfg.byte_order);
     let mut truth_steps = Vec::with_capacity(steps);
     let mut total = 0usize;
     for step in 0..steps {
@@ -60,12 +67,30 @@ fn gen_scene(cfg: &GenConfig, spec: &SceneSpec, steps: usize) -> Result<()> {
         let positions = to_f32(&p.positions);
         let normals = to_f32(&p.normals);
         let pressure: Vec<f32> = p.pressure.iter().map(|&v| v as f32).collect();
-        let surface: Vec<f32> = p.surface.iter().map(|&s| if s { 1.0 } else { 0.0 }).collect();
+        let surface: Vec<f32> = p
+            .surface
+            .iter()
+            .map(|&s| if s { 1.0 } else { 0.0 })
+            .collect();
         writer
-            .write_step(t, &positions, &[VarData::Vector("normal", &normals), VarData::Scalar("pressure", &pressure), VarData::Scalar("surface", &surface)])
+            .write_step(
+                t,
+                &positions,
+                &[
+                    VarData::Vector("normal", &normals),
+                    VarData::Scalar("pressure", &pressure),
+                    VarData::Scalar("surface", &surface),
+                ],
+            )
             .with_context(|| format!("writing step {step}"))?;
         total += p.len();
-        truth_steps.push(TruthStep { step, time: t, points: p.len(), surface_points: p.surface.iter().filter(|s| **s).count(), surface: scene.truth(t) });
+        truth_steps.push(TruthStep {
+            step,
+            time: t,
+            points: p.len(),
+            surface_points: p.surface.iter().filter(|s| **s).count(),
+            surface: scene.truth(t),
+        });
     }
     let truth = TruthFile {
         format_version: 1,
@@ -92,18 +117,42 @@ fn gen_scene(cfg: &GenConfig, spec: &SceneSpec, steps: usize) -> Result<()> {
 
 fn gen_from_file(cfg: &GenConfig, path: &Path) -> Result<()> {
     let cloud = read_point_cloud(path)?;
-    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("points").replace(|c: char| c.is_whitespace() || c == '*', "_");
-    let vars: &[(&str, VarType)] = if cloud.normals.is_some() { &[("normal", VarType::Vector)] } else { &[] };
-    let mut writer = CaseWriter::create(&cfg.out, &name, cfg.format, cfg.placement, vars)?.with_byte_order(cfg.byte_order);
-    let positions: Vec<[f32; 3]> = cloud.positions.iter().map(|p| p.map(|c| c as f32)).collect();
-    let normals: Option<Vec<[f32; 3]>> = cloud.normals.as_ref().map(|n| n.iter().map(|p| p.map(|c| c as f32)).collect());
-    let data: Vec<VarData<'_>> = normals.as_deref().map(|n| VarData::Vector("normal", n)).into_iter().collect();
+    let name = path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("points")
+        .replace(|c: char| c.is_whitespace() || c == '*', "_");
+    let vars: &[(&str, VarType)] = if cloud.normals.is_some() {
+        &[("normal", VarType::Vector)]
+    } else {
+        &[]
+    };
+    let mut writer = CaseWriter::create(&cfg.out, &name, cfg.format, cfg.placement, vars)?
+        .with_byte_order(cfg.byte_order);
+    let positions: Vec<[f32; 3]> = cloud
+        .positions
+        .iter()
+        .map(|p| p.map(|c| c as f32))
+        .collect();
+    let normals: Option<Vec<[f32; 3]>> = cloud
+        .normals
+        .as_ref()
+        .map(|n| n.iter().map(|p| p.map(|c| c as f32)).collect());
+    let data: Vec<VarData<'_>> = normals
+        .as_deref()
+        .map(|n| VarData::Vector("normal", n))
+        .into_iter()
+        .collect();
     writer.write_step(0.0, &positions, &data)?;
     crate::output::print(&format!(
         "wrote {} ({} points, {})\n",
         writer.case_path().display(),
         positions.len(),
-        if normals.is_some() { "normals normalised to unit length" } else { "no normals in the file" }
+        if normals.is_some() {
+            "normals normalised to unit length"
+        } else {
+            "no normals in the file"
+        }
     ))?;
     Ok(())
 }

@@ -14,7 +14,10 @@ pub struct PointCloud {
 }
 
 pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
     let cloud = match ext.as_deref() {
         Some("ply") => read_ply(path)?,
         Some("obj") => read_obj(path)?,
@@ -23,8 +26,16 @@ pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
     if cloud.positions.is_empty() {
         bail!("{}: no vertices found", path.display());
     }
-    if let Some(i) = cloud.positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-        bail!("{}: vertex {i} has a non-finite coordinate {:?}", path.display(), cloud.positions[i]);
+    if let Some(i) = cloud
+        .positions
+        .iter()
+        .position(|p| !p.iter().all(|c| c.is_finite()))
+    {
+        bail!(
+            "{}: vertex {i} has a non-finite coordinate {:?}",
+            path.display(),
+            cloud.positions[i]
+        );
     }
     Ok(cloud)
 }
@@ -44,15 +55,21 @@ fn number(p: &Property) -> Option<f64> {
 }
 
 fn read_ply(path: &Path) -> Result<PointCloud> {
-    let file = std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let file =
+        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
     let mut reader = std::io::BufReader::new(file);
     let ply = Parser::<DefaultElement>::new()
         .read_ply(&mut reader)
         .map_err(|e| anyhow::anyhow!("{}: not a readable PLY file: {e}", path.display()))?;
-    let vertices = ply.payload.get("vertex").with_context(|| format!("{}: PLY file without a `vertex` element", path.display()))?;
+    let vertices = ply
+        .payload
+        .get("vertex")
+        .with_context(|| format!("{}: PLY file without a `vertex` element", path.display()))?;
     let get = |v: &DefaultElement, k: &str| v.get(k).and_then(number);
     let mut cloud = PointCloud::default();
-    let has_normals = vertices.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
+    let has_normals = vertices
+        .first()
+        .is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
     let mut normals = Vec::new();
     for (i, v) in vertices.iter().enumerate() {
         let (Some(x), Some(y), Some(z)) = (get(v, "x"), get(v, "y"), get(v, "z")) else {
@@ -60,7 +77,11 @@ fn read_ply(path: &Path) -> Result<PointCloud> {
         };
         cloud.positions.push([x, y, z]);
         if has_normals {
-            normals.push([get(v, "nx").unwrap_or(0.0), get(v, "ny").unwrap_or(0.0), get(v, "nz").unwrap_or(0.0)]);
+            normals.push([
+                get(v, "nx").unwrap_or(0.0),
+                get(v, "ny").unwrap_or(0.0),
+                get(v, "nz").unwrap_or(0.0),
+            ]);
         }
     }
     if has_normals {
@@ -70,8 +91,14 @@ fn read_ply(path: &Path) -> Result<PointCloud> {
 }
 
 fn read_obj(path: &Path) -> Result<PointCloud> {
-    let options = tobj::LoadOptions { single_index: false, triangulate: false, ignore_points: false, ignore_lines: false };
-    let (models, _) = tobj::load_obj(path, &options).map_err(|e| anyhow::anyhow!("{}: not a readable OBJ file: {e}", path.display()))?;
+    let options = tobj::LoadOptions {
+        single_index: false,
+        triangulate: false,
+        ignore_points: false,
+        ignore_lines: false,
+    };
+    let (models, _) = tobj::load_obj(path, &options)
+        .map_err(|e| anyhow::anyhow!("{}: not a readable OBJ file: {e}", path.display()))?;
     let mut cloud = PointCloud::default();
     let mut normals: Vec<[f64; 3]> = Vec::new();
     let mut any_normals = false;
@@ -79,7 +106,11 @@ fn read_obj(path: &Path) -> Result<PointCloud> {
         let mesh = &m.mesh;
         let base = cloud.positions.len();
         let count = mesh.positions.len() / 3;
-        cloud.positions.extend(mesh.positions.chunks_exact(3).map(|c| [f64::from(c[0]), f64::from(c[1]), f64::from(c[2])]));
+        cloud.positions.extend(
+            mesh.positions
+                .chunks_exact(3)
+                .map(|c| [f64::from(c[0]), f64::from(c[1]), f64::from(c[2])]),
+        );
         normals.resize(base + count, [0.0; 3]);
         // Face corners pair a vertex index with a normal index; accumulate per vertex.
         if !mesh.normals.is_empty() && mesh.normal_indices.len() == mesh.indices.len() {
@@ -107,5 +138,9 @@ fn read_obj(path: &Path) -> Result<PointCloud> {
 /// Unit length; zero stays zero (the reader of the result decides what a zero normal means).
 fn normalise(n: [f64; 3]) -> [f64; 3] {
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    if len > 0.0 && len.is_finite() { [n[0] / len, n[1] / len, n[2] / len] } else { [0.0; 3] }
+    if len > 0.0 && len.is_finite() {
+        [n[0] / len, n[1] / len, n[2] / len]
+    } else {
+        [0.0; 3]
+    }
 }

@@ -2,7 +2,10 @@
 
 use anyhow::{Result, bail};
 use serde::Serialize;
-use slosh_ensight::{ByteOrder, Case, CaseFile, ElementBlock, Encoding, Format, StepRequest, TimeSet, VarLocation, VarType};
+use slosh_ensight::{
+    ByteOrder, Case, CaseFile, ElementBlock, Encoding, Format, StepRequest, TimeSet, VarLocation,
+    VarType,
+};
 
 /// The `--json` document. Field names and meanings are stable (docs/info-json.md).
 #[derive(Debug, Serialize)]
@@ -54,19 +57,28 @@ pub fn gather(case: &Case) -> Info {
     let mut encoding = None;
     let mut byte_order = None;
     let mut parts = Vec::new();
-    if file.model.is_some() {
-        if let Ok(g) = case.read_geometry(0, true) {
-            encoding = Some(g.encoding);
-            byte_order = g.byte_order;
-            let e6 = file.format == Format::Ensight6;
-            parts = g.parts.iter().map(|p| PartInfo { number: p.number, description: p.description.clone(), nodes: if e6 { g.nodes.len() } else { p.nodes.len() }, elements: p.blocks.clone() }).collect();
-        }
+    if file.model.is_some()
+        && let Ok(g) = case.read_geometry(0, true)
+    {
+        encoding = Some(g.encoding);
+        byte_order = g.byte_order;
+        let e6 = file.format == Format::Ensight6;
+        parts = g
+            .parts
+            .iter()
+            .map(|p| PartInfo {
+                number: p.number,
+                description: p.description.clone(),
+                nodes: if e6 { g.nodes.len() } else { p.nodes.len() },
+                elements: p.blocks.clone(),
+            })
+            .collect();
     }
-    if file.measured.is_some() {
-        if let Ok(m) = case.read_measured(0, true) {
-            encoding = encoding.or(Some(m.encoding));
-            byte_order = byte_order.or(m.byte_order);
-        }
+    if file.measured.is_some()
+        && let Ok(m) = case.read_measured(0, true)
+    {
+        encoding = encoding.or(Some(m.encoding));
+        byte_order = byte_order.or(m.byte_order);
     }
     let steps = (0..case.step_count())
         .map(|i| {
@@ -79,13 +91,35 @@ pub fn gather(case: &Case) -> Info {
             }
             match case.read_step(i, &StepRequest::default()) {
                 Ok(s) => {
-                    let bounds = s.positions.iter().fold(None, |acc: Option<[[f32; 3]; 2]>, p| {
-                        let [lo, hi] = acc.unwrap_or([*p, *p]);
-                        Some([[lo[0].min(p[0]), lo[1].min(p[1]), lo[2].min(p[2])], [hi[0].max(p[0]), hi[1].max(p[1]), hi[2].max(p[2])]])
-                    });
-                    StepInfo { index: i, time: s.time, files, points: Some(s.positions.len()), source: Some(s.source), bounds, error: None }
+                    let bounds = s
+                        .positions
+                        .iter()
+                        .fold(None, |acc: Option<[[f32; 3]; 2]>, p| {
+                            let [lo, hi] = acc.unwrap_or([*p, *p]);
+                            Some([
+                                [lo[0].min(p[0]), lo[1].min(p[1]), lo[2].min(p[2])],
+                                [hi[0].max(p[0]), hi[1].max(p[1]), hi[2].max(p[2])],
+                            ])
+                        });
+                    StepInfo {
+                        index: i,
+                        time: s.time,
+                        files,
+                        points: Some(s.positions.len()),
+                        source: Some(s.source),
+                        bounds,
+                        error: None,
+                    }
                 }
-                Err(e) => StepInfo { index: i, time: case.times()[i], files, points: None, source: None, bounds: None, error: Some(e.to_string()) },
+                Err(e) => StepInfo {
+                    index: i,
+                    time: case.times()[i],
+                    files,
+                    points: None,
+                    source: None,
+                    bounds: None,
+                    error: Some(e.to_string()),
+                },
             }
         })
         .collect();
@@ -99,7 +133,16 @@ pub fn gather(case: &Case) -> Info {
         measured: file.measured.as_ref().map(|m| m.pattern.clone()),
         time_sets: file.time_sets.clone(),
         parts,
-        variables: file.variables.iter().map(|v| VariableInfo { name: v.name.clone(), var_type: v.var_type, location: v.location, file: v.file.as_ref().map(|f| f.pattern.clone()) }).collect(),
+        variables: file
+            .variables
+            .iter()
+            .map(|v| VariableInfo {
+                name: v.name.clone(),
+                var_type: v.var_type,
+                location: v.location,
+                file: v.file.as_ref().map(|f| f.pattern.clone()),
+            })
+            .collect(),
         steps,
     }
 }
@@ -112,7 +155,13 @@ pub fn render_human(info: &Info) -> String {
         Format::Gold => "EnSight Gold",
     };
     let enc = match info.encoding {
-        Some(Encoding::CBinary) => format!("C Binary, {}-endian", match info.byte_order { Some(ByteOrder::Big) => "big", _ => "little" }),
+        Some(Encoding::CBinary) => format!(
+            "C Binary, {}-endian",
+            match info.byte_order {
+                Some(ByteOrder::Big) => "big",
+                _ => "little",
+            }
+        ),
         Some(Encoding::Ascii) => "ASCII".to_string(),
         None => "unreadable".to_string(),
     };
@@ -125,20 +174,52 @@ pub fn render_human(info: &Info) -> String {
         let _ = writeln!(out, "measured  {m}");
     }
     for p in &info.parts {
-        let elements: Vec<String> = p.elements.iter().map(|b| format!("{} {}", b.count, b.kind)).collect();
-        let _ = writeln!(out, "part {:<4} {:<24} {} nodes, {}", p.number, p.description, p.nodes, if elements.is_empty() { "no elements".to_string() } else { elements.join(", ") });
+        let elements: Vec<String> = p
+            .elements
+            .iter()
+            .map(|b| format!("{} {}", b.count, b.kind))
+            .collect();
+        let _ = writeln!(
+            out,
+            "part {:<4} {:<24} {} nodes, {}",
+            p.number,
+            p.description,
+            p.nodes,
+            if elements.is_empty() {
+                "no elements".to_string()
+            } else {
+                elements.join(", ")
+            }
+        );
     }
     for v in &info.variables {
-        let _ = writeln!(out, "variable  {:<16} {:?} per {:?}", v.name, v.var_type, v.location);
+        let _ = writeln!(
+            out,
+            "variable  {:<16} {:?} per {:?}",
+            v.name, v.var_type, v.location
+        );
     }
     let _ = writeln!(out, "steps     {}", info.steps.len());
     let _ = writeln!(out, "{:>6} {:>12} {:>10}  bounds", "step", "time", "points");
     for s in &info.steps {
         let _ = match (&s.error, s.bounds) {
-            (Some(e), _) => writeln!(out, "{:>6} {:>12.6} {:>10}  error: {e}", s.index, s.time, "-"),
-            (None, Some([lo, hi])) => writeln!(out, 
+            (Some(e), _) => writeln!(
+                out,
+                "{:>6} {:>12.6} {:>10}  error: {e}",
+                s.index, s.time, "-"
+            ),
+            (None, Some([lo, hi])) => writeln!(
+                out,
                 "{:>6} {:>12.6} {:>10}  [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",
-                s.index, s.time, s.points.unwrap_or(0), lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+                s.index,
+                s.time,
+                s.points.unwrap_or(0),
+                lo[0],
+                lo[1],
+                lo[2],
+                hi[0],
+                hi[1],
+                hi[2]
             ),
             (None, None) => writeln!(out, "{:>6} {:>12.6} {:>10}  (empty)", s.index, s.time, 0),
         };
@@ -148,11 +229,24 @@ pub fn render_human(info: &Info) -> String {
 
 pub fn run(case: &Case, json: bool) -> Result<()> {
     let info = gather(case);
-    let text = if json { serde_json::to_string_pretty(&info)? + "\n" } else { render_human(&info) };
+    let text = if json {
+        serde_json::to_string_pretty(&info)? + "\n"
+    } else {
+        render_human(&info)
+    };
     crate::output::print(&text)?;
-    let failed: Vec<String> = info.steps.iter().filter_map(|s| s.error.as_ref().map(|e| format!("step {}: {e}", s.index))).collect();
+    let failed: Vec<String> = info
+        .steps
+        .iter()
+        .filter_map(|s| s.error.as_ref().map(|e| format!("step {}: {e}", s.index)))
+        .collect();
     if !failed.is_empty() {
-        bail!("{} of {} steps could not be read:\n{}", failed.len(), info.steps.len(), failed.join("\n"));
+        bail!(
+            "{} of {} steps could not be read:\n{}",
+            failed.len(),
+            info.steps.len(),
+            failed.join("\n")
+        );
     }
     Ok(())
 }

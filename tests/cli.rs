@@ -1,6 +1,8 @@
 //! End-to-end tests of the `slosh` binary: gen → EnSight files → info, VTK reading what we
 //! write, PLY/OBJ conversion, and errors that name the file.
 
+#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -8,8 +10,15 @@ use serde_json::Value;
 use slosh_ensight::{Case, FieldValues, StepRequest};
 
 fn slosh(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_slosh")).args(args).output().expect("run slosh");
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    let out = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        .args(args)
+        .output()
+        .expect("run slosh");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 fn generate(dir: &Path, args: &[&str]) {
@@ -27,9 +36,27 @@ fn in_ci() -> bool {
 #[test]
 fn gen_then_info_agree_with_truth_json() {
     let dir = tempfile::tempdir().unwrap();
-    generate(dir.path(), &["tank", "--points", "5000", "--steps", "4", "--format", "e6-binary", "--droplets", "10"]);
-    let truth: Value = serde_json::from_slice(&std::fs::read(dir.path().join("truth.json")).unwrap()).unwrap();
-    let (ok, json, err) = slosh(&["info", dir.path().join("tank.case").to_str().unwrap(), "--json"]);
+    generate(
+        dir.path(),
+        &[
+            "tank",
+            "--points",
+            "5000",
+            "--steps",
+            "4",
+            "--format",
+            "e6-binary",
+            "--droplets",
+            "10",
+        ],
+    );
+    let truth: Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("truth.json")).unwrap()).unwrap();
+    let (ok, json, err) = slosh(&[
+        "info",
+        dir.path().join("tank.case").to_str().unwrap(),
+        "--json",
+    ]);
     assert!(ok, "{err}");
     let info: Value = serde_json::from_str(&json).unwrap();
     assert_eq!(info["format"], "ensight6");
@@ -41,10 +68,15 @@ fn gen_then_info_agree_with_truth_json() {
         assert_eq!(s["points"], t["points"]);
         assert_eq!(s["time"], t["time"]);
         let hi_z = s["bounds"][1][2].as_f64().unwrap();
-        assert!(hi_z > 0.5, "surface above the still level somewhere: {hi_z}");
+        assert!(
+            hi_z > 0.5,
+            "surface above the still level somewhere: {hi_z}"
+        );
     }
     let (ok, human, _) = slosh(&["info", dir.path().join("tank.case").to_str().unwrap()]);
-    assert!(ok && human.contains("EnSight 6, C Binary, little-endian") && human.contains("pressure"));
+    assert!(
+        ok && human.contains("EnSight 6, C Binary, little-endian") && human.contains("pressure")
+    );
 }
 
 #[test]
@@ -52,15 +84,53 @@ fn gen_is_deterministic_and_big_endian_reads_the_same() {
     let a = tempfile::tempdir().unwrap();
     let b = tempfile::tempdir().unwrap();
     let c = tempfile::tempdir().unwrap();
-    generate(a.path(), &["torus", "--points", "3000", "--steps", "2", "--noise", "0.1", "--seed", "5"]);
-    generate(b.path(), &["torus", "--points", "3000", "--steps", "2", "--noise", "0.1", "--seed", "5"]);
-    generate(c.path(), &["torus", "--points", "3000", "--steps", "2", "--noise", "0.1", "--seed", "5", "--byte-order", "big"]);
+    generate(
+        a.path(),
+        &[
+            "torus", "--points", "3000", "--steps", "2", "--noise", "0.1", "--seed", "5",
+        ],
+    );
+    generate(
+        b.path(),
+        &[
+            "torus", "--points", "3000", "--steps", "2", "--noise", "0.1", "--seed", "5",
+        ],
+    );
+    generate(
+        c.path(),
+        &[
+            "torus",
+            "--points",
+            "3000",
+            "--steps",
+            "2",
+            "--noise",
+            "0.1",
+            "--seed",
+            "5",
+            "--byte-order",
+            "big",
+        ],
+    );
     for f in ["torus.geo00001", "torus.normal00001", "truth.json"] {
-        assert_eq!(std::fs::read(a.path().join(f)).unwrap(), std::fs::read(b.path().join(f)).unwrap(), "{f} differs between runs");
+        assert_eq!(
+            std::fs::read(a.path().join(f)).unwrap(),
+            std::fs::read(b.path().join(f)).unwrap(),
+            "{f} differs between runs"
+        );
     }
-    let req = StepRequest { normals: Some("normal".into()), ..Default::default() };
-    let sa = Case::open(a.path().join("torus.case")).unwrap().read_step(1, &req).unwrap();
-    let sc = Case::open(c.path().join("torus.case")).unwrap().read_step(1, &req).unwrap();
+    let req = StepRequest {
+        normals: Some("normal".into()),
+        ..Default::default()
+    };
+    let sa = Case::open(a.path().join("torus.case"))
+        .unwrap()
+        .read_step(1, &req)
+        .unwrap();
+    let sc = Case::open(c.path().join("torus.case"))
+        .unwrap()
+        .read_step(1, &req)
+        .unwrap();
     assert_eq!(sa, sc);
 }
 
@@ -75,8 +145,16 @@ fn bad_case_is_an_error_naming_the_file() {
     std::fs::write(&p, &bytes[..bytes.len() - 7]).unwrap();
     let (ok, out, err) = slosh(&["info", dir.path().join("sphere.case").to_str().unwrap()]);
     assert!(!ok, "a case with broken steps must fail");
-    assert!(out.contains("step") && err.contains("2 of 3 steps"), "{err}");
-    assert!(err.contains("sphere.geo00001") && err.contains("sphere.geo00002") && err.contains("byte offset"), "{err}");
+    assert!(
+        out.contains("step") && err.contains("2 of 3 steps"),
+        "{err}"
+    );
+    assert!(
+        err.contains("sphere.geo00001")
+            && err.contains("sphere.geo00002")
+            && err.contains("byte offset"),
+        "{err}"
+    );
     let (ok, _, err) = slosh(&["gen", "cube", "--out", dir.path().to_str().unwrap()]);
     assert!(!ok && err.contains("unknown scene \"cube\""), "{err}");
 }
@@ -87,14 +165,44 @@ fn ply_and_obj_point_clouds_convert() {
     let ply = dir.path().join("pts.ply");
     std::fs::write(&ply, "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n0 0 0 0 0 2\n1 0 0 0 3 0\n0 1 0 4 0 0\n").unwrap();
     let obj = dir.path().join("tri.obj");
-    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 5\nf 1//1 2//1 3//1\n").unwrap();
-    for (input, n) in [(&ply, [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]), (&obj, [[0.0, 0.0, 1.0]; 3])] {
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 5\nf 1//1 2//1 3//1\n",
+    )
+    .unwrap();
+    for (input, n) in [
+        (&ply, [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
+        (&obj, [[0.0, 0.0, 1.0]; 3]),
+    ] {
         let out = dir.path().join(input.file_stem().unwrap());
-        let (ok, _, err) = slosh(&["gen", "from-file", input.to_str().unwrap(), "--out", out.to_str().unwrap(), "--format", "gold-binary"]);
+        let (ok, _, err) = slosh(&[
+            "gen",
+            "from-file",
+            input.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--format",
+            "gold-binary",
+        ]);
         assert!(ok, "{err}");
-        let case = Case::open(out.join(format!("{}.case", input.file_stem().unwrap().to_str().unwrap()))).unwrap();
-        let step = case.read_step(0, &StepRequest { normals: Some("normal".into()), ..Default::default() }).unwrap();
-        assert_eq!(step.positions, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        let case = Case::open(out.join(format!(
+            "{}.case",
+            input.file_stem().unwrap().to_str().unwrap()
+        )))
+        .unwrap();
+        let step = case
+            .read_step(
+                0,
+                &StepRequest {
+                    normals: Some("normal".into()),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+        assert_eq!(
+            step.positions,
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+        );
         assert_eq!(step.normals.unwrap(), n.to_vec());
     }
 }
@@ -103,30 +211,58 @@ fn ply_and_obj_point_clouds_convert() {
 /// `$SLOSH_DATA`.
 #[test]
 fn classic_models_convert() {
-    let Some(data) = std::env::var_os("SLOSH_DATA").map(PathBuf::from).filter(|d| d.join("bunny.obj").exists()) else {
-        assert!(!in_ci(), "CI=true but $SLOSH_DATA/bunny.obj is missing (.ci/run fetches it)");
-        eprintln!("skipping: set SLOSH_DATA to a folder with bunny.obj, face000.ply, StanfordBunny.ply");
+    let Some(data) = std::env::var_os("SLOSH_DATA")
+        .map(PathBuf::from)
+        .filter(|d| d.join("bunny.obj").exists())
+    else {
+        assert!(
+            !in_ci(),
+            "CI=true but $SLOSH_DATA/bunny.obj is missing (.ci/run fetches it)"
+        );
+        eprintln!(
+            "skipping: set SLOSH_DATA to a folder with bunny.obj, face000.ply, StanfordBunny.ply"
+        );
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    for (file, points, normals) in [("bunny.obj", 28088, true), ("face000.ply", 85849, false), ("StanfordBunny.ply", 50000, false)] {
+    for (file, points, normals) in [
+        ("bunny.obj", 28088, true),
+        ("face000.ply", 85849, false),
+        ("StanfordBunny.ply", 50000, false),
+    ] {
         let out = dir.path().join(file);
-        let (ok, stdout, err) = slosh(&["gen", "from-file", data.join(file).to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let (ok, stdout, err) = slosh(&[
+            "gen",
+            "from-file",
+            data.join(file).to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert!(ok, "{err}");
         assert!(stdout.contains(&format!("{points} points")), "{stdout}");
         let stem = file.split('.').next().unwrap();
         let case = Case::open(out.join(format!("{stem}.case"))).unwrap();
-        let req = StepRequest { normals: normals.then(|| "normal".to_string()), ..Default::default() };
+        let req = StepRequest {
+            normals: normals.then(|| "normal".to_string()),
+            ..Default::default()
+        };
         let step = case.read_step(0, &req).unwrap();
         assert_eq!(step.positions.len(), points);
         if let Some(n) = step.normals {
-            assert!(n.iter().all(|v| ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs() < 1e-5), "normals are unit length");
+            assert!(
+                n.iter()
+                    .all(|v| ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs() < 1e-5),
+                "normals are unit length"
+            );
         }
     }
 }
 
 fn vtk_available() -> bool {
-    Command::new("python3").args(["-c", "import vtk"]).output().is_ok_and(|o| o.status.success())
+    Command::new("python3")
+        .args(["-c", "import vtk"])
+        .output()
+        .is_ok_and(|o| o.status.success())
 }
 
 /// VTK 9.7 reads what we write with the same counts and values (EnSight 6 binary and Gold
@@ -134,7 +270,10 @@ fn vtk_available() -> bool {
 #[test]
 fn vtk_reads_what_we_write() {
     if !vtk_available() {
-        assert!(!in_ci(), "CI=true but python3 cannot import vtk (.ci/run installs it)");
+        assert!(
+            !in_ci(),
+            "CI=true but python3 cannot import vtk (.ci/run installs it)"
+        );
         eprintln!("skipping: python3 with vtk (pip install vtk) not available");
         return;
     }
@@ -148,33 +287,74 @@ fn vtk_reads_what_we_write() {
     ];
     for (scene, format, measured) in cases {
         let out = dir.path().join(format!("{scene}-{format}-{measured}"));
-        let mut args = vec![scene, "--points", "1500", "--steps", "3", "--format", format];
+        let mut args = vec![
+            scene, "--points", "1500", "--steps", "3", "--format", format,
+        ];
         if measured {
             args.push("--measured");
         }
         generate(&out, &args);
         let case_path = out.join(format!("{scene}.case"));
-        let vtk = Command::new("python3").arg(&script).arg(&case_path).arg("--values").output().unwrap();
-        assert!(vtk.status.success(), "{}", String::from_utf8_lossy(&vtk.stderr));
+        let vtk = Command::new("python3")
+            .arg(&script)
+            .arg(&case_path)
+            .arg("--values")
+            .output()
+            .unwrap();
+        assert!(
+            vtk.status.success(),
+            "{}",
+            String::from_utf8_lossy(&vtk.stderr)
+        );
         let vtk: Value = serde_json::from_slice(&vtk.stdout).unwrap();
         let case = Case::open(&case_path).unwrap();
-        let req = StepRequest { normals: Some("normal".into()), fields: vec!["pressure".into(), "surface".into()], ..Default::default() };
+        let req = StepRequest {
+            normals: Some("normal".into()),
+            fields: vec!["pressure".into(), "surface".into()],
+            ..Default::default()
+        };
         let vsteps = vtk["steps"].as_array().unwrap();
         assert_eq!(vsteps.len(), case.step_count());
         for (i, v) in vsteps.iter().enumerate() {
             let ours = case.read_step(i, &req).unwrap();
-            assert_eq!(v["points"].as_u64().unwrap() as usize, ours.positions.len(), "{scene} {format} step {i}: point count");
+            assert_eq!(
+                v["points"].as_u64().unwrap() as usize,
+                ours.positions.len(),
+                "{scene} {format} step {i}: point count"
+            );
             let same = |name: &str, vtk_values: &Value, ours: Vec<f32>| {
-                let vv: Vec<f64> = vtk_values.as_array().unwrap().iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect();
-                assert_eq!(vv.len(), ours.len(), "{scene} {format} step {i} {name}: length");
+                let vv: Vec<f64> = vtk_values
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap_or(f64::NAN))
+                    .collect();
+                assert_eq!(
+                    vv.len(),
+                    ours.len(),
+                    "{scene} {format} step {i} {name}: length"
+                );
                 for (k, (a, b)) in vv.iter().zip(&ours).enumerate() {
-                    assert!(*a == f64::from(*b) || (a.is_nan() && b.is_nan()), "{scene} {format} step {i} {name}[{k}]: VTK {a} vs slosh {b}");
+                    assert!(
+                        *a == f64::from(*b) || (a.is_nan() && b.is_nan()),
+                        "{scene} {format} step {i} {name}[{k}]: VTK {a} vs slosh {b}"
+                    );
                 }
             };
-            same("positions", &v["positions"], ours.positions.iter().flatten().copied().collect());
-            same("normal", &v["arrays"]["normal"], ours.normals.unwrap().iter().flatten().copied().collect());
+            same(
+                "positions",
+                &v["positions"],
+                ours.positions.iter().flatten().copied().collect(),
+            );
+            same(
+                "normal",
+                &v["arrays"]["normal"],
+                ours.normals.unwrap().iter().flatten().copied().collect(),
+            );
             for f in ours.fields {
-                let FieldValues::Scalar(values) = f.values else { panic!("scalar") };
+                let FieldValues::Scalar(values) = f.values else {
+                    panic!("scalar")
+                };
                 same(&f.name, &v["arrays"][&f.name], values);
             }
         }

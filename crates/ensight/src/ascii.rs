@@ -26,7 +26,6 @@ pub(crate) struct AsciiCursor<'a> {
 }
 
 impl<'a> AsciiCursor<'a> {
-
     /// Starts at byte `pos`, which is the beginning of line `line_no + 1`.
     pub fn at(path: &'a Path, data: &'a [u8], pos: usize, line_no: usize) -> Self {
         AsciiCursor {
@@ -44,10 +43,13 @@ impl<'a> AsciiCursor<'a> {
         self.path
     }
 
-
-
     pub fn error(&self, expected: impl Into<String>, found: impl Into<String>) -> Error {
-        Error::parse(self.path, Location::Line(self.line_no.max(1)), expected, found)
+        Error::parse(
+            self.path,
+            Location::Line(self.line_no.max(1)),
+            expected,
+            found,
+        )
     }
 
     fn raw_line(&mut self) -> Option<&'a [u8]> {
@@ -64,7 +66,6 @@ impl<'a> AsciiCursor<'a> {
         }
         Some(line)
     }
-
 
     fn ensure_line_finished(&mut self) -> Result<()> {
         if !is_blank(self.rest) {
@@ -94,7 +95,6 @@ impl<'a> AsciiCursor<'a> {
             }
         }
     }
-
 
     pub fn nonblank_line(&mut self, what: &str) -> Result<&'a str> {
         loop {
@@ -126,7 +126,8 @@ impl<'a> AsciiCursor<'a> {
             if b.is_ascii_whitespace() {
                 break;
             }
-            if (b == b'-' || b == b'+') && (rest[end - 1].is_ascii_digit() || rest[end - 1] == b'.') {
+            if (b == b'-' || b == b'+') && (rest[end - 1].is_ascii_digit() || rest[end - 1] == b'.')
+            {
                 break;
             }
             end += 1;
@@ -147,7 +148,7 @@ impl<'a> AsciiCursor<'a> {
 
     /// `n` floats streamed across lines, appended to `out`.
     pub fn floats(&mut self, n: usize, out: &mut Vec<f32>, what: &str, finite: bool) -> Result<()> {
-        out.reserve(n);
+        out.reserve(n.min(self.bytes_left() / 2));
         for _ in 0..n {
             let v = self.float(what, finite)?;
             out.push(v);
@@ -187,7 +188,7 @@ impl<'a> AsciiCursor<'a> {
 
     /// `n` integers streamed across lines.
     pub fn ints(&mut self, n: usize, width: usize, out: &mut Vec<i64>, what: &str) -> Result<()> {
-        out.reserve(n);
+        out.reserve(n.min(self.bytes_left() / 2));
         for _ in 0..n {
             let v = self.int(width, what)?;
             out.push(v);
@@ -196,17 +197,35 @@ impl<'a> AsciiCursor<'a> {
     }
 
     /// A count (≥ 0) written as an integer line.
-    pub fn count(&mut self, width: usize, what: &str) -> Result<usize> {
-        let v = self.int(width, what)?;
-        usize::try_from(v).map_err(|_| self.error(format!("{what} (a count ≥ 0)"), v.to_string()))
+    /// Unread bytes: an upper bound on what any request can still consume.
+    fn bytes_left(&self) -> usize {
+        self.rest.len() + self.data.len().saturating_sub(self.next)
     }
 
+    /// A count (≥ 0) of items that each hold `values_per_item` numbers further on. Every
+    /// number takes at least two bytes (a digit and a separator), so a count the rest of the
+    /// file cannot hold is refused before anything is allocated for it.
+    pub fn count(&mut self, width: usize, values_per_item: usize, what: &str) -> Result<usize> {
+        let v = self.int(width, what)?;
+        let n = usize::try_from(v)
+            .map_err(|_| self.error(format!("{what} (a count ≥ 0)"), v.to_string()))?;
+        let left = self.bytes_left();
+        if n.saturating_mul(values_per_item).saturating_mul(2) > left {
+            return Err(self.error(
+                format!("{what}: {n} items need more than the {left} bytes left in the file"),
+                v.to_string(),
+            ));
+        }
+        Ok(n)
+    }
 }
 
 /// Whether a line of integers must be cut into columns because neighbours touch.
 fn needs_columns(line: &[u8], width: usize) -> bool {
     line.split(u8::is_ascii_whitespace).any(|t| {
-        t.len() > width && t.iter().all(|&b| b.is_ascii_digit() || b == b'-' || b == b'+')
+        t.len() > width
+            && t.iter()
+                .all(|&b| b.is_ascii_digit() || b == b'-' || b == b'+')
     })
 }
 
@@ -215,16 +234,21 @@ fn is_blank(s: &[u8]) -> bool {
 }
 
 fn trim_start(s: &[u8]) -> &[u8] {
-    let start = s.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(s.len());
+    let start = s
+        .iter()
+        .position(|b| !b.is_ascii_whitespace())
+        .unwrap_or(s.len());
     &s[start..]
 }
 
 fn trim(s: &[u8]) -> &[u8] {
     let s = trim_start(s);
-    let end = s.iter().rposition(|b| !b.is_ascii_whitespace()).map_or(0, |e| e + 1);
+    let end = s
+        .iter()
+        .rposition(|b| !b.is_ascii_whitespace())
+        .map_or(0, |e| e + 1);
     &s[..end]
 }
-
 
 /// What C's printf writes: decimal and exponent forms, `nan`, `inf`. Fortran `D` exponents fail.
 fn parse_f32(token: &[u8]) -> Option<f32> {

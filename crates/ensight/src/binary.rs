@@ -70,7 +70,6 @@ impl<'a> BinCursor<'a> {
         self.order
     }
 
-
     fn remaining(&self) -> usize {
         self.data.len().saturating_sub(self.pos)
     }
@@ -174,7 +173,6 @@ impl<'a> BinCursor<'a> {
         Ok(v as usize)
     }
 
-
     /// Raw bytes of `n` 4-byte values, decoded later with [`decode_i32`]/[`decode_f32_into`].
     pub fn words(&mut self, n: usize, what: &str) -> Result<Words<'a>> {
         let start = self.pos;
@@ -235,9 +233,13 @@ impl Words<'_> {
 
 /// Copies whole 4-byte words into `out` (a Pod type made of them) and fixes their byte order:
 /// memcpy speed, no per-value work in the native order.
-fn copy_words<T: bytemuck::Pod + bytemuck::Zeroable>(raw: &[u8], order: ByteOrder, out: &mut Vec<T>) {
+fn copy_words<T: bytemuck::Pod + bytemuck::Zeroable>(
+    raw: &[u8],
+    order: ByteOrder,
+    out: &mut Vec<T>,
+) {
     let item = size_of::<T>();
-    debug_assert!(item % 4 == 0);
+    debug_assert!(item.is_multiple_of(4));
     let n = raw.len() / item;
     let start = out.len();
     out.reserve(n);
@@ -246,7 +248,11 @@ fn copy_words<T: bytemuck::Pod + bytemuck::Zeroable>(raw: &[u8], order: ByteOrde
     // items are initialised before `set_len` exposes them. Skipping the zero fill that a safe
     // `resize` would do saves a full pass over the step's largest arrays.
     unsafe {
-        std::ptr::copy_nonoverlapping(raw.as_ptr(), out.as_mut_ptr().add(start).cast::<u8>(), n * item);
+        std::ptr::copy_nonoverlapping(
+            raw.as_ptr(),
+            out.as_mut_ptr().add(start).cast::<u8>(),
+            n * item,
+        );
         out.set_len(start + n);
     }
     let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out[start..]);
@@ -269,7 +275,10 @@ pub(crate) fn first_non_finite(values: &[f32]) -> Option<usize> {
         // Masked exponents are ≤ EXP; their maximum reaches EXP only for NaN or Inf.
         let worst = block.iter().map(|v| v.to_bits() & EXP).fold(0, u32::max);
         if worst == EXP {
-            return block.iter().position(|v| !v.is_finite()).map(|i| b * BLOCK + i);
+            return block
+                .iter()
+                .position(|v| !v.is_finite())
+                .map(|i| b * BLOCK + i);
         }
     }
     None

@@ -124,7 +124,12 @@ impl CaseFile {
     /// Parses case text; `path` is used in messages and to find `… file:` side files.
     pub fn parse(path: &Path, text: &str) -> Result<CaseFile> {
         let err = |line: usize, expected: &str, found: &str| {
-            Error::parse(path, Location::Line(line), expected, quote(found.as_bytes()))
+            Error::parse(
+                path,
+                Location::Line(line),
+                expected,
+                quote(found.as_bytes()),
+            )
         };
         let mut section = Section::None;
         let mut format = None;
@@ -159,11 +164,19 @@ impl CaseFile {
             };
             match section {
                 Section::None => {
-                    return Err(err(line_no, "a section (FORMAT, GEOMETRY, VARIABLE, TIME, FILE)", line));
+                    return Err(err(
+                        line_no,
+                        "a section (FORMAT, GEOMETRY, VARIABLE, TIME, FILE)",
+                        line,
+                    ));
                 }
                 Section::Format => {
                     if key != "type" {
-                        return Err(err(line_no, "\"type: ensight\" or \"type: ensight gold\"", line));
+                        return Err(err(
+                            line_no,
+                            "\"type: ensight\" or \"type: ensight gold\"",
+                            line,
+                        ));
                     }
                     let v = value.to_ascii_lowercase();
                     let words: Vec<&str> = v.split_whitespace().collect();
@@ -174,19 +187,44 @@ impl CaseFile {
                     });
                 }
                 Section::Geometry => match key.as_str() {
-                    "model" => model = Some(parse_geometry_ref(value).ok_or_else(|| err(line_no, "model: [ts] [fs] filename", line))?),
-                    "measured" => measured = Some(parse_geometry_ref(value).ok_or_else(|| err(line_no, "measured: [ts] [fs] filename", line))?),
+                    "model" => {
+                        model = Some(
+                            parse_geometry_ref(value)
+                                .ok_or_else(|| err(line_no, "model: [ts] [fs] filename", line))?,
+                        )
+                    }
+                    "measured" => {
+                        measured =
+                            Some(parse_geometry_ref(value).ok_or_else(|| {
+                                err(line_no, "measured: [ts] [fs] filename", line)
+                            })?)
+                    }
                     // Known, valid, and of no use to slosh.
                     "match" | "boundary" | "rigid_body" | "vector_glyphs" => {}
-                    _ => return Err(err(line_no, "model:, measured:, match:, boundary: or rigid_body:", line)),
+                    _ => {
+                        return Err(err(
+                            line_no,
+                            "model:, measured:, match:, boundary: or rigid_body:",
+                            line,
+                        ));
+                    }
                 },
                 Section::Variable => {
-                    let var = parse_variable(&key, value)
-                        .ok_or_else(|| err(line_no, "a variable line such as \"scalar per node: [ts] [fs] name file\"", line))?;
+                    let var = parse_variable(&key, value).ok_or_else(|| {
+                        err(
+                            line_no,
+                            "a variable line such as \"scalar per node: [ts] [fs] name file\"",
+                            line,
+                        )
+                    })?;
                     variables.push(var);
                 }
                 Section::Time | Section::File => {
-                    let entries = if section == Section::Time { &mut time_entries } else { &mut file_entries };
+                    let entries = if section == Section::Time {
+                        &mut time_entries
+                    } else {
+                        &mut file_entries
+                    };
                     let tokens = value.split_whitespace().map(str::to_string);
                     if key.is_empty() {
                         // A continuation line of the previous entry's numbers.
@@ -195,15 +233,33 @@ impl CaseFile {
                             _ => return Err(err(line_no, "a TIME/FILE keyword", line)),
                         }
                     } else {
-                        entries.push(Entry { key, values: tokens.collect(), line: line_no });
+                        entries.push(Entry {
+                            key,
+                            values: tokens.collect(),
+                            line: line_no,
+                        });
                     }
                 }
             }
         }
-        let format = format.ok_or_else(|| Error::parse(path, Location::File, "a FORMAT section with \"type:\"", "none"))?;
+        let format = format.ok_or_else(|| {
+            Error::parse(
+                path,
+                Location::File,
+                "a FORMAT section with \"type:\"",
+                "none",
+            )
+        })?;
         let time_sets = build_time_sets(path, &time_entries)?;
         let file_sets = build_file_sets(path, &file_entries)?;
-        Ok(CaseFile { format, model, measured, variables, time_sets, file_sets })
+        Ok(CaseFile {
+            format,
+            model,
+            measured,
+            variables,
+            time_sets,
+            file_sets,
+        })
     }
 
     pub fn time_set(&self, id: u32) -> Option<&TimeSet> {
@@ -226,7 +282,10 @@ fn parse_u32(s: &str) -> Option<u32> {
 fn parse_geometry_ref(value: &str) -> Option<FileRef> {
     let mut tokens: Vec<&str> = value.split_whitespace().collect();
     let mut change_coords_only = false;
-    if let Some(pos) = tokens.iter().position(|t| t.eq_ignore_ascii_case("change_coords_only")) {
+    if let Some(pos) = tokens
+        .iter()
+        .position(|t| t.eq_ignore_ascii_case("change_coords_only"))
+    {
         change_coords_only = true;
         tokens.truncate(pos);
     }
@@ -237,7 +296,12 @@ fn parse_geometry_ref(value: &str) -> Option<FileRef> {
         [ts, fs] => (Some(parse_u32(ts)?), Some(parse_u32(fs)?)),
         _ => return None,
     };
-    Some(FileRef { pattern, time_set, file_set, change_coords_only })
+    Some(FileRef {
+        pattern,
+        time_set,
+        file_set,
+        change_coords_only,
+    })
 }
 
 fn parse_variable(key: &str, value: &str) -> Option<Variable> {
@@ -275,18 +339,42 @@ fn parse_variable(key: &str, value: &str) -> Option<Variable> {
         };
         let (name, values) = rest.split_first()?;
         if key.ends_with("file") {
-            let file = FileRef { pattern: (*values.first()?).to_string(), time_set, file_set: None, change_coords_only: false };
-            return Some(Variable { name: (*name).to_string(), var_type, location, file: Some(file), constants: Vec::new() });
+            let file = FileRef {
+                pattern: (*values.first()?).to_string(),
+                time_set,
+                file_set: None,
+                change_coords_only: false,
+            };
+            return Some(Variable {
+                name: (*name).to_string(),
+                var_type,
+                location,
+                file: Some(file),
+                constants: Vec::new(),
+            });
         }
-        let constants = values.iter().map(|v| v.parse::<f64>().ok()).collect::<Option<Vec<_>>>()?;
+        let constants = values
+            .iter()
+            .map(|v| v.parse::<f64>().ok())
+            .collect::<Option<Vec<_>>>()?;
         if constants.is_empty() {
             return None;
         }
         let _ = time_set;
-        return Some(Variable { name: (*name).to_string(), var_type, location, file: None, constants });
+        return Some(Variable {
+            name: (*name).to_string(),
+            var_type,
+            location,
+            file: None,
+            constants,
+        });
     }
     // Complex variables end in: description real_file imag_file frequency.
-    let tail = if matches!(var_type, VarType::ComplexScalar | VarType::ComplexVector) { 4 } else { 2 };
+    let tail = if matches!(var_type, VarType::ComplexScalar | VarType::ComplexVector) {
+        4
+    } else {
+        2
+    };
     if tokens.len() < tail {
         return None;
     }
@@ -297,8 +385,19 @@ fn parse_variable(key: &str, value: &str) -> Option<Variable> {
         [ts, fs] => (Some(parse_u32(ts)?), Some(parse_u32(fs)?)),
         _ => return None,
     };
-    let file = FileRef { pattern: rest[1].to_string(), time_set, file_set, change_coords_only: false };
-    Some(Variable { name: rest[0].to_string(), var_type, location, file: Some(file), constants: Vec::new() })
+    let file = FileRef {
+        pattern: rest[1].to_string(),
+        time_set,
+        file_set,
+        change_coords_only: false,
+    };
+    Some(Variable {
+        name: rest[0].to_string(),
+        var_type,
+        location,
+        file: Some(file),
+        constants: Vec::new(),
+    })
 }
 
 fn numbers<T: std::str::FromStr>(path: &Path, e: &Entry) -> Result<Vec<T>> {
@@ -306,7 +405,12 @@ fn numbers<T: std::str::FromStr>(path: &Path, e: &Entry) -> Result<Vec<T>> {
         .iter()
         .map(|v| {
             v.parse::<T>().map_err(|_| {
-                Error::parse(path, Location::Line(e.line), format!("numbers after \"{}:\"", e.key), quote(v.as_bytes()))
+                Error::parse(
+                    path,
+                    Location::Line(e.line),
+                    format!("numbers after \"{}:\"", e.key),
+                    quote(v.as_bytes()),
+                )
             })
         })
         .collect()
@@ -315,18 +419,29 @@ fn numbers<T: std::str::FromStr>(path: &Path, e: &Entry) -> Result<Vec<T>> {
 fn single<T: std::str::FromStr>(path: &Path, e: &Entry) -> Result<T> {
     let mut v: Vec<T> = numbers(path, e)?;
     if v.len() != 1 {
-        return Err(Error::parse(path, Location::Line(e.line), format!("one number after \"{}:\"", e.key), format!("{} values", v.len())));
+        return Err(Error::parse(
+            path,
+            Location::Line(e.line),
+            format!("one number after \"{}:\"", e.key),
+            format!("{} values", v.len()),
+        ));
     }
     Ok(v.remove(0))
 }
 
 /// Reads the whitespace-separated numbers of a `… file:` side file next to the case.
 fn numbers_from_file<T: std::str::FromStr>(case: &Path, e: &Entry) -> Result<Vec<T>> {
-    let name = e.values.first().ok_or_else(|| Error::parse(case, Location::Line(e.line), "a file name", "nothing"))?;
+    let name = e
+        .values
+        .first()
+        .ok_or_else(|| Error::parse(case, Location::Line(e.line), "a file name", "nothing"))?;
     let side = case.parent().unwrap_or(Path::new(".")).join(name);
     let text = std::fs::read_to_string(&side).map_err(|err| Error::io(&side, err))?;
     text.split_whitespace()
-        .map(|v| v.parse::<T>().map_err(|_| Error::parse(&side, Location::File, "numbers", quote(v.as_bytes()))))
+        .map(|v| {
+            v.parse::<T>()
+                .map_err(|_| Error::parse(&side, Location::File, "numbers", quote(v.as_bytes())))
+        })
         .collect()
 }
 
@@ -345,15 +460,38 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
     for e in entries {
         if e.key == "time set" {
             let id = e.values.first().and_then(|v| parse_u32(v)).ok_or_else(|| {
-                Error::parse(path, Location::Line(e.line), "time set: <number> [description]", quote(e.values.join(" ").as_bytes()))
+                Error::parse(
+                    path,
+                    Location::Line(e.line),
+                    "time set: <number> [description]",
+                    quote(e.values.join(" ").as_bytes()),
+                )
             })?;
             let description = (e.values.len() > 1).then(|| e.values[1..].join(" "));
-            sets.push(Partial { id, description, line: e.line, steps: None, start: None, increment: None, numbers: None, times: None });
+            sets.push(Partial {
+                id,
+                description,
+                line: e.line,
+                steps: None,
+                start: None,
+                increment: None,
+                numbers: None,
+                times: None,
+            });
             continue;
         }
         if sets.is_empty() {
             // EnSight 6 cases may omit "time set:"; the set is then number 1.
-            sets.push(Partial { id: 1, description: None, line: e.line, steps: None, start: None, increment: None, numbers: None, times: None });
+            sets.push(Partial {
+                id: 1,
+                description: None,
+                line: e.line,
+                steps: None,
+                start: None,
+                increment: None,
+                numbers: None,
+                times: None,
+            });
         }
         let set = sets.last_mut().expect("pushed above");
         match e.key.as_str() {
@@ -365,22 +503,51 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
             "time values" => set.times = Some(numbers(path, e)?),
             "time values file" => set.times = Some(numbers_from_file(path, e)?),
             _ => {
-                return Err(Error::parse(path, Location::Line(e.line), "a TIME keyword (time set, number of steps, filename start number, filename increment, filename numbers, time values)", quote(e.key.as_bytes())));
+                return Err(Error::parse(
+                    path,
+                    Location::Line(e.line),
+                    "a TIME keyword (time set, number of steps, filename start number, filename increment, filename numbers, time values)",
+                    quote(e.key.as_bytes()),
+                ));
             }
         }
     }
     sets.into_iter()
         .map(|p| {
             let at = Location::Line(p.line);
-            let steps = p.steps.ok_or_else(|| Error::parse(path, at, format!("\"number of steps:\" in time set {}", p.id), "none"))?;
-            let times = p.times.ok_or_else(|| Error::parse(path, at, format!("\"time values:\" in time set {}", p.id), "none"))?;
+            let steps = p.steps.ok_or_else(|| {
+                Error::parse(
+                    path,
+                    at,
+                    format!("\"number of steps:\" in time set {}", p.id),
+                    "none",
+                )
+            })?;
+            let times = p.times.ok_or_else(|| {
+                Error::parse(
+                    path,
+                    at,
+                    format!("\"time values:\" in time set {}", p.id),
+                    "none",
+                )
+            })?;
             if times.len() != steps {
-                return Err(Error::parse(path, at, format!("{steps} time values in time set {}", p.id), format!("{}", times.len())));
+                return Err(Error::parse(
+                    path,
+                    at,
+                    format!("{steps} time values in time set {}", p.id),
+                    format!("{}", times.len()),
+                ));
             }
             let file_numbers = match (p.numbers, p.start) {
                 (Some(n), _) => {
                     if n.len() != steps {
-                        return Err(Error::parse(path, at, format!("{steps} filename numbers in time set {}", p.id), format!("{}", n.len())));
+                        return Err(Error::parse(
+                            path,
+                            at,
+                            format!("{steps} filename numbers in time set {}", p.id),
+                            format!("{}", n.len()),
+                        ));
                     }
                     n
                 }
@@ -390,7 +557,12 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
                 }
                 (None, None) => Vec::new(),
             };
-            Ok(TimeSet { id: p.id, description: p.description, times, file_numbers })
+            Ok(TimeSet {
+                id: p.id,
+                description: p.description,
+                times,
+                file_numbers,
+            })
         })
         .collect()
 }
@@ -401,16 +573,34 @@ fn build_file_sets(path: &Path, entries: &[Entry]) -> Result<Vec<FileSet>> {
     for e in entries {
         match e.key.as_str() {
             "file set" => {
-                sets.push(FileSet { id: single(path, e)?, chunks: Vec::new() });
+                sets.push(FileSet {
+                    id: single(path, e)?,
+                    chunks: Vec::new(),
+                });
                 pending_index = None;
             }
             "filename index" => pending_index = Some(single(path, e)?),
             "number of steps" => {
-                let set = sets.last_mut().ok_or_else(|| Error::parse(path, Location::Line(e.line), "\"file set:\" first", quote(e.key.as_bytes())))?;
-                set.chunks.push(FileSetChunk { index: pending_index.take(), steps: single(path, e)? });
+                let set = sets.last_mut().ok_or_else(|| {
+                    Error::parse(
+                        path,
+                        Location::Line(e.line),
+                        "\"file set:\" first",
+                        quote(e.key.as_bytes()),
+                    )
+                })?;
+                set.chunks.push(FileSetChunk {
+                    index: pending_index.take(),
+                    steps: single(path, e)?,
+                });
             }
             _ => {
-                return Err(Error::parse(path, Location::Line(e.line), "a FILE keyword (file set, filename index, number of steps)", quote(e.key.as_bytes())));
+                return Err(Error::parse(
+                    path,
+                    Location::Line(e.line),
+                    "a FILE keyword (file set, filename index, number of steps)",
+                    quote(e.key.as_bytes()),
+                ));
             }
         }
     }
@@ -447,7 +637,6 @@ pub struct StepFile {
     /// Index of the step's block in a single-file transient file; `None` for one file per step.
     pub block: Option<usize>,
 }
-
 
 #[cfg(test)]
 mod tests {

@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::binary::{ByteOrder, Encoding, sniff};
-use crate::case::{CaseFile, FileRef, Format, StepFile, VarLocation, VarType, Variable, expand_wildcards, has_wildcards};
+use crate::case::{
+    CaseFile, FileRef, Format, StepFile, VarLocation, VarType, Variable, expand_wildcards,
+    has_wildcards,
+};
 use crate::error::{Error, Location, Result};
 use crate::geometry::{Geometry, read_geometry};
 use crate::reader::with_decoder;
@@ -69,6 +72,20 @@ pub struct Step {
     pub surface: Option<Vec<bool>>,
 }
 
+/// The particles of a step before variables are read, and how to find their values.
+#[derive(Debug)]
+struct SelectedPoints {
+    positions: Vec<[f32; 3]>,
+    /// Indices into the geometry's nodes; `None` for measured particles (all, in order).
+    selection: Option<Vec<u32>>,
+    encoding: Encoding,
+    order: Option<ByteOrder>,
+    /// Nodes a variable file covers.
+    count: usize,
+    /// Gold parts `(number, node range)`, for per-part variable files.
+    parts_layout: Vec<(i64, Range<usize>)>,
+}
+
 /// An EnSight case, opened once.
 #[derive(Debug, Clone)]
 pub struct Case {
@@ -83,8 +100,14 @@ impl Case {
     pub fn open(path: impl AsRef<Path>) -> Result<Case> {
         let path = path.as_ref();
         let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let text = String::from_utf8(text)
-            .map_err(|e| Error::parse(path, Location::Byte(e.utf8_error().valid_up_to() as u64), "a text case file", "bytes that are not UTF-8"))?;
+        let text = String::from_utf8(text).map_err(|e| {
+            Error::parse(
+                path,
+                Location::Byte(e.utf8_error().valid_up_to() as u64),
+                "a text case file",
+                "bytes that are not UTF-8",
+            )
+        })?;
         Case::from_text(path, &text)
     }
 
@@ -96,17 +119,34 @@ impl Case {
             .as_ref()
             .and_then(|m| m.time_set)
             .or_else(|| file.measured.as_ref().and_then(|m| m.time_set))
-            .or_else(|| file.variables.iter().find_map(|v| v.file.as_ref().and_then(|f| f.time_set)))
+            .or_else(|| {
+                file.variables
+                    .iter()
+                    .find_map(|v| v.file.as_ref().and_then(|f| f.time_set))
+            })
             .or_else(|| (file.time_sets.len() == 1).then(|| file.time_sets[0].id));
         let times = match main_set {
             Some(id) => file
                 .time_set(id)
-                .ok_or_else(|| Error::parse(path, Location::File, format!("time set {id} in the TIME section"), "none"))?
+                .ok_or_else(|| {
+                    Error::parse(
+                        path,
+                        Location::File,
+                        format!("time set {id} in the TIME section"),
+                        "none",
+                    )
+                })?
                 .times
                 .clone(),
             None => vec![0.0],
         };
-        Ok(Case { path: path.to_path_buf(), file, byte_order: None, main_set, times })
+        Ok(Case {
+            path: path.to_path_buf(),
+            file,
+            byte_order: None,
+            main_set,
+            times,
+        })
     }
 
     /// Forces the byte order of binary files instead of detecting it.
@@ -139,15 +179,33 @@ impl Case {
     }
 
     pub fn variable(&self, name: &str) -> Result<&Variable> {
-        self.file.variables.iter().find(|v| v.name == name).ok_or_else(|| {
-            let names: Vec<&str> = self.file.variables.iter().map(|v| v.name.as_str()).collect();
-            Error::Request(format!("{}: no variable {name:?} (it has: {})", self.path.display(), names.join(", ")))
-        })
+        self.file
+            .variables
+            .iter()
+            .find(|v| v.name == name)
+            .ok_or_else(|| {
+                let names: Vec<&str> = self
+                    .file
+                    .variables
+                    .iter()
+                    .map(|v| v.name.as_str())
+                    .collect();
+                Error::Request(format!(
+                    "{}: no variable {name:?} (it has: {})",
+                    self.path.display(),
+                    names.join(", ")
+                ))
+            })
     }
 
     fn check_step(&self, step: usize) -> Result<()> {
         if step >= self.times.len() {
-            return Err(Error::Request(format!("{}: step {step} requested, the case has {} (0..{})", self.path.display(), self.times.len(), self.times.len())));
+            return Err(Error::Request(format!(
+                "{}: step {step} requested, the case has {} (0..{})",
+                self.path.display(),
+                self.times.len(),
+                self.times.len()
+            )));
         }
         Ok(())
     }
@@ -156,20 +214,44 @@ impl Case {
     pub fn resolve(&self, fref: &FileRef, step: usize) -> Result<StepFile> {
         self.check_step(step)?;
         let dir = self.path.parent().unwrap_or(Path::new("."));
-        let set_id = fref.time_set.or(if has_wildcards(&fref.pattern) || fref.file_set.is_some() { self.main_set } else { None });
+        let set_id = fref
+            .time_set
+            .or(if has_wildcards(&fref.pattern) || fref.file_set.is_some() {
+                self.main_set
+            } else {
+                None
+            });
         let Some(set_id) = set_id else {
-            return Ok(StepFile { path: dir.join(&fref.pattern), block: None });
+            return Ok(StepFile {
+                path: dir.join(&fref.pattern),
+                block: None,
+            });
         };
-        let set = self.file.time_set(set_id).ok_or_else(|| Error::Request(format!("{}: {:?} uses time set {set_id}, which the case does not define", self.path.display(), fref.pattern)))?;
+        let set = self.file.time_set(set_id).ok_or_else(|| {
+            Error::Request(format!(
+                "{}: {:?} uses time set {set_id}, which the case does not define",
+                self.path.display(),
+                fref.pattern
+            ))
+        })?;
         // Map the main step onto this file's time set by time.
         let j = if Some(set_id) == self.main_set {
             step
         } else {
             let t = self.times[step];
-            set.times.iter().rposition(|&s| s <= t + 1e-12 * t.abs().max(1.0)).unwrap_or(0)
+            set.times
+                .iter()
+                .rposition(|&s| s <= t + 1e-12 * t.abs().max(1.0))
+                .unwrap_or(0)
         };
         if let Some(fs) = fref.file_set {
-            let set = self.file.file_set(fs).ok_or_else(|| Error::Request(format!("{}: {:?} uses file set {fs}, which the case does not define", self.path.display(), fref.pattern)))?;
+            let set = self.file.file_set(fs).ok_or_else(|| {
+                Error::Request(format!(
+                    "{}: {:?} uses file set {fs}, which the case does not define",
+                    self.path.display(),
+                    fref.pattern
+                ))
+            })?;
             let mut first = 0;
             for chunk in &set.chunks {
                 if j < first + chunk.steps {
@@ -177,55 +259,174 @@ impl Case {
                         Some(i) => expand_wildcards(&fref.pattern, i),
                         None => fref.pattern.clone(),
                     };
-                    return Ok(StepFile { path: dir.join(name), block: Some(j - first) });
+                    return Ok(StepFile {
+                        path: dir.join(name),
+                        block: Some(j - first),
+                    });
                 }
                 first += chunk.steps;
             }
-            return Err(Error::Request(format!("{}: file set {fs} holds {first} steps, step {j} requested", self.path.display())));
+            return Err(Error::Request(format!(
+                "{}: file set {fs} holds {first} steps, step {j} requested",
+                self.path.display()
+            )));
         }
         if !has_wildcards(&fref.pattern) {
-            return Ok(StepFile { path: dir.join(&fref.pattern), block: None });
+            return Ok(StepFile {
+                path: dir.join(&fref.pattern),
+                block: None,
+            });
         }
         let number = *set.file_numbers.get(j).ok_or_else(|| {
             Error::Request(format!("{}: time set {set_id} gives no filename numbers (filename start number / filename numbers) for {:?}", self.path.display(), fref.pattern))
         })?;
-        Ok(StepFile { path: dir.join(expand_wildcards(&fref.pattern, number)), block: None })
+        Ok(StepFile {
+            path: dir.join(expand_wildcards(&fref.pattern, number)),
+            block: None,
+        })
     }
 
     pub fn model_file(&self, step: usize) -> Result<Option<StepFile>> {
-        self.file.model.as_ref().map(|m| self.resolve(m, step)).transpose()
+        self.file
+            .model
+            .as_ref()
+            .map(|m| self.resolve(m, step))
+            .transpose()
     }
 
     pub fn measured_file(&self, step: usize) -> Result<Option<StepFile>> {
-        self.file.measured.as_ref().map(|m| self.resolve(m, step)).transpose()
+        self.file
+            .measured
+            .as_ref()
+            .map(|m| self.resolve(m, step))
+            .transpose()
     }
 
     /// Reads the model geometry of a step.
     pub fn read_geometry(&self, step: usize, allow_non_finite: bool) -> Result<Geometry> {
-        let file = self.model_file(step)?.ok_or_else(|| Error::Request(format!("{}: no model geometry", self.path.display())))?;
+        let file = self
+            .model_file(step)?
+            .ok_or_else(|| Error::Request(format!("{}: no model geometry", self.path.display())))?;
         let bytes = FileBytes::open(&file.path)?;
         let encoding = sniff(&file.path, &bytes)?;
         let format = self.file.format;
-        with_decoder(&file.path, &bytes, format, encoding, true, file.block, self.byte_order, |d| read_geometry(d, format, encoding, !allow_non_finite))
+        with_decoder(
+            &file.path,
+            &bytes,
+            format,
+            encoding,
+            true,
+            file.block,
+            self.byte_order,
+            |d| read_geometry(d, format, encoding, !allow_non_finite),
+        )
     }
 
     /// Reads the measured particles of a step.
     pub fn read_measured(&self, step: usize, allow_non_finite: bool) -> Result<Measured> {
-        let file = self.measured_file(step)?.ok_or_else(|| Error::Request(format!("{}: no measured particle file", self.path.display())))?;
+        let file = self.measured_file(step)?.ok_or_else(|| {
+            Error::Request(format!(
+                "{}: no measured particle file",
+                self.path.display()
+            ))
+        })?;
         let bytes = FileBytes::open(&file.path)?;
         let encoding = sniff(&file.path, &bytes)?;
-        with_decoder(&file.path, &bytes, self.file.format, encoding, true, file.block, self.byte_order, |d| read_measured(d, encoding, !allow_non_finite))
+        with_decoder(
+            &file.path,
+            &bytes,
+            self.file.format,
+            encoding,
+            true,
+            file.block,
+            self.byte_order,
+            |d| read_measured(d, encoding, !allow_non_finite),
+        )
     }
 
     /// Reads one variable for a step, `components` floats per node interleaved, over every
     /// node of `layout`.
-    fn read_variable(&self, var: &Variable, step: usize, encoding: Encoding, order: Option<ByteOrder>, layout: VarLayout<'_>, out: &mut Vec<f32>) -> Result<()> {
-        let fref = var.file.as_ref().ok_or_else(|| Error::Request(format!("{}: variable {:?} has no file", self.path.display(), var.name)))?;
+    fn read_variable(
+        &self,
+        var: &Variable,
+        step: usize,
+        encoding: Encoding,
+        order: Option<ByteOrder>,
+        layout: VarLayout<'_>,
+        out: &mut Vec<f32>,
+    ) -> Result<()> {
+        let fref = var.file.as_ref().ok_or_else(|| {
+            Error::Request(format!(
+                "{}: variable {:?} has no file",
+                self.path.display(),
+                var.name
+            ))
+        })?;
         let file = self.resolve(fref, step)?;
-        let components = var.var_type.components().ok_or_else(|| Error::unsupported(&self.path, format!("variable {:?} of type {:?}", var.name, var.var_type)))?;
+        let components = var.var_type.components().ok_or_else(|| {
+            Error::unsupported(
+                &self.path,
+                format!("variable {:?} of type {:?}", var.name, var.var_type),
+            )
+        })?;
         let bytes = FileBytes::open(&file.path)?;
         let order = self.byte_order.or(order);
-        with_decoder(&file.path, &bytes, self.file.format, encoding, false, file.block, order, |d| read_node_variable(d, components, layout, out))
+        with_decoder(
+            &file.path,
+            &bytes,
+            self.file.format,
+            encoding,
+            false,
+            file.block,
+            order,
+            |d| read_node_variable(d, components, layout, out),
+        )
+    }
+
+    /// The model nodes that are particles for `source`, and their positions.
+    fn select_nodes(
+        &self,
+        g: Geometry,
+        source: PointSource,
+        parts: Option<&[i64]>,
+        step: usize,
+    ) -> Result<SelectedPoints> {
+        let mut idx: Vec<u32> = Vec::new();
+        for part in selected_parts(&g, parts) {
+            if source == PointSource::AllNodes {
+                idx.extend(part.nodes.start as u32..part.nodes.end as u32);
+            } else {
+                idx.extend_from_slice(&part.point_nodes);
+            }
+        }
+        if source == PointSource::AllNodes && self.file.format == Format::Ensight6 {
+            // EnSight 6 parts share the one node list: take each node once.
+            idx.sort_unstable();
+            idx.dedup();
+        }
+        if idx.is_empty()
+            && source == PointSource::PointElements
+            && parts.is_none()
+            && g.parts.iter().all(|p| p.point_nodes.is_empty())
+        {
+            return Err(Error::Request(format!(
+                "{}: step {step} has no `point` elements and no measured particles; ask for all nodes to use mesh nodes as particles",
+                self.path.display()
+            )));
+        }
+        let parts_layout = g
+            .parts
+            .iter()
+            .map(|p| (p.number, p.nodes.clone()))
+            .collect();
+        Ok(SelectedPoints {
+            count: g.nodes.len(),
+            encoding: g.encoding,
+            order: g.byte_order,
+            positions: gather(g.nodes, &idx),
+            selection: Some(idx),
+            parts_layout,
+        })
     }
 
     /// Reads one step: the particles `request` selects, with the variables it names.
@@ -234,71 +435,93 @@ impl Case {
         let finite = !request.allow_non_finite;
         let mut source = request.points;
         let mut geometry = None;
-        if matches!(source, PointSource::Auto | PointSource::PointElements | PointSource::AllNodes) && self.file.model.is_some() {
+        if matches!(
+            source,
+            PointSource::Auto | PointSource::PointElements | PointSource::AllNodes
+        ) && self.file.model.is_some()
+        {
             let g = self.read_geometry(step, !finite)?;
             if source == PointSource::Auto {
-                let has_points = selected_parts(&g, request.parts.as_deref()).any(|p| !p.point_nodes.is_empty());
-                source = if has_points || self.file.measured.is_none() { PointSource::PointElements } else { PointSource::Measured };
+                let has_points =
+                    selected_parts(&g, request.parts.as_deref()).any(|p| !p.point_nodes.is_empty());
+                source = if has_points || self.file.measured.is_none() {
+                    PointSource::PointElements
+                } else {
+                    PointSource::Measured
+                };
             }
             geometry = Some(g);
         } else if source == PointSource::Auto {
             source = PointSource::Measured;
         }
 
-        let (positions, selection, encoding, order, count, parts_layout): (Vec<[f32; 3]>, Option<Vec<u32>>, Encoding, Option<ByteOrder>, usize, Vec<(i64, Range<usize>)>);
-        if source == PointSource::Measured {
+        let points = if source == PointSource::Measured {
             let m = self.read_measured(step, !finite)?;
-            count = m.positions.len();
-            encoding = m.encoding;
-            order = m.byte_order;
-            positions = m.positions;
-            selection = None;
-            parts_layout = Vec::new();
+            SelectedPoints {
+                count: m.positions.len(),
+                encoding: m.encoding,
+                order: m.byte_order,
+                positions: m.positions,
+                selection: None,
+                parts_layout: Vec::new(),
+            }
         } else {
             let g = match geometry {
                 Some(g) => g,
-                None => return Err(Error::Request(format!("{}: points from the model geometry requested, the case has none", self.path.display()))),
-            };
-            let mut idx: Vec<u32> = Vec::new();
-            for part in selected_parts(&g, request.parts.as_deref()) {
-                if source == PointSource::AllNodes {
-                    idx.extend(part.nodes.start as u32..part.nodes.end as u32);
-                } else {
-                    idx.extend_from_slice(&part.point_nodes);
+                None => {
+                    return Err(Error::Request(format!(
+                        "{}: points from the model geometry requested, the case has none",
+                        self.path.display()
+                    )));
                 }
-            }
-            if source == PointSource::AllNodes && self.file.format == Format::Ensight6 {
-                // EnSight 6 parts share the one node list: take each node once.
-                idx.sort_unstable();
-                idx.dedup();
-            }
-            if idx.is_empty() && source == PointSource::PointElements && request.parts.is_none() && g.parts.iter().all(|p| p.point_nodes.is_empty()) {
-                return Err(Error::Request(format!("{}: step {step} has no `point` elements and no measured particles; ask for all nodes to use mesh nodes as particles", self.path.display())));
-            }
-            count = g.nodes.len();
-            encoding = g.encoding;
-            order = g.byte_order;
-            parts_layout = g.parts.iter().map(|p| (p.number, p.nodes.clone())).collect();
-            positions = gather(g.nodes, &idx);
-            selection = Some(idx);
-        }
+            };
+            self.select_nodes(g, source, request.parts.as_deref(), step)?
+        };
+        let SelectedPoints {
+            positions,
+            selection,
+            encoding,
+            order,
+            count,
+            parts_layout,
+        } = points;
 
-        let location = if source == PointSource::Measured { VarLocation::MeasuredNode } else { VarLocation::Node };
-        let layout = if location == VarLocation::Node && self.file.format == Format::Gold { VarLayout::Parts(&parts_layout) } else { VarLayout::Global(count) };
+        let location = if source == PointSource::Measured {
+            VarLocation::MeasuredNode
+        } else {
+            VarLocation::Node
+        };
+        let layout = if location == VarLocation::Node && self.file.format == Format::Gold {
+            VarLayout::Parts(&parts_layout)
+        } else {
+            VarLayout::Global(count)
+        };
         let read = |name: &str, want: Option<VarType>| -> Result<(VarType, Vec<f32>)> {
             let var = self.variable(name)?;
             if var.location != location {
-                return Err(Error::Request(format!("{}: variable {name:?} is per {:?}, the particles come from {:?}", self.path.display(), var.location, source)));
+                return Err(Error::Request(format!(
+                    "{}: variable {name:?} is per {:?}, the particles come from {:?}",
+                    self.path.display(),
+                    var.location,
+                    source
+                )));
             }
-            if let Some(want) = want {
-                if var.var_type != want {
-                    return Err(Error::Request(format!("{}: variable {name:?} is a {:?}, a {want:?} is needed", self.path.display(), var.var_type)));
-                }
+            if let Some(want) = want
+                && var.var_type != want
+            {
+                return Err(Error::Request(format!(
+                    "{}: variable {name:?} is a {:?}, a {want:?} is needed",
+                    self.path.display(),
+                    var.var_type
+                )));
             }
             let mut values = Vec::new();
             self.read_variable(var, step, encoding, order, layout, &mut values)?;
             let comps = var.var_type.components().unwrap_or(1);
-            Ok((var.var_type, gather_components(values, comps, selection.as_deref())))
+            Ok((
+                var.var_type,
+                gather_components(values, comps, selection.as_deref()),
+            ))
         };
 
         let normals = match &request.normals {
@@ -306,21 +529,47 @@ impl Case {
             None => None,
         };
         let surface = match &request.surface {
-            Some(name) => Some(read(name, Some(VarType::Scalar))?.1.iter().map(|&v| v != 0.0 && !v.is_nan()).collect()),
+            Some(name) => Some(
+                read(name, Some(VarType::Scalar))?
+                    .1
+                    .iter()
+                    .map(|&v| v != 0.0 && !v.is_nan())
+                    .collect(),
+            ),
             None => None,
         };
         let mut fields = Vec::with_capacity(request.fields.len());
         for name in &request.fields {
             let (ty, values) = read(name, None)?;
-            let values = if ty == VarType::Vector { FieldValues::Vector(to_vec3(values)) } else { FieldValues::Scalar(values) };
-            fields.push(Field { name: name.clone(), values });
+            let values = if ty == VarType::Vector {
+                FieldValues::Vector(to_vec3(values))
+            } else {
+                FieldValues::Scalar(values)
+            };
+            fields.push(Field {
+                name: name.clone(),
+                values,
+            });
         }
-        Ok(Step { index: step, time: self.times[step], source, positions, normals, fields, surface })
+        Ok(Step {
+            index: step,
+            time: self.times[step],
+            source,
+            positions,
+            normals,
+            fields,
+            surface,
+        })
     }
 }
 
-fn selected_parts<'a>(g: &'a Geometry, parts: Option<&'a [i64]>) -> impl Iterator<Item = &'a crate::geometry::Part> + 'a {
-    g.parts.iter().filter(move |p| parts.is_none_or(|sel| sel.contains(&p.number)))
+fn selected_parts<'a>(
+    g: &'a Geometry,
+    parts: Option<&'a [i64]>,
+) -> impl Iterator<Item = &'a crate::geometry::Part> + 'a {
+    g.parts
+        .iter()
+        .filter(move |p| parts.is_none_or(|sel| sel.contains(&p.number)))
 }
 
 fn is_identity(idx: &[u32], n: usize) -> bool {

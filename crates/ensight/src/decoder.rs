@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use crate::ascii::AsciiCursor;
-use crate::binary::{BinCursor, ByteOrder, first_non_finite};
+use crate::binary::{BinCursor, ByteOrder, Words, first_non_finite};
 use crate::error::{Error, Location, Result};
 
 /// Reads the pieces EnSight files are made of, whatever their encoding.
@@ -60,8 +60,9 @@ impl Decoder for Ascii<'_> {
     fn int(&mut self, what: &str) -> Result<i64> {
         self.cursor.int(self.int_width, what)
     }
-    fn count(&mut self, what: &str, _bytes_per_item: usize) -> Result<usize> {
-        self.cursor.count(self.int_width, what)
+    fn count(&mut self, what: &str, bytes_per_item: usize) -> Result<usize> {
+        // Binary sizes are 4 bytes per value; ASCII holds the same number of values.
+        self.cursor.count(self.int_width, bytes_per_item / 4, what)
     }
     fn ints(&mut self, n: usize, out: &mut Vec<i64>, what: &str) -> Result<()> {
         self.cursor.ints(n, self.int_width, out, what)
@@ -73,7 +74,6 @@ impl Decoder for Ascii<'_> {
         Ok(())
     }
     fn u32s(&mut self, n: usize, out: &mut Vec<u32>, what: &str) -> Result<usize> {
-        out.reserve(n);
         for _ in 0..n {
             let v = self.cursor.int(self.int_width, what)?;
             out.push(u32::try_from(v).unwrap_or(u32::MAX));
@@ -84,7 +84,6 @@ impl Decoder for Ascii<'_> {
         self.cursor.floats(n, out, what, finite)
     }
     fn vec3s(&mut self, n: usize, out: &mut Vec<[f32; 3]>, what: &str, finite: bool) -> Result<()> {
-        out.reserve(n);
         for _ in 0..n {
             let x = self.cursor.float(what, finite)?;
             let y = self.cursor.float(what, finite)?;
@@ -142,14 +141,7 @@ impl Decoder for BinCursor<'_> {
         let start = out.len();
         words.extend_f32(out);
         if finite {
-            if let Some(k) = first_non_finite(&out[start..]) {
-                return Err(Error::parse(
-                    BinCursor::path(self),
-                    Location::Byte(words.offset_of(k)),
-                    format!("a finite number ({what})"),
-                    out[start + k].to_string(),
-                ));
-            }
+            require_finite(BinCursor::path(self), &words, &out[start..], what)?;
         }
         Ok(())
     }
@@ -161,15 +153,12 @@ impl Decoder for BinCursor<'_> {
         let start = out.len();
         words.extend_vec3(out);
         if finite {
-            let flat: &[f32] = bytemuck::cast_slice(&out[start..]);
-            if let Some(k) = first_non_finite(flat) {
-                return Err(Error::parse(
-                    BinCursor::path(self),
-                    Location::Byte(words.offset_of(k)),
-                    format!("a finite number ({what})"),
-                    flat[k].to_string(),
-                ));
-            }
+            require_finite(
+                BinCursor::path(self),
+                &words,
+                bytemuck::cast_slice(&out[start..]),
+                what,
+            )?;
         }
         Ok(())
     }
@@ -178,5 +167,18 @@ impl Decoder for BinCursor<'_> {
     }
     fn byte_order(&self) -> Option<ByteOrder> {
         self.order()
+    }
+}
+
+/// Fails at the byte offset of the first NaN or Inf among `values`, decoded from `words`.
+fn require_finite(path: &Path, words: &Words<'_>, values: &[f32], what: &str) -> Result<()> {
+    match first_non_finite(values) {
+        Some(k) => Err(Error::parse(
+            path,
+            Location::Byte(words.offset_of(k)),
+            format!("a finite number ({what})"),
+            values[k].to_string(),
+        )),
+        None => Ok(()),
     }
 }

@@ -26,5 +26,6 @@ pub fn nodes_per_element(kind: &str) -> Option<usize> {
 
 /// True for the words that start an element block (fixed-size or Gold's polygons/polyhedra).
 pub fn is_element_keyword(kind: &str) -> bool {
-    nodes_per_element(kind).is_some() || matches!(kind.strip_prefix("g_").unwrap_or(kind), "nsided" | "nfaced")
+    nodes_per_element(kind).is_some()
+        || matches!(kind.strip_prefix("g_").unwrap_or(kind), "nsided" | "nfaced")
 }

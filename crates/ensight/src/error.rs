@@ -53,7 +53,10 @@ pub enum Error {
 fn format_parse(path: &Path, location: Location, expected: &str, found: &str) -> String {
     match location {
         Location::File => format!("{}: expected {expected}, found {found}", path.display()),
-        _ => format!("{}: {location}: expected {expected}, found {found}", path.display()),
+        _ => format!(
+            "{}: {location}: expected {expected}, found {found}",
+            path.display()
+        ),
     }
 }
 

@@ -82,9 +82,17 @@ impl Geometry {
 fn id_mode(d: &mut dyn Decoder, what: &str) -> Result<IdMode> {
     let line = d.keyword(what)?;
     if !line.starts_with(what) {
-        return Err(d.error(&format!("\"{what} <off|given|assign|ignore>\""), &quote(line.as_bytes())));
+        return Err(d.error(
+            &format!("\"{what} <off|given|assign|ignore>\""),
+            &quote(line.as_bytes()),
+        ));
     }
-    IdMode::parse(&line).ok_or_else(|| d.error(&format!("\"{what} <off|given|assign|ignore>\""), &quote(line.as_bytes())))
+    IdMode::parse(&line).ok_or_else(|| {
+        d.error(
+            &format!("\"{what} <off|given|assign|ignore>\""),
+            &quote(line.as_bytes()),
+        )
+    })
 }
 
 fn expect_keyword(d: &mut dyn Decoder, keyword: &str) -> Result<String> {
@@ -97,7 +105,12 @@ fn expect_keyword(d: &mut dyn Decoder, keyword: &str) -> Result<String> {
 
 /// Reads a geometry file's content from the current position (after `C Binary` and any
 /// `BEGIN TIME STEP`) to its end or to `END TIME STEP`.
-pub(crate) fn read_geometry(d: &mut dyn Decoder, format: Format, encoding: Encoding, finite: bool) -> Result<Geometry> {
+pub(crate) fn read_geometry(
+    d: &mut dyn Decoder,
+    format: Format,
+    encoding: Encoding,
+    finite: bool,
+) -> Result<Geometry> {
     d.text("description line 1")?;
     d.text("description line 2")?;
     let node_ids = id_mode(d, "node id")?;
@@ -143,8 +156,17 @@ fn read_e6_body(d: &mut dyn Decoder, g: &mut Geometry, finite: bool) -> Result<(
     }
     // With given ids, connectivity names nodes by id; otherwise by 1-based position.
     let id_to_index: Option<HashMap<i64, u32>> = (g.node_ids == IdMode::Given
-        && !node_ids.iter().enumerate().all(|(i, &id)| id == i as i64 + 1))
-    .then(|| node_ids.iter().enumerate().map(|(i, &id)| (id, i as u32)).collect());
+        && !node_ids
+            .iter()
+            .enumerate()
+            .all(|(i, &id)| id == i as i64 + 1))
+    .then(|| {
+        node_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &id)| (id, i as u32))
+            .collect()
+    });
 
     while let Some(kw) = d.peek_keyword() {
         if kw.starts_with("end time step") {
@@ -156,10 +178,19 @@ fn read_e6_body(d: &mut dyn Decoder, g: &mut Geometry, finite: bool) -> Result<(
             .and_then(|n| n.trim().parse::<i64>().ok())
             .ok_or_else(|| d.error("\"part <number>\"", &quote(line.as_bytes())))?;
         let description = d.text("part description")?;
-        let mut part = Part { number, description, nodes: 0..nn, blocks: Vec::new(), point_nodes: Vec::new() };
+        let mut part = Part {
+            number,
+            description,
+            nodes: 0..nn,
+            blocks: Vec::new(),
+            point_nodes: Vec::new(),
+        };
         let nodes = match &id_to_index {
             Some(map) => NodeRefs::Ids(map),
-            None => NodeRefs::Positions { count: nn, first: 0 },
+            None => NodeRefs::Positions {
+                count: nn,
+                first: 0,
+            },
         };
         read_element_blocks(d, g.element_ids, true, &mut part, &nodes)?;
         g.parts.push(part);
@@ -184,7 +215,10 @@ fn read_gold_body(d: &mut dyn Decoder, g: &mut Geometry, finite: bool) -> Result
         let mut nn = 0;
         if let Some(kw) = d.peek_keyword() {
             if kw.starts_with("block") {
-                return Err(Error::unsupported(d.path(), format!("structured part {number} ({kw:?})")));
+                return Err(Error::unsupported(
+                    d.path(),
+                    format!("structured part {number} ({kw:?})"),
+                ));
             }
             if kw.starts_with("coordinates") {
                 d.keyword("coordinates")?;
@@ -196,7 +230,10 @@ fn read_gold_body(d: &mut dyn Decoder, g: &mut Geometry, finite: bool) -> Result
                 // x block, y block, z block.
                 let mut block = Vec::with_capacity(nn);
                 g.nodes.resize(start + nn, [0.0; 3]);
-                for (axis, what) in ["x coordinates", "y coordinates", "z coordinates"].iter().enumerate() {
+                for (axis, what) in ["x coordinates", "y coordinates", "z coordinates"]
+                    .iter()
+                    .enumerate()
+                {
                     block.clear();
                     d.floats(nn, &mut block, what, finite)?;
                     for (node, v) in g.nodes[start..].iter_mut().zip(&block) {
@@ -205,8 +242,23 @@ fn read_gold_body(d: &mut dyn Decoder, g: &mut Geometry, finite: bool) -> Result
                 }
             }
         }
-        let mut part = Part { number, description, nodes: start..start + nn, blocks: Vec::new(), point_nodes: Vec::new() };
-        read_element_blocks(d, g.element_ids, false, &mut part, &NodeRefs::Positions { count: nn, first: start })?;
+        let mut part = Part {
+            number,
+            description,
+            nodes: start..start + nn,
+            blocks: Vec::new(),
+            point_nodes: Vec::new(),
+        };
+        read_element_blocks(
+            d,
+            g.element_ids,
+            false,
+            &mut part,
+            &NodeRefs::Positions {
+                count: nn,
+                first: start,
+            },
+        )?;
         g.parts.push(part);
     }
     Ok(())
@@ -230,7 +282,10 @@ impl NodeRefs<'_> {
                     Err(format!("node {raw}, which is not among the {count} nodes"))
                 }
             }
-            NodeRefs::Ids(map) => map.get(&raw).copied().ok_or_else(|| format!("node id {raw}, which no node has")),
+            NodeRefs::Ids(map) => map
+                .get(&raw)
+                .copied()
+                .ok_or_else(|| format!("node id {raw}, which no node has")),
         }
     }
 
@@ -238,8 +293,12 @@ impl NodeRefs<'_> {
     fn resolve_all(&self, refs: &mut [u32]) -> Result<(), (usize, String)> {
         if let NodeRefs::Positions { count, first } = *self {
             // Common case: one vectorisable range check, then one shift.
-            let (lo, hi) = refs.iter().fold((u32::MAX, 0), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-            if refs.is_empty() || (lo >= 1 && (hi as usize) <= count && first + count <= u32::MAX as usize) {
+            let (lo, hi) = refs
+                .iter()
+                .fold((u32::MAX, 0), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            if refs.is_empty()
+                || (lo >= 1 && (hi as usize) <= count && first + count <= u32::MAX as usize)
+            {
                 let shift = first as u32;
                 for v in refs.iter_mut() {
                     *v = *v - 1 + shift;
@@ -268,7 +327,10 @@ fn read_element_blocks(
     while let Some(kw) = d.peek_keyword() {
         if !is_element_keyword(&kw) {
             if kw.starts_with("block") {
-                return Err(Error::unsupported(d.path(), format!("structured part {} ({kw:?})", part.number)));
+                return Err(Error::unsupported(
+                    d.path(),
+                    format!("structured part {} ({kw:?})", part.number),
+                ));
             }
             break;
         }
@@ -317,7 +379,9 @@ fn read_element_blocks(
                         conn.clear();
                         d.ints(npe, &mut conn, &format!("{kind} connectivity"))?;
                         if is_point {
-                            let i = nodes.resolve(conn[0]).map_err(|e| d.error("a node of this geometry", &e))?;
+                            let i = nodes
+                                .resolve(conn[0])
+                                .map_err(|e| d.error("a node of this geometry", &e))?;
                             part.point_nodes.push(i);
                         }
                     }
@@ -325,9 +389,16 @@ fn read_element_blocks(
                     // Bulk decode, then resolve every reference in one pass.
                     let first = part.point_nodes.len();
                     let start = d.u32s(count, &mut part.point_nodes, "point connectivity")?;
-                    nodes.resolve_all(&mut part.point_nodes[first..]).map_err(|(k, e)| {
-                        Error::parse(d.path(), Location::Byte((start + 4 * k) as u64), "a node of this geometry", e)
-                    })?;
+                    nodes
+                        .resolve_all(&mut part.point_nodes[first..])
+                        .map_err(|(k, e)| {
+                            Error::parse(
+                                d.path(),
+                                Location::Byte((start + 4 * k) as u64),
+                                "a node of this geometry",
+                                e,
+                            )
+                        })?;
                 } else {
                     d.skip_ints(count * npe, &format!("{kind} connectivity"))?;
                 }
@@ -343,13 +414,24 @@ fn checked_total(d: &dyn Decoder, counts: &[i64], what: &str) -> Result<usize> {
     let mut total: usize = 0;
     for &c in counts {
         let c = usize::try_from(c).map_err(|_| d.error(&format!("{what} ≥ 0"), &c.to_string()))?;
-        total = total.checked_add(c).ok_or_else(|| d.error(what, "a total that overflows"))?;
+        total = total
+            .checked_add(c)
+            .ok_or_else(|| d.error(what, "a total that overflows"))?;
     }
     Ok(total)
 }
 
 /// Reads a whole geometry file given its bytes.
-pub(crate) fn parse_geometry_bytes(path: &Path, data: &[u8], format: Format, block: Option<usize>, order: Option<ByteOrder>, finite: bool) -> Result<Geometry> {
+pub(crate) fn parse_geometry_bytes(
+    path: &Path,
+    data: &[u8],
+    format: Format,
+    block: Option<usize>,
+    order: Option<ByteOrder>,
+    finite: bool,
+) -> Result<Geometry> {
     let encoding = crate::binary::sniff(path, data)?;
-    crate::reader::with_decoder(path, data, format, encoding, true, block, order, |d| read_geometry(d, format, encoding, finite))
+    crate::reader::with_decoder(path, data, format, encoding, true, block, order, |d| {
+        read_geometry(d, format, encoding, finite)
+    })
 }

@@ -44,7 +44,14 @@ pub mod fuzzing {
     pub fn geometry(data: &[u8]) {
         for format in [Format::Ensight6, Format::Gold] {
             for block in [None, Some(0)] {
-                let _ = crate::geometry::parse_geometry_bytes(Path::new("fuzz.geo"), data, format, block, None, true);
+                let _ = crate::geometry::parse_geometry_bytes(
+                    Path::new("fuzz.geo"),
+                    data,
+                    format,
+                    block,
+                    None,
+                    true,
+                );
             }
         }
     }
@@ -52,7 +59,16 @@ pub mod fuzzing {
     pub fn measured(data: &[u8]) {
         let path = Path::new("fuzz.mgeo");
         if let Ok(encoding) = crate::binary::sniff(path, data) {
-            let _ = crate::reader::with_decoder(path, data, Format::Ensight6, encoding, true, None, None, |d| crate::variables::read_measured(d, encoding, true));
+            let _ = crate::reader::with_decoder(
+                path,
+                data,
+                Format::Ensight6,
+                encoding,
+                true,
+                None,
+                None,
+                |d| crate::variables::read_measured(d, encoding, true),
+            );
         }
     }
 }

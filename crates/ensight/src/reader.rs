@@ -67,7 +67,12 @@ fn ascii_block_start(path: &Path, data: &[u8], block: usize) -> Result<(usize, u
             found += 1;
         }
     }
-    Err(Error::parse(path, Location::File, format!("BEGIN TIME STEP number {}", block + 1), format!("{found} of them")))
+    Err(Error::parse(
+        path,
+        Location::File,
+        format!("BEGIN TIME STEP number {}", block + 1),
+        format!("{found} of them"),
+    ))
 }
 
 fn binary_block_start(path: &Path, data: &[u8], from: usize, block: usize) -> Result<usize> {
@@ -76,11 +81,21 @@ fn binary_block_start(path: &Path, data: &[u8], from: usize, block: usize) -> Re
         let at = from + at;
         if found == block {
             if at + STRING_LEN > data.len() {
-                return Err(Error::parse(path, Location::Byte(at as u64), "an 80-byte BEGIN TIME STEP record", quote(&data[at..])));
+                return Err(Error::parse(
+                    path,
+                    Location::Byte(at as u64),
+                    "an 80-byte BEGIN TIME STEP record",
+                    quote(&data[at..]),
+                ));
             }
             return Ok(at + STRING_LEN);
         }
         found += 1;
     }
-    Err(Error::parse(path, Location::File, format!("BEGIN TIME STEP number {}", block + 1), format!("{found} of them")))
+    Err(Error::parse(
+        path,
+        Location::File,
+        format!("BEGIN TIME STEP number {}", block + 1),
+        format!("{found} of them"),
+    ))
 }

@@ -17,7 +17,11 @@ pub struct Measured {
     pub positions: Vec<[f32; 3]>,
 }
 
-pub(crate) fn read_measured(d: &mut dyn Decoder, encoding: Encoding, finite: bool) -> Result<Measured> {
+pub(crate) fn read_measured(
+    d: &mut dyn Decoder,
+    encoding: Encoding,
+    finite: bool,
+) -> Result<Measured> {
     d.text("description line")?;
     let kw = d.keyword("\"particle coordinates\"")?;
     if !kw.starts_with("particle coordinates") {
@@ -40,7 +44,11 @@ pub(crate) fn read_measured(d: &mut dyn Decoder, encoding: Encoding, finite: boo
         d.skip_ints(np, "particle ids")?;
         d.vec3s(np, &mut positions, "particle coordinates", finite)?;
     }
-    Ok(Measured { encoding, byte_order: d.byte_order(), positions })
+    Ok(Measured {
+        encoding,
+        byte_order: d.byte_order(),
+        positions,
+    })
 }
 
 /// How a variable file's values map onto the nodes they belong to.
@@ -55,11 +63,18 @@ pub(crate) enum VarLayout<'a> {
 /// Reads a per-node or per-measured-node variable into `out`: `components` floats per node,
 /// interleaved, over all nodes of the layout. Nodes a Gold file leaves out (or marks
 /// undefined) are NaN.
-pub(crate) fn read_node_variable(d: &mut dyn Decoder, components: usize, layout: VarLayout<'_>, out: &mut Vec<f32>) -> Result<()> {
+pub(crate) fn read_node_variable(
+    d: &mut dyn Decoder,
+    components: usize,
+    layout: VarLayout<'_>,
+    out: &mut Vec<f32>,
+) -> Result<()> {
     d.text("description line")?;
     match layout {
         VarLayout::Global(n) => {
-            let len = n.checked_mul(components).ok_or_else(|| d.error("a node count", "one that overflows"))?;
+            let len = n
+                .checked_mul(components)
+                .ok_or_else(|| d.error("a node count", "one that overflows"))?;
             out.clear();
             d.floats(len, out, "variable values", false)
         }
@@ -83,7 +98,11 @@ pub(crate) fn read_node_variable(d: &mut dyn Decoder, components: usize, layout:
                     .map(|(_, r)| r.clone())
                     .ok_or_else(|| d.error("a part number of the geometry", &number.to_string()))?;
                 let nodes = range.len();
-                if nodes == 0 && !d.peek_keyword().is_some_and(|k| k.starts_with("coordinates")) {
+                if nodes == 0
+                    && !d
+                        .peek_keyword()
+                        .is_some_and(|k| k.starts_with("coordinates"))
+                {
                     continue;
                 }
                 let kw = d.keyword("\"coordinates\"")?;
@@ -95,10 +114,16 @@ pub(crate) fn read_node_variable(d: &mut dyn Decoder, components: usize, layout:
                         Some(v[0])
                     }
                     k if k.starts_with("coordinates partial") => {
-                        return Err(Error::unsupported(d.path(), "partial per-node values (\"coordinates partial\")"));
+                        return Err(Error::unsupported(
+                            d.path(),
+                            "partial per-node values (\"coordinates partial\")",
+                        ));
                     }
                     k if k.starts_with("block") => {
-                        return Err(Error::unsupported(d.path(), format!("structured part values ({k:?})")));
+                        return Err(Error::unsupported(
+                            d.path(),
+                            format!("structured part values ({k:?})"),
+                        ));
                     }
                     _ => return Err(d.error("\"coordinates\"", &quote(kw.as_bytes()))),
                 };

@@ -78,14 +78,24 @@ pub struct CaseWriter {
 
 impl CaseWriter {
     /// Prepares `dir/name.case`; `variables` are the names and types every step will carry.
-    pub fn create(dir: &Path, name: &str, format: WriteFormat, placement: Placement, variables: &[(&str, VarType)]) -> Result<CaseWriter> {
+    pub fn create(
+        dir: &Path,
+        name: &str,
+        format: WriteFormat,
+        placement: Placement,
+        variables: &[(&str, VarType)],
+    ) -> Result<CaseWriter> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         for (v, ty) in variables {
             if v.is_empty() || v.chars().any(|c| c.is_whitespace() || c == '*' || c == '/') {
-                return Err(Error::Request(format!("variable name {v:?} must be one word without '*' or '/'")));
+                return Err(Error::Request(format!(
+                    "variable name {v:?} must be one word without '*' or '/'"
+                )));
             }
             if ty.components().is_none() {
-                return Err(Error::Request(format!("variable {v:?}: only scalar and vector variables can be written")));
+                return Err(Error::Request(format!(
+                    "variable {v:?}: only scalar and vector variables can be written"
+                )));
             }
         }
         Ok(CaseWriter {
@@ -93,7 +103,10 @@ impl CaseWriter {
             name: name.to_string(),
             format,
             placement,
-            variables: variables.iter().map(|(n, t)| ((*n).to_string(), *t)).collect(),
+            variables: variables
+                .iter()
+                .map(|(n, t)| ((*n).to_string(), *t))
+                .collect(),
             times: Vec::new(),
             order: ByteOrder::Little,
         })
@@ -114,26 +127,52 @@ impl CaseWriter {
     }
 
     /// Writes one step's geometry and variables, then the case file.
-    pub fn write_step(&mut self, time: f64, positions: &[[f32; 3]], variables: &[VarData<'_>]) -> Result<()> {
+    pub fn write_step(
+        &mut self,
+        time: f64,
+        positions: &[[f32; 3]],
+        variables: &[VarData<'_>],
+    ) -> Result<()> {
         let step = self.times.len();
         if step >= 10usize.pow(STEP_DIGITS as u32) {
-            return Err(Error::Request(format!("at most {} steps per case", 10usize.pow(STEP_DIGITS as u32))));
+            return Err(Error::Request(format!(
+                "at most {} steps per case",
+                10usize.pow(STEP_DIGITS as u32)
+            )));
         }
-        if let Some(&last) = self.times.last() {
-            if time <= last {
-                return Err(Error::Request(format!("time values must increase: {time} after {last}")));
-            }
+        if let Some(&last) = self.times.last()
+            && time <= last
+        {
+            return Err(Error::Request(format!(
+                "time values must increase: {time} after {last}"
+            )));
         }
         if variables.len() != self.variables.len()
-            || variables.iter().zip(&self.variables).any(|(v, (n, t))| v.name() != n || v.var_type() != *t)
+            || variables
+                .iter()
+                .zip(&self.variables)
+                .any(|(v, (n, t))| v.name() != n || v.var_type() != *t)
         {
-            return Err(Error::Request("variables of a step must match those the writer was created with, in order".into()));
+            return Err(Error::Request(
+                "variables of a step must match those the writer was created with, in order".into(),
+            ));
         }
         if let Some(v) = variables.iter().find(|v| v.len() != positions.len()) {
-            return Err(Error::Request(format!("variable {:?} has {} values for {} particles", v.name(), v.len(), positions.len())));
+            return Err(Error::Request(format!(
+                "variable {:?} has {} values for {} particles",
+                v.name(),
+                v.len(),
+                positions.len()
+            )));
         }
-        if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-            return Err(Error::Request(format!("particle {i} has a non-finite coordinate {:?}", positions[i])));
+        if let Some(i) = positions
+            .iter()
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(Error::Request(format!(
+                "particle {i} has a non-finite coordinate {:?}",
+                positions[i]
+            )));
         }
         if step == 0 && self.placement == Placement::Measured {
             // The model geometry of a measured-only case: no nodes, no parts.
@@ -142,7 +181,10 @@ impl CaseWriter {
         }
         let (geo_stem, geo) = match self.placement {
             Placement::PointPart => ("geo", point_geometry(self.format, self.order, positions)),
-            Placement::Measured => ("mgeo", measured_geometry(self.format, self.order, positions)),
+            Placement::Measured => (
+                "mgeo",
+                measured_geometry(self.format, self.order, positions),
+            ),
         };
         atomic_write(&self.dir.join(self.step_name(geo_stem, step)), &geo)?;
         for v in variables {
@@ -157,7 +199,11 @@ impl CaseWriter {
         let wild = "*".repeat(STEP_DIGITS);
         let name = &self.name;
         let mut s = String::from("# written by slosh\nFORMAT\n");
-        s += if self.format.gold() { "type: ensight gold\n" } else { "type: ensight\n" };
+        s += if self.format.gold() {
+            "type: ensight gold\n"
+        } else {
+            "type: ensight\n"
+        };
         s += "\nGEOMETRY\n";
         let per = match self.placement {
             Placement::PointPart => {
@@ -173,11 +219,19 @@ impl CaseWriter {
         if !self.variables.is_empty() {
             s += "\nVARIABLE\n";
             for (v, ty) in &self.variables {
-                let kind = if *ty == VarType::Vector { "vector" } else { "scalar" };
+                let kind = if *ty == VarType::Vector {
+                    "vector"
+                } else {
+                    "scalar"
+                };
                 let _ = writeln!(s, "{kind} per {per}: 1 {v} {name}.{v}{wild}");
             }
         }
-        let _ = write!(s, "\nTIME\ntime set: 1\nnumber of steps: {}\nfilename start number: 0\nfilename increment: 1\ntime values:\n", self.times.len());
+        let _ = write!(
+            s,
+            "\nTIME\ntime set: 1\nnumber of steps: {}\nfilename start number: 0\nfilename increment: 1\ntime values:\n",
+            self.times.len()
+        );
         for chunk in self.times.chunks(6) {
             let line: Vec<String> = chunk.iter().map(|t| format!("{t:e}")).collect();
             let _ = writeln!(s, "{}", line.join(" "));
@@ -188,7 +242,10 @@ impl CaseWriter {
 
 /// Writes to a temporary name in the same directory, then renames over the target.
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let file_name = path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+    let file_name = path
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = path.with_file_name(format!(".{file_name}.tmp-{}", std::process::id()));
     std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
     std::fs::rename(&tmp, path).map_err(|e| {
@@ -208,7 +265,13 @@ struct Out {
 
 impl Out {
     fn new(format: WriteFormat, order: ByteOrder) -> Out {
-        Out { binary: format.binary(), gold: format.gold(), order, bytes: Vec::new(), text: String::new() }
+        Out {
+            binary: format.binary(),
+            gold: format.gold(),
+            order,
+            bytes: Vec::new(),
+            text: String::new(),
+        }
     }
 
     fn word(&mut self, bits: u32) {
@@ -271,14 +334,28 @@ impl Out {
     }
 
     fn finish(self) -> Vec<u8> {
-        if self.binary { self.bytes } else { self.text.into_bytes() }
+        if self.binary {
+            self.bytes
+        } else {
+            self.text.into_bytes()
+        }
     }
 }
 
 /// C's `%12.5e`: `-1.23450e+00`, right-aligned in 12 columns.
 fn push_e12(out: &mut String, v: f32) {
     if !v.is_finite() {
-        let _ = write!(out, "{:>12}", if v.is_nan() { "nan".to_string() } else if v > 0.0 { "inf".to_string() } else { "-inf".to_string() });
+        let _ = write!(
+            out,
+            "{:>12}",
+            if v.is_nan() {
+                "nan".to_string()
+            } else if v > 0.0 {
+                "inf".to_string()
+            } else {
+                "-inf".to_string()
+            }
+        );
         return;
     }
     let s = format!("{v:.5e}");
@@ -369,7 +446,12 @@ fn measured_geometry(format: WriteFormat, order: ByteOrder, positions: &[[f32; 3
     out.finish()
 }
 
-fn variable_file(format: WriteFormat, order: ByteOrder, placement: Placement, var: &VarData<'_>) -> Vec<u8> {
+fn variable_file(
+    format: WriteFormat,
+    order: ByteOrder,
+    placement: Placement,
+    var: &VarData<'_>,
+) -> Vec<u8> {
     let mut out = Out::new(format, order);
     out.string(var.name());
     let per_part = out.gold && placement == Placement::PointPart;
@@ -400,6 +482,9 @@ mod tests {
         for v in [1.0f32, -0.25, 123456.0, 1e-7, 0.0] {
             push_e12(&mut s, v);
         }
-        assert_eq!(s, " 1.00000e+00-2.50000e-01 1.23456e+05 1.00000e-07 0.00000e+00");
+        assert_eq!(
+            s,
+            " 1.00000e+00-2.50000e-01 1.23456e+05 1.00000e-07 0.00000e+00"
+        );
     }
 }

@@ -1,6 +1,8 @@
 //! Integration tests of the EnSight reader and writer: round trips through every written
 //! flavour, hand-written files in the shapes real solvers produce, and bad input.
 
+#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
+
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
@@ -14,7 +16,9 @@ fn sample(n: usize, seed: u32) -> (Vec<[f32; 3]>, Vec<f32>, Vec<[f32; 3]>) {
         x ^= x << 5;
         (x as f32 / u32::MAX as f32) * 2.0 - 1.0
     };
-    let pos: Vec<[f32; 3]> = (0..n).map(|_| [next() * 10.0, next() * 1e-3, next() * 1e4]).collect();
+    let pos: Vec<[f32; 3]> = (0..n)
+        .map(|_| [next() * 10.0, next() * 1e-3, next() * 1e4])
+        .collect();
     let p: Vec<f32> = (0..n).map(|_| next() * 1e5).collect();
     let nrm: Vec<[f32; 3]> = (0..n).map(|_| [next(), next(), next()]).collect();
     (pos, p, nrm)
@@ -22,37 +26,72 @@ fn sample(n: usize, seed: u32) -> (Vec<[f32; 3]>, Vec<f32>, Vec<[f32; 3]>) {
 
 /// ASCII files keep 6 significant digits (`%12.5e`).
 fn close(a: f32, b: f32, ascii: bool) -> bool {
-    if ascii { (a - b).abs() <= 6e-6 * a.abs().max(b.abs()) + 1e-30 } else { a.to_bits() == b.to_bits() }
+    if ascii {
+        (a - b).abs() <= 6e-6 * a.abs().max(b.abs()) + 1e-30
+    } else {
+        a.to_bits() == b.to_bits()
+    }
 }
 
 fn roundtrip(format: WriteFormat, placement: Placement, order: ByteOrder) {
     let dir = tempfile::tempdir().unwrap();
-    let mut w = CaseWriter::create(dir.path(), "run", format, placement, &[("pressure", VarType::Scalar), ("normal", VarType::Vector)])
-        .unwrap()
-        .with_byte_order(order);
+    let mut w = CaseWriter::create(
+        dir.path(),
+        "run",
+        format,
+        placement,
+        &[("pressure", VarType::Scalar), ("normal", VarType::Vector)],
+    )
+    .unwrap()
+    .with_byte_order(order);
     let steps: Vec<_> = (0..3).map(|s| sample(50 + 7 * s, s as u32 + 1)).collect();
     for (s, (pos, p, n)) in steps.iter().enumerate() {
-        w.write_step(0.1 * s as f64, pos, &[VarData::Scalar("pressure", p), VarData::Vector("normal", n)]).unwrap();
+        w.write_step(
+            0.1 * s as f64,
+            pos,
+            &[VarData::Scalar("pressure", p), VarData::Vector("normal", n)],
+        )
+        .unwrap();
     }
     let case = Case::open(w.case_path()).unwrap();
     assert_eq!(case.step_count(), 3);
-    assert_eq!(case.format(), if matches!(format, WriteFormat::GoldAscii | WriteFormat::GoldBinary) { Format::Gold } else { Format::Ensight6 });
+    assert_eq!(
+        case.format(),
+        if matches!(format, WriteFormat::GoldAscii | WriteFormat::GoldBinary) {
+            Format::Gold
+        } else {
+            Format::Ensight6
+        }
+    );
     let ascii = matches!(format, WriteFormat::E6Ascii | WriteFormat::GoldAscii);
-    let request = StepRequest { normals: Some("normal".into()), fields: vec!["pressure".into()], ..Default::default() };
+    let request = StepRequest {
+        normals: Some("normal".into()),
+        fields: vec!["pressure".into()],
+        ..Default::default()
+    };
     for (s, (pos, p, n)) in steps.iter().enumerate() {
         let step = case.read_step(s, &request).unwrap();
         assert!((step.time - 0.1 * s as f64).abs() < 1e-12);
-        let expected_source = if placement == Placement::Measured { PointSource::Measured } else { PointSource::PointElements };
+        let expected_source = if placement == Placement::Measured {
+            PointSource::Measured
+        } else {
+            PointSource::PointElements
+        };
         assert_eq!(step.source, expected_source);
         assert_eq!(step.positions.len(), pos.len());
         for (a, b) in step.positions.iter().flatten().zip(pos.iter().flatten()) {
-            assert!(close(*a, *b, ascii), "{format:?} {placement:?} position {a} vs {b}");
+            assert!(
+                close(*a, *b, ascii),
+                "{format:?} {placement:?} position {a} vs {b}"
+            );
         }
         let normals = step.normals.as_ref().unwrap();
         for (a, b) in normals.iter().flatten().zip(n.iter().flatten()) {
             assert!(close(*a, *b, ascii), "normal {a} vs {b}");
         }
-        let FieldValues::Scalar(values) = &step.fields[0].values else { panic!("scalar expected") };
+        let FieldValues::Scalar(values) = &step.fields[0].values else {
+            panic!("scalar expected")
+        };
         for (a, b) in values.iter().zip(p) {
             assert!(close(*a, *b, ascii), "pressure {a} vs {b}");
         }
@@ -68,7 +107,12 @@ fn roundtrip(format: WriteFormat, placement: Placement, order: ByteOrder) {
 
 #[test]
 fn every_written_flavour_reads_back() {
-    for format in [WriteFormat::E6Ascii, WriteFormat::E6Binary, WriteFormat::GoldAscii, WriteFormat::GoldBinary] {
+    for format in [
+        WriteFormat::E6Ascii,
+        WriteFormat::E6Binary,
+        WriteFormat::GoldAscii,
+        WriteFormat::GoldBinary,
+    ] {
         for placement in [Placement::PointPart, Placement::Measured] {
             roundtrip(format, placement, ByteOrder::Little);
         }
@@ -125,11 +169,27 @@ point
         TIME\ntime set: 1\nnumber of steps: 1\nfilename start number: 1\nfilename increment: 1\ntime values: 0.5\n";
     let path = write(dir.path(), "a.case", case.as_bytes());
     let case = Case::open(&path).unwrap();
-    let step = case.read_step(0, &StepRequest { fields: vec!["p".into()], ..Default::default() }).unwrap();
+    let step = case
+        .read_step(
+            0,
+            &StepRequest {
+                fields: vec!["p".into()],
+                ..Default::default()
+            },
+        )
+        .unwrap();
     // Particles are the point elements only, referenced by node id.
     assert_eq!(step.positions, vec![[7.0, 8.0, 9.0], [-1.0, -2.0, -3.0]]);
     assert_eq!(step.fields[0].values, FieldValues::Scalar(vec![4.0, 1.0]));
-    let all = case.read_step(0, &StepRequest { points: PointSource::AllNodes, ..Default::default() }).unwrap();
+    let all = case
+        .read_step(
+            0,
+            &StepRequest {
+                points: PointSource::AllNodes,
+                ..Default::default()
+            },
+        )
+        .unwrap();
     assert_eq!(all.positions.len(), 4);
     let g = case.read_geometry(0, false).unwrap();
     assert_eq!(g.parts[0].blocks[0].kind, "tria3");
@@ -193,9 +253,20 @@ point
     let path = write(dir.path(), "g.case", case.as_bytes());
     let case = Case::open(&path).unwrap();
     assert_eq!(case.step_count(), 1);
-    let step = case.read_step(0, &StepRequest { fields: vec!["vel".into()], ..Default::default() }).unwrap();
+    let step = case
+        .read_step(
+            0,
+            &StepRequest {
+                fields: vec!["vel".into()],
+                ..Default::default()
+            },
+        )
+        .unwrap();
     assert_eq!(step.positions, vec![[6.0, 8.0, 10.0], [5.0, 7.0, 9.0]]);
-    assert_eq!(step.fields[0].values, FieldValues::Vector(vec![[11.0, 13.0, 15.0], [10.0, 12.0, 14.0]]));
+    assert_eq!(
+        step.fields[0].values,
+        FieldValues::Vector(vec![[11.0, 13.0, 15.0], [10.0, 12.0, 14.0]])
+    );
 }
 
 /// Single-file transient data: every step in one file between BEGIN/END TIME STEP.
@@ -206,7 +277,11 @@ fn single_file_transient_ascii_and_binary() {
     let m = "BEGIN TIME STEP\nstep a\nparticle coordinates\n       1\n       1 1.00000e+00 2.00000e+00 3.00000e+00\nEND TIME STEP\n\
              BEGIN TIME STEP\nstep b\nparticle coordinates\n       2\n       1 4.00000e+00 5.00000e+00 6.00000e+00\n       2-1.00000e+00-2.00000e+00-3.00000e+00\nEND TIME STEP\n";
     write(dir.path(), "m.mgeo", m.as_bytes());
-    write(dir.path(), "empty.geo", b"d\nd\nnode id off\nelement id off\ncoordinates\n       0\n");
+    write(
+        dir.path(),
+        "empty.geo",
+        b"d\nd\nnode id off\nelement id off\ncoordinates\n       0\n",
+    );
     let case = "FORMAT\ntype: ensight\nGEOMETRY\nmodel: empty.geo\nmeasured: 1 1 m.mgeo\nTIME\ntime set: 1\nnumber of steps: 2\ntime values: 0 1\nFILE\nfile set: 1\nnumber of steps: 2\n";
     let path = write(dir.path(), "m.case", case.as_bytes());
     let c = Case::open(&path).unwrap();
@@ -247,13 +322,27 @@ fn single_file_transient_ascii_and_binary() {
     let case = "FORMAT\ntype: ensight gold\nGEOMETRY\nmodel: 1 1 t.geo\nTIME\ntime set: 1\nnumber of steps: 2\ntime values: 0.0\n 2.0\nFILE\nfile set: 1\nnumber of steps: 2\n";
     let path = write(dir.path(), "t.case", case.as_bytes());
     let c = Case::open(&path).unwrap();
-    assert_eq!(c.read_step(1, &StepRequest::default()).unwrap().positions, vec![[10.0, 11.0, 12.0]]);
-    assert_eq!(c.read_step(0, &StepRequest::default()).unwrap().positions, vec![[0.0, 1.0, 2.0]]);
+    assert_eq!(
+        c.read_step(1, &StepRequest::default()).unwrap().positions,
+        vec![[10.0, 11.0, 12.0]]
+    );
+    assert_eq!(
+        c.read_step(0, &StepRequest::default()).unwrap().positions,
+        vec![[0.0, 1.0, 2.0]]
+    );
 }
 
 fn error_of(case_dir: &Path, case: &str) -> String {
     let path = write(case_dir, "bad.case", case.as_bytes());
-    match Case::open(&path).and_then(|c| c.read_step(0, &StepRequest { fields: vec![], ..Default::default() })) {
+    match Case::open(&path).and_then(|c| {
+        c.read_step(
+            0,
+            &StepRequest {
+                fields: vec![],
+                ..Default::default()
+            },
+        )
+    }) {
         Ok(_) => panic!("expected an error"),
         Err(e) => e.to_string(),
     }
@@ -263,7 +352,14 @@ const BIN_CASE: &str = "FORMAT\ntype: ensight\nGEOMETRY\nmodel: 1 b.geo*****\nTI
 
 fn binary_geo(n: i32, coords: &[f32]) -> Vec<u8> {
     let mut b = Vec::new();
-    for t in ["C Binary", "d", "d", "node id off", "element id off", "coordinates"] {
+    for t in [
+        "C Binary",
+        "d",
+        "d",
+        "node id off",
+        "element id off",
+        "coordinates",
+    ] {
         let mut r = [0u8; 80];
         r[..t.len()].copy_from_slice(t.as_bytes());
         b.extend_from_slice(&r);
@@ -288,7 +384,10 @@ fn bad_input_names_file_and_place() {
     // Count larger than the file: byte offset of the count.
     write(d, "b.geo00000", &binary_geo(1000, &[1.0, 2.0, 3.0]));
     let e = error_of(d, BIN_CASE);
-    assert!(e.contains("byte offset 480") && e.contains("1000 items"), "{e}");
+    assert!(
+        e.contains("byte offset 480") && e.contains("1000 items"),
+        "{e}"
+    );
     // NaN coordinate: byte offset of the value.
     write(d, "b.geo00000", &binary_geo(1, &[1.0, f32::NAN, 3.0]));
     let e = error_of(d, BIN_CASE);
@@ -296,7 +395,10 @@ fn bad_input_names_file_and_place() {
     // Truncated inside the header strings.
     write(d, "b.geo00000", &binary_geo(1, &[1.0, 2.0, 3.0])[..200]);
     let e = error_of(d, BIN_CASE);
-    assert!(e.contains("byte offset 160") && e.contains("end of file"), "{e}");
+    assert!(
+        e.contains("byte offset 160") && e.contains("end of file"),
+        "{e}"
+    );
     // Fortran binary: refused by name.
     let mut fortran = 80i32.to_le_bytes().to_vec();
     fortran.extend_from_slice(b"Fortran Binary");
@@ -305,7 +407,11 @@ fn bad_input_names_file_and_place() {
     let e = error_of(d, BIN_CASE);
     assert!(e.contains("Fortran"), "{e}");
     // Unparsable ASCII number: its line.
-    write(d, "b.geo00000", b"d\nd\nnode id off\nelement id off\ncoordinates\n       1\n 1.0 2.0 x3\n");
+    write(
+        d,
+        "b.geo00000",
+        b"d\nd\nnode id off\nelement id off\ncoordinates\n       1\n 1.0 2.0 x3\n",
+    );
     let e = error_of(d, BIN_CASE);
     assert!(e.contains("line 7") && e.contains("x3"), "{e}");
     // A point element naming a node that does not exist.
@@ -313,7 +419,10 @@ fn bad_input_names_file_and_place() {
     let e = error_of(d, BIN_CASE);
     assert!(e.contains("line 12") && e.contains("node 5"), "{e}");
     // Wrong number of time values.
-    let e = error_of(d, "FORMAT\ntype: ensight\nGEOMETRY\nmodel: 1 b.geo*****\nTIME\ntime set: 1\nnumber of steps: 3\ntime values: 0 1\n");
+    let e = error_of(
+        d,
+        "FORMAT\ntype: ensight\nGEOMETRY\nmodel: 1 b.geo*****\nTIME\ntime set: 1\nnumber of steps: 3\ntime values: 0 1\n",
+    );
     assert!(e.contains("3 time values"), "{e}");
 }
 
@@ -321,7 +430,12 @@ fn bad_input_names_file_and_place() {
 fn fuzz_corpus_files_never_panic() {
     // Every prefix of valid files of each flavour: truncation at any byte is an error, not a panic.
     let dir = tempfile::tempdir().unwrap();
-    for format in [WriteFormat::E6Ascii, WriteFormat::E6Binary, WriteFormat::GoldAscii, WriteFormat::GoldBinary] {
+    for format in [
+        WriteFormat::E6Ascii,
+        WriteFormat::E6Binary,
+        WriteFormat::GoldAscii,
+        WriteFormat::GoldBinary,
+    ] {
         let sub = dir.path().join(format!("{format:?}"));
         let mut w = CaseWriter::create(&sub, "f", format, Placement::PointPart, &[]).unwrap();
         let (pos, _, _) = sample(4, 9);

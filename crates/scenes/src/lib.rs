@@ -9,5 +9,7 @@ mod truth;
 pub use glam::{DMat3, DVec3};
 pub use ray::{Hit, Ray};
 pub use sampling::{fibonacci_sphere, fibonacci_torus};
-pub use scene::{DENSITY, Droplet, Extra, GRAVITY, HardCases, Particles, Scene, SceneError, SceneKind, SceneSpec};
+pub use scene::{
+    DENSITY, Droplet, Extra, GRAVITY, HardCases, Particles, Scene, SceneError, SceneKind, SceneSpec,
+};
 pub use truth::{Truth, Wave, height, height_gradient};

@@ -11,7 +11,10 @@ pub struct Ray {
 
 impl Ray {
     pub fn new(origin: DVec3, dir: DVec3) -> Ray {
-        Ray { origin, dir: dir.normalize() }
+        Ray {
+            origin,
+            dir: dir.normalize(),
+        }
     }
 
     pub fn at(&self, t: f64) -> DVec3 {
@@ -41,7 +44,12 @@ pub(crate) fn quadratic_roots(a: f64, b: f64, c: f64) -> Option<(f64, f64)> {
 
 /// First root of `f` in (t_min, t_max) found by stepping with a Lipschitz bound (so no sign
 /// change is stepped over) and then bisecting to machine precision.
-pub(crate) fn first_root_lipschitz(f: impl Fn(f64) -> f64, lipschitz: f64, t_min: f64, t_max: f64) -> Option<f64> {
+pub(crate) fn first_root_lipschitz(
+    f: impl Fn(f64) -> f64,
+    lipschitz: f64,
+    t_min: f64,
+    t_max: f64,
+) -> Option<f64> {
     let mut t = t_min;
     let mut v = f(t);
     let min_step = 1e-12 * (t_max - t_min).abs().max(1.0);

@@ -44,7 +44,10 @@ pub fn grid(a: f64, b: f64, s: f64) -> Vec<DVec2> {
     let mut out = Vec::with_capacity(nx * ny);
     for j in 0..ny {
         for i in 0..nx {
-            out.push(DVec2::new((i as f64 + 0.5) * a / nx as f64, (j as f64 + 0.5) * b / ny as f64));
+            out.push(DVec2::new(
+                (i as f64 + 0.5) * a / nx as f64,
+                (j as f64 + 0.5) * b / ny as f64,
+            ));
         }
     }
     out

@@ -34,7 +34,15 @@ pub enum SceneKind {
 }
 
 impl SceneKind {
-    pub const ALL: [SceneKind; 7] = [SceneKind::Sphere, SceneKind::Torus, SceneKind::Ellipsoid, SceneKind::Tank, SceneKind::Droplets, SceneKind::Sheet, SceneKind::Plane];
+    pub const ALL: [SceneKind; 7] = [
+        SceneKind::Sphere,
+        SceneKind::Torus,
+        SceneKind::Ellipsoid,
+        SceneKind::Tank,
+        SceneKind::Droplets,
+        SceneKind::Sheet,
+        SceneKind::Plane,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -55,7 +63,12 @@ impl FromStr for SceneKind {
         SceneKind::ALL
             .into_iter()
             .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown scene {s:?} (one of: {})", SceneKind::ALL.map(SceneKind::name).join(", ")))
+            .ok_or_else(|| {
+                format!(
+                    "unknown scene {s:?} (one of: {})",
+                    SceneKind::ALL.map(SceneKind::name).join(", ")
+                )
+            })
     }
 }
 
@@ -98,7 +111,14 @@ pub struct SceneSpec {
 
 impl SceneSpec {
     pub fn new(kind: SceneKind, points: usize, seed: u64) -> SceneSpec {
-        SceneSpec { kind, points, seed, dt: 0.05, droplets: if kind == SceneKind::Droplets { 40 } else { 0 }, hard: HardCases::default() }
+        SceneSpec {
+            kind,
+            points,
+            seed,
+            dt: 0.05,
+            droplets: if kind == SceneKind::Droplets { 40 } else { 0 },
+            hard: HardCases::default(),
+        }
     }
 }
 
@@ -146,9 +166,20 @@ impl Particles {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Extra {
-    Segment { start: DVec3, end: DVec3, points: usize },
-    Square { center: DVec3, normal: DVec3, half: f64, points: usize },
-    Point { position: DVec3 },
+    Segment {
+        start: DVec3,
+        end: DVec3,
+        points: usize,
+    },
+    Square {
+        center: DVec3,
+        normal: DVec3,
+        half: f64,
+        points: usize,
+    },
+    Point {
+        position: DVec3,
+    },
 }
 
 /// One ballistic droplet.
@@ -167,7 +198,10 @@ struct TankShape {
     depth: f64,
 }
 
-const TANK: TankShape = TankShape { size: [2.0, 1.0], depth: 0.5 };
+const TANK: TankShape = TankShape {
+    size: [2.0, 1.0],
+    depth: 0.5,
+};
 
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum SceneError {
@@ -188,22 +222,39 @@ impl Scene {
     pub fn new(spec: SceneSpec) -> Result<Scene, SceneError> {
         let h = &spec.hard;
         let fraction = |v: f64, name: &str| {
-            if (0.0..=1.0).contains(&v) { Ok(()) } else { Err(SceneError::Invalid(format!("{name} must be a fraction in [0, 1], got {v}"))) }
+            if (0.0..=1.0).contains(&v) {
+                Ok(())
+            } else {
+                Err(SceneError::Invalid(format!(
+                    "{name} must be a fraction in [0, 1], got {v}"
+                )))
+            }
         };
         fraction(h.flip_normals, "flip-normals")?;
         fraction(h.duplicates, "duplicates")?;
         fraction(h.bad_normals, "bad-normals")?;
-        if !(h.noise >= 0.0 && h.noise.is_finite()) || !h.offset.is_finite() {
-            return Err(SceneError::Invalid("noise must be ≥ 0 and offset finite".into()));
+        if !(h.noise >= 0.0 && h.noise.is_finite() && h.offset.is_finite()) {
+            return Err(SceneError::Invalid(
+                "noise must be ≥ 0 and offset finite".into(),
+            ));
         }
         if !(h.density_jump == 0.0 || h.density_jump >= 1.0) {
-            return Err(SceneError::Invalid(format!("density-jump is a ratio ≥ 1, got {}", h.density_jump)));
+            return Err(SceneError::Invalid(format!(
+                "density-jump is a ratio ≥ 1, got {}",
+                h.density_jump
+            )));
         }
         if spec.points == 0 || spec.points > 200_000_000 {
-            return Err(SceneError::Invalid(format!("points must be in 1..=200000000, got {}", spec.points)));
+            return Err(SceneError::Invalid(format!(
+                "points must be in 1..=200000000, got {}",
+                spec.points
+            )));
         }
         if !(spec.dt > 0.0 && spec.dt.is_finite()) {
-            return Err(SceneError::Invalid(format!("dt must be > 0, got {}", spec.dt)));
+            return Err(SceneError::Invalid(format!(
+                "dt must be > 0, got {}",
+                spec.dt
+            )));
         }
         let n = spec.points as f64;
         let spacing = match spec.kind {
@@ -214,8 +265,17 @@ impl Scene {
             SceneKind::Sheet => (2.0 * 4.0 / n).sqrt(),
             SceneKind::Plane => (4.0 / n).sqrt(),
         };
-        let waves = if matches!(spec.kind, SceneKind::Tank | SceneKind::Droplets) { tank_waves() } else { Vec::new() };
-        let mut scene = Scene { spec, spacing, waves, droplets: Vec::new() };
+        let waves = if matches!(spec.kind, SceneKind::Tank | SceneKind::Droplets) {
+            tank_waves()
+        } else {
+            Vec::new()
+        };
+        let mut scene = Scene {
+            spec,
+            spacing,
+            waves,
+            droplets: Vec::new(),
+        };
         if matches!(scene.spec.kind, SceneKind::Tank | SceneKind::Droplets) {
             // The area/volume estimate ignores lattice rounding and the wavy top: calibrate on
             // the real count so that `points` is what the user gets (to about 1 %).
@@ -254,12 +314,39 @@ impl Scene {
     /// The true surface at `time`, offset included.
     pub fn truth(&self, time: f64) -> Truth {
         let body = match self.spec.kind {
-            SceneKind::Sphere => Truth::Sphere { center: sphere_center(time), radius: 1.0 },
-            SceneKind::Torus => Truth::Torus { center: DVec3::ZERO, rotation: torus_rotation(time), major: TORUS.0, minor: TORUS.1 },
-            SceneKind::Ellipsoid => Truth::Ellipsoid { center: DVec3::ZERO, rotation: ellipsoid_rotation(time), radii: ELLIPSOID },
+            SceneKind::Sphere => Truth::Sphere {
+                center: sphere_center(time),
+                radius: 1.0,
+            },
+            SceneKind::Torus => Truth::Torus {
+                center: DVec3::ZERO,
+                rotation: torus_rotation(time),
+                major: TORUS.0,
+                minor: TORUS.1,
+            },
+            SceneKind::Ellipsoid => Truth::Ellipsoid {
+                center: DVec3::ZERO,
+                rotation: ellipsoid_rotation(time),
+                radii: ELLIPSOID,
+            },
             SceneKind::Tank | SceneKind::Droplets => {
-                let field = Truth::HeightField { origin: DVec3::ZERO, size: TANK.size, depth: TANK.depth, time, waves: self.waves.clone() };
-                let spheres: Vec<Truth> = self.droplets.iter().filter_map(|d| self.droplet_center(d, time).map(|c| Truth::Sphere { center: c, radius: d.radius })).collect();
+                let field = Truth::HeightField {
+                    origin: DVec3::ZERO,
+                    size: TANK.size,
+                    depth: TANK.depth,
+                    time,
+                    waves: self.waves.clone(),
+                };
+                let spheres: Vec<Truth> = self
+                    .droplets
+                    .iter()
+                    .filter_map(|d| {
+                        self.droplet_center(d, time).map(|c| Truth::Sphere {
+                            center: c,
+                            radius: d.radius,
+                        })
+                    })
+                    .collect();
                 if spheres.is_empty() {
                     field
                 } else {
@@ -273,12 +360,24 @@ impl Scene {
                 let c = DVec3::new(0.0, 0.0, 0.1 * time);
                 Truth::Union {
                     parts: vec![
-                        Truth::Square { center: c + DVec3::Z * gap / 2.0, normal: DVec3::Z, half: 1.0 },
-                        Truth::Square { center: c - DVec3::Z * gap / 2.0, normal: -DVec3::Z, half: 1.0 },
+                        Truth::Square {
+                            center: c + DVec3::Z * gap / 2.0,
+                            normal: DVec3::Z,
+                            half: 1.0,
+                        },
+                        Truth::Square {
+                            center: c - DVec3::Z * gap / 2.0,
+                            normal: -DVec3::Z,
+                            half: 1.0,
+                        },
                     ],
                 }
             }
-            SceneKind::Plane => Truth::Square { center: DVec3::new(0.05 * time, 0.0, 0.0), normal: DVec3::Z, half: 1.0 },
+            SceneKind::Plane => Truth::Square {
+                center: DVec3::new(0.05 * time, 0.0, 0.0),
+                normal: DVec3::Z,
+                half: 1.0,
+            },
         };
         body.translated(self.offset())
     }
@@ -314,7 +413,11 @@ impl Scene {
                     let (su, cu) = uv.x.sin_cos();
                     let (sv, cv) = uv.y.sin_cos();
                     let n = DVec3::new(cv * cu, cv * su, sv);
-                    let p = DVec3::new((TORUS.0 + TORUS.1 * cv) * cu, (TORUS.0 + TORUS.1 * cv) * su, TORUS.1 * sv);
+                    let p = DVec3::new(
+                        (TORUS.0 + TORUS.1 * cv) * cu,
+                        (TORUS.0 + TORUS.1 * cv) * su,
+                        TORUS.1 * sv,
+                    );
                     out.push(rot * p, rot * n, 0.0, true);
                 }
             }
@@ -334,7 +437,12 @@ impl Scene {
                 let half_n = self.spec.points / 2;
                 for (side, normal) in [(1.0, DVec3::Z), (-1.0, -DVec3::Z)] {
                     for q in square_points(half_n, self.spacing, &mut rng) {
-                        out.push(c + DVec3::new(q.x, q.y, side * gap / 2.0), normal, c.z, true);
+                        out.push(
+                            c + DVec3::new(q.x, q.y, side * gap / 2.0),
+                            normal,
+                            c.z,
+                            true,
+                        );
                     }
                 }
             }
@@ -356,7 +464,12 @@ impl Scene {
     /// with the coordinate axes), drawn from the seed.
     fn pattern_rotation(&self) -> DMat3 {
         let mut rng = self.rng(0, 7);
-        let axis = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize_or(DVec3::Z);
+        let axis = DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        )
+        .normalize_or(DVec3::Z);
         DMat3::from_axis_angle(axis, rng.random_range(0.0..PI))
     }
 
@@ -371,7 +484,12 @@ impl Scene {
             let y = (q.y + rng.random_range(-jitter..=jitter)).clamp(0.0, ly);
             let z = d + height(&self.waves, t, x, y);
             let (hx, hy) = height_gradient(&self.waves, t, x, y);
-            out.push(DVec3::new(x, y, z), DVec3::new(-hx, -hy, 1.0).normalize(), d, true);
+            out.push(
+                DVec3::new(x, y, z),
+                DVec3::new(-hx, -hy, 1.0).normalize(),
+                d,
+                true,
+            );
         }
         // Interior: lattice below the surface, normals of the surface above. Unflagged.
         for q in grid(lx, ly, s) {
@@ -388,7 +506,12 @@ impl Scene {
         for q in grid(lx, ly, s) {
             out.push(DVec3::new(q.x, q.y, 0.0), -DVec3::Z, d, false);
         }
-        let walls: [(f64, bool, DVec3); 4] = [(0.0, true, -DVec3::X), (lx, true, DVec3::X), (0.0, false, -DVec3::Y), (ly, false, DVec3::Y)];
+        let walls: [(f64, bool, DVec3); 4] = [
+            (0.0, true, -DVec3::X),
+            (lx, true, DVec3::X),
+            (0.0, false, -DVec3::Y),
+            (ly, false, DVec3::Y),
+        ];
         for (at, along_y, normal) in walls {
             let length = if along_y { ly } else { lx };
             let n_along = ((length / s).round() as usize).max(1);
@@ -414,15 +537,31 @@ impl Scene {
                 let launch_time = rng.random_range(-0.5..2.0);
                 // Leave from the highest of a few candidate points: a crest.
                 let (x, y) = (0..8)
-                    .map(|_| (rng.random_range(0.1 * lx..0.9 * lx), rng.random_range(0.1 * ly..0.9 * ly)))
-                    .max_by(|a, b| height(&self.waves, launch_time, a.0, a.1).total_cmp(&height(&self.waves, launch_time, b.0, b.1)))
+                    .map(|_| {
+                        (
+                            rng.random_range(0.1 * lx..0.9 * lx),
+                            rng.random_range(0.1 * ly..0.9 * ly),
+                        )
+                    })
+                    .max_by(|a, b| {
+                        height(&self.waves, launch_time, a.0, a.1).total_cmp(&height(
+                            &self.waves,
+                            launch_time,
+                            b.0,
+                            b.1,
+                        ))
+                    })
                     .unwrap_or((0.5 * lx, 0.5 * ly));
                 let particles = rng.random_range(1..=20usize);
                 let radius = self.spacing * (particles as f64 / (4.0 * PI)).sqrt().max(0.5);
                 Droplet {
                     launch_time,
                     launch: DVec3::new(x, y, TANK.depth + amp + 2.0 * self.spacing + radius),
-                    velocity: DVec3::new(rng.random_range(-0.4..0.4), rng.random_range(-0.2..0.2), rng.random_range(1.0..2.0)),
+                    velocity: DVec3::new(
+                        rng.random_range(-0.4..0.4),
+                        rng.random_range(-0.2..0.2),
+                        rng.random_range(1.0..2.0),
+                    ),
                     particles,
                     radius,
                 }
@@ -445,7 +584,9 @@ impl Scene {
     }
 
     fn droplet_particles(&self, d: &Droplet, t: f64, out: &mut Particles) {
-        let Some(c) = self.droplet_center(d, t) else { return };
+        let Some(c) = self.droplet_center(d, t) else {
+            return;
+        };
         if d.particles == 1 {
             out.push(c, DVec3::Z, TANK.depth, true);
             return;
@@ -456,7 +597,10 @@ impl Scene {
     }
 
     fn bounds(p: &Particles) -> (DVec3, DVec3) {
-        p.positions.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), &q| (lo.min(q), hi.max(q)))
+        p.positions.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), &q| (lo.min(q), hi.max(q)),
+        )
     }
 
     /// The extra point sets the hard-case options add, in scene coordinates (offset included).
@@ -469,21 +613,38 @@ impl Scene {
         if h.collinear > 0 {
             let start = hi + DVec3::new(4.0 * s, 0.0, 0.0);
             let end = start + DVec3::X * (h.collinear.saturating_sub(1)) as f64 * 0.5 * s;
-            out.push(Extra::Segment { start: start + o, end: end + o, points: h.collinear });
+            out.push(Extra::Segment {
+                start: start + o,
+                end: end + o,
+                points: h.collinear,
+            });
         }
         if h.coplanar > 0 {
             let side = (h.coplanar as f64).sqrt().ceil();
             let half = 0.5 * (side - 1.0) * s;
-            out.push(Extra::Square { center: hi + DVec3::new(0.0, 0.0, 4.0 * s + half) + o, normal: DVec3::Z, half, points: h.coplanar });
+            out.push(Extra::Square {
+                center: hi + DVec3::new(0.0, 0.0, 4.0 * s + half) + o,
+                normal: DVec3::Z,
+                half,
+                points: h.coplanar,
+            });
         }
         if h.isolated {
-            out.push(Extra::Point { position: hi + DVec3::splat(20.0 * s) + o });
+            out.push(Extra::Point {
+                position: hi + DVec3::splat(20.0 * s) + o,
+            });
         }
         out
     }
 
     fn particles_without_hard(&self, step: usize) -> Particles {
-        let plain = Scene { spec: SceneSpec { hard: HardCases::default(), ..self.spec.clone() }, ..self.clone() };
+        let plain = Scene {
+            spec: SceneSpec {
+                hard: HardCases::default(),
+                ..self.spec.clone()
+            },
+            ..self.clone()
+        };
         plain.particles(step)
     }
 
@@ -497,18 +658,31 @@ impl Scene {
         if h.density_jump > 1.0 {
             let (lo, hi) = Self::bounds(out);
             let mid = 0.5 * (lo.x + hi.x);
-            let keep: Vec<bool> = out.positions.iter().map(|p| p.x <= mid || rng.random::<f64>() < 1.0 / h.density_jump).collect();
+            let keep: Vec<bool> = out
+                .positions
+                .iter()
+                .map(|p| p.x <= mid || rng.random::<f64>() < 1.0 / h.density_jump)
+                .collect();
             out.retain(&keep);
         }
         for extra in self.extras() {
             match extra {
                 Extra::Segment { start, end, points } => {
                     for i in 0..points {
-                        let a = if points > 1 { i as f64 / (points - 1) as f64 } else { 0.0 };
+                        let a = if points > 1 {
+                            i as f64 / (points - 1) as f64
+                        } else {
+                            0.0
+                        };
                         out.push(start.lerp(end, a) - self.offset(), DVec3::Z, 0.0, true);
                     }
                 }
-                Extra::Square { center, half, points, .. } => {
+                Extra::Square {
+                    center,
+                    half,
+                    points,
+                    ..
+                } => {
                     let side = (points as f64).sqrt().ceil() as usize;
                     for k in 0..points {
                         let (i, j) = (k % side, k / side);
@@ -516,14 +690,21 @@ impl Scene {
                         out.push(center - self.offset() + q, DVec3::Z, 0.0, true);
                     }
                 }
-                Extra::Point { position } => out.push(position - self.offset(), DVec3::Z, 0.0, true),
+                Extra::Point { position } => {
+                    out.push(position - self.offset(), DVec3::Z, 0.0, true)
+                }
             }
         }
         if h.duplicates > 0.0 {
             let n = out.len();
             for i in 0..n {
                 if rng.random::<f64>() < h.duplicates {
-                    let (p, nn, pr, sf) = (out.positions[i], out.normals[i], out.pressure[i], out.surface[i]);
+                    let (p, nn, pr, sf) = (
+                        out.positions[i],
+                        out.normals[i],
+                        out.pressure[i],
+                        out.surface[i],
+                    );
                     out.positions.push(p);
                     out.normals.push(nn);
                     out.pressure.push(pr);
@@ -531,11 +712,15 @@ impl Scene {
                 }
             }
         }
-        if h.noise > 0.0 {
-            if let Ok(normal) = Normal::new(0.0, h.noise * s) {
-                for p in &mut out.positions {
-                    *p += DVec3::new(normal.sample(&mut rng), normal.sample(&mut rng), normal.sample(&mut rng));
-                }
+        if h.noise > 0.0
+            && let Ok(normal) = Normal::new(0.0, h.noise * s)
+        {
+            for p in &mut out.positions {
+                *p += DVec3::new(
+                    normal.sample(&mut rng),
+                    normal.sample(&mut rng),
+                    normal.sample(&mut rng),
+                );
             }
         }
         for n in &mut out.normals {
@@ -577,15 +762,25 @@ fn ellipsoid_rotation(t: f64) -> DMat3 {
 /// Three standing modes of a 2 × 1 × 0.5 m tank with slip walls (dispersion ω² = g k tanh(k d)).
 fn tank_waves() -> Vec<Wave> {
     let [lx, ly] = TANK.size;
-    [(1.0, 0.0, 0.06, 0.0), (2.0, 1.0, 0.015, 1.0), (0.0, 1.0, 0.02, 2.0)]
-        .into_iter()
-        .map(|(mx, my, amplitude, phase)| {
-            let kx = mx * PI / lx;
-            let ky = my * PI / ly;
-            let k = f64::hypot(kx, ky);
-            Wave { amplitude, kx, ky, omega: (GRAVITY * k * (k * TANK.depth).tanh()).sqrt(), phase }
-        })
-        .collect()
+    [
+        (1.0, 0.0, 0.06, 0.0),
+        (2.0, 1.0, 0.015, 1.0),
+        (0.0, 1.0, 0.02, 2.0),
+    ]
+    .into_iter()
+    .map(|(mx, my, amplitude, phase)| {
+        let kx = mx * PI / lx;
+        let ky = my * PI / ly;
+        let k = f64::hypot(kx, ky);
+        Wave {
+            amplitude,
+            kx,
+            ky,
+            omega: (GRAVITY * k * (k * TANK.depth).tanh()).sqrt(),
+            phase,
+        }
+    })
+    .collect()
 }
 
 /// Spacing s at which surface + walls (area / s²) and interior (volume / s³) make `n` points.
@@ -598,7 +793,11 @@ fn tank_spacing(n: usize) -> f64 {
     let (mut lo, mut hi) = (1e-5_f64, 1.0_f64);
     for _ in 0..100 {
         let mid = (lo * hi).sqrt();
-        if count(mid) > n as f64 { lo = mid } else { hi = mid }
+        if count(mid) > n as f64 {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     hi
 }
@@ -609,6 +808,11 @@ fn square_points(n: usize, s: f64, rng: &mut ChaCha8Rng) -> Vec<glam::DVec2> {
     grid(2.0, 2.0, s)
         .into_iter()
         .take(n.max(1))
-        .map(|q| glam::DVec2::new((q.x - 1.0 + rng.random_range(-jitter..=jitter)).clamp(-1.0, 1.0), (q.y - 1.0 + rng.random_range(-jitter..=jitter)).clamp(-1.0, 1.0)))
+        .map(|q| {
+            glam::DVec2::new(
+                (q.x - 1.0 + rng.random_range(-jitter..=jitter)).clamp(-1.0, 1.0),
+                (q.y - 1.0 + rng.random_range(-jitter..=jitter)).clamp(-1.0, 1.0),
+            )
+        })
         .collect()
 }

@@ -75,29 +75,55 @@ impl Truth {
         match self {
             Truth::Sphere { center, radius } => {
                 let oc = ray.origin - *center;
-                let (t0, t1) = quadratic_roots(1.0, 2.0 * oc.dot(ray.dir), oc.length_squared() - radius * radius)?;
+                let (t0, t1) = quadratic_roots(
+                    1.0,
+                    2.0 * oc.dot(ray.dir),
+                    oc.length_squared() - radius * radius,
+                )?;
                 let t = [t0, t1].into_iter().find(|&t| t > t_min && t < t_max)?;
                 let p = ray.at(t);
-                Some(Hit { t, position: p, normal: (p - *center) / *radius })
+                Some(Hit {
+                    t,
+                    position: p,
+                    normal: (p - *center) / *radius,
+                })
             }
-            Truth::Ellipsoid { center, rotation, radii } => {
+            Truth::Ellipsoid {
+                center,
+                rotation,
+                radii,
+            } => {
                 // In the frame where the ellipsoid is the unit sphere the problem is a quadratic.
                 let inv = rotation.transpose();
                 let o = inv * (ray.origin - *center) / *radii;
                 let d = inv * ray.dir / *radii;
-                let (t0, t1) = quadratic_roots(d.length_squared(), 2.0 * o.dot(d), o.length_squared() - 1.0)?;
+                let (t0, t1) =
+                    quadratic_roots(d.length_squared(), 2.0 * o.dot(d), o.length_squared() - 1.0)?;
                 let t = [t0, t1].into_iter().find(|&t| t > t_min && t < t_max)?;
                 let p = ray.at(t);
                 let local = inv * (p - *center);
                 let n = (*rotation * (local / (*radii * *radii))).normalize();
-                Some(Hit { t, position: p, normal: n })
+                Some(Hit {
+                    t,
+                    position: p,
+                    normal: n,
+                })
             }
-            Truth::Torus { center, major, minor, .. } => {
+            Truth::Torus {
+                center,
+                major,
+                minor,
+                ..
+            } => {
                 // Sphere tracing on the exact signed distance never steps over the surface.
                 // Padded so that the march starts strictly outside.
                 let bound = (major + minor) * (1.0 + 1e-6);
                 let oc = ray.origin - *center;
-                let (b0, b1) = quadratic_roots(1.0, 2.0 * oc.dot(ray.dir), oc.length_squared() - bound * bound)?;
+                let (b0, b1) = quadratic_roots(
+                    1.0,
+                    2.0 * oc.dot(ray.dir),
+                    oc.length_squared() - bound * bound,
+                )?;
                 let lo = b0.max(t_min);
                 let hi = b1.min(t_max);
                 if lo >= hi {
@@ -106,10 +132,23 @@ impl Truth {
                 let sdf = |t: f64| self.signed_distance(ray.at(t));
                 let t = first_root_lipschitz(sdf, 1.0, lo, hi)?;
                 let p = ray.at(t);
-                Some(Hit { t, position: p, normal: self.normal_at(p) })
+                Some(Hit {
+                    t,
+                    position: p,
+                    normal: self.normal_at(p),
+                })
             }
-            Truth::HeightField { origin, size, depth, time, waves } => {
-                let slope: f64 = waves.iter().map(|w| w.amplitude.abs() * (w.kx.abs() + w.ky.abs())).sum();
+            Truth::HeightField {
+                origin,
+                size,
+                depth,
+                time,
+                waves,
+            } => {
+                let slope: f64 = waves
+                    .iter()
+                    .map(|w| w.amplitude.abs() * (w.kx.abs() + w.ky.abs()))
+                    .sum();
                 let amp: f64 = waves.iter().map(|w| w.amplitude.abs()).sum();
                 // Clip the ray to the box over the footprint that holds the surface.
                 let lo_b = *origin + DVec3::new(0.0, 0.0, depth - amp - 1e-9);
@@ -137,9 +176,17 @@ impl Truth {
                 let lipschitz = ray.dir.z.abs() + slope * ray.dir.truncate().length() + 1e-300;
                 let t = first_root_lipschitz(g, lipschitz, lo, hi)?;
                 let p = ray.at(t);
-                Some(Hit { t, position: p, normal: self.normal_at(p) })
+                Some(Hit {
+                    t,
+                    position: p,
+                    normal: self.normal_at(p),
+                })
             }
-            Truth::Square { center, normal, half } => {
+            Truth::Square {
+                center,
+                normal,
+                half,
+            } => {
                 let denom = ray.dir.dot(*normal);
                 if denom.abs() < 1e-300 {
                     return None;
@@ -151,7 +198,11 @@ impl Truth {
                 let p = ray.at(t);
                 let (u, v) = local_frame(*normal);
                 let q = p - *center;
-                (q.dot(u).abs() <= *half && q.dot(v).abs() <= *half).then_some(Hit { t, position: p, normal: *normal })
+                (q.dot(u).abs() <= *half && q.dot(v).abs() <= *half).then_some(Hit {
+                    t,
+                    position: p,
+                    normal: *normal,
+                })
             }
             Truth::Union { parts } => {
                 let mut best: Option<Hit> = None;
@@ -171,21 +222,48 @@ impl Truth {
     pub fn signed_distance(&self, p: DVec3) -> f64 {
         match self {
             Truth::Sphere { center, radius } => (p - *center).length() - radius,
-            Truth::Torus { center, rotation, major, minor } => {
+            Truth::Torus {
+                center,
+                rotation,
+                major,
+                minor,
+            } => {
                 let q = rotation.transpose() * (p - *center);
                 DVec3::new(q.truncate().length() - major, q.z, 0.0).length() - minor
             }
-            Truth::Ellipsoid { center, rotation, radii } => {
+            Truth::Ellipsoid {
+                center,
+                rotation,
+                radii,
+            } => {
                 let q = rotation.transpose() * (p - *center);
                 let d = ellipsoid_distance(*radii, q.abs());
-                if (q / *radii).length_squared() < 1.0 { -d } else { d }
+                if (q / *radii).length_squared() < 1.0 {
+                    -d
+                } else {
+                    d
+                }
             }
-            Truth::HeightField { origin, depth, time, waves, .. } => {
+            Truth::HeightField {
+                origin,
+                depth,
+                time,
+                waves,
+                ..
+            } => {
                 let q = p - *origin;
                 let d = heightfield_distance(waves, *time, *depth, q);
-                if q.z < depth + height(waves, *time, q.x, q.y) { -d } else { d }
+                if q.z < depth + height(waves, *time, q.x, q.y) {
+                    -d
+                } else {
+                    d
+                }
             }
-            Truth::Square { center, normal, half } => {
+            Truth::Square {
+                center,
+                normal,
+                half,
+            } => {
                 let (u, v) = local_frame(*normal);
                 let q = p - *center;
                 let du = (q.dot(u).abs() - half).max(0.0);
@@ -204,16 +282,30 @@ impl Truth {
     pub fn normal_at(&self, p: DVec3) -> DVec3 {
         match self {
             Truth::Sphere { center, .. } => (p - *center).normalize(),
-            Truth::Torus { center, rotation, major, .. } => {
+            Truth::Torus {
+                center,
+                rotation,
+                major,
+                ..
+            } => {
                 let q = rotation.transpose() * (p - *center);
                 let ring = q.truncate().normalize_or(glam::DVec2::X) * *major;
                 (*rotation * (q - ring.extend(0.0))).normalize()
             }
-            Truth::Ellipsoid { center, rotation, radii } => {
+            Truth::Ellipsoid {
+                center,
+                rotation,
+                radii,
+            } => {
                 let q = rotation.transpose() * (p - *center);
                 (*rotation * (q / (*radii * *radii))).normalize()
             }
-            Truth::HeightField { origin, time, waves, .. } => {
+            Truth::HeightField {
+                origin,
+                time,
+                waves,
+                ..
+            } => {
                 let q = p - *origin;
                 let (hx, hy) = height_gradient(waves, *time, q.x, q.y);
                 DVec3::new(-hx, -hy, 1.0).normalize()
@@ -221,7 +313,11 @@ impl Truth {
             Truth::Square { normal, .. } => *normal,
             Truth::Union { parts } => parts
                 .iter()
-                .min_by(|a, b| a.signed_distance(p).abs().total_cmp(&b.signed_distance(p).abs()))
+                .min_by(|a, b| {
+                    a.signed_distance(p)
+                        .abs()
+                        .total_cmp(&b.signed_distance(p).abs())
+                })
                 .map_or(DVec3::Z, |t| t.normal_at(p)),
         }
     }
@@ -230,7 +326,10 @@ impl Truth {
     pub fn translated(&self, offset: DVec3) -> Truth {
         let mut t = self.clone();
         match &mut t {
-            Truth::Sphere { center, .. } | Truth::Torus { center, .. } | Truth::Ellipsoid { center, .. } | Truth::Square { center, .. } => *center += offset,
+            Truth::Sphere { center, .. }
+            | Truth::Torus { center, .. }
+            | Truth::Ellipsoid { center, .. }
+            | Truth::Square { center, .. } => *center += offset,
             Truth::HeightField { origin, .. } => *origin += offset,
             Truth::Union { parts } => {
                 for p in parts.iter_mut() {
@@ -244,13 +343,19 @@ impl Truth {
 
 /// Surface height above the still level at (x, y), tank-local coordinates.
 pub fn height(waves: &[Wave], t: f64, x: f64, y: f64) -> f64 {
-    waves.iter().map(|w| w.amplitude * (w.kx * x).cos() * (w.ky * y).cos() * (w.omega * t + w.phase).cos()).sum()
+    waves
+        .iter()
+        .map(|w| w.amplitude * (w.kx * x).cos() * (w.ky * y).cos() * (w.omega * t + w.phase).cos())
+        .sum()
 }
 
 pub fn height_gradient(waves: &[Wave], t: f64, x: f64, y: f64) -> (f64, f64) {
     waves.iter().fold((0.0, 0.0), |(gx, gy), w| {
         let c = w.amplitude * (w.omega * t + w.phase).cos();
-        (gx - c * w.kx * (w.kx * x).sin() * (w.ky * y).cos(), gy - c * w.ky * (w.kx * x).cos() * (w.ky * y).sin())
+        (
+            gx - c * w.kx * (w.kx * x).sin() * (w.ky * y).cos(),
+            gy - c * w.ky * (w.kx * x).cos() * (w.ky * y).sin(),
+        )
     })
 }
 
@@ -264,7 +369,10 @@ fn heightfield_distance(waves: &[Wave], t: f64, depth: f64, q: DVec3) -> f64 {
     let grad = |x: f64, y: f64| {
         let z = depth + height(waves, t, x, y);
         let (hx, hy) = height_gradient(waves, t, x, y);
-        (-2.0 * (q.x - x) - 2.0 * (q.z - z) * hx, -2.0 * (q.y - y) - 2.0 * (q.z - z) * hy)
+        (
+            -2.0 * (q.x - x) - 2.0 * (q.z - z) * hx,
+            -2.0 * (q.y - y) - 2.0 * (q.z - z) * hy,
+        )
     };
     let (mut x, mut y) = (q.x, q.y);
     for _ in 0..50 {
@@ -276,7 +384,11 @@ fn heightfield_distance(waves: &[Wave], t: f64, depth: f64, q: DVec3) -> f64 {
         };
         let gyy = (grad(x, y + e).1 - gy) / e;
         let det = gxx * gyy - gxy * gxy;
-        let (dx, dy) = if det > 1e-12 && gxx > 0.0 { ((gyy * gx - gxy * gy) / det, (gxx * gy - gxy * gx) / det) } else { (0.25 * gx, 0.25 * gy) };
+        let (dx, dy) = if det > 1e-12 && gxx > 0.0 {
+            ((gyy * gx - gxy * gy) / det, (gxx * gy - gxy * gx) / det)
+        } else {
+            (0.25 * gx, 0.25 * gy)
+        };
         // Only accept steps that do not increase the distance.
         let before = dist2(x, y);
         let mut s = 1.0;
@@ -301,7 +413,11 @@ fn ellipsoid_distance(radii: DVec3, q: DVec3) -> f64 {
     let e = DVec3::new(pairs[0].0, pairs[1].0, pairs[2].0);
     // Points on a coordinate plane are nudged off it by 1e-12 of the size (error of that order).
     let floor = 1e-12 * e.x;
-    let y = DVec3::new(pairs[0].1.max(floor), pairs[1].1.max(floor), pairs[2].1.max(floor));
+    let y = DVec3::new(
+        pairs[0].1.max(floor),
+        pairs[1].1.max(floor),
+        pairs[2].1.max(floor),
+    );
     let z = y / e;
     let g = z.length_squared() - 1.0;
     if g == 0.0 {
@@ -309,14 +425,13 @@ fn ellipsoid_distance(radii: DVec3, q: DVec3) -> f64 {
     }
     let r = DVec3::new((e.x / e.z).powi(2), (e.y / e.z).powi(2), 1.0);
     let f = |s: f64| (r * z / (s + r)).length_squared() - 1.0;
-    let (mut lo, mut hi) = (-1.0 + z.z, if g < 0.0 { 0.0 } else { (r * z).length() - 1.0 });
+    let (mut lo, mut hi) = (
+        -1.0 + z.z,
+        if g < 0.0 { 0.0 } else { (r * z).length() - 1.0 },
+    );
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
-        if f(mid) > 0.0 {
-            lo = mid
-        } else {
-            hi = mid
-        }
+        if f(mid) > 0.0 { lo = mid } else { hi = mid }
     }
     let s = 0.5 * (lo + hi);
     let x = r * y / (s + r);

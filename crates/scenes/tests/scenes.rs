@@ -1,6 +1,8 @@
 //! Scenes against their own closed forms: particles on the surface, exact ray hits, motion,
 //! determinism and each hard case doing what it says.
 
+#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
+
 use slosh_scenes::*;
 
 fn scene(kind: SceneKind, n: usize) -> Scene {
@@ -22,9 +24,16 @@ fn surface_particles_lie_on_the_truth_with_its_normals() {
                     continue;
                 }
                 let d = truth.signed_distance(p.positions[i]);
-                assert!(d.abs() < 1e-9, "{kind:?} step {step}: particle {i} is {d} off the surface");
+                assert!(
+                    d.abs() < 1e-9,
+                    "{kind:?} step {step}: particle {i} is {d} off the surface"
+                );
                 let n = truth.normal_at(p.positions[i]);
-                assert!(n.dot(p.normals[i]) > 1.0 - 1e-9, "{kind:?}: normal {i} off by {}", n.dot(p.normals[i]));
+                assert!(
+                    n.dot(p.normals[i]) > 1.0 - 1e-9,
+                    "{kind:?}: normal {i} off by {}",
+                    n.dot(p.normals[i])
+                );
                 checked += 1;
             }
             assert!(checked > 100, "{kind:?}: {checked} surface particles");
@@ -39,35 +48,101 @@ fn mean_spacing_matches_the_point_count() {
     let p = sc.particles(0);
     let mut sum = 0.0;
     for (i, a) in p.positions.iter().enumerate() {
-        let nn = p.positions.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, b)| (*a - *b).length()).fold(f64::INFINITY, f64::min);
+        let nn = p
+            .positions
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, b)| (*a - *b).length())
+            .fold(f64::INFINITY, f64::min);
         sum += nn;
     }
     let mean_nn = sum / p.len() as f64;
     let ratio = mean_nn / sc.spacing();
-    assert!((0.8..1.2).contains(&ratio), "nearest neighbour / spacing = {ratio}");
+    assert!(
+        (0.8..1.2).contains(&ratio),
+        "nearest neighbour / spacing = {ratio}"
+    );
 }
 
 #[test]
 fn ray_hits_are_exact_and_first() {
-    let sphere = Truth::Sphere { center: DVec3::new(1.0, 0.0, 0.0), radius: 0.5 };
-    let h = sphere.intersect(&Ray::new(DVec3::new(-5.0, 0.0, 0.0), DVec3::X), 0.0, f64::INFINITY).unwrap();
+    let sphere = Truth::Sphere {
+        center: DVec3::new(1.0, 0.0, 0.0),
+        radius: 0.5,
+    };
+    let h = sphere
+        .intersect(
+            &Ray::new(DVec3::new(-5.0, 0.0, 0.0), DVec3::X),
+            0.0,
+            f64::INFINITY,
+        )
+        .unwrap();
     assert!((h.t - 5.5).abs() < 1e-14 && (h.normal + DVec3::X).length() < 1e-14);
 
     // Torus of radii 1 and 0.35 about z: a ray along x in its plane enters at x = −1.35.
-    let torus = Truth::Torus { center: DVec3::ZERO, rotation: DMat3::IDENTITY, major: 1.0, minor: 0.35 };
-    let h = torus.intersect(&Ray::new(DVec3::new(-3.0, 0.0, 0.0), DVec3::X), 0.0, f64::INFINITY).unwrap();
+    let torus = Truth::Torus {
+        center: DVec3::ZERO,
+        rotation: DMat3::IDENTITY,
+        major: 1.0,
+        minor: 0.35,
+    };
+    let h = torus
+        .intersect(
+            &Ray::new(DVec3::new(-3.0, 0.0, 0.0), DVec3::X),
+            0.0,
+            f64::INFINITY,
+        )
+        .unwrap();
     assert!((h.t - 1.65).abs() < 1e-12, "torus t = {}", h.t);
     // Down the axis: through the hole, no hit.
-    assert!(torus.intersect(&Ray::new(DVec3::new(0.0, 0.0, 3.0), -DVec3::Z), 0.0, f64::INFINITY).is_none());
+    assert!(
+        torus
+            .intersect(
+                &Ray::new(DVec3::new(0.0, 0.0, 3.0), -DVec3::Z),
+                0.0,
+                f64::INFINITY
+            )
+            .is_none()
+    );
     // Grazing the tube top: z = 0.35 − 1e-6 must hit, z = 0.35 + 1e-6 must miss.
-    assert!(torus.intersect(&Ray::new(DVec3::new(-3.0, -1.0, 0.35 - 1e-6), DVec3::X), 0.0, f64::INFINITY).is_some());
-    assert!(torus.intersect(&Ray::new(DVec3::new(-3.0, -1.0, 0.35 + 1e-6), DVec3::X), 0.0, f64::INFINITY).is_none());
+    assert!(
+        torus
+            .intersect(
+                &Ray::new(DVec3::new(-3.0, -1.0, 0.35 - 1e-6), DVec3::X),
+                0.0,
+                f64::INFINITY
+            )
+            .is_some()
+    );
+    assert!(
+        torus
+            .intersect(
+                &Ray::new(DVec3::new(-3.0, -1.0, 0.35 + 1e-6), DVec3::X),
+                0.0,
+                f64::INFINITY
+            )
+            .is_none()
+    );
 
-    let ell = Truth::Ellipsoid { center: DVec3::ZERO, rotation: DMat3::from_rotation_z(0.3), radii: DVec3::new(1.2, 0.8, 0.5) };
-    let h = ell.intersect(&Ray::new(DVec3::new(0.0, 0.0, 4.0), -DVec3::Z), 0.0, f64::INFINITY).unwrap();
+    let ell = Truth::Ellipsoid {
+        center: DVec3::ZERO,
+        rotation: DMat3::from_rotation_z(0.3),
+        radii: DVec3::new(1.2, 0.8, 0.5),
+    };
+    let h = ell
+        .intersect(
+            &Ray::new(DVec3::new(0.0, 0.0, 4.0), -DVec3::Z),
+            0.0,
+            f64::INFINITY,
+        )
+        .unwrap();
     assert!((h.t - 3.5).abs() < 1e-13);
     // Distance of an outside point on a principal axis is exact.
-    assert!((ell.signed_distance(DMat3::from_rotation_z(0.3) * DVec3::new(2.0, 0.0, 0.0)) - 0.8).abs() < 1e-9);
+    assert!(
+        (ell.signed_distance(DMat3::from_rotation_z(0.3) * DVec3::new(2.0, 0.0, 0.0)) - 0.8).abs()
+            < 1e-9
+    );
 }
 
 #[test]
@@ -76,19 +151,33 @@ fn tank_surface_hits_and_dispersion() {
     for step in [0, 5, 13] {
         let t = sc.time(step);
         let truth = sc.truth(t);
-        let Truth::HeightField { waves, depth, .. } = &truth else { panic!("height field expected") };
+        let Truth::HeightField { waves, depth, .. } = &truth else {
+            panic!("height field expected")
+        };
         for w in waves {
             let k = w.k();
             assert!((w.omega * w.omega - GRAVITY * k * (k * depth).tanh()).abs() < 1e-12);
         }
         for (x, y) in [(0.3, 0.2), (1.0, 0.5), (1.7, 0.9)] {
-            let h = truth.intersect(&Ray::new(DVec3::new(x, y, 5.0), -DVec3::Z), 0.0, f64::INFINITY).unwrap();
+            let h = truth
+                .intersect(
+                    &Ray::new(DVec3::new(x, y, 5.0), -DVec3::Z),
+                    0.0,
+                    f64::INFINITY,
+                )
+                .unwrap();
             let expect = depth + height(waves, t, x, y);
-            assert!((h.position.z - expect).abs() < 1e-12, "hit z {} vs {expect}", h.position.z);
+            assert!(
+                (h.position.z - expect).abs() < 1e-12,
+                "hit z {} vs {expect}",
+                h.position.z
+            );
             // Oblique ray aimed at that surface point: hits it unless something is in front.
             let target = DVec3::new(x, y, expect);
             let origin = target + DVec3::new(-0.3, 0.1, 1.0);
-            let hit = truth.intersect(&Ray::new(origin, target - origin), 0.0, f64::INFINITY).unwrap();
+            let hit = truth
+                .intersect(&Ray::new(origin, target - origin), 0.0, f64::INFINITY)
+                .unwrap();
             assert!(truth.signed_distance(hit.position).abs() < 1e-9);
             assert!(hit.t <= (target - origin).length() + 1e-9);
         }
@@ -96,9 +185,16 @@ fn tank_surface_hits_and_dispersion() {
     // Surface flagged, interior and walls present but unflagged.
     let p = sc.particles(0);
     let flagged = p.surface.iter().filter(|s| **s).count();
-    assert!(flagged > 1000 && flagged < p.len() / 2, "{flagged} of {}", p.len());
+    assert!(
+        flagged > 1000 && flagged < p.len() / 2,
+        "{flagged} of {}",
+        p.len()
+    );
     let total = p.len() as f64;
-    assert!((total / 20_000.0 - 1.0).abs() < 0.15, "tank made {total} points for 20000 asked");
+    assert!(
+        (total / 20_000.0 - 1.0).abs() < 0.15,
+        "tank made {total} points for 20000 asked"
+    );
 }
 
 #[test]
@@ -128,7 +224,10 @@ fn same_seed_same_particles() {
     let b = Scene::new(spec.clone()).unwrap().particles(3);
     assert_eq!(a, b);
     spec.seed = 10;
-    assert_ne!(a.positions, Scene::new(spec).unwrap().particles(3).positions);
+    assert_ne!(
+        a.positions,
+        Scene::new(spec).unwrap().particles(3).positions
+    );
 }
 
 #[test]
@@ -141,7 +240,13 @@ fn hard_cases_do_what_they_say() {
     spec.hard.noise = 0.3;
     let sc = Scene::new(spec).unwrap();
     let p = sc.particles(0);
-    let var: f64 = p.positions.iter().zip(&p0.positions).map(|(a, b)| (*a - *b).length_squared()).sum::<f64>() / (3.0 * p.len() as f64);
+    let var: f64 = p
+        .positions
+        .iter()
+        .zip(&p0.positions)
+        .map(|(a, b)| (*a - *b).length_squared())
+        .sum::<f64>()
+        / (3.0 * p.len() as f64);
     let sigma = var.sqrt() / sc.spacing();
     assert!((sigma - 0.3).abs() < 0.02, "noise σ = {sigma} spacings");
 
@@ -163,14 +268,21 @@ fn hard_cases_do_what_they_say() {
     let extra = p.len() - p0.len();
     assert!((150..250).contains(&extra), "{extra} duplicates");
     let last = p.positions[p.len() - 1];
-    assert!(p.positions[..p0.len()].contains(&last), "a duplicate sits exactly on its original");
+    assert!(
+        p.positions[..p0.len()].contains(&last),
+        "a duplicate sits exactly on its original"
+    );
 
     let mut spec = base.clone();
     spec.hard.density_jump = 100.0;
     let p = Scene::new(spec).unwrap().particles(0);
     let right = p.positions.iter().filter(|q| q.x > 0.0).count() as f64;
     let left = p.positions.iter().filter(|q| q.x <= 0.0).count() as f64;
-    assert!(left / right > 40.0 && left / right < 250.0, "density ratio {}", left / right);
+    assert!(
+        left / right > 40.0 && left / right < 250.0,
+        "density ratio {}",
+        left / right
+    );
 
     let mut spec = base;
     spec.hard.collinear = 10;
@@ -183,7 +295,10 @@ fn hard_cases_do_what_they_say() {
     // The segment's points are exactly collinear.
     let seg = &p.positions[p0.len()..p0.len() + 10];
     let dir = (seg[9] - seg[0]).normalize();
-    assert!(seg.iter().all(|q| (*q - seg[0]).cross(dir).length() < 1e-12));
+    assert!(
+        seg.iter()
+            .all(|q| (*q - seg[0]).cross(dir).length() < 1e-12)
+    );
 }
 
 #[test]
