@@ -1,0 +1,27 @@
+//! The maths of slosh: moving least squares point set surfaces and their iterative ray
+//! intersection (Adamson & Alexa 2003), generic over f32 and f64. The f64 build is the oracle
+//! that the GPU port must match. No I/O.
+
+// `!(x > 0)` is true for NaN; these negated comparisons are how NaN is refused, on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Index loops mirror the WGSL port line for line, which has no iterators.
+#![allow(clippy::needless_range_loop)]
+
+mod fit;
+mod frame;
+mod intersect;
+mod poly;
+mod real;
+mod roots;
+mod support;
+
+pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
+pub use frame::Frame;
+pub use intersect::{Ball, HitStatus, Outcome, Params, Ray, initial_fit, intersect_ball, ray_ball};
+pub use poly::{Poly, coefficient_count, monomials};
+pub use real::{Real, V3};
+pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};
+pub use support::{
+    CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
+    weight,
+};
