@@ -9,11 +9,14 @@
 
 mod fit;
 mod frame;
+mod grid;
 mod intersect;
 mod poly;
 mod real;
 mod roots;
 mod support;
+mod surface;
+mod tracer;
 
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use frame::Frame;
@@ -25,3 +28,5 @@ pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
     weight,
 };
+pub use surface::{BallFit, Surface, SurfaceError, SurfaceParams};
+pub use tracer::{Camera, TraceHit};

@@ -1,0 +1,147 @@
+//! The CPU reference tracer: camera rays, candidate balls front to back through the grid,
+//! first accepted hit. rayon-parallel over image rows.
+
+use rayon::prelude::*;
+
+use crate::intersect::{HitStatus, Params, Ray, intersect_ball, ray_ball};
+use crate::real::{Real, V3};
+use crate::surface::{BallFit, Surface, gather};
+
+/// A pinhole camera.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    pub up: [f64; 3],
+    /// Vertical field of view in degrees.
+    pub fov_y: f64,
+    pub width: u32,
+    pub height: u32,
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn normalize(a: [f64; 3]) -> [f64; 3] {
+    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    if l > 0.0 {
+        [a[0] / l, a[1] / l, a[2] / l]
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+impl Camera {
+    /// Origin and unit direction of the ray through the centre of pixel (x, y), y down.
+    pub fn ray(&self, x: u32, y: u32) -> ([f64; 3], [f64; 3]) {
+        let w = normalize(sub(self.target, self.eye));
+        let u = normalize(cross(w, self.up));
+        let v = cross(u, w);
+        let half = (self.fov_y.to_radians() * 0.5).tan();
+        let aspect = f64::from(self.width) / f64::from(self.height.max(1));
+        let sx = ((f64::from(x) + 0.5) / f64::from(self.width) * 2.0 - 1.0) * half * aspect;
+        let sy = (1.0 - (f64::from(y) + 0.5) / f64::from(self.height) * 2.0) * half;
+        let d = normalize([
+            w[0] + sx * u[0] + sy * v[0],
+            w[1] + sx * u[1] + sy * v[1],
+            w[2] + sx * u[2] + sy * v[2],
+        ]);
+        (self.eye, d)
+    }
+}
+
+/// The first accepted hit of a ray, in world coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceHit {
+    pub t: f64,
+    pub position: [f64; 3],
+    pub normal: [f64; 3],
+    /// The ball (point index) whose candidate produced the hit.
+    pub ball: u32,
+    pub iterations: u32,
+    pub status: HitStatus,
+    pub degree: u8,
+}
+
+impl<T: Real> Surface<T> {
+    /// Traces one world-space ray (`dir` unit length).
+    pub fn trace(&self, origin: [f64; 3], dir: [f64; 3], params: &Params<T>) -> Option<TraceHit> {
+        let rel = sub(origin, self.origin);
+        let ray = Ray {
+            origin: V3::from_f64(rel),
+            dir: V3::from_f64(dir),
+        };
+        let mut best: Option<TraceHit> = None;
+        let mut tested: Vec<u32> = Vec::new();
+        let (mut np, mut nn) = (Vec::new(), Vec::new());
+        self.grid.walk(rel, dir, |balls, cell_exit| {
+            for &b in balls {
+                let i = b as usize;
+                if self.ball_fits[i] == BallFit::None || tested.contains(&b) {
+                    continue;
+                }
+                tested.push(b);
+                let ball = &self.balls[i];
+                let Some((t_in, _)) = ray_ball(&ray, ball.centre, ball.radius) else {
+                    continue;
+                };
+                if best.is_some_and(|h| t_in.to_f64() >= h.t) {
+                    continue;
+                }
+                gather(
+                    &self.points,
+                    self.normals.as_deref(),
+                    self.neighbours_of(i),
+                    &mut np,
+                    &mut nn,
+                );
+                let normals = self.normals.as_ref().map(|_| nn.as_slice());
+                let out = intersect_ball(&ray, ball, &np, normals, params);
+                if out.status.is_hit()
+                    && out.t.is_finite()
+                    && best.is_none_or(|h| out.t.to_f64() < h.t)
+                {
+                    let p = out.position.to_f64();
+                    best = Some(TraceHit {
+                        t: out.t.to_f64(),
+                        position: [
+                            p[0] + self.origin[0],
+                            p[1] + self.origin[1],
+                            p[2] + self.origin[2],
+                        ],
+                        normal: out.normal.to_f64(),
+                        ball: b,
+                        iterations: out.iterations,
+                        status: out.status,
+                        degree: out.degree,
+                    });
+                }
+            }
+            // Any hit nearer than the current best lies in a cell not yet left.
+            best.is_none_or(|h| cell_exit < h.t)
+        });
+        best
+    }
+
+    /// Traces every pixel of `camera`, row-major.
+    pub fn render(&self, camera: &Camera, params: &Params<T>) -> Vec<Option<TraceHit>> {
+        (0..camera.height)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                (0..camera.width).map(move |x| {
+                    let (o, d) = camera.ray(x, y);
+                    self.trace(o, d, params)
+                })
+            })
+            .collect()
+    }
+}

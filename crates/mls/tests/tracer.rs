@@ -1,0 +1,138 @@
+//! The CPU reference tracer on analytic scenes: hits against the exact surface, hit/miss
+//! agreement away from silhouettes, f32 against f64.
+
+#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
+
+use slosh_mls::*;
+use slosh_scenes::{DVec3, Ray as TrueRay, Scene, SceneKind, SceneSpec};
+
+struct Report {
+    hits: usize,
+    rms: f64,
+    max: f64,
+    disagree: usize,
+    compared: usize,
+}
+
+/// Renders `scene` at step 0 and compares with the truth. Pixels whose 3×3 neighbourhood
+/// disagrees with the truth about hit/miss are silhouettes and are not compared.
+fn compare<T: Real>(
+    kind: SceneKind,
+    points: usize,
+    degree: u8,
+    iterations: u32,
+    size: u32,
+) -> Report {
+    let scene = Scene::new(SceneSpec::new(kind, points, 3)).unwrap();
+    let p = scene.particles(0);
+    let pos: Vec<[f64; 3]> = p
+        .positions
+        .iter()
+        .zip(&p.surface)
+        .filter(|(_, s)| **s)
+        .map(|(q, _)| q.to_array())
+        .collect();
+    let nrm: Vec<[f64; 3]> = p
+        .normals
+        .iter()
+        .zip(&p.surface)
+        .filter(|(_, s)| **s)
+        .map(|(q, _)| q.to_array())
+        .collect();
+    let params = SurfaceParams {
+        degree,
+        ..SurfaceParams::default()
+    };
+    let surface = Surface::<T>::build(&pos, Some(&nrm), &params).unwrap();
+    let truth = scene.truth(0.0);
+    let (eye, target) = match kind {
+        SceneKind::Tank => ([1.0, -1.2, 1.4], [1.0, 0.5, 0.45]),
+        _ => ([2.2, -2.6, 1.8], [0.0, 0.0, 0.0]),
+    };
+    let camera = Camera {
+        eye,
+        target,
+        up: [0.0, 0.0, 1.0],
+        fov_y: 40.0,
+        width: size,
+        height: size,
+    };
+    let mut tp = Params::new(surface.h);
+    tp.degree = degree;
+    tp.iterations = iterations;
+    let ours = surface.render(&camera, &tp);
+    let exact: Vec<Option<f64>> = (0..size)
+        .flat_map(|y| (0..size).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let (o, d) = camera.ray(x, y);
+            truth
+                .intersect(
+                    &TrueRay::new(DVec3::from(o), DVec3::from(d)),
+                    0.0,
+                    f64::INFINITY,
+                )
+                .map(|h| h.t)
+        })
+        .collect();
+    let spacing = scene.spacing();
+    let at = |x: i64, y: i64| -> Option<(bool, bool)> {
+        (x >= 0 && y >= 0 && x < size as i64 && y < size as i64).then(|| {
+            let i = (y * size as i64 + x) as usize;
+            (ours[i].is_some(), exact[i].is_some())
+        })
+    };
+    let (mut sq, mut max, mut hits, mut disagree, mut compared) = (0.0, 0.0f64, 0, 0, 0);
+    for y in 0..size as i64 {
+        for x in 0..size as i64 {
+            let silhouette = (-1..=1).any(|dy| {
+                (-1..=1).any(|dx| at(x + dx, y + dy).is_some_and(|(_, e)| e != at(x, y).unwrap().1))
+            });
+            if silhouette {
+                continue;
+            }
+            compared += 1;
+            let i = (y * size as i64 + x) as usize;
+            match (ours[i], exact[i]) {
+                (Some(h), Some(_)) => {
+                    let d = truth.signed_distance(DVec3::from(h.position)).abs() / spacing;
+                    assert!(h.normal.iter().all(|c| c.is_finite()));
+                    sq += d * d;
+                    max = max.max(d);
+                    hits += 1;
+                }
+                (None, None) => {}
+                _ => disagree += 1,
+            }
+        }
+    }
+    Report {
+        hits,
+        rms: (sq / hits.max(1) as f64).sqrt(),
+        max,
+        disagree,
+        compared,
+    }
+}
+
+#[test]
+fn sphere_torus_and_tank_match_the_truth() {
+    for (kind, n) in [
+        (SceneKind::Sphere, 4000),
+        (SceneKind::Torus, 6000),
+        (SceneKind::Tank, 20_000),
+    ] {
+        let r = compare::<f64>(kind, n, 2, 4, 48);
+        eprintln!(
+            "{kind:?}: {} hits, RMS {:.2e}, max {:.2e} spacings, {} of {} pixels disagree",
+            r.hits, r.rms, r.max, r.disagree, r.compared
+        );
+        assert!(r.hits > 200, "{kind:?}: {} hits", r.hits);
+        assert!(r.rms < 0.05, "{kind:?}: RMS {} spacings", r.rms);
+        assert!(
+            (r.disagree as f64) < 0.01 * r.compared as f64,
+            "{kind:?}: {} of {} pixels disagree",
+            r.disagree,
+            r.compared
+        );
+    }
+}
