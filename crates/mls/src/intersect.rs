@@ -21,14 +21,14 @@ pub struct Ray<T> {
 pub struct Ball<T> {
     pub centre: V3<T>,
     pub radius: T,
+    /// Smoothing length used inside this ball: the global h, or c·ρ_i for uneven sampling.
+    pub h: T,
     pub normal: V3<T>,
     pub poly: Poly<T>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params<T> {
-    /// Smoothing length of θ(d) = exp(−d²/h²).
-    pub h: T,
     /// Requested polynomial degree (1–3); lower where the data cannot support it.
     pub degree: u8,
     /// Total iterations including the initial polynomial: 1 = the precomputed polynomial only.
@@ -38,10 +38,15 @@ pub struct Params<T> {
     pub normals: NormalsMode,
 }
 
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl<T: Real> Params<T> {
-    pub fn new(h: T) -> Self {
+    pub fn new() -> Self {
         Params {
-            h,
             degree: 2,
             iterations: 3,
             epsilon: T::c(1e-4),
@@ -148,19 +153,13 @@ pub fn initial_fit<T: Real>(
     centre: V3<T>,
     neighbours: &[V3<T>],
     normals: Option<&[V3<T>]>,
+    h: T,
     params: &Params<T>,
     toward: V3<T>,
 ) -> Option<(V3<T>, Fit<T>)> {
-    let support = support_normal(
-        centre,
-        neighbours,
-        normals,
-        params.h,
-        params.normals,
-        toward,
-    )?;
+    let support = support_normal(centre, neighbours, normals, h, params.normals, toward)?;
     let frame = Frame::from_normal(support.normal);
-    let f = fit(centre, &frame, neighbours, params.h, params.degree);
+    let f = fit(centre, &frame, neighbours, h, params.degree);
     (f.status != FitStatus::Failed).then_some((support.normal, f))
 }
 
@@ -191,7 +190,7 @@ pub fn intersect_ball<T: Real>(
     }
     let frame = Frame::from_normal(ball.normal);
     let Some((mut t, x, y)) =
-        intersect_poly(ray, ball.centre, &frame, &ball.poly, params.h, t_lo, t_out)
+        intersect_poly(ray, ball.centre, &frame, &ball.poly, ball.h, t_lo, t_out)
     else {
         return miss(HitStatus::NoInitialRoot);
     };
@@ -203,19 +202,19 @@ pub fn intersect_ball<T: Real>(
     while iterations < params.iterations.max(1) {
         let r = ray.origin + ray.dir * t;
         let Some(support) =
-            support_normal(r, neighbours, normals, params.h, params.normals, ray.origin)
+            support_normal(r, neighbours, normals, ball.h, params.normals, ray.origin)
         else {
             status = HitStatus::NoSupport;
             break;
         };
         let frame = Frame::from_normal(support.normal);
-        let f = fit(r, &frame, neighbours, params.h, params.degree);
+        let f = fit(r, &frame, neighbours, ball.h, params.degree);
         if f.status == FitStatus::Failed {
             status = HitStatus::DegenerateFit;
             break;
         }
         degraded |= matches!(f.status, FitStatus::Degraded { .. });
-        let Some((t_next, x, y)) = intersect_poly(ray, r, &frame, &f.poly, params.h, t_lo, t_out)
+        let Some((t_next, x, y)) = intersect_poly(ray, r, &frame, &f.poly, ball.h, t_lo, t_out)
         else {
             return Outcome {
                 iterations: iterations + 1,
@@ -229,7 +228,7 @@ pub fn intersect_ball<T: Real>(
         t = t_next;
         normal = hit_normal(&frame, &f.poly, x, y);
         degree = f.poly.degree;
-        if dt < params.epsilon * params.h {
+        if dt < params.epsilon * ball.h {
             status = HitStatus::Converged;
             break;
         }

@@ -26,6 +26,8 @@ pub struct SurfaceParams {
     pub neighbour_cap: usize,
     pub degree: u8,
     pub normals: NormalsMode,
+    /// h_i = h_scale × ρ_i per ball instead of one global h (for uneven sampling).
+    pub per_point_h: bool,
 }
 
 impl Default for SurfaceParams {
@@ -37,6 +39,7 @@ impl Default for SurfaceParams {
             neighbour_cap: 128,
             degree: 2,
             normals: NormalsMode::Mean,
+            per_point_h: false,
         }
     }
 }
@@ -69,6 +72,7 @@ pub struct Surface<T> {
     pub points: Vec<V3<T>>,
     pub normals: Option<Vec<V3<T>>>,
     pub radii: Vec<T>,
+    /// The global smoothing length h_scale × mean ρ (each ball carries the h it uses).
     pub h: T,
     /// CSR neighbour lists: the neighbours of point i are `neighbours[start[i]..start[i + 1]]`.
     pub neighbour_start: Vec<u32>,
@@ -135,12 +139,19 @@ impl<T: Real> Surface<T> {
         }
         let mean = radii.iter().sum::<f64>() / n as f64;
         let h = params.h_scale * mean;
+        let ball_h = |i: usize| {
+            if params.per_point_h {
+                params.h_scale * radii[i]
+            } else {
+                h
+            }
+        };
         let cap = NonZero::new(params.neighbour_cap.max(1)).ok_or(SurfaceError::BadK)?;
 
         let lists: Vec<(Vec<u32>, bool)> = (0..n)
             .into_par_iter()
             .map(|i| {
-                let reach = radii[i] + params.support * h;
+                let reach = radii[i] + params.support * ball_h(i);
                 let found = tree
                     .query(&rel[i])
                     .nearest_n::<SquaredEuclidean<f64>>(cap)
@@ -180,7 +191,6 @@ impl<T: Real> Surface<T> {
             .map(|ns| ns.iter().map(|n| n.map_or(V3::zero(), to_t)).collect());
         let h_t = T::c(h);
         let fit_params = Params {
-            h: h_t,
             degree: params.degree,
             iterations: 1,
             epsilon: T::c(1e-4),
@@ -201,9 +211,11 @@ impl<T: Real> Surface<T> {
                     let centre = pts[i];
                     // Without data normals the plane faces away from the set's centre.
                     let toward = centre * T::c(2.0);
+                    let hi = T::c(ball_h(i));
                     let ball = |normal, poly| Ball {
                         centre,
                         radius: T::c(radii[i]),
+                        h: hi,
                         normal,
                         poly,
                     };
@@ -211,6 +223,7 @@ impl<T: Real> Surface<T> {
                         centre,
                         np,
                         nrm.as_ref().map(|_| nn.as_slice()),
+                        hi,
                         &fit_params,
                         toward,
                     ) {

@@ -324,12 +324,13 @@ fn sphere_hits_converge_onto_the_surface() {
             .filter(|p| (*p - centre).length() < radius_of_trust + 3.0 * h)
             .collect();
         let normals: Vec<V> = neighbours.clone();
-        let mut params = Params::new(h);
+        let mut params = Params::new();
         params.degree = 2;
         params.iterations = 5;
         let (normal, f) =
-            initial_fit(centre, &neighbours, Some(&normals), &params, origin).unwrap();
+            initial_fit(centre, &neighbours, Some(&normals), h, &params, origin).unwrap();
         let ball = Ball {
+            h,
             centre,
             radius: radius_of_trust,
             normal,
@@ -348,11 +349,12 @@ fn sphere_hits_converge_onto_the_surface() {
         // The same in f32.
         let c32 = |p: V| V3::<f32>::new(p.x as f32, p.y as f32, p.z as f32);
         let n32: Vec<V3<f32>> = neighbours.iter().map(|p| c32(*p)).collect();
-        let mut p32 = Params::new(h as f32);
+        let mut p32 = Params::new();
         p32.iterations = 5;
         let (normal32, f32fit) =
-            initial_fit(c32(centre), &n32, Some(&n32), &p32, c32(origin)).unwrap();
+            initial_fit(c32(centre), &n32, Some(&n32), h as f32, &p32, c32(origin)).unwrap();
         let ball32 = Ball {
+            h: h as f32,
             centre: c32(centre),
             radius: radius_of_trust as f32,
             normal: normal32,

@@ -57,7 +57,7 @@ fn compare<T: Real>(
         width: size,
         height: size,
     };
-    let mut tp = Params::new(surface.h);
+    let mut tp = Params::new();
     tp.degree = degree;
     tp.iterations = iterations;
     let ours = surface.render(&camera, &tp);

@@ -1,0 +1,120 @@
+//! Hard cases of orientation: flipped normals, NaN and zero normals, a thin sheet whose two
+//! faces have opposing normals, and no normals at all.
+
+mod common;
+
+use common::*;
+use slosh_mls::*;
+use slosh_scenes::{SceneKind, SceneSpec};
+
+fn spec(kind: SceneKind, n: usize) -> SceneSpec {
+    SceneSpec::new(kind, n, 11)
+}
+
+#[test]
+fn flipped_normals_fall_back_to_the_covariance() {
+    let mut s = spec(SceneKind::Sphere, 3000);
+    s.hard.flip_normals = 0.3;
+    let sc = scene(s);
+    for degree in [2, 3] {
+        let surface = surface_of::<f64>(
+            &sc,
+            0,
+            &SurfaceParams {
+                degree,
+                ..Default::default()
+            },
+            true,
+        );
+        let st = render_stats(
+            &sc,
+            &surface,
+            &framing_camera(&sc, 32),
+            &params(&surface, degree, 4),
+            0.5,
+        );
+        eprintln!("flips, degree {degree}: {st:?}");
+        assert_eq!(st.non_finite, 0);
+        assert!(st.hits > 100);
+        assert!(
+            st.rms < 0.05 && st.max < 0.3,
+            "flipped normals: RMS {} max {} spacings",
+            st.rms,
+            st.max
+        );
+    }
+}
+
+#[test]
+fn nan_and_zero_normals_never_reach_the_output() {
+    let mut s = spec(SceneKind::Torus, 4000);
+    s.hard.bad_normals = 0.3;
+    let sc = scene(s);
+    let surface = surface_of::<f32>(&sc, 0, &SurfaceParams::default(), true);
+    assert!(
+        surface
+            .balls
+            .iter()
+            .all(|b| b.normal.is_finite() && b.poly.c.iter().all(|c| c.is_finite()))
+    );
+    let st = render_stats(
+        &sc,
+        &surface,
+        &framing_camera(&sc, 32),
+        &params(&surface, 2, 3),
+        0.5,
+    );
+    eprintln!("bad normals: {st:?}");
+    assert_eq!(st.non_finite, 0);
+    assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
+}
+
+#[test]
+fn thin_sheet_faces_do_not_mix() {
+    let sc = scene(spec(SceneKind::Sheet, 6000));
+    let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
+    // Neighbour lists never pair the two faces (opposing normals).
+    let normals = surface.normals.as_ref().unwrap();
+    for i in 0..surface.len() {
+        assert!(
+            surface
+                .neighbours_of(i)
+                .iter()
+                .all(|&j| normals[j as usize].dot(normals[i]) >= 0.0)
+        );
+    }
+    // Rays from above hit the top face, from below the bottom face, within a small fraction of
+    // the gap.
+    let gap = sc.sheet_gap();
+    for (z, face) in [(2.0, gap / 2.0), (-2.0, -gap / 2.0)] {
+        let p = params(&surface, 2, 4);
+        for k in 0..20 {
+            let x = -0.6 + 0.06 * k as f64;
+            let hit = surface
+                .trace([x, 0.1, z], [0.0, 0.0, -z.signum()], &p)
+                .unwrap();
+            assert!(hit.position.iter().all(|c| c.is_finite()));
+            assert!(
+                (hit.position[2] - face).abs() < 0.1 * gap,
+                "hit z {} for face at {face}",
+                hit.position[2]
+            );
+        }
+    }
+}
+
+#[test]
+fn without_normals_the_covariance_plane_still_finds_the_surface() {
+    let sc = scene(spec(SceneKind::Sphere, 3000));
+    let sp = SurfaceParams {
+        normals: NormalsMode::Covariance,
+        ..Default::default()
+    };
+    let surface = surface_of::<f64>(&sc, 0, &sp, false);
+    let mut p = params(&surface, 2, 4);
+    p.normals = NormalsMode::Covariance;
+    let st = render_stats(&sc, &surface, &framing_camera(&sc, 32), &p, 0.5);
+    eprintln!("no normals: {st:?}");
+    assert_eq!(st.non_finite, 0);
+    assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
+}
