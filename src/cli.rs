@@ -22,6 +22,31 @@ pub enum Command {
     Gen(GenArgs),
     /// Print what an EnSight case holds.
     Info(InfoArgs),
+    /// Measure speed against error.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// CPU MLS accuracy against analytic scenes: error vs cost tables and a plot.
+    Accuracy(AccuracyArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct AccuracyArgs {
+    /// Markdown report to write.
+    #[arg(long, default_value = "docs/accuracy.md")]
+    pub out: PathBuf,
+    /// PNG plot of error against cost.
+    #[arg(long, default_value = "docs/img/accuracy.png")]
+    pub plot: PathBuf,
+    /// Image size in pixels (square) of every render.
+    #[arg(long, default_value_t = 96)]
+    pub size: u32,
+    /// A small, fast run (fewer scenes and configurations) to check the harness itself.
+    #[arg(long)]
+    pub quick: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

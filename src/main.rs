@@ -1,6 +1,7 @@
 //! slosh: a thin binary over the library crates. Flags are parsed in `cli`, validated into
 //! settings in `config`, and each subcommand lives in its own module.
 
+mod accuracy;
 mod cli;
 mod config;
 mod generate;
@@ -26,6 +27,7 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
+        Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
         Command::Info(args) => {
             let mut case = slosh_ensight::Case::open(&args.case)?;
             case.set_byte_order(args.byte_order.map(Into::into));

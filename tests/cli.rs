@@ -360,3 +360,39 @@ fn vtk_reads_what_we_write() {
         }
     }
 }
+
+/// `slosh bench accuracy --quick` writes its report and plot, and the clean sphere meets the
+/// accuracy goals it reports against.
+#[test]
+fn accuracy_harness_reports_goals() {
+    let dir = tempfile::tempdir().unwrap();
+    let md = dir.path().join("accuracy.md");
+    let png = dir.path().join("img/accuracy.png");
+    let (ok, _, err) = slosh(&[
+        "bench",
+        "accuracy",
+        "--quick",
+        "--out",
+        md.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let report = std::fs::read_to_string(&md).unwrap();
+    let goals: Vec<&str> = report
+        .lines()
+        .filter(|l| {
+            l.starts_with("| converged")
+                || l.starts_with("| 1 iteration")
+                || l.starts_with("| f32 vs f64")
+        })
+        .collect();
+    assert_eq!(goals.len(), 3, "{report}");
+    for g in goals {
+        assert!(
+            g.ends_with("| yes |"),
+            "goal not met on the clean sphere: {g}"
+        );
+    }
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+}
