@@ -70,15 +70,7 @@ fn case(kind: SceneKind, points: usize, step: usize, noise: f64, size: u32) -> R
     let scene = Scene::new(spec)?;
     let t = scene.time(step);
     let p = scene.particles(step);
-    let keep = |v: &[DVec3]| -> Vec<[f64; 3]> {
-        v.iter()
-            .zip(&p.surface)
-            .filter(|(_, s)| **s)
-            .map(|(q, _)| q.to_array())
-            .collect()
-    };
-    let positions = keep(&p.positions);
-    let normals = keep(&p.normals);
+    let (positions, normals) = p.surface_arrays();
     let (eye, target) = match kind {
         SceneKind::Tank => ([1.0, -1.2, 1.4], [1.0, 0.5, 0.45]),
         _ => {

@@ -135,20 +135,7 @@ fn sparse_droplets_give_finite_answers() {
     let sc = scene(SceneSpec::new(SceneKind::Droplets, 8000, 2));
     let step = 10;
     let p = sc.particles(step);
-    let pos: Vec<[f64; 3]> = p
-        .positions
-        .iter()
-        .zip(&p.surface)
-        .filter(|(_, s)| **s)
-        .map(|(q, _)| q.to_array())
-        .collect();
-    let nrm: Vec<[f64; 3]> = p
-        .normals
-        .iter()
-        .zip(&p.surface)
-        .filter(|(_, s)| **s)
-        .map(|(q, _)| q.to_array())
-        .collect();
+    let (pos, nrm) = p.surface_arrays();
     let surface = Surface::<f64>::build(&pos, Some(&nrm), &SurfaceParams::default()).unwrap();
     let t = sc.time(step);
     let mut traced = 0;

@@ -25,20 +25,7 @@ fn compare<T: Real>(
 ) -> Report {
     let scene = Scene::new(SceneSpec::new(kind, points, 3)).unwrap();
     let p = scene.particles(0);
-    let pos: Vec<[f64; 3]> = p
-        .positions
-        .iter()
-        .zip(&p.surface)
-        .filter(|(_, s)| **s)
-        .map(|(q, _)| q.to_array())
-        .collect();
-    let nrm: Vec<[f64; 3]> = p
-        .normals
-        .iter()
-        .zip(&p.surface)
-        .filter(|(_, s)| **s)
-        .map(|(q, _)| q.to_array())
-        .collect();
+    let (pos, nrm) = p.surface_arrays();
     let params = SurfaceParams {
         degree,
         ..SurfaceParams::default()

@@ -142,6 +142,19 @@ impl Particles {
         self.surface.push(surface);
     }
 
+    /// Positions and normals of the free-surface particles only, as plain arrays (what a
+    /// surface reconstruction is given).
+    pub fn surface_arrays(&self) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let keep = |v: &[DVec3]| -> Vec<[f64; 3]> {
+            v.iter()
+                .zip(&self.surface)
+                .filter(|(_, s)| **s)
+                .map(|(q, _)| q.to_array())
+                .collect()
+        };
+        (keep(&self.positions), keep(&self.normals))
+    }
+
     pub fn len(&self) -> usize {
         self.positions.len()
     }

@@ -30,20 +30,7 @@ pub fn surface_of<T: Real>(
     with_normals: bool,
 ) -> Surface<T> {
     let p = scene.particles(step);
-    let pos: Vec<[f64; 3]> = p
-        .positions
-        .iter()
-        .zip(&p.surface)
-        .filter(|(_, s)| **s)
-        .map(|(q, _)| q.to_array())
-        .collect();
-    let nrm: Vec<[f64; 3]> = p
-        .normals
-        .iter()
-        .zip(&p.surface)
-        .filter(|(_, s)| **s)
-        .map(|(q, _)| q.to_array())
-        .collect();
+    let (pos, nrm) = p.surface_arrays();
     Surface::<T>::build(&pos, with_normals.then_some(nrm.as_slice()), params).unwrap()
 }
 
