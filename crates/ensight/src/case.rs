@@ -360,7 +360,6 @@ fn parse_variable(key: &str, value: &str) -> Option<Variable> {
         if constants.is_empty() {
             return None;
         }
-        let _ = time_set;
         return Some(Variable {
             name: (*name).to_string(),
             var_type,
@@ -456,6 +455,20 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
         numbers: Option<Vec<i64>>,
         times: Option<Vec<f64>>,
     }
+    impl Partial {
+        fn new(id: u32, description: Option<String>, line: usize) -> Partial {
+            Partial {
+                id,
+                description,
+                line,
+                steps: None,
+                start: None,
+                increment: None,
+                numbers: None,
+                times: None,
+            }
+        }
+    }
     let mut sets: Vec<Partial> = Vec::new();
     for e in entries {
         if e.key == "time set" {
@@ -468,30 +481,12 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
                 )
             })?;
             let description = (e.values.len() > 1).then(|| e.values[1..].join(" "));
-            sets.push(Partial {
-                id,
-                description,
-                line: e.line,
-                steps: None,
-                start: None,
-                increment: None,
-                numbers: None,
-                times: None,
-            });
+            sets.push(Partial::new(id, description, e.line));
             continue;
         }
         if sets.is_empty() {
             // EnSight 6 cases may omit "time set:"; the set is then number 1.
-            sets.push(Partial {
-                id: 1,
-                description: None,
-                line: e.line,
-                steps: None,
-                start: None,
-                increment: None,
-                numbers: None,
-                times: None,
-            });
+            sets.push(Partial::new(1, None, e.line));
         }
         let set = sets.last_mut().expect("pushed above");
         match e.key.as_str() {

@@ -71,14 +71,6 @@ pub struct Geometry {
     pub parts: Vec<Part>,
 }
 
-impl Geometry {
-    /// Values a per-node variable file must hold for each component, part by part (Gold) or
-    /// for the one global list (EnSight 6).
-    pub fn node_count(&self) -> usize {
-        self.nodes.len()
-    }
-}
-
 fn id_mode(d: &mut dyn Decoder, what: &str) -> Result<IdMode> {
     let line = d.keyword(what)?;
     if !line.starts_with(what) {

@@ -44,20 +44,8 @@ impl FileBytes {
         })
     }
 
-    /// Wraps bytes already in memory (tests, fuzzing, stdin).
-    pub fn from_vec(path: impl Into<PathBuf>, bytes: Vec<u8>) -> Self {
-        FileBytes {
-            path: path.into(),
-            data: Data::Owned(bytes),
-        }
-    }
-
     pub fn path(&self) -> &Path {
         &self.path
-    }
-
-    pub fn is_mapped(&self) -> bool {
-        matches!(self.data, Data::Mapped(_))
     }
 }
 

@@ -164,14 +164,14 @@ impl Particles {
     }
 
     fn retain(&mut self, keep: &[bool]) {
-        let mut k = keep.iter();
-        self.positions.retain(|_| *k.next().unwrap_or(&true));
-        let mut k = keep.iter();
-        self.normals.retain(|_| *k.next().unwrap_or(&true));
-        let mut k = keep.iter();
-        self.pressure.retain(|_| *k.next().unwrap_or(&true));
-        let mut k = keep.iter();
-        self.surface.retain(|_| *k.next().unwrap_or(&true));
+        fn by_mask<T>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().unwrap_or(&true));
+        }
+        by_mask(&mut self.positions, keep);
+        by_mask(&mut self.normals, keep);
+        by_mask(&mut self.pressure, keep);
+        by_mask(&mut self.surface, keep);
     }
 }
 

@@ -64,6 +64,16 @@ pub enum Truth {
     },
 }
 
+/// Both ray parameters where a ray meets a sphere, ascending.
+fn ray_sphere(ray: &Ray, center: DVec3, radius: f64) -> Option<(f64, f64)> {
+    let oc = ray.origin - center;
+    quadratic_roots(
+        1.0,
+        2.0 * oc.dot(ray.dir),
+        oc.length_squared() - radius * radius,
+    )
+}
+
 fn local_frame(n: DVec3) -> (DVec3, DVec3) {
     let u = n.any_orthonormal_vector();
     (u, n.cross(u))
@@ -74,12 +84,7 @@ impl Truth {
     pub fn intersect(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
         match self {
             Truth::Sphere { center, radius } => {
-                let oc = ray.origin - *center;
-                let (t0, t1) = quadratic_roots(
-                    1.0,
-                    2.0 * oc.dot(ray.dir),
-                    oc.length_squared() - radius * radius,
-                )?;
+                let (t0, t1) = ray_sphere(ray, *center, *radius)?;
                 let t = [t0, t1].into_iter().find(|&t| t > t_min && t < t_max)?;
                 let p = ray.at(t);
                 Some(Hit {
@@ -118,12 +123,7 @@ impl Truth {
                 // Sphere tracing on the exact signed distance never steps over the surface.
                 // Padded so that the march starts strictly outside.
                 let bound = (major + minor) * (1.0 + 1e-6);
-                let oc = ray.origin - *center;
-                let (b0, b1) = quadratic_roots(
-                    1.0,
-                    2.0 * oc.dot(ray.dir),
-                    oc.length_squared() - bound * bound,
-                )?;
+                let (b0, b1) = ray_sphere(ray, *center, bound)?;
                 let lo = b0.max(t_min);
                 let hi = b1.min(t_max);
                 if lo >= hi {
