@@ -1,5 +1,7 @@
 //! A uniform grid over the balls' bounding boxes, walked front to back along a ray
-//! (Amanatides & Woo). The CPU reference tracer's acceleration; the bake builds a BVH instead.
+//! (Amanatides & Woo). The in-memory tracer's index; caches carry a BVH instead.
+
+use crate::tracer::BallIndex;
 
 #[derive(Debug, Clone)]
 pub(crate) struct Grid {
@@ -74,15 +76,12 @@ impl Grid {
             items,
         }
     }
+}
 
-    /// Visits the cells the ray crosses for t in [0, ∞), nearest first, with each cell's balls
-    /// and the t at which the ray leaves it; stops when `visit` returns false.
-    pub fn walk(
-        &self,
-        origin: [f64; 3],
-        dir: [f64; 3],
-        mut visit: impl FnMut(&[u32], f64) -> bool,
-    ) {
+impl BallIndex for Grid {
+    /// Visits the cells the ray crosses for t in [0, ∞), nearest first; stops at the first
+    /// cell the ray leaves beyond the best hit so far.
+    fn walk(&self, origin: [f64; 3], dir: [f64; 3], visit: &mut dyn FnMut(&[u32]) -> f64) {
         let hi: [f64; 3] = std::array::from_fn(|a| self.lo[a] + self.dims[a] as f64 * self.cell);
         let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
         for a in 0..3 {
@@ -131,7 +130,8 @@ impl Grid {
                 2
             };
             let exit = t_next[axis].min(t1);
-            if !visit(items, exit) || t_next[axis] > t1 {
+            // Any hit nearer than the best lies in a cell not yet left.
+            if !(exit < visit(items)) || t_next[axis] > t1 {
                 return;
             }
             let next = cell[axis] as isize + step[axis];

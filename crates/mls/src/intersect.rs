@@ -72,6 +72,8 @@ pub enum HitStatus {
     NoInitialRoot,
     /// The ray does not pass through the ball.
     MissedBall,
+    /// A droplet sphere was hit (no MLS patch).
+    Droplet,
 }
 
 impl HitStatus {
@@ -82,6 +84,7 @@ impl HitStatus {
                 | HitStatus::IterationLimit
                 | HitStatus::NoSupport
                 | HitStatus::DegenerateFit
+                | HitStatus::Droplet
         )
     }
 }

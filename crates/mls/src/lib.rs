@@ -28,5 +28,5 @@ pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
     weight,
 };
-pub use surface::{BallFit, Surface, SurfaceError, SurfaceParams};
-pub use tracer::{Camera, TraceHit};
+pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts};
+pub use tracer::{BallIndex, Camera, TraceHit};

@@ -1,6 +1,7 @@
 //! A point set prepared for tracing: recentred coordinates, radii of trust, neighbour lists
-//! (CSR), initial support normals and polynomials, and a uniform grid over the balls.
-//! This is the CPU reference of what the bake will store in caches.
+//! (CSR, sorted by index), initial support normals and polynomials, droplets too small for a
+//! fit as spheres, and a uniform grid over the balls. This is the CPU reference of what the
+//! bake stores in caches.
 
 use std::num::NonZero;
 
@@ -28,6 +29,9 @@ pub struct SurfaceParams {
     pub normals: NormalsMode,
     /// h_i = h_scale × ρ_i per ball instead of one global h (for uneven sampling).
     pub per_point_h: bool,
+    /// Connected components (points linked within 2h) with fewer points than this become
+    /// spheres instead of MLS patches; 0 turns droplet detection off.
+    pub droplet_below: usize,
 }
 
 impl Default for SurfaceParams {
@@ -40,6 +44,7 @@ impl Default for SurfaceParams {
             degree: 2,
             normals: NormalsMode::Mean,
             per_point_h: false,
+            droplet_below: 6,
         }
     }
 }
@@ -54,6 +59,8 @@ pub enum SurfaceError {
     BadK,
     #[error("spatial index: {0}")]
     Index(String),
+    #[error("inconsistent surface parts: {0}")]
+    Parts(String),
 }
 
 /// Per-ball state of the initial fit.
@@ -62,6 +69,33 @@ pub enum BallFit {
     Fitted(FitStatus),
     /// No support plane or fit at the centre: the ball is never a candidate.
     None,
+    /// Part of a component too small for a fit: drawn as `spheres[index]` instead.
+    Droplet(u32),
+}
+
+/// A droplet drawn as what it is: a small sphere.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sphere<T> {
+    pub centre: V3<T>,
+    pub radius: T,
+}
+
+/// Everything a [`Surface`] holds except its search grid: what a cache stores.
+#[derive(Debug, Clone)]
+pub struct SurfaceParts<T> {
+    pub origin: [f64; 3],
+    pub points: Vec<V3<T>>,
+    pub normals: Option<Vec<V3<T>>>,
+    pub radii: Vec<T>,
+    pub h: T,
+    pub spacing: T,
+    pub neighbour_start: Vec<u32>,
+    pub neighbours: Vec<u32>,
+    pub capped: usize,
+    pub balls: Vec<Ball<T>>,
+    pub ball_fits: Vec<BallFit>,
+    pub spheres: Vec<Sphere<T>>,
+    pub params: SurfaceParams,
 }
 
 #[derive(Debug, Clone)]
@@ -74,6 +108,8 @@ pub struct Surface<T> {
     pub radii: Vec<T>,
     /// The global smoothing length h_scale × mean ρ (each ball carries the h it uses).
     pub h: T,
+    /// Mean distance to the nearest other point.
+    pub spacing: T,
     /// CSR neighbour lists: the neighbours of point i are `neighbours[start[i]..start[i + 1]]`.
     pub neighbour_start: Vec<u32>,
     pub neighbours: Vec<u32>,
@@ -81,6 +117,8 @@ pub struct Surface<T> {
     pub capped: usize,
     pub balls: Vec<Ball<T>>,
     pub ball_fits: Vec<BallFit>,
+    /// Droplets; in candidate lists sphere d is item `len() + d`.
+    pub spheres: Vec<Sphere<T>>,
     pub params: SurfaceParams,
     pub(crate) grid: Grid,
 }
@@ -121,16 +159,18 @@ impl<T: Real> Surface<T> {
             .map_err(|e| SurfaceError::Index(format!("{e:?}")))?;
         let k = params.k.min(n - 1);
         let k_query = NonZero::new(k + 1).ok_or(SurfaceError::BadK)?;
-        let mut radii: Vec<f64> = rel
+        let (mut radii, nearest): (Vec<f64>, Vec<f64>) = rel
             .par_iter()
             .map(|p| {
                 let nn = tree
                     .query(p)
                     .nearest_n::<SquaredEuclidean<f64>>(k_query)
                     .execute();
-                nn.last().map_or(0.0, |r| r.distance.sqrt())
+                let dist = |i: usize| nn.get(i).map_or(0.0, |r| r.distance.sqrt());
+                (dist(nn.len().saturating_sub(1)), dist(1))
             })
-            .collect();
+            .unzip();
+        let spacing = nearest.iter().sum::<f64>() / n as f64;
         let mean = radii.iter().sum::<f64>() / n as f64;
         // Coincident points give ρ = 0: keep every ball a tenth of the mean radius at least.
         let floor = 0.1 * mean;
@@ -159,7 +199,7 @@ impl<T: Real> Surface<T> {
                     .execute();
                 let capped = found.len() == cap.get();
                 let own = unit_normals.as_ref().and_then(|ns| ns[i]);
-                let list = found
+                let mut list: Vec<u32> = found
                     .iter()
                     .map(|r| r.item)
                     .filter(|&j| {
@@ -170,6 +210,8 @@ impl<T: Real> Surface<T> {
                         }
                     })
                     .collect();
+                // Index order: the order the GPU reads them in, and small deltas in the cache.
+                list.sort_unstable();
                 (list, capped)
             })
             .collect();
@@ -236,22 +278,128 @@ impl<T: Real> Surface<T> {
                 },
             )
             .collect();
-        let (balls, ball_fits): (Vec<_>, Vec<_>) = fits.into_iter().unzip();
-        let grid = Grid::build(&rel, &radii, mean);
-        Ok(Surface {
+        let (balls, mut ball_fits): (Vec<_>, Vec<_>) = fits.into_iter().unzip();
+        let spheres = droplets(
+            &rel,
+            &neighbour_start,
+            &neighbours,
+            &ball_h,
+            spacing,
+            params.droplet_below,
+            &mut ball_fits,
+        );
+        Surface::from_parts(SurfaceParts {
             origin,
             points: pts,
             normals: nrm,
             radii: radii.iter().map(|&r| T::c(r)).collect(),
             h: h_t,
+            spacing: T::c(spacing),
             neighbour_start,
             neighbours,
             capped,
             balls,
             ball_fits,
+            spheres,
             params: params.clone(),
+        })
+    }
+
+    /// A surface from stored parts (a cache); checks that they fit together and builds the grid.
+    pub fn from_parts(parts: SurfaceParts<T>) -> Result<Surface<T>, SurfaceError> {
+        let n = parts.points.len();
+        let bad = |what: String| Err(SurfaceError::Parts(what));
+        if parts.radii.len() != n || parts.balls.len() != n || parts.ball_fits.len() != n {
+            return bad(format!(
+                "{n} points but {} radii, {} balls, {} fit states",
+                parts.radii.len(),
+                parts.balls.len(),
+                parts.ball_fits.len()
+            ));
+        }
+        if parts.normals.as_ref().is_some_and(|v| v.len() != n) {
+            return bad("normals and points differ in count".into());
+        }
+        if parts.neighbour_start.len() != n + 1
+            || parts.neighbour_start.windows(2).any(|w| w[0] > w[1])
+            || parts.neighbour_start.last().map(|&e| e as usize) != Some(parts.neighbours.len())
+        {
+            return bad("neighbour offsets are not a CSR index over the neighbour list".into());
+        }
+        if parts.neighbours.iter().any(|&j| j as usize >= n) {
+            return bad("a neighbour index is out of range".into());
+        }
+        if parts
+            .ball_fits
+            .iter()
+            .any(|f| matches!(f, BallFit::Droplet(d) if *d as usize >= parts.spheres.len()))
+        {
+            return bad("a droplet index is out of range".into());
+        }
+        let centres: Vec<[f64; 3]> = parts
+            .points
+            .iter()
+            .map(|p| p.to_f64())
+            .chain(parts.spheres.iter().map(|s| s.centre.to_f64()))
+            .collect();
+        let radii: Vec<f64> = parts
+            .radii
+            .iter()
+            .chain(parts.spheres.iter().map(|s| &s.radius))
+            .map(|&r| Real::to_f64(r))
+            .collect();
+        let mean = parts.radii.iter().map(|&r| Real::to_f64(r)).sum::<f64>() / n.max(1) as f64;
+        let grid = Grid::build(&centres, &radii, mean);
+        let SurfaceParts {
+            origin,
+            points,
+            normals,
+            radii,
+            h,
+            spacing,
+            neighbour_start,
+            neighbours,
+            capped,
+            balls,
+            ball_fits,
+            spheres,
+            params,
+        } = parts;
+        Ok(Surface {
+            origin,
+            points,
+            normals,
+            radii,
+            h,
+            spacing,
+            neighbour_start,
+            neighbours,
+            capped,
+            balls,
+            ball_fits,
+            spheres,
+            params,
             grid,
         })
+    }
+
+    /// The stored parts, without the grid.
+    pub fn into_parts(self) -> SurfaceParts<T> {
+        SurfaceParts {
+            origin: self.origin,
+            points: self.points,
+            normals: self.normals,
+            radii: self.radii,
+            h: self.h,
+            spacing: self.spacing,
+            neighbour_start: self.neighbour_start,
+            neighbours: self.neighbours,
+            capped: self.capped,
+            balls: self.balls,
+            ball_fits: self.ball_fits,
+            spheres: self.spheres,
+            params: self.params,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -265,6 +413,88 @@ impl<T: Real> Surface<T> {
     pub fn neighbours_of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.neighbour_start[i] as usize..self.neighbour_start[i + 1] as usize]
     }
+}
+
+/// Marks the points of components (linked when within 2h) smaller than `below` as droplets
+/// and returns one sphere per such component: the members' centroid, reaching half a spacing
+/// past the farthest member.
+fn droplets<T: Real>(
+    points: &[[f64; 3]],
+    start: &[u32],
+    neighbours: &[u32],
+    ball_h: &(dyn Fn(usize) -> f64 + Sync),
+    spacing: f64,
+    below: usize,
+    fits: &mut [BallFit],
+) -> Vec<Sphere<T>> {
+    if below <= 1 {
+        return Vec::new();
+    }
+    let n = points.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn root(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            let up = parent[parent[i as usize] as usize];
+            parent[i as usize] = up;
+            i = up;
+        }
+        i
+    }
+    for i in 0..n {
+        let reach = 2.0 * ball_h(i);
+        for &j in &neighbours[start[i] as usize..start[i + 1] as usize] {
+            let (a, b) = (points[i], points[j as usize]);
+            let d2 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
+            if d2 <= reach * reach {
+                let (ri, rj) = (root(&mut parent, i as u32), root(&mut parent, j));
+                if ri != rj {
+                    parent[ri.max(rj) as usize] = ri.min(rj);
+                }
+            }
+        }
+    }
+    let roots: Vec<u32> = (0..n as u32).map(|i| root(&mut parent, i)).collect();
+    let mut size = vec![0usize; n];
+    for &r in &roots {
+        size[r as usize] += 1;
+    }
+    // Spheres numbered in order of their first member, so the result does not depend on threads.
+    let mut sphere_of = vec![u32::MAX; n];
+    let mut members: Vec<Vec<usize>> = Vec::new();
+    for (i, &r) in roots.iter().enumerate() {
+        if size[r as usize] >= below {
+            continue;
+        }
+        if sphere_of[r as usize] == u32::MAX {
+            sphere_of[r as usize] = members.len() as u32;
+            members.push(Vec::new());
+        }
+        let d = sphere_of[r as usize];
+        members[d as usize].push(i);
+        fits[i] = BallFit::Droplet(d);
+    }
+    members
+        .iter()
+        .map(|m| {
+            let mut c = [0.0; 3];
+            for &i in m {
+                for a in 0..3 {
+                    c[a] += points[i][a] / m.len() as f64;
+                }
+            }
+            let far = m
+                .iter()
+                .map(|&i| {
+                    let p = points[i];
+                    ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()
+                })
+                .fold(0.0, f64::max);
+            Sphere {
+                centre: V3::from_f64(c),
+                radius: T::c(far + 0.5 * spacing),
+            }
+        })
+        .collect()
 }
 
 /// Copies the positions (and normals) of `ids` into the scratch vectors.

@@ -1,11 +1,20 @@
-//! The CPU reference tracer: camera rays, candidate balls front to back through the grid,
-//! first accepted hit. rayon-parallel over image rows.
+//! The CPU reference tracer: camera rays, candidate balls front to back through an index
+//! (the surface's grid or a cache's BVH), first accepted hit. rayon-parallel over image rows.
 
 use rayon::prelude::*;
 
 use crate::intersect::{HitStatus, Params, Ray, intersect_ball, ray_ball};
 use crate::real::{Real, V3};
 use crate::surface::{BallFit, Surface, gather};
+
+/// A spatial index over a surface's candidates: ball i is item i, droplet sphere d is item
+/// `len + d`.
+pub trait BallIndex: Sync {
+    /// Calls `visit` with batches of items whose bounds the ray (t ≥ 0) enters, roughly nearest
+    /// first. `visit` returns the nearest hit so far (∞ if none); the walk ends once nothing
+    /// unvisited can be nearer.
+    fn walk(&self, origin: [f64; 3], dir: [f64; 3], visit: &mut dyn FnMut(&[u32]) -> f64);
+}
 
 /// A pinhole camera.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,8 +82,19 @@ pub struct TraceHit {
 }
 
 impl<T: Real> Surface<T> {
-    /// Traces one world-space ray (`dir` unit length).
+    /// Traces one world-space ray (`dir` unit length) through the surface's own grid.
     pub fn trace(&self, origin: [f64; 3], dir: [f64; 3], params: &Params<T>) -> Option<TraceHit> {
+        self.trace_in(&self.grid, origin, dir, params)
+    }
+
+    /// Traces one world-space ray through `index`.
+    pub fn trace_in(
+        &self,
+        index: &dyn BallIndex,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        params: &Params<T>,
+    ) -> Option<TraceHit> {
         let rel = sub(origin, self.origin);
         let ray = Ray {
             origin: V3::from_f64(rel),
@@ -83,13 +103,53 @@ impl<T: Real> Surface<T> {
         let mut best: Option<TraceHit> = None;
         let mut tested: Vec<u32> = Vec::new();
         let (mut np, mut nn) = (Vec::new(), Vec::new());
-        self.grid.walk(rel, dir, |balls, cell_exit| {
-            for &b in balls {
+        let n = self.len();
+        let to_world = |p: [f64; 3]| {
+            [
+                p[0] + self.origin[0],
+                p[1] + self.origin[1],
+                p[2] + self.origin[2],
+            ]
+        };
+        index.walk(rel, dir, &mut |items| {
+            for &b in items {
                 let i = b as usize;
-                if self.ball_fits[i] == BallFit::None || tested.contains(&b) {
+                if tested.contains(&b) {
                     continue;
                 }
                 tested.push(b);
+                if i >= n {
+                    let Some(sphere) = self.spheres.get(i - n) else {
+                        continue;
+                    };
+                    let Some((t_in, t_out)) = ray_ball(&ray, sphere.centre, sphere.radius) else {
+                        continue;
+                    };
+                    // From inside a droplet the ray sees its far wall.
+                    let t = if t_in >= T::zero() { t_in } else { t_out };
+                    if !(t >= T::zero()) || best.is_some_and(|h| t.to_f64() >= h.t) {
+                        continue;
+                    }
+                    let p = ray.origin + ray.dir * t;
+                    let normal = (p - sphere.centre).normalized().unwrap_or(V3::new(
+                        T::zero(),
+                        T::zero(),
+                        T::one(),
+                    ));
+                    best = Some(TraceHit {
+                        t: t.to_f64(),
+                        position: to_world(p.to_f64()),
+                        normal: normal.to_f64(),
+                        ball: b,
+                        iterations: 0,
+                        status: HitStatus::Droplet,
+                        degree: 0,
+                    });
+                    continue;
+                }
+                if !matches!(self.ball_fits.get(i), Some(BallFit::Fitted(_))) {
+                    continue;
+                }
                 let ball = &self.balls[i];
                 let Some((t_in, _)) = ray_ball(&ray, ball.centre, ball.radius) else {
                     continue;
@@ -110,14 +170,9 @@ impl<T: Real> Surface<T> {
                     && out.t.is_finite()
                     && best.is_none_or(|h| out.t.to_f64() < h.t)
                 {
-                    let p = out.position.to_f64();
                     best = Some(TraceHit {
                         t: out.t.to_f64(),
-                        position: [
-                            p[0] + self.origin[0],
-                            p[1] + self.origin[1],
-                            p[2] + self.origin[2],
-                        ],
+                        position: to_world(out.position.to_f64()),
                         normal: out.normal.to_f64(),
                         ball: b,
                         iterations: out.iterations,
@@ -126,20 +181,29 @@ impl<T: Real> Surface<T> {
                     });
                 }
             }
-            // Any hit nearer than the current best lies in a cell not yet left.
-            best.is_none_or(|h| cell_exit < h.t)
+            best.map_or(f64::INFINITY, |h| h.t)
         });
         best
     }
 
-    /// Traces every pixel of `camera`, row-major.
+    /// Traces every pixel of `camera`, row-major, through the surface's own grid.
     pub fn render(&self, camera: &Camera, params: &Params<T>) -> Vec<Option<TraceHit>> {
+        self.render_in(&self.grid, camera, params)
+    }
+
+    /// Traces every pixel of `camera`, row-major, through `index`.
+    pub fn render_in(
+        &self,
+        index: &dyn BallIndex,
+        camera: &Camera,
+        params: &Params<T>,
+    ) -> Vec<Option<TraceHit>> {
         (0..camera.height)
             .into_par_iter()
             .flat_map_iter(|y| {
                 (0..camera.width).map(move |x| {
                     let (o, d) = camera.ray(x, y);
-                    self.trace(o, d, params)
+                    self.trace_in(index, o, d, params)
                 })
             })
             .collect()

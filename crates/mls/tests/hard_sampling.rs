@@ -66,9 +66,18 @@ fn duplicates_and_density_jumps_stay_accurate() {
         st.off_surface,
         st.hits
     );
+    // A global h, set by the dense half, cannot link the sparse half's points within 2h: they
+    // fall apart into droplets and whole regions of the true surface go missing.
     assert!(
-        st.rms < st_global.rms && st.disagree < st_global.disagree,
-        "per-point h must beat a global h here"
+        st_global.statuses.contains_key("Droplet"),
+        "{:?}",
+        st_global.statuses
+    );
+    assert!(
+        st.disagree * 3 < st_global.disagree,
+        "per-point h must beat a global h here: {} vs {} hit/miss disagreements",
+        st.disagree,
+        st_global.disagree
     );
 }
 
@@ -102,14 +111,26 @@ fn collinear_coplanar_and_isolated_points_degrade_and_report() {
             degraded >= 6,
             "the collinear segment cannot support degree {degree}: {degraded} degraded"
         );
-        // The isolated point: a constant at best, never NaN.
+        // The isolated point is a droplet: drawn as a sphere, not fitted.
+        assert!(matches!(fits[37], BallFit::Droplet(_)), "{:?}", fits[37]);
+        // Without droplet detection it is a constant at best, never NaN.
+        let undetected = surface_of::<f32>(
+            &sc,
+            0,
+            &SurfaceParams {
+                degree,
+                droplet_below: 0,
+                ..Default::default()
+            },
+            true,
+        );
         assert!(
             matches!(
-                fits[37],
+                undetected.ball_fits[n - 1],
                 BallFit::Fitted(FitStatus::Degraded { used: 0, .. })
             ),
             "{:?}",
-            fits[37]
+            undetected.ball_fits[n - 1]
         );
         assert!(
             surface
