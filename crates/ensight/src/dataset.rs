@@ -13,7 +13,7 @@ use crate::case::{
 use crate::error::{Error, Location, Result};
 use crate::geometry::{Geometry, read_geometry};
 use crate::reader::with_decoder;
-use crate::source::FileBytes;
+use crate::source;
 use crate::variables::{Measured, VarLayout, read_measured, read_node_variable};
 
 /// Which points of a step are the particles.
@@ -307,7 +307,7 @@ impl Case {
         let file = self
             .model_file(step)?
             .ok_or_else(|| Error::Request(format!("{}: no model geometry", self.path.display())))?;
-        let bytes = FileBytes::open(&file.path)?;
+        let bytes = source::open(&file.path)?;
         let encoding = sniff(&file.path, &bytes)?;
         let format = self.file.format;
         with_decoder(
@@ -330,7 +330,7 @@ impl Case {
                 self.path.display()
             ))
         })?;
-        let bytes = FileBytes::open(&file.path)?;
+        let bytes = source::open(&file.path)?;
         let encoding = sniff(&file.path, &bytes)?;
         with_decoder(
             &file.path,
@@ -369,7 +369,7 @@ impl Case {
                 format!("variable {:?} of type {:?}", var.name, var.var_type),
             )
         })?;
-        let bytes = FileBytes::open(&file.path)?;
+        let bytes = source::open(&file.path)?;
         let order = self.byte_order.or(order);
         with_decoder(
             &file.path,

@@ -240,18 +240,9 @@ impl CaseWriter {
     }
 }
 
-/// Writes to a temporary name in the same directory, then renames over the target.
+/// Writes `bytes` to `path` atomically (temporary name, flush, rename).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let file_name = path
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{file_name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
+    slosh_fileio::atomic_write(path, bytes).map_err(|e| Error::io(&e.path, e.source))
 }
 
 /// Buffers one file in either encoding, so each layout below is written once.

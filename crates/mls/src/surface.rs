@@ -120,6 +120,8 @@ pub struct Surface<T> {
     /// Droplets; in candidate lists sphere d is item `len() + d`.
     pub spheres: Vec<Sphere<T>>,
     pub params: SurfaceParams,
+    /// Seconds spent per stage of [`Surface::build`] (empty for surfaces from parts).
+    pub build_seconds: Vec<(&'static str, f64)>,
     pub(crate) grid: Grid,
 }
 
@@ -142,6 +144,7 @@ impl<T: Real> Surface<T> {
             });
         }
         let n = points.len();
+        let mut clock = Stages::default();
         let (lo, hi) = bounds(points);
         let origin = [
             0.5 * (lo[0] + hi[0]),
@@ -171,6 +174,7 @@ impl<T: Real> Surface<T> {
             })
             .unzip();
         let spacing = nearest.iter().sum::<f64>() / n as f64;
+        clock.lap("kd-tree and radii (kNN)");
         let mean = radii.iter().sum::<f64>() / n as f64;
         // Coincident points give ρ = 0: keep every ball a tenth of the mean radius at least.
         let floor = 0.1 * mean;
@@ -215,6 +219,7 @@ impl<T: Real> Surface<T> {
                 (list, capped)
             })
             .collect();
+        clock.lap("neighbour lists");
         let mut neighbour_start = Vec::with_capacity(n + 1);
         let mut neighbours = Vec::new();
         let mut capped = 0;
@@ -279,6 +284,7 @@ impl<T: Real> Surface<T> {
             )
             .collect();
         let (balls, mut ball_fits): (Vec<_>, Vec<_>) = fits.into_iter().unzip();
+        clock.lap("initial fits");
         let spheres = droplets(
             &rel,
             &neighbour_start,
@@ -288,7 +294,8 @@ impl<T: Real> Surface<T> {
             params.droplet_below,
             &mut ball_fits,
         );
-        Surface::from_parts(SurfaceParts {
+        clock.lap("droplets");
+        let mut surface = Surface::from_parts(SurfaceParts {
             origin,
             points: pts,
             normals: nrm,
@@ -302,7 +309,10 @@ impl<T: Real> Surface<T> {
             ball_fits,
             spheres,
             params: params.clone(),
-        })
+        })?;
+        clock.lap("grid");
+        surface.build_seconds = clock.laps;
+        Ok(surface)
     }
 
     /// A surface from stored parts (a cache); checks that they fit together and builds the grid.
@@ -379,6 +389,7 @@ impl<T: Real> Surface<T> {
             ball_fits,
             spheres,
             params,
+            build_seconds: Vec::new(),
             grid,
         })
     }
@@ -412,6 +423,30 @@ impl<T: Real> Surface<T> {
 
     pub fn neighbours_of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.neighbour_start[i] as usize..self.neighbour_start[i + 1] as usize]
+    }
+}
+
+/// Wall-clock laps of the build stages.
+#[derive(Debug)]
+struct Stages {
+    last: std::time::Instant,
+    laps: Vec<(&'static str, f64)>,
+}
+
+impl Default for Stages {
+    fn default() -> Self {
+        Stages {
+            last: std::time::Instant::now(),
+            laps: Vec::new(),
+        }
+    }
+}
+
+impl Stages {
+    fn lap(&mut self, name: &'static str) {
+        let now = std::time::Instant::now();
+        self.laps.push((name, (now - self.last).as_secs_f64()));
+        self.last = now;
     }
 }
 

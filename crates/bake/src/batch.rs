@@ -1,0 +1,233 @@
+//! The batch driver: bakes a series step by step with a bounded number of steps in memory,
+//! skips steps whose cache already verifies with the same parameters (resume), splits work
+//! into disjoint shards, goes on past bad steps and reports them, and rebuilds the manifest.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use slosh_cache::{CacheFile, Manifest, StepStats, step_file_name, write_step};
+
+use crate::params::BakeParams;
+use crate::select::StepInput;
+use crate::step::bake_step;
+
+/// Where steps come from: an EnSight case, or a single point-cloud file.
+pub trait StepSource: Sync {
+    /// (step index, time) of every step, in order.
+    fn steps(&self) -> Vec<(usize, f64)>;
+    /// Reads one step with everything `BakeParams` asks for.
+    fn read(&self, index: usize) -> Result<StepInput, String>;
+}
+
+/// Which of the series' steps this process bakes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    /// 0-based.
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    pub const WHOLE: Shard = Shard { index: 0, count: 1 };
+
+    /// Step at position `pos` of the selected steps belongs to shard `pos % count`: disjoint,
+    /// covering, and balanced when step sizes drift over a run.
+    pub fn owns(self, pos: usize) -> bool {
+        pos % self.count == self.index
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct BatchOptions {
+    pub out: PathBuf,
+    /// Step indices to bake (inclusive range of EnSight step indices); all when `None`.
+    pub steps: Option<(usize, usize)>,
+    /// Steps in flight at once (each is parallel inside).
+    pub jobs: usize,
+    pub shard: Shard,
+    pub params: BakeParams,
+}
+
+#[derive(Debug, Clone)]
+pub enum Outcome {
+    Baked {
+        bytes: u64,
+        points: u64,
+        seconds: f64,
+        stats: Box<StepStats>,
+    },
+    /// A cache with the same parameter hash was already there and verified.
+    Kept,
+    Failed(String),
+}
+
+/// Progress events, for a progress bar.
+#[derive(Debug, Clone)]
+pub enum Event {
+    Planned { steps: usize },
+    Done { index: usize, outcome: Outcome },
+}
+
+#[derive(Debug, Default)]
+pub struct BatchReport {
+    pub baked: usize,
+    pub kept: usize,
+    pub failed: Vec<(usize, String)>,
+    pub points: u64,
+    pub bytes: u64,
+    /// Summed seconds per stage over baked steps, pipeline order; plus "write".
+    pub stages: Vec<(String, f64)>,
+    pub wall_seconds: f64,
+    /// Step files that failed when the manifest was rebuilt.
+    pub manifest_problems: Vec<(PathBuf, String)>,
+}
+
+/// The steps this process is responsible for.
+pub fn plan(source: &dyn StepSource, opts: &BatchOptions) -> Vec<(usize, f64)> {
+    source
+        .steps()
+        .into_iter()
+        .filter(|(i, _)| opts.steps.is_none_or(|(a, b)| (a..=b).contains(i)))
+        .enumerate()
+        .filter(|(pos, _)| opts.shard.owns(*pos))
+        .map(|(_, s)| s)
+        .collect()
+}
+
+/// True when `path` holds a complete cache made with `hash` whose bytes are intact.
+pub fn is_current(path: &Path, hash: &str) -> bool {
+    CacheFile::open(path).is_ok_and(|f| f.header().params_hash == hash && f.body_intact())
+}
+
+fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &str) -> Outcome {
+    let path = opts.out.join(step_file_name(index));
+    if is_current(&path, hash) {
+        return Outcome::Kept;
+    }
+    let start = Instant::now();
+    let input = match source.read(index) {
+        Ok(i) => i,
+        Err(e) => return Outcome::Failed(e),
+    };
+    let read_seconds = start.elapsed().as_secs_f64();
+    let baked = match bake_step(&input, &opts.params) {
+        Ok(b) => b,
+        Err(e) => return Outcome::Failed(e.to_string()),
+    };
+    drop(input);
+    let mut header = baked.header;
+    header
+        .stats
+        .stage_seconds
+        .insert(0, ("read".into(), read_seconds));
+    let points = header.points;
+    let mut stats = header.stats.clone();
+    let write_start = Instant::now();
+    match write_step(&path, header, &baked.sections, opts.params.compression) {
+        Ok(bytes) => {
+            stats.stage_seconds.push((
+                "compress and write".into(),
+                write_start.elapsed().as_secs_f64(),
+            ));
+            Outcome::Baked {
+                bytes,
+                points,
+                seconds: start.elapsed().as_secs_f64(),
+                stats: Box::new(stats),
+            }
+        }
+        Err(e) => Outcome::Failed(e.to_string()),
+    }
+}
+
+/// Removes temporary files that a killed bake left behind (their writer is gone).
+fn remove_stale_temps(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !(slosh_fileio::is_atomic_temp(&name) && name.starts_with(".step-")) {
+            continue;
+        }
+        let pid = name
+            .rsplit_once(".tmp-")
+            .and_then(|(_, rest)| rest.split('-').next())
+            .and_then(|p| p.parse::<u32>().ok());
+        let alive = pid.is_none_or(|p| {
+            cfg!(not(target_os = "linux")) || Path::new(&format!("/proc/{p}")).exists()
+        });
+        if !alive {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+/// Bakes the planned steps of `source` into `opts.out`, then rebuilds the manifest.
+pub fn run_batch(
+    source: &dyn StepSource,
+    opts: &BatchOptions,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<BatchReport, slosh_cache::Error> {
+    let start = Instant::now();
+    std::fs::create_dir_all(&opts.out).map_err(|e| slosh_fileio::IoError::new(&opts.out, e))?;
+    remove_stale_temps(&opts.out);
+    let planned = plan(source, opts);
+    progress(Event::Planned {
+        steps: planned.len(),
+    });
+    let hash = opts.params.hash();
+    let next = AtomicUsize::new(0);
+    let report = Mutex::new(BatchReport::default());
+    // Plain threads pull steps; each step runs on the rayon pool. A rayon thread waiting inside
+    // one step could otherwise start another step, and memory would grow with the series.
+    std::thread::scope(|scope| {
+        for _ in 0..opts.jobs.max(1) {
+            scope.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&(index, _)) = planned.get(k) else {
+                        break;
+                    };
+                    let outcome = bake_one(source, index, opts, &hash);
+                    {
+                        let mut r = report.lock().unwrap_or_else(|p| p.into_inner());
+                        match &outcome {
+                            Outcome::Baked {
+                                bytes,
+                                points,
+                                stats,
+                                ..
+                            } => {
+                                r.baked += 1;
+                                r.bytes += bytes;
+                                r.points += points;
+                                for (name, s) in &stats.stage_seconds {
+                                    match r.stages.iter_mut().find(|(n, _)| n == name) {
+                                        Some(entry) => entry.1 += s,
+                                        None => r.stages.push((name.clone(), *s)),
+                                    }
+                                }
+                            }
+                            Outcome::Kept => r.kept += 1,
+                            Outcome::Failed(e) => r.failed.push((index, e.clone())),
+                        }
+                    }
+                    progress(Event::Done { index, outcome });
+                }
+            });
+        }
+    });
+    let mut report = report.into_inner().unwrap_or_else(|p| p.into_inner());
+    report.failed.sort_by_key(|(i, _)| *i);
+    let (manifest, problems) = Manifest::rebuild(&opts.out)?;
+    manifest.write(&opts.out)?;
+    report.manifest_problems = problems
+        .into_iter()
+        .map(|(p, e)| (p, e.to_string()))
+        .collect();
+    report.wall_seconds = start.elapsed().as_secs_f64();
+    Ok(report)
+}

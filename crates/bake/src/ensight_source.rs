@@ -1,0 +1,73 @@
+//! EnSight cases as a step source for the batch driver.
+
+use std::path::Path;
+
+use slosh_ensight::{Case, PointSource, StepRequest};
+
+use crate::batch::StepSource;
+use crate::params::{BakeParams, NormalSource, SurfaceSelect};
+use crate::select::StepInput;
+
+#[derive(Debug)]
+pub struct EnsightSource {
+    case: Case,
+    request: StepRequest,
+    label: String,
+}
+
+impl EnsightSource {
+    /// A source reading what `params` needs (surface flags, normals, fields) from `case`.
+    pub fn new(case: Case, path: &Path, points: PointSource, params: &BakeParams) -> EnsightSource {
+        let request = StepRequest {
+            points,
+            parts: None,
+            normals: match &params.normals {
+                NormalSource::Variable(v) => Some(v.clone()),
+                NormalSource::Pca => None,
+            },
+            fields: params.fields.clone(),
+            surface: match &params.surface {
+                SurfaceSelect::Variable(v) => Some(v.clone()),
+                _ => None,
+            },
+            // The bake drops and counts non-finite particles itself.
+            allow_non_finite: true,
+        };
+        EnsightSource {
+            case,
+            request,
+            label: path.display().to_string(),
+        }
+    }
+}
+
+impl StepSource for EnsightSource {
+    fn steps(&self) -> Vec<(usize, f64)> {
+        let times = self.case.times();
+        (0..self.case.step_count())
+            .map(|i| (i, times.get(i).copied().unwrap_or(0.0)))
+            .collect()
+    }
+
+    fn read(&self, index: usize) -> Result<StepInput, String> {
+        let step = self
+            .case
+            .read_step(index, &self.request)
+            .map_err(|e| e.to_string())?;
+        let widen =
+            |v: &[[f32; 3]]| -> Vec<[f64; 3]> { v.iter().map(|p| p.map(f64::from)).collect() };
+        Ok(StepInput {
+            index,
+            time: step.time,
+            source: self.label.clone(),
+            positions: widen(&step.positions),
+            normals: step.normals.as_deref().map(widen),
+            surface_flags: step.surface,
+            fields: step
+                .fields
+                .into_iter()
+                .map(|f| (f.name, f.values))
+                .collect(),
+        })
+    }
+}

@@ -1,0 +1,20 @@
+//! One particle step in, one `.slc` cache out, and the batch driver around it (rayon within a
+//! step, a bounded number of steps in flight, resumable, sharded). Never touches wgpu.
+
+mod batch;
+mod bvh;
+mod ensight_source;
+mod order;
+mod params;
+mod select;
+mod step;
+
+pub use batch::{
+    BatchOptions, BatchReport, Event, Outcome, Shard, StepSource, is_current, plan, run_batch,
+};
+pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
+pub use ensight_source::EnsightSource;
+pub use order::morton_order;
+pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
+pub use select::{ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface};
+pub use step::{BakeError, BakedStep, bake_step};

@@ -1,0 +1,68 @@
+//! Step 1 of the bake: which particles to keep. Finite positions only; the surface by flag,
+//! by estimate, or all.
+
+use std::num::NonZero;
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+use slosh_ensight::FieldValues;
+
+/// One step's particles as read, before selection.
+#[derive(Debug, Clone, Default)]
+pub struct StepInput {
+    pub index: usize,
+    pub time: f64,
+    /// Where the step came from (recorded in the header).
+    pub source: String,
+    pub positions: Vec<[f64; 3]>,
+    pub normals: Option<Vec<[f64; 3]>>,
+    /// Surface flags from a variable (`SurfaceSelect::Variable`).
+    pub surface_flags: Option<Vec<bool>>,
+    pub fields: Vec<(String, FieldValues)>,
+}
+
+/// Neighbours looked at per particle by the surface estimate.
+pub const ESTIMATE_NEIGHBOURS: usize = 24;
+/// A particle is on the surface when the centroid of its neighbours is offset from it by more
+/// than this fraction of their mean distance.
+pub const ESTIMATE_THRESHOLD: f64 = 0.25;
+
+/// Free-surface estimate for solvers that flag nothing (SPH): inside the fluid a particle's
+/// nearest neighbours surround it and their centroid is close to it; at the surface they all
+/// lie on one side, pulling the centroid inward by a sizeable fraction of their distance. The
+/// same idea as the SPH free-surface detectors based on the kernel-gradient sum; this form
+/// needs no kernel. It flags every boundary of the fluid body, walls included.
+pub fn estimate_surface(points: &[[f64; 3]]) -> Vec<bool> {
+    if points.len() <= ESTIMATE_NEIGHBOURS {
+        return vec![true; points.len()];
+    }
+    let tree: ImmutableKdTree<f64, 3> = match ImmutableKdTree::new_from_slice(points) {
+        Ok(t) => t,
+        Err(_) => return vec![true; points.len()],
+    };
+    let Some(k) = NonZero::new(ESTIMATE_NEIGHBOURS + 1) else {
+        return vec![true; points.len()];
+    };
+    points
+        .par_iter()
+        .map(|p| {
+            let nn = tree
+                .query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(k)
+                .execute();
+            let others = &nn[1.min(nn.len())..];
+            let m = others.len().max(1) as f64;
+            let mut c = [0.0; 3];
+            let mut mean_dist = 0.0;
+            for r in others {
+                let q = points[r.item as usize];
+                for a in 0..3 {
+                    c[a] += (q[a] - p[a]) / m;
+                }
+                mean_dist += r.distance.sqrt() / m;
+            }
+            let offset = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            offset > ESTIMATE_THRESHOLD * mean_dist
+        })
+        .collect()
+}

@@ -1,0 +1,339 @@
+//! One step in, one cache out: select → recentre and scale → Morton order → kNN, radii,
+//! neighbour lists, initial fits, droplets (`slosh_mls::Surface::build`) → BVH → sections.
+
+use std::time::Instant;
+
+use slosh_cache::{
+    BallState, Element, Encoding, GpuBall, GpuNormal, GpuPoint, GpuSphere, Header, MlsSettings,
+    SectionInput, Source, StepStats, Transform, names,
+};
+use slosh_ensight::FieldValues;
+use slosh_mls::{BallFit, FitStatus, Surface, SurfaceError};
+
+use crate::params::{BakeParams, SurfaceSelect};
+use crate::select::{StepInput, estimate_surface};
+
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error("step {step}: {problem}")]
+    Input { step: usize, problem: String },
+    #[error("step {step}: {source}")]
+    Surface {
+        step: usize,
+        #[source]
+        source: SurfaceError,
+    },
+}
+
+/// A baked step: the header (sections still empty) and the sections to write.
+#[derive(Debug)]
+pub struct BakedStep {
+    pub header: Header,
+    pub sections: Vec<SectionInput>,
+}
+
+struct Clock {
+    last: Instant,
+    laps: Vec<(String, f64)>,
+}
+
+impl Clock {
+    fn lap(&mut self, name: &str) {
+        let now = Instant::now();
+        self.laps
+            .push((name.to_string(), (now - self.last).as_secs_f64()));
+        self.last = now;
+    }
+}
+
+fn permute<T: Copy>(values: &[T], order: &[u32]) -> Vec<T> {
+    order.iter().map(|&i| values[i as usize]).collect()
+}
+
+pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
+    let mut clock = Clock {
+        last: Instant::now(),
+        laps: Vec::new(),
+    };
+    let step = input.index;
+    let input_err = |problem: String| BakeError::Input { step, problem };
+    let n_in = input.positions.len();
+    for (name, values) in &input.fields {
+        let len = match values {
+            FieldValues::Scalar(v) => v.len(),
+            FieldValues::Vector(v) => v.len(),
+        };
+        if len != n_in {
+            return Err(input_err(format!(
+                "field '{name}' has {len} values for {n_in} particles"
+            )));
+        }
+    }
+
+    // 1. Select: finite positions, then the surface.
+    let finite: Vec<u32> = (0..n_in as u32)
+        .filter(|&i| input.positions[i as usize].iter().all(|c| c.is_finite()))
+        .collect();
+    let dropped_non_finite = n_in - finite.len();
+    let surface_of_finite: Vec<bool> = match &params.surface {
+        SurfaceSelect::All => vec![true; finite.len()],
+        SurfaceSelect::Variable(name) => {
+            let flags = input
+                .surface_flags
+                .as_ref()
+                .ok_or_else(|| input_err(format!("no surface flags read from '{name}'")))?;
+            if flags.len() != n_in {
+                return Err(input_err(format!(
+                    "surface variable '{name}' has {} values for {n_in} particles",
+                    flags.len()
+                )));
+            }
+            finite.iter().map(|&i| flags[i as usize]).collect()
+        }
+        SurfaceSelect::Estimate => estimate_surface(&permute(&input.positions, &finite)),
+    };
+    let kept: Vec<u32> = finite
+        .iter()
+        .zip(&surface_of_finite)
+        .filter_map(|(&i, &s)| s.then_some(i))
+        .collect();
+    let dropped_interior = finite.len() - kept.len();
+    if kept.len() < 2 {
+        return Err(input_err(format!(
+            "{} of {n_in} particles left after selection ({dropped_non_finite} non-finite, \
+             {dropped_interior} not on the surface): nothing to bake",
+            kept.len()
+        )));
+    }
+    clock.lap("select");
+
+    // 2. Recentre and scale: local = (world − origin) / scale, coordinates within [−1, 1].
+    let world = permute(&input.positions, &kept);
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &world {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let origin: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+    let half = (0..3).map(|a| 0.5 * (hi[a] - lo[a])).fold(0.0, f64::max);
+    let scale = if half > 0.0 { half } else { 1.0 };
+    let transform = Transform { origin, scale };
+    let local: Vec<[f64; 3]> = world.iter().map(|p| transform.to_local(*p)).collect();
+    clock.lap("recentre");
+
+    // 3. Spatial order, carried through every per-point array below.
+    let order = crate::order::morton_order(&local);
+    let local = permute(&local, &order);
+    let source_index: Vec<u32> = order.iter().map(|&o| kept[o as usize]).collect();
+    let normals: Option<Vec<[f64; 3]>> = match &params.normals {
+        crate::params::NormalSource::Pca => None,
+        crate::params::NormalSource::Variable(name) => {
+            let ns = input
+                .normals
+                .as_ref()
+                .ok_or_else(|| input_err(format!("no normals read from '{name}'")))?;
+            if ns.len() != n_in {
+                return Err(input_err(format!(
+                    "normal variable '{name}' has {} values for {n_in} particles",
+                    ns.len()
+                )));
+            }
+            Some(permute(ns, &source_index))
+        }
+    };
+    clock.lap("morton order");
+
+    // 4–7. kNN, radii, neighbour lists, initial fits, droplets.
+    let surface = Surface::<f64>::build(&local, normals.as_deref(), &params.mls)
+        .map_err(|source| BakeError::Surface { step, source })?;
+    for (name, seconds) in &surface.build_seconds {
+        if *name != "grid" {
+            clock.laps.push((name.to_string(), *seconds));
+        }
+    }
+    clock.last = Instant::now();
+
+    // 8. BVH over fitted balls and droplet spheres.
+    let n = surface.len();
+    let mut candidates: Vec<(u32, [f64; 3], f64)> = (0..n)
+        .filter(|&i| matches!(surface.ball_fits[i], BallFit::Fitted(_)))
+        .map(|i| {
+            let c = surface.points[i];
+            (i as u32, [c.x, c.y, c.z], surface.radii[i])
+        })
+        .collect();
+    for (d, s) in surface.spheres.iter().enumerate() {
+        candidates.push((
+            (n + d) as u32,
+            [s.centre.x, s.centre.y, s.centre.z],
+            s.radius,
+        ));
+    }
+    let bvh = crate::bvh::build(&candidates);
+    clock.lap("bvh");
+
+    // Sections, in the GPU layouts.
+    let f32x3 = |v: slosh_mls::V3<f64>| [v.x as f32, v.y as f32, v.z as f32];
+    let points: Vec<GpuPoint> = (0..n)
+        .map(|i| GpuPoint {
+            position: f32x3(surface.points[i]),
+            radius: surface.radii[i] as f32,
+        })
+        .collect();
+    let mut stats = StepStats {
+        input_points: n_in as u64,
+        dropped_non_finite: dropped_non_finite as u64,
+        dropped_interior: dropped_interior as u64,
+        capped: surface.capped as u64,
+        droplets: surface.spheres.len() as u64,
+        bvh_nodes: bvh.nodes.len() as u64,
+        bvh_depth: bvh.depth().unwrap_or(0) as u64,
+        ..StepStats::default()
+    };
+    let balls: Vec<GpuBall> = (0..n)
+        .map(|i| {
+            let b = &surface.balls[i];
+            let (kind, sphere) = match surface.ball_fits[i] {
+                BallFit::Fitted(FitStatus::Full) => {
+                    stats.fit_full += 1;
+                    (BallState::Full, 0)
+                }
+                BallFit::Fitted(FitStatus::Degraded { .. }) => {
+                    stats.fit_degraded += 1;
+                    (BallState::Degraded, 0)
+                }
+                BallFit::Fitted(FitStatus::Failed) | BallFit::None => {
+                    stats.fit_none += 1;
+                    (BallState::Unfitted, 0)
+                }
+                BallFit::Droplet(d) => {
+                    stats.droplet_points += 1;
+                    (BallState::Droplet, d)
+                }
+            };
+            GpuBall {
+                normal: f32x3(b.normal),
+                h: b.h as f32,
+                coeffs: b.poly.c.map(|c| c as f32),
+                degree: u32::from(b.poly.degree),
+                state: GpuBall::state_word(kind, sphere),
+            }
+        })
+        .collect();
+    let spheres: Vec<GpuSphere> = surface
+        .spheres
+        .iter()
+        .map(|s| GpuSphere {
+            centre: f32x3(s.centre),
+            radius: s.radius as f32,
+        })
+        .collect();
+    let mut sections = vec![
+        SectionInput::new(
+            names::POINTS,
+            Element::Point,
+            &points,
+            Encoding::Shuffle4Zstd,
+        ),
+        SectionInput::new(names::BALLS, Element::Ball, &balls, Encoding::Shuffle4Zstd),
+        SectionInput::new(
+            names::NEIGHBOUR_START,
+            Element::U32,
+            &surface.neighbour_start,
+            Encoding::Delta4Shuffle4Zstd,
+        ),
+        SectionInput::new(
+            names::NEIGHBOURS,
+            Element::U32,
+            &surface.neighbours,
+            Encoding::Delta4Shuffle4Zstd,
+        ),
+        SectionInput::new(
+            names::SPHERES,
+            Element::Sphere,
+            &spheres,
+            Encoding::Shuffle4Zstd,
+        ),
+        SectionInput::new(
+            names::BVH_NODES,
+            Element::BvhNode,
+            &bvh.nodes,
+            Encoding::Shuffle4Zstd,
+        ),
+        SectionInput::new(
+            names::BVH_ITEMS,
+            Element::U32,
+            &bvh.items,
+            Encoding::Shuffle4Zstd,
+        ),
+    ];
+    if let Some(ns) = &surface.normals {
+        let normals: Vec<GpuNormal> = ns
+            .iter()
+            .map(|v| GpuNormal {
+                normal: f32x3(*v),
+                pad: 0.0,
+            })
+            .collect();
+        sections.insert(
+            1,
+            SectionInput::new(
+                names::NORMALS,
+                Element::Normal,
+                &normals,
+                Encoding::Shuffle4Zstd,
+            ),
+        );
+    }
+    for name in &params.fields {
+        let values = input
+            .fields
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v)
+            .ok_or_else(|| input_err(format!("field '{name}' was not read")))?;
+        let section = format!("{}{name}", names::FIELD_PREFIX);
+        sections.push(match values {
+            FieldValues::Scalar(v) => SectionInput::new(
+                &section,
+                Element::F32,
+                &permute(v, &source_index),
+                Encoding::Shuffle4Zstd,
+            ),
+            FieldValues::Vector(v) => {
+                let vec4: Vec<[f32; 4]> = source_index
+                    .iter()
+                    .map(|&i| {
+                        let x = v[i as usize];
+                        [x[0], x[1], x[2], 0.0]
+                    })
+                    .collect();
+                SectionInput::new(&section, Element::Vec4, &vec4, Encoding::Shuffle4Zstd)
+            }
+        });
+    }
+    clock.lap("sections");
+    stats.stage_seconds = clock.laps;
+
+    let header = Header {
+        source: Source {
+            path: input.source.clone(),
+            step: input.index,
+            time: input.time,
+        },
+        points: n as u64,
+        transform,
+        bounds: [lo, hi],
+        smoothing_length: surface.h,
+        spacing: surface.spacing,
+        mls: MlsSettings::from_params(&params.mls),
+        bake: params.record(),
+        params_hash: params.hash(),
+        stats,
+        sections: Vec::new(),
+    };
+    Ok(BakedStep { header, sections })
+}

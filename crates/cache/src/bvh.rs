@@ -1,0 +1,103 @@
+//! The baked BVH2 read on the CPU: the reference traversal of the node layout the WGSL
+//! tracer walks (stack based, nearer child first, pruned by the best hit so far).
+
+use slosh_mls::BallIndex;
+
+use crate::layout::GpuBvhNode;
+
+/// Nodes and leaf items of a step's BVH. Items number balls `0..n` and droplet spheres
+/// `n..n + spheres`, as [`BallIndex`] expects.
+#[derive(Debug, Clone, Default)]
+pub struct Bvh {
+    pub nodes: Vec<GpuBvhNode>,
+    pub items: Vec<u32>,
+}
+
+/// Entry parameter of the ray into the box for t ≥ 0, if it enters at all.
+fn enter(node: &GpuBvhNode, origin: [f64; 3], inv_dir: [f64; 3]) -> Option<f64> {
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for a in 0..3 {
+        let (lo, hi) = (f64::from(node.lo[a]), f64::from(node.hi[a]));
+        if inv_dir[a].is_infinite() {
+            // Parallel to the slab: inside it or never.
+            if origin[a] < lo || origin[a] > hi {
+                return None;
+            }
+            continue;
+        }
+        let (ta, tb) = ((lo - origin[a]) * inv_dir[a], (hi - origin[a]) * inv_dir[a]);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    (t0 <= t1).then_some(t0)
+}
+
+impl BallIndex for Bvh {
+    fn walk(&self, origin: [f64; 3], dir: [f64; 3], visit: &mut dyn FnMut(&[u32]) -> f64) {
+        let Some(root) = self.nodes.first() else {
+            return;
+        };
+        let inv_dir = dir.map(|d| 1.0 / d);
+        let Some(t_root) = enter(root, origin, inv_dir) else {
+            return;
+        };
+        let mut best = f64::INFINITY;
+        let mut stack: Vec<(u32, f64)> = vec![(0, t_root)];
+        while let Some((index, t_near)) = stack.pop() {
+            if t_near >= best {
+                continue;
+            }
+            let node = &self.nodes[index as usize];
+            if node.count > 0 {
+                let (first, count) = (node.first as usize, node.count as usize);
+                if let Some(items) = self.items.get(first..first + count) {
+                    best = visit(items);
+                }
+                continue;
+            }
+            let (a, b) = (node.first, node.first + 1);
+            let ta = self
+                .nodes
+                .get(a as usize)
+                .and_then(|n| enter(n, origin, inv_dir));
+            let tb = self
+                .nodes
+                .get(b as usize)
+                .and_then(|n| enter(n, origin, inv_dir));
+            // Push the farther child first so the nearer one is walked first.
+            match (ta, tb) {
+                (Some(ta), Some(tb)) if ta <= tb => stack.extend([(b, tb), (a, ta)]),
+                (Some(ta), Some(tb)) => stack.extend([(a, ta), (b, tb)]),
+                (Some(ta), None) => stack.push((a, ta)),
+                (None, Some(tb)) => stack.push((b, tb)),
+                (None, None) => {}
+            }
+        }
+    }
+}
+
+impl Bvh {
+    /// Depth of the tree (1 for a lone root), or `None` if a child index leaves the node array
+    /// or the links are not a tree.
+    pub fn depth(&self) -> Option<usize> {
+        if self.nodes.is_empty() {
+            return Some(0);
+        }
+        let mut seen = vec![false; self.nodes.len()];
+        let mut stack = vec![(0usize, 1usize)];
+        let mut depth = 0;
+        while let Some((i, d)) = stack.pop() {
+            if std::mem::replace(seen.get_mut(i)?, true) {
+                return None;
+            }
+            depth = depth.max(d);
+            let node = &self.nodes[i];
+            if node.count == 0 {
+                let a = node.first as usize;
+                stack.push((a, d + 1));
+                stack.push((a.checked_add(1)?, d + 1));
+            }
+        }
+        Some(depth)
+    }
+}

@@ -1,0 +1,213 @@
+//! The `.slc` byte layout: preamble, JSON header with the section table, page-aligned
+//! sections, footer. `docs/cache-format.md` is the specification; this is its code.
+
+use serde::{Deserialize, Serialize};
+
+/// First 8 bytes of every step file (PNG-style: a high bit, CR LF, ^Z and LF catch text-mode
+/// mangling).
+pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
+/// Footer magic.
+pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
+/// Readers refuse files with a larger major version; minor versions only add.
+pub const MAJOR: u16 = 1;
+pub const MINOR: u16 = 0;
+pub const PREAMBLE_LEN: usize = 32;
+pub const FOOTER_LEN: usize = 32;
+/// Sections start on this boundary, so raw sections can be used in place from the map.
+pub const ALIGN: usize = 4096;
+
+/// The fixed 32 bytes at offset 0 (little-endian).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Preamble {
+    pub major: u16,
+    pub minor: u16,
+    pub flags: u32,
+    pub header_len: u64,
+    pub header_xxh3: u64,
+}
+
+impl Preamble {
+    pub fn to_bytes(self) -> [u8; PREAMBLE_LEN] {
+        let mut b = [0u8; PREAMBLE_LEN];
+        b[0..8].copy_from_slice(&MAGIC);
+        b[8..10].copy_from_slice(&self.major.to_le_bytes());
+        b[10..12].copy_from_slice(&self.minor.to_le_bytes());
+        b[12..16].copy_from_slice(&self.flags.to_le_bytes());
+        b[16..24].copy_from_slice(&self.header_len.to_le_bytes());
+        b[24..32].copy_from_slice(&self.header_xxh3.to_le_bytes());
+        b
+    }
+
+    /// Parses the fixed fields; the caller has checked the magic and the length.
+    pub fn parse(b: &[u8; PREAMBLE_LEN]) -> Preamble {
+        let u16_at = |o: usize| u16::from_le_bytes([b[o], b[o + 1]]);
+        let u32_at = |o: usize| u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
+        let u64_at = |o: usize| {
+            let mut w = [0u8; 8];
+            w.copy_from_slice(&b[o..o + 8]);
+            u64::from_le_bytes(w)
+        };
+        Preamble {
+            major: u16_at(8),
+            minor: u16_at(10),
+            flags: u32_at(12),
+            header_len: u64_at(16),
+            header_xxh3: u64_at(24),
+        }
+    }
+}
+
+/// The fixed 32 bytes at the end: magic, total file length, xxh3-64 of every byte before the
+/// footer, reserved zero.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Footer {
+    pub file_len: u64,
+    pub body_xxh3: u64,
+}
+
+impl Footer {
+    pub fn to_bytes(self) -> [u8; FOOTER_LEN] {
+        let mut b = [0u8; FOOTER_LEN];
+        b[0..8].copy_from_slice(&FOOTER_MAGIC);
+        b[8..16].copy_from_slice(&self.file_len.to_le_bytes());
+        b[16..24].copy_from_slice(&self.body_xxh3.to_le_bytes());
+        b
+    }
+}
+
+/// How a section's bytes are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Encoding {
+    /// The element bytes as they are.
+    #[serde(rename = "raw")]
+    Raw,
+    /// One zstd frame of the element bytes.
+    #[serde(rename = "zstd")]
+    Zstd,
+    /// Bytes regrouped by position within each 4-byte word (all first bytes, then all second
+    /// bytes, …), then zstd.
+    #[serde(rename = "shuffle4+zstd")]
+    Shuffle4Zstd,
+    /// u32 words replaced by their wrapping difference from the previous word (the first
+    /// from 0), then shuffled and compressed as `shuffle4+zstd`. For sorted index lists.
+    #[serde(rename = "delta4+shuffle4+zstd")]
+    Delta4Shuffle4Zstd,
+}
+
+impl Encoding {
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoding::Raw => "raw",
+            Encoding::Zstd => "zstd",
+            Encoding::Shuffle4Zstd => "shuffle4+zstd",
+            Encoding::Delta4Shuffle4Zstd => "delta4+shuffle4+zstd",
+        }
+    }
+}
+
+/// One row of the section table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SectionEntry {
+    pub name: String,
+    /// An [`crate::Element`] name.
+    pub element: String,
+    pub count: u64,
+    /// Byte offset of the stored bytes from the start of the file (a multiple of 4096).
+    pub offset: u64,
+    /// Bytes stored in the file.
+    pub stored: u64,
+    /// Bytes after decoding: `count` × element size.
+    pub raw: u64,
+    pub encoding: Encoding,
+    /// xxh3-64 of the stored bytes, 16 lowercase hex digits.
+    pub xxh3: String,
+}
+
+/// World coordinates of a stored (local) point: `origin + scale × local`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Transform {
+    pub origin: [f64; 3],
+    pub scale: f64,
+}
+
+impl Transform {
+    pub fn to_world(&self, p: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|a| self.origin[a] + self.scale * p[a])
+    }
+
+    pub fn to_local(&self, p: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|a| (p[a] - self.origin[a]) / self.scale)
+    }
+}
+
+/// The MLS settings the balls were fitted with (mirrors `slosh_mls::SurfaceParams`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MlsSettings {
+    pub k: usize,
+    pub h_scale: f64,
+    pub support: f64,
+    pub neighbour_cap: usize,
+    pub degree: u8,
+    /// "mean" (data normals) or "covariance" (PCA).
+    pub normals: String,
+    pub per_point_h: bool,
+    pub droplet_below: usize,
+}
+
+/// Where the step came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Source {
+    pub path: String,
+    pub step: usize,
+    pub time: f64,
+}
+
+/// Counts the bake records about a step.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct StepStats {
+    /// Particles in the input step.
+    pub input_points: u64,
+    /// Dropped for non-finite coordinates.
+    pub dropped_non_finite: u64,
+    /// Dropped as not on the surface.
+    pub dropped_interior: u64,
+    /// Points whose neighbour list was cut at the cap.
+    pub capped: u64,
+    pub fit_full: u64,
+    pub fit_degraded: u64,
+    pub fit_none: u64,
+    pub droplets: u64,
+    pub droplet_points: u64,
+    pub bvh_nodes: u64,
+    pub bvh_depth: u64,
+    /// Seconds per bake stage, in pipeline order.
+    pub stage_seconds: Vec<(String, f64)>,
+}
+
+/// The JSON header.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    pub source: Source,
+    pub points: u64,
+    pub transform: Transform,
+    /// World bounds of the points.
+    pub bounds: [[f64; 3]; 2],
+    /// Global smoothing length and mean nearest-neighbour spacing, in local units.
+    pub smoothing_length: f64,
+    pub spacing: f64,
+    pub mls: MlsSettings,
+    /// Everything that shaped the output, as the bake recorded it, and its hash.
+    pub bake: serde_json::Value,
+    pub params_hash: String,
+    pub stats: StepStats,
+    pub sections: Vec<SectionEntry>,
+}
+
+pub fn hex64(v: u64) -> String {
+    format!("{v:016x}")
+}
+
+pub fn align_up(v: usize) -> usize {
+    v.div_ceil(ALIGN) * ALIGN
+}

@@ -1,0 +1,35 @@
+//! The `.slc` step cache: one memory-mappable file per time step holding everything the
+//! tracer needs (points, radii, neighbour lists, initial fits, droplets, BVH) in the exact
+//! layout of the WGSL storage buffers, plus a manifest per series. The one contract between
+//! `slosh bake` and the renderers; `docs/cache-format.md` specifies it byte by byte.
+
+mod bvh;
+mod codec;
+mod error;
+mod format;
+mod layout;
+mod manifest;
+pub mod names;
+mod reader;
+mod step;
+mod verify;
+mod writer;
+
+pub use bvh::Bvh;
+pub use codec::{DecodeError, shuffle4};
+pub use error::{Error, Result};
+pub use format::{
+    ALIGN, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings, PREAMBLE_LEN, SectionEntry,
+    Source, StepStats, Transform, hex64,
+};
+pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
+pub use manifest::{MANIFEST_NAME, Manifest, ManifestStep, parse_step_file_name, step_file_name};
+pub use reader::CacheFile;
+pub use step::LoadedStep;
+pub use verify::VerifyReport;
+pub use writer::{Compression, SectionInput, encode_step, write_step};
+
+/// Encodes raw bytes with `encoding` (for measuring encodings).
+pub fn encode_bytes(raw: &[u8], encoding: Encoding, level: i32) -> std::io::Result<Vec<u8>> {
+    codec::encode(raw, encoding, level)
+}

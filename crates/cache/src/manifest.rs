@@ -1,0 +1,160 @@
+//! The series manifest: one JSON file per cache directory listing the step files, their
+//! times, bounds and checksums, and the bake parameters they share. It is derived data: it can
+//! always be rebuilt from the step files (`slosh bake --manifest-only DIR`).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::format::hex64;
+use crate::reader::CacheFile;
+
+pub const MANIFEST_NAME: &str = "manifest.json";
+pub const MANIFEST_FORMAT: &str = "slosh-cache-series";
+
+/// The file name of step `index`.
+pub fn step_file_name(index: usize) -> String {
+    format!("step-{index:05}.slc")
+}
+
+/// The step index a file name stands for, if it is a step file name.
+pub fn parse_step_file_name(name: &str) -> Option<usize> {
+    let digits = name.strip_prefix("step-")?.strip_suffix(".slc")?;
+    (digits.len() >= 5 && digits.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| digits.parse().ok())
+        .flatten()
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ManifestStep {
+    pub index: usize,
+    pub time: f64,
+    pub file: String,
+    pub points: u64,
+    pub bytes: u64,
+    /// The footer's xxh3 over the file body.
+    pub xxh3: String,
+    pub bounds: [[f64; 3]; 2],
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: String,
+    pub version: u32,
+    pub source: String,
+    pub params_hash: String,
+    pub bake: serde_json::Value,
+    /// World bounds over all steps.
+    pub bounds: [[f64; 3]; 2],
+    pub steps: Vec<ManifestStep>,
+}
+
+impl Manifest {
+    /// Rebuilds the manifest from the step files in `dir`, checking each one's footer checksum.
+    /// Files that fail are returned beside it, not listed in it.
+    pub fn rebuild(dir: &Path) -> Result<(Manifest, Vec<(PathBuf, Error)>)> {
+        let mut files: Vec<(usize, PathBuf)> = std::fs::read_dir(dir)
+            .map_err(|e| slosh_fileio::IoError::new(dir, e))?
+            .filter_map(|e| e.ok())
+            .filter_map(|e| {
+                let name = e.file_name().to_string_lossy().into_owned();
+                parse_step_file_name(&name).map(|i| (i, e.path()))
+            })
+            .collect();
+        files.sort();
+        let mut steps = Vec::new();
+        let mut failed = Vec::new();
+        let mut first: Option<(String, serde_json::Value, String)> = None;
+        let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        for (index, path) in files {
+            let file = match CacheFile::open(&path) {
+                Ok(f) => f,
+                Err(e) => {
+                    failed.push((path, e));
+                    continue;
+                }
+            };
+            if !file.body_intact() {
+                failed.push((
+                    path.clone(),
+                    Error::Invalid {
+                        path,
+                        problem: "the footer checksum does not match the file's bytes".into(),
+                    },
+                ));
+                continue;
+            }
+            let h = file.header();
+            match &first {
+                None => {
+                    first = Some((h.params_hash.clone(), h.bake.clone(), h.source.path.clone()))
+                }
+                Some((hash, _, _)) if *hash != h.params_hash => {
+                    return Err(Error::Invalid {
+                        path: path.clone(),
+                        problem: format!(
+                            "baked with parameter hash {}, other steps in {} with {hash}: \
+                             one directory holds one bake",
+                            h.params_hash,
+                            dir.display()
+                        ),
+                    });
+                }
+                Some(_) => {}
+            }
+            for a in 0..3 {
+                bounds[0][a] = bounds[0][a].min(h.bounds[0][a]);
+                bounds[1][a] = bounds[1][a].max(h.bounds[1][a]);
+            }
+            let bytes = file.file_len();
+            let foot = file.footer_checksum();
+            steps.push(ManifestStep {
+                index,
+                time: h.source.time,
+                file: step_file_name(index),
+                points: h.points,
+                bytes,
+                xxh3: hex64(foot),
+                bounds: h.bounds,
+            });
+        }
+        let (params_hash, bake, source) = first.unwrap_or_default();
+        Ok((
+            Manifest {
+                format: MANIFEST_FORMAT.into(),
+                version: 1,
+                source,
+                params_hash,
+                bake,
+                bounds,
+                steps,
+            },
+            failed,
+        ))
+    }
+
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        let path = dir.join(MANIFEST_NAME);
+        let json = serde_json::to_vec_pretty(self)
+            .map_err(|e| slosh_fileio::IoError::new(&path, std::io::Error::other(e)))?;
+        slosh_fileio::atomic_write(&path, &json)?;
+        Ok(())
+    }
+
+    pub fn read(dir: &Path) -> Result<Manifest> {
+        let path = dir.join(MANIFEST_NAME);
+        let bytes = std::fs::read(&path).map_err(|e| slosh_fileio::IoError::new(&path, e))?;
+        let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| Error::Invalid {
+            path: path.clone(),
+            problem: format!("not a manifest: {e}"),
+        })?;
+        if m.format != MANIFEST_FORMAT {
+            return Err(Error::Invalid {
+                path,
+                problem: format!("format '{}', expected '{MANIFEST_FORMAT}'", m.format),
+            });
+        }
+        Ok(m)
+    }
+}

@@ -1,0 +1,12 @@
+//! Section names.
+
+pub const POINTS: &str = "points";
+pub const NORMALS: &str = "normals";
+pub const BALLS: &str = "balls";
+pub const NEIGHBOUR_START: &str = "neighbour_start";
+pub const NEIGHBOURS: &str = "neighbours";
+pub const SPHERES: &str = "spheres";
+pub const BVH_NODES: &str = "bvh_nodes";
+pub const BVH_ITEMS: &str = "bvh_items";
+/// Per-point field sections are named `field.<variable>`.
+pub const FIELD_PREFIX: &str = "field.";

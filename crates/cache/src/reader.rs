@@ -1,0 +1,289 @@
+//! Opening a step file: the map (or read) and the structural checks that make every later
+//! access safe: magic, version, footer, header checksum, section table bounds.
+
+use std::collections::HashSet;
+use std::path::Path;
+
+use bytemuck::Pod;
+use slosh_fileio::FileBytes;
+use xxhash_rust::xxh3::xxh3_64;
+
+use crate::codec::decode_into;
+use crate::error::{Error, Result};
+use crate::format::{
+    ALIGN, FOOTER_LEN, FOOTER_MAGIC, Footer, Header, MAGIC, MAJOR, PREAMBLE_LEN, Preamble,
+    SectionEntry, hex64,
+};
+use crate::layout::Element;
+
+/// A step file, mapped and structurally checked. Section contents are checked when they are
+/// decoded (checksum) or by [`CacheFile::verify`](crate::verify) (everything).
+#[derive(Debug)]
+pub struct CacheFile {
+    bytes: FileBytes,
+    preamble: Preamble,
+    footer: Footer,
+    header: Header,
+}
+
+impl CacheFile {
+    pub fn open(path: &Path) -> Result<CacheFile> {
+        CacheFile::from_bytes(FileBytes::open(path)?)
+    }
+
+    pub fn from_bytes(bytes: FileBytes) -> Result<CacheFile> {
+        let path = bytes.path().to_path_buf();
+        let len = bytes.len();
+        let format = |offset: usize, expected: &str, found: String| Error::Format {
+            path: path.clone(),
+            offset: offset as u64,
+            expected: expected.to_string(),
+            found,
+        };
+        if len < PREAMBLE_LEN + FOOTER_LEN {
+            return Err(format(
+                len,
+                "a 32-byte preamble and a 32-byte footer",
+                format!("a file of {len} bytes (truncated?)"),
+            ));
+        }
+        if bytes[..8] != MAGIC {
+            return Err(format(
+                0,
+                "the .slc magic 89 53 4c 43 0d 0a 1a 0a",
+                format!("{:02x?}", &bytes[..8]),
+            ));
+        }
+        let mut pre = [0u8; PREAMBLE_LEN];
+        pre.copy_from_slice(&bytes[..PREAMBLE_LEN]);
+        let preamble = Preamble::parse(&pre);
+        if preamble.major > MAJOR {
+            return Err(Error::NewerVersion {
+                path,
+                found_major: preamble.major,
+                found_minor: preamble.minor,
+                supported: MAJOR,
+            });
+        }
+        if preamble.major == 0 {
+            return Err(format(8, "major version 1", "0".into()));
+        }
+        let foot = len - FOOTER_LEN;
+        if bytes[foot..foot + 8] != FOOTER_MAGIC {
+            return Err(format(
+                foot,
+                "the footer magic \"SLC-END\\n\" in the last 32 bytes (the file may be truncated)",
+                format!("{:02x?}", &bytes[foot..foot + 8]),
+            ));
+        }
+        let word = |o: usize| {
+            let mut w = [0u8; 8];
+            w.copy_from_slice(&bytes[o..o + 8]);
+            u64::from_le_bytes(w)
+        };
+        let footer = Footer {
+            file_len: word(foot + 8),
+            body_xxh3: word(foot + 16),
+        };
+        if footer.file_len != len as u64 {
+            return Err(format(
+                foot + 8,
+                &format!("the file length {len}"),
+                format!("{} (truncated or appended to)", footer.file_len),
+            ));
+        }
+        if word(foot + 24) != 0 {
+            return Err(format(foot + 24, "reserved zero", hex64(word(foot + 24))));
+        }
+        let header_end = usize::try_from(preamble.header_len)
+            .ok()
+            .and_then(|h| h.checked_add(PREAMBLE_LEN))
+            .filter(|&e| e <= foot)
+            .ok_or_else(|| {
+                format(
+                    16,
+                    "a header length that fits in the file",
+                    preamble.header_len.to_string(),
+                )
+            })?;
+        let header_bytes = &bytes[PREAMBLE_LEN..header_end];
+        let sum = xxh3_64(header_bytes);
+        if sum != preamble.header_xxh3 {
+            return Err(format(
+                PREAMBLE_LEN,
+                &format!("a header with xxh3 {}", hex64(preamble.header_xxh3)),
+                format!("xxh3 {} (corrupt header)", hex64(sum)),
+            ));
+        }
+        let header: Header = serde_json::from_slice(header_bytes).map_err(|e| {
+            format(
+                PREAMBLE_LEN + e.column().saturating_sub(1),
+                "the JSON header",
+                e.to_string(),
+            )
+        })?;
+        let mut names = HashSet::new();
+        let mut end = header_end;
+        for s in &header.sections {
+            let bad = |problem: String| Error::Section {
+                path: path.clone(),
+                section: s.name.clone(),
+                offset: s.offset,
+                problem,
+            };
+            let element = Element::from_name(&s.element)
+                .ok_or_else(|| bad(format!("unknown element type '{}'", s.element)))?;
+            if !names.insert(s.name.as_str()) {
+                return Err(bad("the name appears twice in the section table".into()));
+            }
+            if s.count.checked_mul(element.size() as u64) != Some(s.raw) {
+                return Err(bad(format!(
+                    "{} elements of {} bytes cannot be {} raw bytes",
+                    s.count,
+                    element.size(),
+                    s.raw
+                )));
+            }
+            let start = usize::try_from(s.offset).unwrap_or(usize::MAX);
+            let stop = usize::try_from(s.stored)
+                .ok()
+                .and_then(|n| start.checked_add(n));
+            if start % ALIGN != 0 || start < end || stop.is_none_or(|e| e > foot) {
+                return Err(bad(format!(
+                    "stored bytes {}..+{} are not page-aligned, in order and inside the body \
+                     (which ends at byte {foot})",
+                    s.offset, s.stored
+                )));
+            }
+            if s.encoding == crate::format::Encoding::Raw && s.stored != s.raw {
+                return Err(bad(format!(
+                    "raw section stores {} bytes for {} raw",
+                    s.stored, s.raw
+                )));
+            }
+            end = stop.unwrap_or(foot);
+        }
+        Ok(CacheFile {
+            bytes,
+            preamble,
+            footer,
+            header,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        self.bytes.path()
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    pub fn version(&self) -> (u16, u16) {
+        (self.preamble.major, self.preamble.minor)
+    }
+
+    pub fn file_len(&self) -> u64 {
+        self.bytes.len() as u64
+    }
+
+    pub fn is_mapped(&self) -> bool {
+        self.bytes.is_mapped()
+    }
+
+    /// The footer's xxh3 over the body, as recorded.
+    pub fn footer_checksum(&self) -> u64 {
+        self.footer.body_xxh3
+    }
+
+    /// Whether the xxh3 of every byte before the footer matches the footer.
+    pub fn body_intact(&self) -> bool {
+        let foot = self.bytes.len() - FOOTER_LEN;
+        xxh3_64(&self.bytes[..foot]) == self.footer.body_xxh3
+    }
+
+    pub fn section(&self, name: &str) -> Option<&SectionEntry> {
+        self.header.sections.iter().find(|s| s.name == name)
+    }
+
+    fn required(&self, name: &str) -> Result<&SectionEntry> {
+        self.section(name).ok_or_else(|| Error::Invalid {
+            path: self.path().to_path_buf(),
+            problem: format!("no section '{name}'"),
+        })
+    }
+
+    /// The stored bytes of a section (bounds were checked at open).
+    pub fn stored(&self, entry: &SectionEntry) -> &[u8] {
+        let start = entry.offset as usize;
+        &self.bytes[start..start + entry.stored as usize]
+    }
+
+    /// A raw section's bytes in place (zero-copy from the map); `None` if it is compressed.
+    pub fn raw_bytes(&self, name: &str) -> Option<&[u8]> {
+        self.section(name)
+            .filter(|s| s.encoding == crate::format::Encoding::Raw)
+            .map(|s| self.stored(s))
+    }
+
+    fn section_error(&self, entry: &SectionEntry, problem: String) -> Error {
+        Error::Section {
+            path: self.path().to_path_buf(),
+            section: entry.name.clone(),
+            offset: entry.offset,
+            problem,
+        }
+    }
+
+    /// Checks the section's checksum, then decodes it into `out` (exactly `entry.raw` bytes,
+    /// e.g. a mapped GPU staging buffer). `scratch` is reused across calls.
+    pub fn decode_into(
+        &self,
+        entry: &SectionEntry,
+        out: &mut [u8],
+        scratch: &mut Vec<u8>,
+    ) -> Result<()> {
+        if out.len() as u64 != entry.raw {
+            return Err(self.section_error(
+                entry,
+                format!(
+                    "a {}-byte buffer was given for {} bytes",
+                    out.len(),
+                    entry.raw
+                ),
+            ));
+        }
+        let stored = self.stored(entry);
+        let sum = hex64(xxh3_64(stored));
+        if sum != entry.xxh3 {
+            return Err(self.section_error(
+                entry,
+                format!(
+                    "checksum xxh3 {sum}, the table says {} (corrupt)",
+                    entry.xxh3
+                ),
+            ));
+        }
+        decode_into(stored, entry.encoding, out, scratch)
+            .map_err(|e| self.section_error(entry, e.to_string()))
+    }
+
+    /// Decodes a whole section into a new vector of `T`.
+    pub fn decode<T: Pod>(&self, name: &str) -> Result<Vec<T>> {
+        let entry = self.required(name)?;
+        let element = Element::from_name(&entry.element).map(Element::size);
+        if element != Some(size_of::<T>()) {
+            return Err(self.section_error(
+                entry,
+                format!(
+                    "holds '{}' elements, read as {} bytes each",
+                    entry.element,
+                    size_of::<T>()
+                ),
+            ));
+        }
+        let mut out: Vec<T> = bytemuck::zeroed_vec(entry.count as usize);
+        self.decode_into(entry, bytemuck::cast_slice_mut(&mut out), &mut Vec::new())?;
+        Ok(out)
+    }
+}

@@ -1,0 +1,174 @@
+//! A step file turned back into the MLS crate's surface and the baked BVH: what the CPU
+//! reference tracer needs to trace straight from a cache.
+
+use slosh_mls::{
+    Ball, BallFit, Camera, FitStatus, NormalsMode, Params, Poly, Sphere, Surface, SurfaceParams,
+    SurfaceParts, TraceHit, V3,
+};
+
+use crate::bvh::Bvh;
+use crate::error::{Error, Result};
+use crate::format::{MlsSettings, Transform};
+use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
+use crate::names;
+use crate::reader::CacheFile;
+
+impl MlsSettings {
+    pub fn from_params(p: &SurfaceParams) -> MlsSettings {
+        MlsSettings {
+            k: p.k,
+            h_scale: p.h_scale,
+            support: p.support,
+            neighbour_cap: p.neighbour_cap,
+            degree: p.degree,
+            normals: match p.normals {
+                NormalsMode::Mean => "mean",
+                NormalsMode::Covariance => "covariance",
+            }
+            .to_string(),
+            per_point_h: p.per_point_h,
+            droplet_below: p.droplet_below,
+        }
+    }
+
+    pub fn to_params(&self) -> Option<SurfaceParams> {
+        Some(SurfaceParams {
+            k: self.k,
+            h_scale: self.h_scale,
+            support: self.support,
+            neighbour_cap: self.neighbour_cap,
+            degree: self.degree,
+            normals: match self.normals.as_str() {
+                "mean" => NormalsMode::Mean,
+                "covariance" => NormalsMode::Covariance,
+                _ => return None,
+            },
+            per_point_h: self.per_point_h,
+            droplet_below: self.droplet_below,
+        })
+    }
+}
+
+/// A step ready for the CPU tracer, in the file's local coordinates.
+#[derive(Debug)]
+pub struct LoadedStep {
+    pub surface: Surface<f32>,
+    pub bvh: Bvh,
+    pub transform: Transform,
+}
+
+fn v3(a: [f32; 3]) -> V3<f32> {
+    V3::new(a[0], a[1], a[2])
+}
+
+impl LoadedStep {
+    pub fn load(file: &CacheFile) -> Result<LoadedStep> {
+        let header = file.header();
+        let invalid = |problem: String| Error::Invalid {
+            path: file.path().to_path_buf(),
+            problem,
+        };
+        let params = header
+            .mls
+            .to_params()
+            .ok_or_else(|| invalid(format!("unknown normals mode '{}'", header.mls.normals)))?;
+        let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
+        let normals: Option<Vec<GpuNormal>> = file
+            .section(names::NORMALS)
+            .map(|_| file.decode(names::NORMALS))
+            .transpose()?;
+        let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+        let spheres: Vec<GpuSphere> = file.decode(names::SPHERES)?;
+        if balls.len() != points.len() {
+            return Err(invalid(format!(
+                "{} balls for {} points",
+                balls.len(),
+                points.len()
+            )));
+        }
+        let requested = header.mls.degree;
+        let ball_fits = balls
+            .iter()
+            .map(|b| match b.kind() {
+                BallState::Full => BallFit::Fitted(FitStatus::Full),
+                BallState::Degraded => BallFit::Fitted(FitStatus::Degraded {
+                    requested,
+                    used: b.degree as u8,
+                }),
+                BallState::Unfitted => BallFit::None,
+                BallState::Droplet => BallFit::Droplet(b.state >> 2),
+            })
+            .collect();
+        let surface = Surface::from_parts(SurfaceParts {
+            origin: [0.0; 3],
+            points: points.iter().map(|p| v3(p.position)).collect(),
+            normals: normals.map(|ns| ns.iter().map(|n| v3(n.normal)).collect()),
+            radii: points.iter().map(|p| p.radius).collect(),
+            h: header.smoothing_length as f32,
+            spacing: header.spacing as f32,
+            neighbour_start: file.decode(names::NEIGHBOUR_START)?,
+            neighbours: file.decode(names::NEIGHBOURS)?,
+            capped: header.stats.capped as usize,
+            balls: points
+                .iter()
+                .zip(&balls)
+                .map(|(p, b)| Ball {
+                    centre: v3(p.position),
+                    radius: p.radius,
+                    h: b.h,
+                    normal: v3(b.normal),
+                    poly: Poly {
+                        degree: b.degree.min(3) as u8,
+                        c: b.coeffs,
+                    },
+                })
+                .collect(),
+            ball_fits,
+            spheres: spheres
+                .iter()
+                .map(|s| Sphere {
+                    centre: v3(s.centre),
+                    radius: s.radius,
+                })
+                .collect(),
+            params,
+        })
+        .map_err(|e| invalid(e.to_string()))?;
+        let bvh = Bvh {
+            nodes: file.decode::<GpuBvhNode>(names::BVH_NODES)?,
+            items: file.decode(names::BVH_ITEMS)?,
+        };
+        Ok(LoadedStep {
+            surface,
+            bvh,
+            transform: header.transform,
+        })
+    }
+
+    /// The camera in the file's local coordinates (same rays, uniformly scaled).
+    pub fn local_camera(&self, camera: &Camera) -> Camera {
+        Camera {
+            eye: self.transform.to_local(camera.eye),
+            target: self.transform.to_local(camera.target),
+            ..*camera
+        }
+    }
+
+    /// A local hit in world coordinates.
+    pub fn to_world(&self, hit: TraceHit) -> TraceHit {
+        TraceHit {
+            t: hit.t * self.transform.scale,
+            position: self.transform.to_world(hit.position),
+            ..hit
+        }
+    }
+
+    /// Traces every pixel through the baked BVH; hits in world coordinates.
+    pub fn render(&self, camera: &Camera, params: &Params<f32>) -> Vec<Option<TraceHit>> {
+        self.surface
+            .render_in(&self.bvh, &self.local_camera(camera), params)
+            .into_iter()
+            .map(|h| h.map(|h| self.to_world(h)))
+            .collect()
+    }
+}

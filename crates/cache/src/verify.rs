@@ -1,0 +1,159 @@
+//! Full verification of a step file: the footer checksum over every byte, each section's
+//! checksum and decoding, and the structural invariants the tracer relies on.
+
+use crate::bvh::Bvh;
+use crate::error::{Error, Result};
+use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere};
+use crate::names;
+use crate::reader::CacheFile;
+
+/// What a successful verification covered.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct VerifyReport {
+    pub sections: usize,
+    pub raw_bytes: u64,
+}
+
+impl CacheFile {
+    pub fn verify(&self) -> Result<VerifyReport> {
+        let invalid = |problem: String| Error::Invalid {
+            path: self.path().to_path_buf(),
+            problem,
+        };
+        if !self.body_intact() {
+            return Err(invalid(
+                "the footer checksum does not match the file's bytes (corrupt or modified)".into(),
+            ));
+        }
+        let mut scratch = Vec::new();
+        let mut raw_bytes = 0;
+        for entry in &self.header().sections {
+            let mut out = vec![0u8; entry.raw as usize];
+            self.decode_into(entry, &mut out, &mut scratch)?;
+            raw_bytes += entry.raw;
+        }
+        self.check_invariants().map_err(invalid)?;
+        Ok(VerifyReport {
+            sections: self.header().sections.len(),
+            raw_bytes,
+        })
+    }
+
+    fn check_invariants(&self) -> Result<(), String> {
+        let header = self.header();
+        let n = header.points as usize;
+        let decode_err = |e: Error| e.to_string();
+        let points: Vec<GpuPoint> = self.decode(names::POINTS).map_err(decode_err)?;
+        let balls: Vec<GpuBall> = self.decode(names::BALLS).map_err(decode_err)?;
+        let spheres: Vec<GpuSphere> = self.decode(names::SPHERES).map_err(decode_err)?;
+        let start: Vec<u32> = self.decode(names::NEIGHBOUR_START).map_err(decode_err)?;
+        let neighbours: Vec<u32> = self.decode(names::NEIGHBOURS).map_err(decode_err)?;
+        let bvh = Bvh {
+            nodes: self
+                .decode::<GpuBvhNode>(names::BVH_NODES)
+                .map_err(decode_err)?,
+            items: self.decode(names::BVH_ITEMS).map_err(decode_err)?,
+        };
+        if points.len() != n || balls.len() != n || start.len() != n + 1 {
+            return Err(format!(
+                "the header says {n} points; sections hold {} points, {} balls, {} neighbour offsets",
+                points.len(),
+                balls.len(),
+                start.len()
+            ));
+        }
+        for entry in &header.sections {
+            let per_point =
+                entry.name == names::NORMALS || entry.name.starts_with(names::FIELD_PREFIX);
+            if per_point && entry.count != n as u64 {
+                return Err(format!(
+                    "section '{}' has {} elements for {n} points",
+                    entry.name, entry.count
+                ));
+            }
+        }
+        if let Some(i) = points
+            .iter()
+            .position(|p| !(p.position.iter().all(|c| c.is_finite()) && p.radius > 0.0))
+        {
+            return Err(format!("point {i} is not finite or has no positive radius"));
+        }
+        if start.first() != Some(&0)
+            || start.windows(2).any(|w| w[0] > w[1])
+            || start.last().map(|&e| e as usize) != Some(neighbours.len())
+        {
+            return Err("neighbour offsets are not monotone from 0 to the list length".into());
+        }
+        for i in 0..n {
+            let list = &neighbours[start[i] as usize..start[i + 1] as usize];
+            if list.windows(2).any(|w| w[0] >= w[1])
+                || list.last().is_some_and(|&j| j as usize >= n)
+            {
+                return Err(format!(
+                    "the neighbour list of point {i} is not sorted, distinct and in range"
+                ));
+            }
+        }
+        for (i, b) in balls.iter().enumerate() {
+            let finite = b.normal.iter().chain(&b.coeffs).all(|c| c.is_finite()) && b.h > 0.0;
+            let sphere_ok = b.sphere().is_none_or(|s| (s as usize) < spheres.len());
+            if !finite
+                || b.degree > 3
+                || !sphere_ok
+                || (b.state >> 2 != 0 && b.kind() != BallState::Droplet)
+            {
+                return Err(format!("ball {i} is invalid: {b:?}"));
+            }
+        }
+        if let Some(d) = spheres
+            .iter()
+            .position(|s| !(s.centre.iter().all(|c| c.is_finite()) && s.radius > 0.0))
+        {
+            return Err(format!(
+                "droplet sphere {d} is not finite or has no positive radius"
+            ));
+        }
+        // Every candidate (fitted ball or sphere) is reachable exactly once; nothing else is.
+        bvh.depth()
+            .ok_or("the BVH's child links leave the node array or are not a tree")?;
+        let items = n + spheres.len();
+        let mut seen = vec![false; items];
+        for node in &bvh.nodes {
+            if !(node.lo.iter().chain(&node.hi).all(|c| c.is_finite()))
+                || (0..3).any(|a| node.lo[a] > node.hi[a])
+            {
+                return Err(format!("a BVH node has an invalid box: {node:?}"));
+            }
+            if node.count == 0 {
+                continue;
+            }
+            let range = node.first as usize..node.first as usize + node.count as usize;
+            let leaf = bvh
+                .items
+                .get(range)
+                .ok_or("a BVH leaf points past the item list")?;
+            for &item in leaf {
+                let slot = seen
+                    .get_mut(item as usize)
+                    .ok_or(format!("BVH item {item} is out of range"))?;
+                if std::mem::replace(slot, true) {
+                    return Err(format!("BVH item {item} appears twice"));
+                }
+            }
+        }
+        for (i, b) in balls.iter().enumerate() {
+            let candidate = matches!(b.kind(), BallState::Full | BallState::Degraded);
+            if seen[i] != candidate {
+                return Err(format!(
+                    "ball {i} ({:?}) is {} the BVH",
+                    b.kind(),
+                    if seen[i] { "in" } else { "missing from" }
+                ));
+            }
+        }
+        if let Some(d) = seen[n..].iter().position(|s| !s) {
+            return Err(format!("droplet sphere {d} is missing from the BVH"));
+        }
+        Ok(())
+    }
+}

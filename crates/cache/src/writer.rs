@@ -1,0 +1,147 @@
+//! Assembling a step file: encode sections (in parallel), lay them out page-aligned after the
+//! JSON header, close with the footer, write atomically.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+use xxhash_rust::xxh3::xxh3_64;
+
+use crate::error::Result;
+use crate::format::{
+    ALIGN, Encoding, Footer, Header, MAJOR, MINOR, PREAMBLE_LEN, Preamble, SectionEntry, align_up,
+    hex64,
+};
+use crate::layout::Element;
+
+/// One section to write: its element bytes and the encoding to try.
+#[derive(Debug, Clone)]
+pub struct SectionInput {
+    pub name: String,
+    pub element: Element,
+    pub bytes: Vec<u8>,
+    pub encoding: Encoding,
+}
+
+impl SectionInput {
+    pub fn new<T: bytemuck::Pod>(
+        name: &str,
+        element: Element,
+        items: &[T],
+        encoding: Encoding,
+    ) -> SectionInput {
+        debug_assert_eq!(size_of::<T>(), element.size());
+        SectionInput {
+            name: name.to_string(),
+            element,
+            bytes: bytemuck::cast_slice(items).to_vec(),
+            encoding,
+        }
+    }
+}
+
+/// How hard to compress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Compression {
+    /// Every section raw.
+    None,
+    /// zstd at this level; a section keeps its encoding only where it saves at least 10 %
+    /// (otherwise raw, usable in place from the map).
+    Level(i32),
+}
+
+/// Encodes a whole step file. `header.sections` is filled in here.
+pub fn encode_step(
+    mut header: Header,
+    sections: &[SectionInput],
+    compression: Compression,
+) -> Result<Vec<u8>, std::io::Error> {
+    let encoded: Vec<(Encoding, Vec<u8>)> = sections
+        .par_iter()
+        .map(|s| {
+            let Compression::Level(level) = compression else {
+                return Ok((Encoding::Raw, s.bytes.clone()));
+            };
+            if s.encoding == Encoding::Raw || s.bytes.is_empty() {
+                return Ok((Encoding::Raw, s.bytes.clone()));
+            }
+            let packed = crate::codec::encode(&s.bytes, s.encoding, level)?;
+            Ok(if packed.len() * 10 <= s.bytes.len() * 9 {
+                (s.encoding, packed)
+            } else {
+                (Encoding::Raw, s.bytes.clone())
+            })
+        })
+        .collect::<std::io::Result<_>>()?;
+
+    // The header records offsets, which depend on the header's length: lay out with a guess,
+    // then again until the length settles (twice at most in practice).
+    let mut header_len_guess = 0usize;
+    let (header_bytes, offsets) = loop {
+        let mut offset = align_up(PREAMBLE_LEN + header_len_guess);
+        let mut offsets = Vec::with_capacity(sections.len());
+        header.sections = sections
+            .iter()
+            .zip(&encoded)
+            .map(|(s, (encoding, bytes))| {
+                offsets.push(offset);
+                let entry = SectionEntry {
+                    name: s.name.clone(),
+                    element: s.element.name().to_string(),
+                    count: (s.bytes.len() / s.element.size()) as u64,
+                    offset: offset as u64,
+                    stored: bytes.len() as u64,
+                    raw: s.bytes.len() as u64,
+                    encoding: *encoding,
+                    xxh3: hex64(xxh3_64(bytes)),
+                };
+                offset = align_up(offset + bytes.len());
+                entry
+            })
+            .collect();
+        let json = serde_json::to_vec(&header).map_err(std::io::Error::other)?;
+        if align_up(PREAMBLE_LEN + json.len()) == align_up(PREAMBLE_LEN + header_len_guess) {
+            break (json, offsets);
+        }
+        header_len_guess = json.len();
+    };
+
+    let body_end = offsets
+        .last()
+        .zip(encoded.last())
+        .map_or(PREAMBLE_LEN + header_bytes.len(), |(o, (_, b))| o + b.len());
+    let mut out = Vec::with_capacity(body_end + ALIGN);
+    out.extend_from_slice(
+        &Preamble {
+            major: MAJOR,
+            minor: MINOR,
+            flags: 0,
+            header_len: header_bytes.len() as u64,
+            header_xxh3: xxh3_64(&header_bytes),
+        }
+        .to_bytes(),
+    );
+    out.extend_from_slice(&header_bytes);
+    for (offset, (_, bytes)) in offsets.iter().zip(&encoded) {
+        out.resize(*offset, 0);
+        out.extend_from_slice(bytes);
+    }
+    let footer = Footer {
+        file_len: (out.len() + crate::format::FOOTER_LEN) as u64,
+        body_xxh3: xxh3_64(&out),
+    };
+    out.extend_from_slice(&footer.to_bytes());
+    Ok(out)
+}
+
+/// Encodes and writes a step file atomically.
+pub fn write_step(
+    path: &Path,
+    header: Header,
+    sections: &[SectionInput],
+    compression: Compression,
+) -> Result<u64> {
+    let bytes = encode_step(header, sections, compression)
+        .map_err(|e| slosh_fileio::IoError::new(path, e))?;
+    slosh_fileio::atomic_write(path, &bytes)?;
+    Ok(bytes.len() as u64)
+}

@@ -1,0 +1,121 @@
+//! Whole files in and out: bytes memory-mapped where the OS allows (read into memory
+//! otherwise), and writes that either land completely or not at all.
+
+use std::fs::File;
+use std::io::Write;
+use std::ops::Deref;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// An I/O failure and the file it concerns.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {source}", path.display())]
+pub struct IoError {
+    pub path: PathBuf,
+    #[source]
+    pub source: std::io::Error,
+}
+
+impl IoError {
+    pub fn new(path: &Path, source: std::io::Error) -> IoError {
+        IoError {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
+
+/// The whole content of one file, mapped or owned.
+#[derive(Debug)]
+pub struct FileBytes {
+    path: PathBuf,
+    data: Data,
+}
+
+#[derive(Debug)]
+enum Data {
+    Mapped(memmap2::Mmap),
+    Owned(Vec<u8>),
+}
+
+impl FileBytes {
+    /// Maps `path` read-only; falls back to reading it (pipes, some network file systems).
+    pub fn open(path: &Path) -> Result<FileBytes, IoError> {
+        let file = File::open(path).map_err(|e| IoError::new(path, e))?;
+        let len = file.metadata().map_err(|e| IoError::new(path, e))?.len();
+        // An empty file cannot be mapped on every OS; it has nothing to map anyway.
+        if len > 0 {
+            // SAFETY: the map is read-only. Another process truncating the file while it is
+            // mapped would raise SIGBUS; files are only ever replaced by rename (see
+            // `atomic_write`), which leaves a mapped old inode intact, and the read fallback
+            // exists for file systems where that promise does not hold.
+            let mapped = unsafe { memmap2::MmapOptions::new().populate().map(&file) };
+            if let Ok(map) = mapped {
+                return Ok(FileBytes {
+                    path: path.to_path_buf(),
+                    data: Data::Mapped(map),
+                });
+            }
+        }
+        let bytes = std::fs::read(path).map_err(|e| IoError::new(path, e))?;
+        Ok(FileBytes::from_vec(path, bytes))
+    }
+
+    /// Bytes already in memory, labelled with the path they stand for.
+    pub fn from_vec(path: &Path, bytes: Vec<u8>) -> FileBytes {
+        FileBytes {
+            path: path.to_path_buf(),
+            data: Data::Owned(bytes),
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn is_mapped(&self) -> bool {
+        matches!(self.data, Data::Mapped(_))
+    }
+}
+
+impl Deref for FileBytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match &self.data {
+            Data::Mapped(m) => m,
+            Data::Owned(v) => v,
+        }
+    }
+}
+
+static TEMP_SERIAL: AtomicU64 = AtomicU64::new(0);
+
+/// Writes to a temporary name in the same directory, flushes it to disk, then renames it over
+/// the target: a reader sees the old file or the whole new one, even after a crash or kill.
+pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    let file_name = path
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let serial = TEMP_SERIAL.fetch_add(1, Ordering::Relaxed);
+    let tmp = path.with_file_name(format!(".{file_name}.tmp-{}-{serial}", std::process::id()));
+    let written = File::create(&tmp)
+        .and_then(|mut f| {
+            f.write_all(bytes)?;
+            f.sync_data()
+        })
+        .map_err(|e| IoError::new(&tmp, e));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        IoError::new(path, e)
+    })
+}
+
+/// True for the temporary files `atomic_write` leaves behind when it is killed mid-write.
+pub fn is_atomic_temp(file_name: &str) -> bool {
+    file_name.starts_with('.') && file_name.contains(".tmp-")
+}
