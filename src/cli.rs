@@ -22,6 +22,12 @@ pub enum Command {
     Gen(GenArgs),
     /// Print what an EnSight case holds.
     Info(InfoArgs),
+    /// Bake an EnSight series (or a PLY/OBJ point cloud) into one .slc cache per step.
+    Bake(BakeArgs),
+    /// Summarise and verify .slc caches (a step file or a cache directory).
+    Inspect(InspectArgs),
+    /// Render a frame and its hit buffer from a cache.
+    Render(RenderArgs),
     /// Measure speed against error.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -132,4 +138,122 @@ pub struct InfoArgs {
     /// Force the byte order of binary files instead of detecting it.
     #[arg(long, value_enum)]
     pub byte_order: Option<ByteOrderArg>,
+}
+
+#[derive(Debug, Args)]
+pub struct BakeArgs {
+    /// The .case file, a .ply/.obj point cloud, or with --manifest-only the cache directory.
+    pub input: PathBuf,
+    /// Output directory for step-NNNNN.slc files and manifest.json.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Inclusive range of step indices, e.g. 0..49.
+    #[arg(long)]
+    pub steps: Option<String>,
+    /// Steps baked at once (each is also parallel inside).
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+    /// Bake only shard I of N (0-based), e.g. 2/8 for task 2 of a job array.
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Polynomial degree of the fits.
+    #[arg(long, default_value_t = 2)]
+    pub degree: u8,
+    /// Radius of trust = distance to the k-th nearest neighbour.
+    #[arg(long, default_value_t = 6)]
+    pub k: usize,
+    /// h = h-scale × mean radius of trust.
+    #[arg(long, default_value_t = 1.5)]
+    pub h_scale: f64,
+    /// At most this many neighbours per point.
+    #[arg(long, default_value_t = 128)]
+    pub neighbour_cap: usize,
+    /// One h per point (h-scale × its radius) instead of a global h: for uneven sampling.
+    #[arg(long)]
+    pub per_point_h: bool,
+    /// Clusters with fewer points become droplet spheres (default: the coefficient count of
+    /// the degree, 6 or 10; 0 turns detection off).
+    #[arg(long)]
+    pub droplet_below: Option<usize>,
+    /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable
+    /// `surface` if the case has one, else all).
+    #[arg(long)]
+    pub surface: Option<String>,
+    /// Normals: a vector variable's name or `pca` (default: `normal` or `normals` if present,
+    /// else pca).
+    #[arg(long)]
+    pub normals: Option<String>,
+    /// Variables to store per point, comma separated.
+    #[arg(long, value_delimiter = ',')]
+    pub fields: Vec<String>,
+    /// zstd level (1-22) or `none`.
+    #[arg(long, default_value = "1")]
+    pub compress: String,
+    /// Force the byte order of binary EnSight files instead of detecting it.
+    #[arg(long, value_enum)]
+    pub byte_order: Option<ByteOrderArg>,
+    /// Rebuild manifest.json from the step files in the directory, bake nothing.
+    #[arg(long)]
+    pub manifest_only: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct InspectArgs {
+    /// A step file (.slc) or a cache directory.
+    pub path: PathBuf,
+    /// Machine-readable output (schema in docs/inspect-json.md).
+    #[arg(long)]
+    pub json: bool,
+    /// Check every checksum and structural invariant; exit non-zero on any failure.
+    #[arg(long)]
+    pub verify: bool,
+    /// Dump the record of point I (cache order) of a step file.
+    #[arg(long)]
+    pub point: Option<usize>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    Shade,
+    Normals,
+    Status,
+}
+
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// A cache directory or one step file.
+    pub path: PathBuf,
+    /// Step index (cache directories).
+    #[arg(long, default_value_t = 0)]
+    pub step: usize,
+    /// Camera position X,Y,Z (default: framing the step's bounds).
+    #[arg(long)]
+    pub eye: Option<String>,
+    #[arg(long)]
+    pub target: Option<String>,
+    #[arg(long)]
+    pub up: Option<String>,
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 40.0)]
+    pub fov: f64,
+    /// Image size WxH.
+    #[arg(long, default_value = "640x480")]
+    pub size: String,
+    /// MLS iterations, counting the precomputed polynomial.
+    #[arg(long, default_value_t = 1)]
+    pub iterations: u32,
+    #[arg(long, value_enum, default_value_t = ModeArg::Shade)]
+    pub mode: ModeArg,
+    /// PNG to write.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Hit buffer to write: float32 H×W×8 .npy (position xyz, normal xyz, t, status; 0 = miss).
+    #[arg(long)]
+    pub aov: Option<PathBuf>,
+    /// Trace on the CPU with the reference tracer.
+    #[arg(long)]
+    pub cpu: bool,
 }

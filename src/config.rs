@@ -97,3 +97,172 @@ impl GenConfig {
         })
     }
 }
+
+/// What `slosh bake` reads.
+#[derive(Debug)]
+pub enum BakeInput {
+    Case(slosh_ensight::Case),
+    PointCloud(crate::import::PointCloud),
+}
+
+/// Validated `slosh bake` settings: every "auto" resolved against the input.
+#[derive(Debug)]
+pub struct BakeConfig {
+    pub input: BakeInput,
+    pub input_path: PathBuf,
+    pub options: slosh_bake::BatchOptions,
+    pub quiet: bool,
+}
+
+/// Parses `A..B` (inclusive) or a single step `A`.
+pub fn parse_step_range(s: &str) -> Result<(usize, usize)> {
+    let parse = |v: &str| -> Result<usize> {
+        v.trim()
+            .parse()
+            .with_context(|| format!("--steps {s}: '{v}' is not a step index"))
+    };
+    let (a, b) = match s.split_once("..") {
+        Some((a, b)) => (parse(a)?, parse(b.trim_start_matches('='))?),
+        None => (parse(s)?, parse(s)?),
+    };
+    if a > b {
+        bail!("--steps {s}: the range is empty (expected A..B with A ≤ B, both inclusive)");
+    }
+    Ok((a, b))
+}
+
+fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {
+    let bad = || anyhow::anyhow!("--shard {s}: expected I/N with 0 ≤ I < N, e.g. 0/3");
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (index, count): (usize, usize) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if count == 0 || index >= count {
+        return Err(bad());
+    }
+    Ok(slosh_bake::Shard { index, count })
+}
+
+impl BakeConfig {
+    pub fn from_args(a: &crate::cli::BakeArgs) -> Result<BakeConfig> {
+        use slosh_bake::{BakeParams, NormalSource, SurfaceSelect};
+        use slosh_ensight::VarType;
+        let out = a
+            .out
+            .clone()
+            .context("--out DIR is required (where the .slc files go)")?;
+        if !(1..=3).contains(&a.degree) {
+            bail!("--degree {}: expected 1, 2 or 3", a.degree);
+        }
+        if a.k == 0 {
+            bail!("--k must be at least 1");
+        }
+        if !(a.h_scale.is_finite() && a.h_scale > 0.0) {
+            bail!("--h-scale {}: expected a positive number", a.h_scale);
+        }
+        if a.neighbour_cap < 3 {
+            bail!("--neighbour-cap {}: at least 3 neighbours are needed for a plane", a.neighbour_cap);
+        }
+        let compression = match a.compress.as_str() {
+            "none" => slosh_cache::Compression::None,
+            l => {
+                let level: i32 = l.parse().ok().filter(|v| (1..=22).contains(v)).with_context(
+                    || format!("--compress {l}: expected a zstd level 1-22 or 'none'"),
+                )?;
+                slosh_cache::Compression::Level(level)
+            }
+        };
+        let ext = a
+            .input
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        let point_cloud = matches!(ext.as_deref(), Some("ply" | "obj"));
+        let (input, surface, normals) = if point_cloud {
+            let surface = match a.surface.as_deref() {
+                None | Some("all") => SurfaceSelect::All,
+                Some("estimate") => SurfaceSelect::Estimate,
+                Some(v) => bail!("--surface {v}: a point cloud has no variables (use all or estimate)"),
+            };
+            let cloud = crate::import::read_point_cloud(&a.input)?;
+            let normals = match a.normals.as_deref() {
+                Some("pca") => NormalSource::Pca,
+                None if cloud.normals.is_some() => NormalSource::Variable("normals".into()),
+                None => NormalSource::Pca,
+                Some(v) => bail!("--normals {v}: a point cloud has only its own normals (or pca)"),
+            };
+            (BakeInput::PointCloud(cloud), surface, normals)
+        } else {
+            let mut case = slosh_ensight::Case::open(&a.input)?;
+            case.set_byte_order(a.byte_order.map(Into::into));
+            let has = |name: &str, ty: VarType| {
+                case.variables().iter().any(|v| v.name == name && v.var_type == ty)
+            };
+            let scalar = |name: &str| -> Result<()> {
+                if !has(name, VarType::Scalar) {
+                    bail!(
+                        "{}: no scalar variable '{name}' (variables: {})",
+                        a.input.display(),
+                        case.variables().iter().map(|v| v.name.as_str()).collect::<Vec<_>>().join(", ")
+                    );
+                }
+                Ok(())
+            };
+            let surface = match a.surface.as_deref() {
+                None if has("surface", VarType::Scalar) => SurfaceSelect::Variable("surface".into()),
+                None | Some("all") => SurfaceSelect::All,
+                Some("estimate") => SurfaceSelect::Estimate,
+                Some(v) => {
+                    scalar(v)?;
+                    SurfaceSelect::Variable(v.into())
+                }
+            };
+            let normals = match a.normals.as_deref() {
+                None => ["normal", "normals"]
+                    .into_iter()
+                    .find(|n| has(n, VarType::Vector))
+                    .map_or(NormalSource::Pca, |n| NormalSource::Variable(n.into())),
+                Some("pca") => NormalSource::Pca,
+                Some(v) => {
+                    if !has(v, VarType::Vector) {
+                        bail!("{}: no vector variable '{v}' for --normals", a.input.display());
+                    }
+                    NormalSource::Variable(v.into())
+                }
+            };
+            for f in &a.fields {
+                if !case.variables().iter().any(|v| &v.name == f) {
+                    bail!("{}: no variable '{f}' for --fields", a.input.display());
+                }
+            }
+            (BakeInput::Case(case), surface, normals)
+        };
+        if point_cloud && !a.fields.is_empty() {
+            bail!("--fields: a point cloud has no variables");
+        }
+        let mut params = BakeParams::new(surface, normals);
+        params.mls.degree = a.degree;
+        params.mls.k = a.k;
+        params.mls.h_scale = a.h_scale;
+        params.mls.neighbour_cap = a.neighbour_cap;
+        params.mls.per_point_h = a.per_point_h;
+        params.mls.droplet_below = a
+            .droplet_below
+            .unwrap_or(slosh_mls::coefficient_count(a.degree));
+        params.fields = a.fields.clone();
+        params.compression = compression;
+        Ok(BakeConfig {
+            input,
+            input_path: a.input.clone(),
+            options: slosh_bake::BatchOptions {
+                out,
+                steps: a.steps.as_deref().map(parse_step_range).transpose()?,
+                jobs: a.jobs.max(1),
+                shard: a.shard.as_deref().map(parse_shard).transpose()?.unwrap_or(slosh_bake::Shard::WHOLE),
+                params,
+            },
+            quiet: a.quiet,
+        })
+    }
+}

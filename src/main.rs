@@ -2,12 +2,15 @@
 //! settings in `config`, and each subcommand lives in its own module.
 
 mod accuracy;
+mod bake;
 mod cli;
 mod config;
 mod generate;
 mod import;
 mod info;
+mod inspect;
 mod output;
+mod render;
 
 use anyhow::Result;
 use clap::Parser;
@@ -28,6 +31,10 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
         Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
+        Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
+        Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
+        Command::Inspect(args) => inspect::run(&args),
+        Command::Render(args) => render::run(&args),
         Command::Info(args) => {
             let mut case = slosh_ensight::Case::open(&args.case)?;
             case.set_byte_order(args.byte_order.map(Into::into));

@@ -200,6 +200,7 @@ impl<T: Real> Surface<T> {
                     .query(&rel[i])
                     .nearest_n::<SquaredEuclidean<f64>>(cap)
                     .within(reach * reach)
+                    .unsorted()
                     .execute();
                 let capped = found.len() == cap.get();
                 let own = unit_normals.as_ref().and_then(|ns| ns[i]);

@@ -1,0 +1,151 @@
+//! `slosh bake`: the batch driver with a progress bar and a summary.
+
+use std::sync::Mutex;
+use std::time::Duration;
+
+use anyhow::{Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use slosh_bake::{EnsightSource, Event, Outcome, StepInput, StepSource, run_batch};
+use slosh_cache::Manifest;
+use slosh_ensight::PointSource;
+
+use crate::config::{BakeConfig, BakeInput};
+use crate::import::PointCloud;
+
+/// A PLY/OBJ point cloud as a one-step series.
+struct CloudSource<'a> {
+    cloud: &'a PointCloud,
+    label: String,
+}
+
+impl StepSource for CloudSource<'_> {
+    fn steps(&self) -> Vec<(usize, f64)> {
+        vec![(0, 0.0)]
+    }
+
+    fn read(&self, index: usize) -> Result<StepInput, String> {
+        Ok(StepInput {
+            index,
+            time: 0.0,
+            source: self.label.clone(),
+            positions: self.cloud.positions.clone(),
+            normals: self.cloud.normals.clone(),
+            surface_flags: None,
+            fields: Vec::new(),
+        })
+    }
+}
+
+pub fn manifest_only(dir: &std::path::Path) -> Result<()> {
+    let (manifest, problems) = Manifest::rebuild(dir)?;
+    manifest.write(dir)?;
+    println!(
+        "wrote {} ({} steps)",
+        dir.join(slosh_cache::MANIFEST_NAME).display(),
+        manifest.steps.len()
+    );
+    for (path, e) in &problems {
+        eprintln!("left out {}: {e}", path.display());
+    }
+    if !problems.is_empty() {
+        bail!("{} step files failed their checks", problems.len());
+    }
+    Ok(())
+}
+
+pub fn run(cfg: &BakeConfig) -> Result<()> {
+    let opts = &cfg.options;
+    let label = cfg.input_path.display().to_string();
+    let ensight;
+    let cloud;
+    let source: &dyn StepSource = match &cfg.input {
+        BakeInput::Case(case) => {
+            ensight = EnsightSource::new(
+                case.clone(),
+                &cfg.input_path,
+                PointSource::Auto,
+                &opts.params,
+            );
+            &ensight
+        }
+        BakeInput::PointCloud(c) => {
+            cloud = CloudSource {
+                cloud: c,
+                label: label.clone(),
+            };
+            &cloud
+        }
+    };
+    let bar = if cfg.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(0)
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} steps, ETA {eta} {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.enable_steady_tick(Duration::from_millis(250));
+    let failures = Mutex::new(Vec::new());
+    let report = run_batch(source, opts, &|event| match event {
+        Event::Planned { steps } => bar.set_length(steps as u64),
+        Event::Done { index, outcome } => {
+            match outcome {
+                Outcome::Baked {
+                    points, seconds, ..
+                } => bar.set_message(format!("step {index}: {points} points in {seconds:.2} s")),
+                Outcome::Kept => bar.set_message(format!("step {index}: kept")),
+                Outcome::Failed(e) => {
+                    bar.println(format!("step {index} failed: {e}"));
+                    if let Ok(mut f) = failures.lock() {
+                        f.push(index);
+                    }
+                }
+            }
+            bar.inc(1);
+        }
+    })?;
+    bar.finish_and_clear();
+
+    let stage_total: f64 = report.stages.iter().map(|(_, s)| s).sum();
+    println!(
+        "baked {} steps, kept {} already current, {} failed, into {} in {:.2} s",
+        report.baked,
+        report.kept,
+        report.failed.len(),
+        opts.out.display(),
+        report.wall_seconds
+    );
+    if report.baked > 0 {
+        println!(
+            "{} points, {:.1} MB written ({:.1} bytes per point); per-stage CPU seconds summed over steps:",
+            report.points,
+            report.bytes as f64 / 1e6,
+            report.bytes as f64 / report.points.max(1) as f64
+        );
+        for (name, s) in &report.stages {
+            println!(
+                "  {name:<26} {s:>9.3} s  {:>5.1} %",
+                100.0 * s / stage_total.max(f64::MIN_POSITIVE)
+            );
+        }
+    }
+    for (path, e) in &report.manifest_problems {
+        eprintln!("manifest: left out {}: {e}", path.display());
+    }
+    if !report.failed.is_empty() {
+        for (i, e) in &report.failed {
+            eprintln!("step {i}: {e}");
+        }
+        let list: Vec<String> = report.failed.iter().map(|(i, _)| i.to_string()).collect();
+        bail!(
+            "{} of {} steps failed: {}",
+            report.failed.len(),
+            report.baked + report.kept + report.failed.len(),
+            list.join(", ")
+        );
+    }
+    Ok(())
+}

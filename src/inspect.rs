@@ -1,0 +1,455 @@
+//! `slosh inspect`: a step file's header, sections and statistics, or a cache directory's
+//! per-step table; `--verify` checks everything; `--json` is documented in
+//! docs/inspect-json.md.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::Serialize;
+use slosh_cache::{
+    BallState, Bvh, CacheFile, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, Header, Manifest,
+    SectionEntry, names, parse_step_file_name,
+};
+
+use crate::cli::InspectArgs;
+use crate::output::print;
+
+#[derive(Debug, Serialize)]
+struct Summary {
+    min: f64,
+    mean: f64,
+    max: f64,
+}
+
+impl Summary {
+    fn of(values: impl Iterator<Item = f64>) -> Summary {
+        let (mut min, mut max, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize);
+        for v in values {
+            min = min.min(v);
+            max = max.max(v);
+            sum += v;
+            n += 1;
+        }
+        if n == 0 {
+            return Summary {
+                min: 0.0,
+                mean: 0.0,
+                max: 0.0,
+            };
+        }
+        Summary {
+            min,
+            mean: sum / n as f64,
+            max,
+        }
+    }
+}
+
+/// Statistics computed from the sections (not stored in the header).
+#[derive(Debug, Serialize)]
+struct Statistics {
+    /// Neighbours per point.
+    neighbours: Summary,
+    /// Points with 0–15, 16–31, … neighbours (last bucket: 128 and more).
+    neighbour_histogram: Vec<u64>,
+    /// Radii of trust in world units.
+    radii: Summary,
+    /// Balls whose stored polynomial has degree 0, 1, 2, 3 (fitted balls only).
+    degrees: [u64; 4],
+    fit_full: u64,
+    fit_degraded: u64,
+    fit_none: u64,
+    droplets: u64,
+    droplet_points: u64,
+    bvh_nodes: u64,
+    bvh_leaves: u64,
+    bvh_depth: u64,
+}
+
+#[derive(Debug, Serialize)]
+struct Verification {
+    ok: bool,
+    error: Option<String>,
+}
+
+#[derive(Debug, Serialize)]
+struct FileReport {
+    file: PathBuf,
+    version: [u16; 2],
+    bytes: u64,
+    header: Header,
+    statistics: Statistics,
+    verify: Option<Verification>,
+}
+
+fn statistics(file: &CacheFile) -> Result<Statistics> {
+    let h = file.header();
+    let start: Vec<u32> = file.decode(names::NEIGHBOUR_START)?;
+    let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
+    let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+    let nodes: Vec<GpuBvhNode> = file.decode(names::BVH_NODES)?;
+    let counts: Vec<u32> = start.windows(2).map(|w| w[1].saturating_sub(w[0])).collect();
+    let mut histogram = vec![0u64; 9];
+    for &c in &counts {
+        histogram[(c as usize / 16).min(8)] += 1;
+    }
+    let mut degrees = [0u64; 4];
+    for b in &balls {
+        if matches!(b.kind(), BallState::Full | BallState::Degraded) {
+            degrees[(b.degree as usize).min(3)] += 1;
+        }
+    }
+    let bvh = Bvh {
+        nodes,
+        items: Vec::new(),
+    };
+    Ok(Statistics {
+        neighbours: Summary::of(counts.iter().map(|&c| f64::from(c))),
+        neighbour_histogram: histogram,
+        radii: Summary::of(
+            points
+                .iter()
+                .map(|p| f64::from(p.radius) * h.transform.scale),
+        ),
+        degrees,
+        fit_full: h.stats.fit_full,
+        fit_degraded: h.stats.fit_degraded,
+        fit_none: h.stats.fit_none,
+        droplets: h.stats.droplets,
+        droplet_points: h.stats.droplet_points,
+        bvh_leaves: bvh.nodes.iter().filter(|n| n.count > 0).count() as u64,
+        bvh_nodes: bvh.nodes.len() as u64,
+        bvh_depth: bvh.depth().unwrap_or(0) as u64,
+    })
+}
+
+fn verification(file: &CacheFile) -> Verification {
+    match file.verify() {
+        Ok(_) => Verification {
+            ok: true,
+            error: None,
+        },
+        Err(e) => Verification {
+            ok: false,
+            error: Some(e.to_string()),
+        },
+    }
+}
+
+fn section_row(s: &SectionEntry) -> String {
+    format!(
+        "  {:<18} {:<9} {:>10} {:>12} {:>12} {:>6.2}x  {}",
+        s.name,
+        s.element,
+        s.count,
+        s.raw,
+        s.stored,
+        s.raw as f64 / (s.stored.max(1)) as f64,
+        s.encoding.name()
+    )
+}
+
+fn human_file(r: &FileReport) -> String {
+    let h = &r.header;
+    let st = &r.statistics;
+    let m = &h.mls;
+    let mut o = String::new();
+    let mut line = |s: String| {
+        o.push_str(&s);
+        o.push('\n');
+    };
+    line(format!(
+        "file       {} (cache format {}.{}, {} bytes)",
+        r.file.display(),
+        r.version[0],
+        r.version[1],
+        r.bytes
+    ));
+    line(format!(
+        "source     {} step {}, time {}",
+        h.source.path, h.source.step, h.source.time
+    ));
+    line(format!(
+        "points     {} kept of {} read ({} non-finite, {} not on the surface dropped)",
+        h.points, h.stats.input_points, h.stats.dropped_non_finite, h.stats.dropped_interior
+    ));
+    line(format!(
+        "bounds     [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",
+        h.bounds[0][0], h.bounds[0][1], h.bounds[0][2], h.bounds[1][0], h.bounds[1][1], h.bounds[1][2]
+    ));
+    line(format!(
+        "transform  world = [{:.6}, {:.6}, {:.6}] + {:.6} × local",
+        h.transform.origin[0], h.transform.origin[1], h.transform.origin[2], h.transform.scale
+    ));
+    line(format!(
+        "mls        degree {}, k {}, h-scale {} (h = {:.4e} world), support {}h, cap {}, normals {}, {} h, droplets below {} points",
+        m.degree,
+        m.k,
+        m.h_scale,
+        h.smoothing_length * h.transform.scale,
+        m.support,
+        m.neighbour_cap,
+        m.normals,
+        if m.per_point_h { "per-point" } else { "global" },
+        m.droplet_below
+    ));
+    line(format!("params     hash {}", h.params_hash));
+    line(format!(
+        "sections   {:<18} {:<9} {:>10} {:>12} {:>12} {:>7}  encoding",
+        "name", "element", "count", "raw bytes", "stored", "ratio"
+    ));
+    for s in &h.sections {
+        line(section_row(s));
+    }
+    line(format!(
+        "neighbours per point min {} mean {:.1} max {}; capped at {}: {} points ({:.1} %)",
+        st.neighbours.min,
+        st.neighbours.mean,
+        st.neighbours.max,
+        m.neighbour_cap,
+        h.stats.capped,
+        100.0 * h.stats.capped as f64 / h.points.max(1) as f64
+    ));
+    line(format!(
+        "           histogram by 16: {:?}",
+        st.neighbour_histogram
+    ));
+    line(format!(
+        "radii      min {:.4e} mean {:.4e} max {:.4e} (world)",
+        st.radii.min, st.radii.mean, st.radii.max
+    ));
+    line(format!(
+        "fits       {} full, {} degraded, {} unfitted; degrees 0/1/2/3: {:?}",
+        st.fit_full, st.fit_degraded, st.fit_none, st.degrees
+    ));
+    line(format!(
+        "droplets   {} spheres from {} points",
+        st.droplets, st.droplet_points
+    ));
+    line(format!(
+        "bvh        {} nodes, {} leaves, depth {}",
+        st.bvh_nodes, st.bvh_leaves, st.bvh_depth
+    ));
+    let stages: Vec<String> = h
+        .stats
+        .stage_seconds
+        .iter()
+        .map(|(n, s)| format!("{n} {:.1} ms", s * 1e3))
+        .collect();
+    line(format!("bake       {}", stages.join(", ")));
+    if let Some(v) = &r.verify {
+        line(match &v.error {
+            None => "verify     ok: footer checksum, every section checksum, invariants".into(),
+            Some(e) => format!("verify     FAILED: {e}"),
+        });
+    }
+    o
+}
+
+fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
+    let h = file.header();
+    if i >= h.points as usize {
+        bail!("--point {i}: the step has {} points (0..{})", h.points, h.points);
+    }
+    let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
+    let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+    let start: Vec<u32> = file.decode(names::NEIGHBOUR_START)?;
+    let neighbours: Vec<u32> = file.decode(names::NEIGHBOURS)?;
+    let p = points[i];
+    let b = balls[i];
+    let local = p.position.map(f64::from);
+    let mut rec = serde_json::json!({
+        "point": i,
+        "local": p.position,
+        "world": h.transform.to_world(local),
+        "radius_local": p.radius,
+        "ball": {
+            "normal": b.normal, "h": b.h, "degree": b.degree,
+            "state": format!("{:?}", b.kind()), "sphere": b.sphere(),
+            "coefficients": b.coeffs,
+        },
+        "neighbours": &neighbours[start[i] as usize..start[i + 1] as usize],
+    });
+    if file.section(names::NORMALS).is_some() {
+        let ns: Vec<GpuNormal> = file.decode(names::NORMALS)?;
+        rec["normal"] = serde_json::json!(ns[i].normal);
+    }
+    for s in &h.sections {
+        if let Some(field) = s.name.strip_prefix(names::FIELD_PREFIX) {
+            let value = if s.element == "f32" {
+                serde_json::json!(file.decode::<f32>(&s.name)?[i])
+            } else {
+                serde_json::json!(file.decode::<[f32; 4]>(&s.name)?[i][..3])
+            };
+            rec["fields"][field] = value;
+        }
+    }
+    Ok(rec)
+}
+
+fn inspect_file(path: &Path, args: &InspectArgs) -> Result<bool> {
+    let file = CacheFile::open(path)?;
+    if let Some(i) = args.point {
+        let rec = point_record(&file, i)?;
+        print(&format!("{}\n", serde_json::to_string_pretty(&rec)?))?;
+        return Ok(true);
+    }
+    let verify = args.verify.then(|| verification(&file));
+    let ok = verify.as_ref().is_none_or(|v| v.ok);
+    // Statistics decode sections; a file that failed verification may not decode.
+    let statistics = match statistics(&file) {
+        Ok(s) => s,
+        Err(e) if !ok => {
+            let msg = verify.and_then(|v| v.error).unwrap_or_default();
+            bail!("{}: verification failed: {msg} ({e})", path.display());
+        }
+        Err(e) => return Err(e),
+    };
+    let report = FileReport {
+        file: path.to_path_buf(),
+        version: {
+            let (a, b) = file.version();
+            [a, b]
+        },
+        bytes: file.file_len(),
+        header: file.header().clone(),
+        statistics,
+        verify,
+    };
+    if args.json {
+        print(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
+    } else {
+        print(&human_file(&report))?;
+    }
+    Ok(ok)
+}
+
+#[derive(Debug, Serialize)]
+struct DirStep {
+    index: usize,
+    file: String,
+    time: f64,
+    points: u64,
+    bytes: u64,
+    params_hash: String,
+    verify: Option<Verification>,
+    error: Option<String>,
+}
+
+#[derive(Debug, Serialize)]
+struct DirReport {
+    directory: PathBuf,
+    manifest: bool,
+    params_hash: Option<String>,
+    steps: Vec<DirStep>,
+    total_points: u64,
+    total_bytes: u64,
+    failed: usize,
+}
+
+fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
+    let mut files: Vec<(usize, PathBuf)> = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot list", dir.display()))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            parse_step_file_name(&e.file_name().to_string_lossy()).map(|i| (i, e.path()))
+        })
+        .collect();
+    files.sort();
+    let manifest = Manifest::read(dir).ok();
+    let mut steps = Vec::new();
+    for (index, path) in files {
+        let file_name = path
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        match CacheFile::open(&path) {
+            Ok(f) => steps.push(DirStep {
+                index,
+                file: file_name,
+                time: f.header().source.time,
+                points: f.header().points,
+                bytes: f.file_len(),
+                params_hash: f.header().params_hash.clone(),
+                verify: args.verify.then(|| verification(&f)),
+                error: None,
+            }),
+            Err(e) => steps.push(DirStep {
+                index,
+                file: file_name,
+                time: f64::NAN,
+                points: 0,
+                bytes: 0,
+                params_hash: String::new(),
+                verify: None,
+                error: Some(e.to_string()),
+            }),
+        }
+    }
+    let failed = steps
+        .iter()
+        .filter(|s| s.error.is_some() || s.verify.as_ref().is_some_and(|v| !v.ok))
+        .count();
+    let report = DirReport {
+        directory: dir.to_path_buf(),
+        manifest: manifest.is_some(),
+        params_hash: manifest.map(|m| m.params_hash),
+        total_points: steps.iter().map(|s| s.points).sum(),
+        total_bytes: steps.iter().map(|s| s.bytes).sum(),
+        failed,
+        steps,
+    };
+    if args.json {
+        print(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
+    } else {
+        let mut o = format!(
+            "directory  {} ({} steps, manifest {})\n  step         time     points        bytes  bytes/pt  params            status\n",
+            dir.display(),
+            report.steps.len(),
+            if report.manifest { "present" } else { "missing" }
+        );
+        for s in &report.steps {
+            let status = match (&s.error, &s.verify) {
+                (Some(e), _) => format!("UNREADABLE: {e}"),
+                (None, Some(Verification { ok: true, .. })) => "verified".into(),
+                (None, Some(Verification { error, .. })) => {
+                    format!("FAILED: {}", error.clone().unwrap_or_default())
+                }
+                (None, None) => "readable".into(),
+            };
+            o.push_str(&format!(
+                "  {:>5} {:>12.6} {:>10} {:>12} {:>9.1}  {:<16}  {status}\n",
+                s.index,
+                s.time,
+                s.points,
+                s.bytes,
+                s.bytes as f64 / s.points.max(1) as f64,
+                s.params_hash
+            ));
+        }
+        o.push_str(&format!(
+            "total      {} points, {} bytes ({:.1} bytes per point), {} failed\n",
+            report.total_points,
+            report.total_bytes,
+            report.total_bytes as f64 / report.total_points.max(1) as f64,
+            report.failed
+        ));
+        print(&o)?;
+    }
+    Ok(report.failed == 0)
+}
+
+pub fn run(args: &InspectArgs) -> Result<()> {
+    let ok = if args.path.is_dir() {
+        if args.point.is_some() {
+            bail!("--point needs a step file, not a directory");
+        }
+        inspect_dir(&args.path, args)?
+    } else {
+        inspect_file(&args.path, args)?
+    };
+    if !ok {
+        bail!("{}: verification failed", args.path.display());
+    }
+    Ok(())
+}
