@@ -162,14 +162,21 @@ impl BakeConfig {
             bail!("--h-scale {}: expected a positive number", a.h_scale);
         }
         if a.neighbour_cap < 3 {
-            bail!("--neighbour-cap {}: at least 3 neighbours are needed for a plane", a.neighbour_cap);
+            bail!(
+                "--neighbour-cap {}: at least 3 neighbours are needed for a plane",
+                a.neighbour_cap
+            );
         }
         let compression = match a.compress.as_str() {
             "none" => slosh_cache::Compression::None,
             l => {
-                let level: i32 = l.parse().ok().filter(|v| (1..=22).contains(v)).with_context(
-                    || format!("--compress {l}: expected a zstd level 1-22 or 'none'"),
-                )?;
+                let level: i32 = l
+                    .parse()
+                    .ok()
+                    .filter(|v| (1..=22).contains(v))
+                    .with_context(|| {
+                        format!("--compress {l}: expected a zstd level 1-22 or 'none'")
+                    })?;
                 slosh_cache::Compression::Level(level)
             }
         };
@@ -183,7 +190,9 @@ impl BakeConfig {
             let surface = match a.surface.as_deref() {
                 None | Some("all") => SurfaceSelect::All,
                 Some("estimate") => SurfaceSelect::Estimate,
-                Some(v) => bail!("--surface {v}: a point cloud has no variables (use all or estimate)"),
+                Some(v) => {
+                    bail!("--surface {v}: a point cloud has no variables (use all or estimate)")
+                }
             };
             let cloud = crate::import::read_point_cloud(&a.input)?;
             let normals = match a.normals.as_deref() {
@@ -197,20 +206,28 @@ impl BakeConfig {
             let mut case = slosh_ensight::Case::open(&a.input)?;
             case.set_byte_order(a.byte_order.map(Into::into));
             let has = |name: &str, ty: VarType| {
-                case.variables().iter().any(|v| v.name == name && v.var_type == ty)
+                case.variables()
+                    .iter()
+                    .any(|v| v.name == name && v.var_type == ty)
             };
             let scalar = |name: &str| -> Result<()> {
                 if !has(name, VarType::Scalar) {
                     bail!(
                         "{}: no scalar variable '{name}' (variables: {})",
                         a.input.display(),
-                        case.variables().iter().map(|v| v.name.as_str()).collect::<Vec<_>>().join(", ")
+                        case.variables()
+                            .iter()
+                            .map(|v| v.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     );
                 }
                 Ok(())
             };
             let surface = match a.surface.as_deref() {
-                None if has("surface", VarType::Scalar) => SurfaceSelect::Variable("surface".into()),
+                None if has("surface", VarType::Scalar) => {
+                    SurfaceSelect::Variable("surface".into())
+                }
                 None | Some("all") => SurfaceSelect::All,
                 Some("estimate") => SurfaceSelect::Estimate,
                 Some(v) => {
@@ -226,7 +243,10 @@ impl BakeConfig {
                 Some("pca") => NormalSource::Pca,
                 Some(v) => {
                     if !has(v, VarType::Vector) {
-                        bail!("{}: no vector variable '{v}' for --normals", a.input.display());
+                        bail!(
+                            "{}: no vector variable '{v}' for --normals",
+                            a.input.display()
+                        );
                     }
                     NormalSource::Variable(v.into())
                 }
@@ -259,7 +279,12 @@ impl BakeConfig {
                 out,
                 steps: a.steps.as_deref().map(parse_step_range).transpose()?,
                 jobs: a.jobs.max(1),
-                shard: a.shard.as_deref().map(parse_shard).transpose()?.unwrap_or(slosh_bake::Shard::WHOLE),
+                shard: a
+                    .shard
+                    .as_deref()
+                    .map(parse_shard)
+                    .transpose()?
+                    .unwrap_or(slosh_bake::Shard::WHOLE),
                 params,
             },
             quiet: a.quiet,

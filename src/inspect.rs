@@ -88,7 +88,10 @@ fn statistics(file: &CacheFile) -> Result<Statistics> {
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
     let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
     let nodes: Vec<GpuBvhNode> = file.decode(names::BVH_NODES)?;
-    let counts: Vec<u32> = start.windows(2).map(|w| w[1].saturating_sub(w[0])).collect();
+    let counts: Vec<u32> = start
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .collect();
     let mut histogram = vec![0u64; 9];
     for &c in &counts {
         histogram[(c as usize / 16).min(8)] += 1;
@@ -175,7 +178,12 @@ fn human_file(r: &FileReport) -> String {
     ));
     line(format!(
         "bounds     [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",
-        h.bounds[0][0], h.bounds[0][1], h.bounds[0][2], h.bounds[1][0], h.bounds[1][1], h.bounds[1][2]
+        h.bounds[0][0],
+        h.bounds[0][1],
+        h.bounds[0][2],
+        h.bounds[1][0],
+        h.bounds[1][1],
+        h.bounds[1][2]
     ));
     line(format!(
         "transform  world = [{:.6}, {:.6}, {:.6}] + {:.6} × local",
@@ -249,7 +257,11 @@ fn human_file(r: &FileReport) -> String {
 fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
     let h = file.header();
     if i >= h.points as usize {
-        bail!("--point {i}: the step has {} points (0..{})", h.points, h.points);
+        bail!(
+            "--point {i}: the step has {} points (0..{})",
+            h.points,
+            h.points
+        );
     }
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
     let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
@@ -406,7 +418,11 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
             "directory  {} ({} steps, manifest {})\n  step         time     points        bytes  bytes/pt  params            status\n",
             dir.display(),
             report.steps.len(),
-            if report.manifest { "present" } else { "missing" }
+            if report.manifest {
+                "present"
+            } else {
+                "missing"
+            }
         );
         for s in &report.steps {
             let status = match (&s.error, &s.verify) {

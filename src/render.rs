@@ -137,7 +137,13 @@ fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
 }
 
 /// float32 H×W×C little-endian .npy.
-pub fn write_npy(path: &Path, height: u32, width: u32, channels: usize, data: &[f32]) -> Result<()> {
+pub fn write_npy(
+    path: &Path,
+    height: u32,
+    width: u32,
+    channels: usize,
+    data: &[f32],
+) -> Result<()> {
     let dict = format!(
         "{{'descr': '<f4', 'fortran_order': False, 'shape': ({height}, {width}, {channels}), }}"
     );

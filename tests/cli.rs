@@ -396,3 +396,256 @@ fn accuracy_harness_reports_goals() {
     }
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
 }
+
+fn step_sums(dir: &Path) -> Vec<(String, Vec<String>)> {
+    let mut names: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| slosh_cache::parse_step_file_name(n).is_some())
+        .collect();
+    names.sort();
+    names
+        .into_iter()
+        .map(|n| {
+            let f = slosh_cache::CacheFile::open(&dir.join(&n)).unwrap();
+            let sums = f.header().sections.iter().map(|s| s.xxh3.clone()).collect();
+            (n, sums)
+        })
+        .collect()
+}
+
+#[test]
+fn bake_then_inspect_and_render_a_tank() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("tank");
+    generate(&case_dir, &["tank", "--points", "20000", "--steps", "4"]);
+    let case = case_dir.join("tank.case");
+    let cache = dir.path().join("cache");
+    let (ok, out, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--fields",
+        "pressure",
+        "--quiet",
+    ]);
+    assert!(ok, "bake failed: {err}");
+    assert!(out.contains("baked 4 steps"), "{out}");
+    let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
+    assert!(ok, "{out}{err}");
+    assert_eq!(out.matches("verified").count(), 4, "{out}");
+
+    let step1 = cache.join("step-00001.slc");
+    let (ok, out, _) = slosh(&["inspect", step1.to_str().unwrap(), "--json", "--verify"]);
+    assert!(ok);
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["verify"]["ok"], true);
+    assert_eq!(v["header"]["source"]["step"], 1);
+    let points = v["header"]["points"].as_u64().unwrap();
+    // The tank flags its free surface; only those particles are baked.
+    let read = v["header"]["stats"]["input_points"].as_u64().unwrap();
+    assert!(points > 100 && points < read / 4, "{points} of {read}");
+    assert!(v["statistics"]["neighbours"]["mean"].as_f64().unwrap() > 10.0);
+    let names: Vec<&str> = v["header"]["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["name"].as_str().unwrap())
+        .collect();
+    assert!(names.contains(&"field.pressure") && names.contains(&"bvh_nodes"));
+
+    let (ok, out, _) = slosh(&["inspect", step1.to_str().unwrap(), "--point", "7"]);
+    assert!(ok);
+    let rec: Value = serde_json::from_str(&out).unwrap();
+    assert!(!rec["neighbours"].as_array().unwrap().is_empty());
+    assert!(rec["fields"]["pressure"].as_f64().is_some());
+
+    let png = dir.path().join("frame.png");
+    let npy = dir.path().join("hits.npy");
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--cpu",
+        "--size",
+        "48x32",
+        "--iterations",
+        "2",
+        "--out",
+        png.to_str().unwrap(),
+        "--aov",
+        npy.to_str().unwrap(),
+    ]);
+    assert!(ok, "render failed: {err}");
+    assert!(out.contains("hit pixels"), "{out}");
+    let npy_bytes = std::fs::read(&npy).unwrap();
+    assert_eq!(npy_bytes.len(), 128 + 48 * 32 * 8 * 4);
+    assert!(String::from_utf8_lossy(&npy_bytes[..128]).contains("'shape': (32, 48, 8)"));
+    let values: &[f32] = bytemuck::cast_slice(&npy_bytes[128..]);
+    let hits = values.chunks_exact(8).filter(|px| px[7] > 0.0).count();
+    assert!(hits > 48 * 32 / 10, "{hits} hit pixels");
+    assert!(values.iter().all(|v| v.is_finite()));
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+
+    // A flipped byte is caught by --verify, naming the file.
+    let mut bytes = std::fs::read(&step1).unwrap();
+    let mid = bytes.len() / 3;
+    bytes[mid] ^= 0x10;
+    std::fs::write(&step1, bytes).unwrap();
+    let (ok, out, err) = slosh(&["inspect", step1.to_str().unwrap(), "--verify"]);
+    assert!(!ok);
+    assert!(
+        format!("{out}{err}").contains("step-00001.slc"),
+        "{out}{err}"
+    );
+
+    // A missing step file: the batch goes on, reports it, exits non-zero.
+    std::fs::remove_file(case_dir.join("tank.geo00002")).unwrap();
+    let cache2 = dir.path().join("cache2");
+    let (ok, out, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        cache2.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(!ok);
+    assert!(out.contains("baked 3 steps"), "{out}");
+    assert!(
+        err.contains("step 2") && err.contains("tank.geo00002"),
+        "{err}"
+    );
+    let manifest: Value =
+        serde_json::from_slice(&std::fs::read(cache2.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["steps"].as_array().unwrap().len(), 3);
+}
+
+#[test]
+fn shards_make_the_caches_of_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("sphere");
+    generate(&case_dir, &["sphere", "--points", "1500", "--steps", "7"]);
+    let case = case_dir.join("sphere.case");
+    let one = dir.path().join("one");
+    let (ok, _, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        one.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let sharded = dir.path().join("sharded");
+    for shard in ["0/3", "1/3", "2/3"] {
+        let (ok, out, err) = slosh(&[
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            sharded.to_str().unwrap(),
+            "--shard",
+            shard,
+            "--quiet",
+        ]);
+        assert!(ok, "{err}");
+        let expect = if shard == "0/3" {
+            "baked 3 steps"
+        } else {
+            "baked 2 steps"
+        };
+        assert!(out.contains(expect), "{shard}: {out}");
+    }
+    let (ok, out, _) = slosh(&["bake", "--manifest-only", sharded.to_str().unwrap()]);
+    assert!(ok && out.contains("7 steps"), "{out}");
+    assert_eq!(step_sums(&one), step_sums(&sharded));
+    let (ok, _, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        "x",
+        "--shard",
+        "3/3",
+    ]);
+    assert!(!ok && err.contains("--shard 3/3"), "{err}");
+}
+
+#[test]
+fn a_killed_bake_leaves_only_valid_caches_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("sphere");
+    generate(&case_dir, &["sphere", "--points", "4000", "--steps", "16"]);
+    let case = case_dir.join("sphere.case");
+    let reference = dir.path().join("reference");
+    let (ok, _, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        reference.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let cache = dir.path().join("cache");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        .args([
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--quiet",
+            "--jobs",
+            "1",
+        ])
+        .spawn()
+        .unwrap();
+    // Kill -9 once the first steps are written, in the middle of the series.
+    let start = std::time::Instant::now();
+    while !cache.join("step-00002.slc").exists() && start.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let present = step_sums(&cache);
+    assert!(
+        present.len() >= 3 && present.len() < 16,
+        "killed with {} of 16 steps written",
+        present.len()
+    );
+    // Everything that looks like a step verifies and equals the reference bake.
+    let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
+    assert!(ok, "{out}{err}");
+    let full = step_sums(&reference);
+    for (name, sums) in &present {
+        assert_eq!(
+            Some(sums),
+            full.iter().find(|(n, _)| n == name).map(|(_, s)| s),
+            "{name}"
+        );
+    }
+    let (ok, out, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains(&format!(
+            "baked {} steps, kept {}",
+            16 - present.len(),
+            present.len()
+        )),
+        "{out}"
+    );
+    assert_eq!(step_sums(&cache), full);
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(&cache)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}

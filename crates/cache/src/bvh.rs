@@ -44,7 +44,8 @@ impl BallIndex for Bvh {
         let mut best = f64::INFINITY;
         let mut stack: Vec<(u32, f64)> = vec![(0, t_root)];
         while let Some((index, t_near)) = stack.pop() {
-            if t_near >= best {
+            // Equal is not pruned: a tie goes to the lower item, which may lie here.
+            if t_near > best {
                 continue;
             }
             let node = &self.nodes[index as usize];

@@ -46,7 +46,7 @@ pub fn decode_into(
             }
         }
         Encoding::Shuffle4Zstd | Encoding::Delta4Shuffle4Zstd => {
-            if expected % 4 != 0 {
+            if !expected.is_multiple_of(4) {
                 return Err(size(expected));
             }
             scratch.clear();

@@ -103,10 +103,10 @@ impl Manifest {
                 }
                 Some(_) => {}
             }
-            for a in 0..3 {
-                bounds[0][a] = bounds[0][a].min(h.bounds[0][a]);
-                bounds[1][a] = bounds[1][a].max(h.bounds[1][a]);
-            }
+            bounds = [
+                std::array::from_fn(|a| bounds[0][a].min(h.bounds[0][a])),
+                std::array::from_fn(|a| bounds[1][a].max(h.bounds[1][a])),
+            ];
             let bytes = file.file_len();
             let foot = file.footer_checksum();
             steps.push(ManifestStep {

@@ -130,8 +130,8 @@ impl BallIndex for Grid {
                 2
             };
             let exit = t_next[axis].min(t1);
-            // Any hit nearer than the best lies in a cell not yet left.
-            if !(exit < visit(items)) || t_next[axis] > t1 {
+            // Any hit nearer than the best (or tied with it) lies in a cell not yet left.
+            if !(exit <= visit(items)) || t_next[axis] > t1 {
                 return;
             }
             let next = cell[axis] as isize + step[axis];

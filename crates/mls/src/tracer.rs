@@ -7,12 +7,18 @@ use crate::intersect::{HitStatus, Params, Ray, intersect_ball, ray_ball};
 use crate::real::{Real, V3};
 use crate::surface::{BallFit, Surface, gather};
 
+/// Whether a hit at `t` by item `b` beats `best`: nearer, or as near from a lower item, so
+/// the result does not depend on the order an index visits items in.
+fn nearer(t: f64, b: u32, best: Option<TraceHit>) -> bool {
+    best.is_none_or(|h| t < h.t || (t == h.t && b < h.ball))
+}
+
 /// A spatial index over a surface's candidates: ball i is item i, droplet sphere d is item
 /// `len + d`.
 pub trait BallIndex: Sync {
     /// Calls `visit` with batches of items whose bounds the ray (t ≥ 0) enters, roughly nearest
     /// first. `visit` returns the nearest hit so far (∞ if none); the walk ends once nothing
-    /// unvisited can be nearer.
+    /// unvisited can be nearer (or as near: ties go to the lower item).
     fn walk(&self, origin: [f64; 3], dir: [f64; 3], visit: &mut dyn FnMut(&[u32]) -> f64);
 }
 
@@ -127,7 +133,7 @@ impl<T: Real> Surface<T> {
                     };
                     // From inside a droplet the ray sees its far wall.
                     let t = if t_in >= T::zero() { t_in } else { t_out };
-                    if !(t >= T::zero()) || best.is_some_and(|h| t.to_f64() >= h.t) {
+                    if !(t >= T::zero()) || !nearer(t.to_f64(), b, best) {
                         continue;
                     }
                     let p = ray.origin + ray.dir * t;
@@ -154,7 +160,7 @@ impl<T: Real> Surface<T> {
                 let Some((t_in, _)) = ray_ball(&ray, ball.centre, ball.radius) else {
                     continue;
                 };
-                if best.is_some_and(|h| t_in.to_f64() >= h.t) {
+                if best.is_some_and(|h| t_in.to_f64() > h.t) {
                     continue;
                 }
                 gather(
@@ -166,10 +172,7 @@ impl<T: Real> Surface<T> {
                 );
                 let normals = self.normals.as_ref().map(|_| nn.as_slice());
                 let out = intersect_ball(&ray, ball, &np, normals, params);
-                if out.status.is_hit()
-                    && out.t.is_finite()
-                    && best.is_none_or(|h| out.t.to_f64() < h.t)
-                {
+                if out.status.is_hit() && out.t.is_finite() && nearer(out.t.to_f64(), b, best) {
                     best = Some(TraceHit {
                         t: out.t.to_f64(),
                         position: to_world(out.position.to_f64()),

@@ -1,0 +1,402 @@
+#![allow(clippy::unwrap_used)]
+//! The bake against its truths: tracing a cache gives the hits of tracing the in-memory
+//! surface; every byte of a cache is protected; selection, order and fields stay consistent;
+//! batches resume, shard and survive bad steps.
+
+use std::path::Path;
+
+use slosh_bake::*;
+use slosh_cache::{
+    CacheFile, Compression, LoadedStep, Manifest, encode_step, names, step_file_name,
+};
+use slosh_ensight::FieldValues;
+use slosh_fileio::FileBytes;
+use slosh_mls::{Camera, NormalsMode, Params, Surface, TraceHit};
+use slosh_scenes::{Scene, SceneKind, SceneSpec};
+
+fn scene_input(kind: SceneKind, points: usize, step: usize) -> (Scene, StepInput) {
+    let scene = Scene::new(SceneSpec::new(kind, points, 7)).unwrap();
+    let p = scene.particles(step);
+    let (positions, normals) = p.surface_arrays();
+    let input = StepInput {
+        index: step,
+        time: scene.time(step),
+        source: format!("{kind:?}"),
+        positions,
+        normals: Some(normals),
+        ..StepInput::default()
+    };
+    (scene, input)
+}
+
+fn params() -> BakeParams {
+    BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()))
+}
+
+fn bake_to_file(input: &StepInput, params: &BakeParams) -> CacheFile {
+    let baked = bake_step(input, params).unwrap();
+    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
+    CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap()
+}
+
+fn camera_for(points: &[[f64; 3]], size: u32) -> Camera {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+    let r = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt() * 0.5;
+    Camera {
+        eye: [c[0] + 0.9 * r, c[1] - 2.2 * r, c[2] + 1.1 * r],
+        target: c,
+        up: [0.0, 0.0, 1.0],
+        fov_y: 45.0,
+        width: size,
+        height: size,
+    }
+}
+
+/// Pixels whose 4-neighbourhood mixes hits and misses (silhouettes).
+fn silhouette(hits: &[Option<TraceHit>], w: usize, i: usize) -> bool {
+    let (x, y) = (i % w, i / w);
+    let h = hits.len() / w;
+    let me = hits[i].is_some();
+    [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+        .iter()
+        .any(|(dx, dy)| {
+            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+            nx >= 0
+                && ny >= 0
+                && (nx as usize) < w
+                && (ny as usize) < h
+                && hits[ny as usize * w + nx as usize].is_some() != me
+        })
+}
+
+#[test]
+fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
+    for (kind, points, iterations) in [
+        (SceneKind::Sphere, 3000, 1u32),
+        (SceneKind::Sphere, 3000, 3),
+        (SceneKind::Torus, 4000, 3),
+        (SceneKind::Droplets, 3000, 1),
+    ] {
+        let (_, input) = scene_input(kind, points, 1);
+        let p = params();
+        let file = bake_to_file(&input, &p);
+        file.verify().unwrap();
+        let step = LoadedStep::load(&file).unwrap();
+        let camera = camera_for(&input.positions, 72);
+        let f32_params = Params::<f32> {
+            degree: 2,
+            iterations,
+            epsilon: 1e-4,
+            normals: NormalsMode::Mean,
+        };
+        // The baked BVH and the grid over the same loaded surface find identical hits.
+        let via_bvh = step.render(&camera, &f32_params);
+        let via_grid: Vec<_> = step
+            .surface
+            .render(&step.local_camera(&camera), &f32_params)
+            .into_iter()
+            .map(|h| h.map(|h| step.to_world(h)))
+            .collect();
+        let differ: Vec<usize> = (0..via_bvh.len())
+            .filter(|&i| via_bvh[i] != via_grid[i])
+            .collect();
+        if let Some(&i) = differ.first() {
+            panic!(
+                "{kind:?}: BVH and grid disagree at {} pixels, first {i}: {:?} vs {:?}",
+                differ.len(),
+                via_bvh[i],
+                via_grid[i]
+            );
+        }
+
+        // The in-memory f64 oracle over the unscaled, unordered points.
+        let oracle =
+            Surface::<f64>::build(&input.positions, input.normals.as_deref(), &p.mls).unwrap();
+        let f64_params = Params::<f64> {
+            degree: 2,
+            iterations,
+            epsilon: 1e-4,
+            normals: NormalsMode::Mean,
+        };
+        let reference = oracle.render(&camera, &f64_params);
+        let spacing = oracle.spacing;
+        let (mut away, mut disagree, mut shared, mut close, mut worst) = (0, 0, 0, 0, 0.0f64);
+        for i in 0..reference.len() {
+            if silhouette(&reference, 72, i) {
+                continue;
+            }
+            away += 1;
+            match (reference[i], via_bvh[i]) {
+                (Some(a), Some(b)) => {
+                    shared += 1;
+                    let dt = (a.t - b.t).abs() / spacing;
+                    worst = worst.max(dt);
+                    close += usize::from(dt <= 1e-3);
+                }
+                (None, None) => {}
+                _ => disagree += 1,
+            }
+        }
+        eprintln!(
+            "{kind:?} {iterations} it: {disagree} of {away} pixels disagree, {close} of {shared} shared hits within 1e-3 spacing, worst {worst:.2e}"
+        );
+        assert!(shared > 500, "{kind:?}: only {shared} hits");
+        assert!(
+            disagree * 1000 <= away,
+            "{kind:?}: {disagree} of {away} hit/miss disagree"
+        );
+        assert!(
+            close * 1000 >= shared * 999,
+            "{kind:?}: {close} of {shared} within 1e-3 spacing"
+        );
+    }
+}
+
+#[test]
+fn droplets_are_stored_as_spheres_and_hit_as_spheres() {
+    let (scene, mut input) = scene_input(SceneKind::Sphere, 3000, 0);
+    let spacing = scene.spacing();
+    // Three lone particles and one pair, far from the body and from each other.
+    let lone = [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]];
+    let pair = [[-3.0, 0.0, 0.0], [-3.0, 0.5 * spacing, 0.0]];
+    for p in lone.iter().chain(&pair) {
+        input.positions.push(*p);
+        input.normals.as_mut().unwrap().push([1.0, 0.0, 0.0]);
+    }
+    let file = bake_to_file(&input, &params());
+    file.verify().unwrap();
+    let h = file.header();
+    assert_eq!((h.stats.droplets, h.stats.droplet_points), (4, 5));
+    let step = LoadedStep::load(&file).unwrap();
+    let mls = Params::<f32> {
+        iterations: 3,
+        ..Params::new()
+    };
+    // A lone particle is a sphere of half a spacing around it.
+    let to_local = |p: [f64; 3]| step.transform.to_local(p);
+    let hit = step
+        .surface
+        .trace_in(&step.bvh, to_local([3.0, -1.0, 0.0]), [0.0, 1.0, 0.0], &mls)
+        .map(|h| step.to_world(h))
+        .unwrap();
+    assert_eq!(hit.status, slosh_mls::HitStatus::Droplet);
+    let expected = 1.0 - 0.5 * step.surface.spacing as f64 * step.transform.scale;
+    assert!(
+        (hit.t - expected).abs() < 1e-5 * expected,
+        "{} vs {expected}",
+        hit.t
+    );
+    assert!((hit.normal[1] + 1.0).abs() < 1e-5);
+}
+
+#[test]
+fn every_single_byte_flip_is_detected() {
+    let (_, input) = scene_input(SceneKind::Sphere, 60, 0);
+    let baked = bake_step(&input, &params()).unwrap();
+    let bytes = encode_step(baked.header, &baked.sections, Compression::Level(1)).unwrap();
+    let path = Path::new("flip.slc");
+    CacheFile::from_bytes(FileBytes::from_vec(path, bytes.clone()))
+        .unwrap()
+        .verify()
+        .unwrap();
+    let mut undetected = Vec::new();
+    for offset in 0..bytes.len() {
+        let mut b = bytes.clone();
+        b[offset] ^= 0x5a;
+        let caught = match CacheFile::from_bytes(FileBytes::from_vec(path, b)) {
+            Err(_) => true,
+            Ok(f) => f.verify().is_err(),
+        };
+        if !caught {
+            undetected.push(offset);
+        }
+    }
+    eprintln!("{} byte flips tried", bytes.len());
+    assert!(undetected.is_empty(), "undetected flips at {undetected:?}");
+}
+
+#[test]
+fn selection_drops_non_finite_and_interior_and_keeps_fields_aligned() {
+    let (_, mut input) = scene_input(SceneKind::Sphere, 2000, 0);
+    let n = input.positions.len();
+    input.positions[5] = [f64::NAN, 0.0, 0.0];
+    input.positions[9][2] = f64::INFINITY;
+    // A field that names its particle: its x coordinate.
+    let xs: Vec<f32> = input.positions.iter().map(|p| p[0] as f32).collect();
+    input.fields.push(("x".into(), FieldValues::Scalar(xs)));
+    input.surface_flags = Some((0..n).map(|i| i % 4 != 0).collect());
+    let mut p = BakeParams::new(
+        SurfaceSelect::Variable("surface".into()),
+        NormalSource::Variable("normal".into()),
+    );
+    p.fields = vec!["x".into()];
+    let file = bake_to_file(&input, &p);
+    let h = file.header();
+    assert_eq!(h.stats.dropped_non_finite, 2);
+    // Every 4th particle unflagged; index 5 and 9 were already gone (neither is a multiple of 4).
+    assert_eq!(h.stats.dropped_interior as usize, n.div_ceil(4));
+    assert_eq!(h.points as usize, n - 2 - n.div_ceil(4));
+    let points: Vec<slosh_cache::GpuPoint> = file.decode(names::POINTS).unwrap();
+    let field: Vec<f32> = file.decode("field.x").unwrap();
+    for (p, x) in points.iter().zip(&field) {
+        let world = h.transform.to_world(p.position.map(f64::from));
+        assert!((world[0] - f64::from(*x)).abs() < 1e-5, "{world:?} vs {x}");
+    }
+}
+
+#[test]
+fn surface_estimate_finds_the_free_surface_of_the_tank() {
+    let scene = Scene::new(SceneSpec::new(SceneKind::Tank, 60_000, 3)).unwrap();
+    let p = scene.particles(0);
+    let positions: Vec<[f64; 3]> = p.positions.iter().map(|v| v.to_array()).collect();
+    let estimate = estimate_surface(&positions);
+    let flagged = p.surface.iter().filter(|s| **s).count();
+    let found = p
+        .surface
+        .iter()
+        .zip(&estimate)
+        .filter(|(t, e)| **t && **e)
+        .count();
+    let interior = positions.len() - flagged;
+    let false_pos = p
+        .surface
+        .iter()
+        .zip(&estimate)
+        .filter(|(t, e)| !**t && **e)
+        .count();
+    eprintln!(
+        "estimate: {found} of {flagged} free-surface particles found; {false_pos} of {interior} others flagged"
+    );
+    assert!(found * 100 >= flagged * 95);
+    // Walls and floor bound the fluid too and are flagged; the bulk below is not.
+    assert!(false_pos * 5 <= interior);
+}
+
+#[test]
+fn morton_order_is_a_permutation_that_clusters() {
+    let (_, input) = scene_input(SceneKind::Sphere, 5000, 0);
+    let order = morton_order(&input.positions);
+    let mut seen = order.clone();
+    seen.sort_unstable();
+    assert!(seen.iter().enumerate().all(|(i, &v)| i as u32 == v));
+    // Consecutive points are close: the mean step is far below the scene size.
+    let step = |ids: &[u32]| {
+        ids.windows(2)
+            .map(|w| {
+                let (a, b) = (
+                    input.positions[w[0] as usize],
+                    input.positions[w[1] as usize],
+                );
+                (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
+            })
+            .sum::<f64>()
+            / ids.len() as f64
+    };
+    let shuffled: Vec<u32> = (0..order.len() as u32)
+        .map(|i| (i * 7919) % order.len() as u32)
+        .collect();
+    assert!(step(&order) * 5.0 < step(&shuffled));
+}
+
+/// A series of sphere steps, one of which cannot be read.
+struct Series {
+    steps: usize,
+    bad: Option<usize>,
+}
+
+impl StepSource for Series {
+    fn steps(&self) -> Vec<(usize, f64)> {
+        (0..self.steps).map(|i| (i, i as f64 * 0.1)).collect()
+    }
+    fn read(&self, index: usize) -> Result<StepInput, String> {
+        if Some(index) == self.bad {
+            return Err(format!("step {index}: unreadable on purpose"));
+        }
+        Ok(scene_input(SceneKind::Sphere, 800, index).1)
+    }
+}
+
+fn options(dir: &Path, shard: Shard) -> BatchOptions {
+    BatchOptions {
+        out: dir.to_path_buf(),
+        steps: None,
+        jobs: 2,
+        shard,
+        params: params(),
+    }
+}
+
+fn section_sums(dir: &Path, steps: usize) -> Vec<Vec<String>> {
+    (0..steps)
+        .map(|i| {
+            let f = CacheFile::open(&dir.join(step_file_name(i))).unwrap();
+            f.header().sections.iter().map(|s| s.xxh3.clone()).collect()
+        })
+        .collect()
+}
+
+#[test]
+fn batches_resume_shard_and_go_on_past_bad_steps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let whole = tmp.path().join("whole");
+    let series = Series {
+        steps: 6,
+        bad: Some(3),
+    };
+    let report = run_batch(&series, &options(&whole, Shard::WHOLE), &|_| {}).unwrap();
+    assert_eq!((report.baked, report.kept), (5, 0));
+    assert_eq!(report.failed.len(), 1);
+    assert_eq!(report.failed[0].0, 3);
+    let manifest = Manifest::read(&whole).unwrap();
+    assert_eq!(
+        manifest.steps.iter().map(|s| s.index).collect::<Vec<_>>(),
+        vec![0, 1, 2, 4, 5]
+    );
+
+    // Resume: the good steps are kept, the bad one is retried (and now works).
+    let fixed = Series {
+        steps: 6,
+        bad: None,
+    };
+    let report = run_batch(&fixed, &options(&whole, Shard::WHOLE), &|_| {}).unwrap();
+    assert_eq!((report.baked, report.kept, report.failed.len()), (1, 5, 0));
+
+    // A corrupted step is not kept: it is baked again.
+    let victim = whole.join(step_file_name(2));
+    let mut bytes = std::fs::read(&victim).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 1;
+    std::fs::write(&victim, bytes).unwrap();
+    let report = run_batch(&fixed, &options(&whole, Shard::WHOLE), &|_| {}).unwrap();
+    assert_eq!((report.baked, report.kept), (1, 5));
+
+    // Other parameters: every step is baked again.
+    let mut other = options(&whole, Shard::WHOLE);
+    other.params.mls.degree = 3;
+    let report = run_batch(&fixed, &other, &|_| {}).unwrap();
+    assert_eq!((report.baked, report.kept), (6, 0));
+
+    // Three shards into one directory give the same caches as one run.
+    let single = tmp.path().join("single");
+    run_batch(&fixed, &options(&single, Shard::WHOLE), &|_| {}).unwrap();
+    let sharded = tmp.path().join("sharded");
+    let mut owned = Vec::new();
+    for index in 0..3 {
+        let shard = Shard { index, count: 3 };
+        owned.push(plan(&fixed, &options(&sharded, shard)).len());
+        run_batch(&fixed, &options(&sharded, shard), &|_| {}).unwrap();
+    }
+    assert_eq!(owned, vec![2, 2, 2]);
+    let (manifest, problems) = Manifest::rebuild(&sharded).unwrap();
+    assert!(problems.is_empty());
+    assert_eq!(manifest.steps.len(), 6);
+    assert_eq!(section_sums(&single, 6), section_sums(&sharded, 6));
+}
