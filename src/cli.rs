@@ -37,6 +37,21 @@ pub enum Command {
 pub enum BenchCommand {
     /// CPU MLS accuracy against analytic scenes: error vs cost tables and a plot.
     Accuracy(AccuracyArgs),
+    /// Bake stage times against the thesis, bytes per point, section encodings, load times.
+    Bake(BakeBenchArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct BakeBenchArgs {
+    /// Markdown report to write.
+    #[arg(long, default_value = "docs/results-bake.md")]
+    pub out: PathBuf,
+    /// Runs per size (median reported; 1 at 1M points).
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Only 2.5k and 10k points.
+    #[arg(long)]
+    pub quick: bool,
 }
 
 #[derive(Debug, Args)]

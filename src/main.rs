@@ -3,6 +3,7 @@
 
 mod accuracy;
 mod bake;
+mod bench_bake;
 mod cli;
 mod config;
 mod generate;
@@ -31,6 +32,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
         Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
+        Command::Bench(cli::BenchCommand::Bake(args)) => bench_bake::run(&args),
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
         Command::Inspect(args) => inspect::run(&args),

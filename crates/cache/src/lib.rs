@@ -7,6 +7,8 @@ mod bvh;
 mod codec;
 mod error;
 mod format;
+#[doc(hidden)]
+pub mod fuzzing;
 mod layout;
 mod manifest;
 pub mod names;
@@ -28,6 +30,16 @@ pub use reader::CacheFile;
 pub use step::LoadedStep;
 pub use verify::VerifyReport;
 pub use writer::{Compression, SectionInput, encode_step, write_step};
+
+/// Decodes stored bytes (for measuring encodings); see [`CacheFile::decode_into`].
+pub fn decode_bytes(
+    stored: &[u8],
+    encoding: Encoding,
+    out: &mut [u8],
+    scratch: &mut Vec<u8>,
+) -> Result<(), DecodeError> {
+    codec::decode_into(stored, encoding, out, scratch)
+}
 
 /// Encodes raw bytes with `encoding` (for measuring encodings).
 pub fn encode_bytes(raw: &[u8], encoding: Encoding, level: i32) -> std::io::Result<Vec<u8>> {
