@@ -162,10 +162,9 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         let path = dir.path().join("step.slc");
         slosh_fileio::atomic_write(&path, &encoded)?;
         let mut buffers = file.section_buffers();
-        let mut scratch = Vec::new();
         let load_runs = if n >= 1_000_000 { 5 } else { 20 };
         let load = time(load_runs, || {
-            CacheFile::open(&path).and_then(|f| f.decode_all_into(&mut buffers, &mut scratch))
+            CacheFile::open(&path).and_then(|f| f.decode_all_into(&mut buffers))
         });
         let open_only = time(load_runs, || CacheFile::open(&path).map(|_| ()));
         let verify = time(load_runs.min(5), || {

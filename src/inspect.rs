@@ -84,7 +84,7 @@ struct FileReport {
 
 fn statistics(file: &CacheFile) -> Result<Statistics> {
     let h = file.header();
-    let start: Vec<u32> = file.decode(names::NEIGHBOUR_START)?;
+    let (start, _) = file.neighbour_lists()?;
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
     let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
     let nodes: Vec<GpuBvhNode> = file.decode(names::BVH_NODES)?;
@@ -265,8 +265,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
     }
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
     let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
-    let start: Vec<u32> = file.decode(names::NEIGHBOUR_START)?;
-    let neighbours: Vec<u32> = file.decode(names::NEIGHBOURS)?;
+    let (start, neighbours) = file.neighbour_lists()?;
     let p = points[i];
     let b = balls[i];
     let local = p.position.map(f64::from);

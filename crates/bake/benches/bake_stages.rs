@@ -42,11 +42,10 @@ fn bench(c: &mut Criterion) {
     std::fs::write(&path, &bytes).unwrap();
     let file = CacheFile::open(&path).unwrap();
     let mut buffers = file.section_buffers();
-    let mut scratch = Vec::new();
     g.bench_function("load_decode_all_sections", |b| {
         b.iter(|| {
             let f = CacheFile::open(Path::new(&path)).unwrap();
-            f.decode_all_into(&mut buffers, &mut scratch).unwrap();
+            f.decode_all_into(&mut buffers).unwrap();
         })
     });
     g.finish();

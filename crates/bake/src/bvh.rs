@@ -11,7 +11,7 @@ use obvhs::bvh2::builder::build_bvh2;
 use slosh_cache::{Bvh, GpuBvhNode};
 
 /// Up to this many items share a leaf (obvhs collapses by SAH cost below it).
-pub const MAX_LEAF_ITEMS: u32 = 4;
+pub const MAX_LEAF_ITEMS: u32 = 8;
 
 fn down(v: f64) -> f32 {
     let f = v as f32;

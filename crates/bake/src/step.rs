@@ -25,6 +25,11 @@ pub enum BakeError {
     },
 }
 
+/// Points per neighbour cluster. Measured on a 100k-point sphere at the default cap of 128:
+/// clusters of 16, 32 and 64 store 16.8, 10.9 and 7.4 candidate ids per point, against 128
+/// per point for separate lists; 32 also matches a GPU subgroup of points.
+pub const NEIGHBOUR_CLUSTER: u32 = 32;
+
 /// A baked step: the header (sections still empty) and the sections to write.
 #[derive(Debug)]
 pub struct BakedStep {
@@ -223,6 +228,33 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             }
         })
         .collect();
+    // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
+    // rounded up to f32 keeps every stored list within its distance filter.
+    let (cluster_start, cluster_ids) = slosh_mls::cluster_lists(
+        &surface.neighbour_start,
+        &surface.neighbours,
+        NEIGHBOUR_CLUSTER as usize,
+    );
+    // The reach as f32, raised where needed so that the expansion, which measures distances
+    // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
+    let stored: Vec<slosh_mls::V3<f32>> = points
+        .iter()
+        .map(|p| slosh_mls::V3::new(p.position[0], p.position[1], p.position[2]))
+        .collect();
+    let reach: Vec<f32> = (0..n)
+        .map(|i| {
+            let far2 = surface
+                .neighbours_of(i)
+                .iter()
+                .map(|&j| (stored[j as usize] - stored[i]).length_squared())
+                .fold(0.0f32, f32::max);
+            let mut r = (surface.reach[i] as f32).max(far2.sqrt());
+            while r * r < far2 || f64::from(r) < surface.reach[i] {
+                r = r.next_up();
+            }
+            r
+        })
+        .collect();
     let spheres: Vec<GpuSphere> = surface
         .spheres
         .iter()
@@ -239,16 +271,17 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             Encoding::Shuffle4Zstd,
         ),
         SectionInput::new(names::BALLS, Element::Ball, &balls, Encoding::Shuffle4Zstd),
+        SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
         SectionInput::new(
-            names::NEIGHBOUR_START,
+            names::CLUSTER_START,
             Element::U32,
-            &surface.neighbour_start,
+            &cluster_start,
             Encoding::Delta4Shuffle4Zstd,
         ),
         SectionInput::new(
-            names::NEIGHBOURS,
+            names::CLUSTER_NEIGHBOURS,
             Element::U32,
-            &surface.neighbours,
+            &cluster_ids,
             Encoding::Delta4Shuffle4Zstd,
         ),
         SectionInput::new(
@@ -329,6 +362,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         bounds: [lo, hi],
         smoothing_length: surface.h,
         spacing: surface.spacing,
+        neighbour_cluster: NEIGHBOUR_CLUSTER,
         mls: MlsSettings::from_params(&params.mls),
         bake: params.record(),
         params_hash: params.hash(),

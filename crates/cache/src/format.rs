@@ -196,6 +196,9 @@ pub struct Header {
     /// Global smoothing length and mean nearest-neighbour spacing, in local units.
     pub smoothing_length: f64,
     pub spacing: f64,
+    /// Points per neighbour cluster: `cluster_neighbours` holds one candidate list per run of
+    /// this many consecutive points.
+    pub neighbour_cluster: u32,
     pub mls: MlsSettings,
     /// Everything that shaped the output, as the bake recorded it, and its hash.
     pub bake: serde_json::Value,

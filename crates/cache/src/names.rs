@@ -3,8 +3,9 @@
 pub const POINTS: &str = "points";
 pub const NORMALS: &str = "normals";
 pub const BALLS: &str = "balls";
-pub const NEIGHBOUR_START: &str = "neighbour_start";
-pub const NEIGHBOURS: &str = "neighbours";
+pub const REACH: &str = "reach";
+pub const CLUSTER_START: &str = "cluster_start";
+pub const CLUSTER_NEIGHBOURS: &str = "cluster_neighbours";
 pub const SPHERES: &str = "spheres";
 pub const BVH_NODES: &str = "bvh_nodes";
 pub const BVH_ITEMS: &str = "bvh_items";

@@ -289,13 +289,17 @@ impl CacheFile {
     }
 
     /// Decodes every section into `buffers` (from [`CacheFile::section_buffers`] of a file with
-    /// the same table, reused across steps).
-    pub fn decode_all_into(&self, buffers: &mut [Vec<u8>], scratch: &mut Vec<u8>) -> Result<()> {
-        for (entry, buf) in self.header.sections.iter().zip(buffers) {
-            buf.resize(entry.raw as usize, 0);
-            self.decode_into(entry, buf, scratch)?;
-        }
-        Ok(())
+    /// the same table, reused across steps), sections in parallel.
+    pub fn decode_all_into(&self, buffers: &mut [Vec<u8>]) -> Result<()> {
+        use rayon::prelude::*;
+        self.header
+            .sections
+            .par_iter()
+            .zip(buffers.par_iter_mut())
+            .try_for_each_init(Vec::new, |scratch, (entry, buf)| {
+                buf.resize(entry.raw as usize, 0);
+                self.decode_into(entry, buf, scratch)
+            })
     }
 
     /// Decodes a whole section into a new vector of `T`.

@@ -49,6 +49,63 @@ impl MlsSettings {
     }
 }
 
+/// What neighbour lists are recovered from: stored points (with radii), positions and data
+/// normals as vectors, reaches.
+struct Geometry {
+    points: Vec<GpuPoint>,
+    positions: Vec<V3<f32>>,
+    normals: Option<Vec<V3<f32>>>,
+    reach: Vec<f32>,
+}
+
+impl CacheFile {
+    fn geometry(&self) -> Result<Geometry> {
+        let points: Vec<GpuPoint> = self.decode(names::POINTS)?;
+        let normals: Option<Vec<GpuNormal>> = self
+            .section(names::NORMALS)
+            .map(|_| self.decode(names::NORMALS))
+            .transpose()?;
+        let reach: Vec<f32> = self.decode(names::REACH)?;
+        if reach.len() != points.len() || normals.as_ref().is_some_and(|n| n.len() != points.len())
+        {
+            return Err(Error::Invalid {
+                path: self.path().to_path_buf(),
+                problem: format!(
+                    "{} points, {} reaches, {:?} normals",
+                    points.len(),
+                    reach.len(),
+                    normals.as_ref().map(Vec::len)
+                ),
+            });
+        }
+        Ok(Geometry {
+            positions: points.iter().map(|p| v3(p.position)).collect(),
+            normals: normals.map(|ns| ns.iter().map(|n| v3(n.normal)).collect()),
+            points,
+            reach,
+        })
+    }
+
+    fn expand(&self, g: &Geometry) -> Result<(Vec<u32>, Vec<u32>)> {
+        let cluster_start: Vec<u32> = self.decode(names::CLUSTER_START)?;
+        let cluster_ids: Vec<u32> = self.decode(names::CLUSTER_NEIGHBOURS)?;
+        Ok(slosh_mls::expand_clusters(
+            &g.positions,
+            g.normals.as_deref(),
+            &g.reach,
+            self.header().neighbour_cluster as usize,
+            &cluster_start,
+            &cluster_ids,
+        ))
+    }
+
+    /// Every point's neighbour list (CSR), recovered from the cluster lists by the rule in
+    /// `slosh_mls::expand_clusters`.
+    pub fn neighbour_lists(&self) -> Result<(Vec<u32>, Vec<u32>)> {
+        self.expand(&self.geometry()?)
+    }
+}
+
 /// A step ready for the CPU tracer, in the file's local coordinates.
 #[derive(Debug)]
 pub struct LoadedStep {
@@ -72,11 +129,14 @@ impl LoadedStep {
             .mls
             .to_params()
             .ok_or_else(|| invalid(format!("unknown normals mode '{}'", header.mls.normals)))?;
-        let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
-        let normals: Option<Vec<GpuNormal>> = file
-            .section(names::NORMALS)
-            .map(|_| file.decode(names::NORMALS))
-            .transpose()?;
+        let geometry = file.geometry()?;
+        let (neighbour_start, neighbours) = file.expand(&geometry)?;
+        let Geometry {
+            points,
+            positions,
+            normals,
+            reach,
+        } = geometry;
         let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
         let spheres: Vec<GpuSphere> = file.decode(names::SPHERES)?;
         if balls.len() != points.len() {
@@ -101,13 +161,14 @@ impl LoadedStep {
             .collect();
         let surface = Surface::from_parts(SurfaceParts {
             origin: [0.0; 3],
-            points: points.iter().map(|p| v3(p.position)).collect(),
-            normals: normals.map(|ns| ns.iter().map(|n| v3(n.normal)).collect()),
+            points: positions,
+            normals,
             radii: points.iter().map(|p| p.radius).collect(),
             h: header.smoothing_length as f32,
             spacing: header.spacing as f32,
-            neighbour_start: file.decode(names::NEIGHBOUR_START)?,
-            neighbours: file.decode(names::NEIGHBOURS)?,
+            neighbour_start,
+            neighbours,
+            reach,
             capped: header.stats.capped as usize,
             balls: points
                 .iter()

@@ -46,21 +46,33 @@ impl CacheFile {
         let points: Vec<GpuPoint> = self.decode(names::POINTS).map_err(decode_err)?;
         let balls: Vec<GpuBall> = self.decode(names::BALLS).map_err(decode_err)?;
         let spheres: Vec<GpuSphere> = self.decode(names::SPHERES).map_err(decode_err)?;
-        let start: Vec<u32> = self.decode(names::NEIGHBOUR_START).map_err(decode_err)?;
-        let neighbours: Vec<u32> = self.decode(names::NEIGHBOURS).map_err(decode_err)?;
+        let reach: Vec<f32> = self.decode(names::REACH).map_err(decode_err)?;
+        let start: Vec<u32> = self.decode(names::CLUSTER_START).map_err(decode_err)?;
+        let neighbours: Vec<u32> = self.decode(names::CLUSTER_NEIGHBOURS).map_err(decode_err)?;
+        let size = header.neighbour_cluster as usize;
+        if size == 0 {
+            return Err("the neighbour cluster size is 0".into());
+        }
+        let clusters = n.div_ceil(size);
         let bvh = Bvh {
             nodes: self
                 .decode::<GpuBvhNode>(names::BVH_NODES)
                 .map_err(decode_err)?,
             items: self.decode(names::BVH_ITEMS).map_err(decode_err)?,
         };
-        if points.len() != n || balls.len() != n || start.len() != n + 1 {
+        if points.len() != n || balls.len() != n || reach.len() != n || start.len() != clusters + 1
+        {
             return Err(format!(
-                "the header says {n} points; sections hold {} points, {} balls, {} neighbour offsets",
+                "the header says {n} points in {clusters} clusters; sections hold {} points, {} \
+                 balls, {} reaches, {} cluster offsets",
                 points.len(),
                 balls.len(),
+                reach.len(),
                 start.len()
             ));
+        }
+        if let Some(i) = reach.iter().position(|r| !(r.is_finite() && *r >= 0.0)) {
+            return Err(format!("point {i} has an invalid reach {}", reach[i]));
         }
         for entry in &header.sections {
             let per_point =
@@ -82,15 +94,15 @@ impl CacheFile {
             || start.windows(2).any(|w| w[0] > w[1])
             || start.last().map(|&e| e as usize) != Some(neighbours.len())
         {
-            return Err("neighbour offsets are not monotone from 0 to the list length".into());
+            return Err("cluster offsets are not monotone from 0 to the list length".into());
         }
-        for i in 0..n {
+        for i in 0..clusters {
             let list = &neighbours[start[i] as usize..start[i + 1] as usize];
             if list.windows(2).any(|w| w[0] >= w[1])
                 || list.last().is_some_and(|&j| j as usize >= n)
             {
                 return Err(format!(
-                    "the neighbour list of point {i} is not sorted, distinct and in range"
+                    "the candidate list of cluster {i} is not sorted, distinct and in range"
                 ));
             }
         }

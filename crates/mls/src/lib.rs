@@ -7,6 +7,7 @@
 // Index loops mirror the WGSL port line for line, which has no iterators.
 #![allow(clippy::needless_range_loop)]
 
+mod clusters;
 mod fit;
 mod frame;
 mod grid;
@@ -18,6 +19,7 @@ mod support;
 mod surface;
 mod tracer;
 
+pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use frame::Frame;
 pub use intersect::{Ball, HitStatus, Outcome, Params, Ray, initial_fit, intersect_ball, ray_ball};

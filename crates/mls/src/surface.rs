@@ -91,6 +91,7 @@ pub struct SurfaceParts<T> {
     pub spacing: T,
     pub neighbour_start: Vec<u32>,
     pub neighbours: Vec<u32>,
+    pub reach: Vec<T>,
     pub capped: usize,
     pub balls: Vec<Ball<T>>,
     pub ball_fits: Vec<BallFit>,
@@ -113,6 +114,9 @@ pub struct Surface<T> {
     /// CSR neighbour lists: the neighbours of point i are `neighbours[start[i]..start[i + 1]]`.
     pub neighbour_start: Vec<u32>,
     pub neighbours: Vec<u32>,
+    /// How far each point's neighbour list reaches: ρ_i + support·h_i, or the distance of the
+    /// farthest neighbour kept where the cap cut the list.
+    pub reach: Vec<T>,
     /// Points whose neighbour list was cut at the cap.
     pub capped: usize,
     pub balls: Vec<Ball<T>>,
@@ -192,7 +196,7 @@ impl<T: Real> Surface<T> {
         };
         let cap = NonZero::new(params.neighbour_cap.max(1)).ok_or(SurfaceError::BadK)?;
 
-        let lists: Vec<(Vec<u32>, bool)> = (0..n)
+        let lists: Vec<(Vec<u32>, f64, bool)> = (0..n)
             .into_par_iter()
             .map(|i| {
                 let reach = radii[i] + params.support * ball_h(i);
@@ -203,6 +207,15 @@ impl<T: Real> Surface<T> {
                     .unsorted()
                     .execute();
                 let capped = found.len() == cap.get();
+                // A cut list reaches only as far as its farthest member: the radius that
+                // reproduces it as a distance filter (`crate::clusters::expand`).
+                let reach = if capped {
+                    // Rounded up so that squaring it again cannot fall below the farthest d².
+                    let far = found.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt();
+                    far.next_up().next_up()
+                } else {
+                    reach
+                };
                 let own = unit_normals.as_ref().and_then(|ns| ns[i]);
                 let mut list: Vec<u32> = found
                     .iter()
@@ -217,15 +230,17 @@ impl<T: Real> Surface<T> {
                     .collect();
                 // Index order: the order the GPU reads them in, and small deltas in the cache.
                 list.sort_unstable();
-                (list, capped)
+                (list, reach, capped)
             })
             .collect();
         clock.lap("neighbour lists");
         let mut neighbour_start = Vec::with_capacity(n + 1);
         let mut neighbours = Vec::new();
         let mut capped = 0;
+        let mut reach = Vec::with_capacity(n);
         neighbour_start.push(0u32);
-        for (list, c) in &lists {
+        for (list, r, c) in &lists {
+            reach.push(*r);
             neighbours.extend_from_slice(list);
             neighbour_start.push(neighbours.len() as u32);
             capped += usize::from(*c);
@@ -305,6 +320,7 @@ impl<T: Real> Surface<T> {
             spacing: T::c(spacing),
             neighbour_start,
             neighbours,
+            reach: reach.iter().map(|&r| T::c(r)).collect(),
             capped,
             balls,
             ball_fits,
@@ -330,6 +346,9 @@ impl<T: Real> Surface<T> {
         }
         if parts.normals.as_ref().is_some_and(|v| v.len() != n) {
             return bad("normals and points differ in count".into());
+        }
+        if parts.reach.len() != n {
+            return bad(format!("{n} points but {} reaches", parts.reach.len()));
         }
         if parts.neighbour_start.len() != n + 1
             || parts.neighbour_start.windows(2).any(|w| w[0] > w[1])
@@ -370,6 +389,7 @@ impl<T: Real> Surface<T> {
             spacing,
             neighbour_start,
             neighbours,
+            reach,
             capped,
             balls,
             ball_fits,
@@ -385,6 +405,7 @@ impl<T: Real> Surface<T> {
             spacing,
             neighbour_start,
             neighbours,
+            reach,
             capped,
             balls,
             ball_fits,
@@ -406,6 +427,7 @@ impl<T: Real> Surface<T> {
             spacing: self.spacing,
             neighbour_start: self.neighbour_start,
             neighbours: self.neighbours,
+            reach: self.reach,
             capped: self.capped,
             balls: self.balls,
             ball_fits: self.ball_fits,

@@ -118,3 +118,42 @@ fn without_normals_the_covariance_plane_still_finds_the_surface() {
     assert_eq!(st.non_finite, 0);
     assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
 }
+
+/// Cluster lists lose nothing: each point's own list comes back exactly from its cluster's
+/// union by the reach and normal rule, capped lists included, across both faces of a sheet.
+#[test]
+fn cluster_lists_expand_to_the_neighbour_lists() {
+    for (kind, cap) in [
+        (SceneKind::Sphere, 128),
+        (SceneKind::Sphere, 40),
+        (SceneKind::Sheet, 128),
+    ] {
+        let sc = scene(spec(kind, 3000));
+        let surface = surface_of::<f64>(
+            &sc,
+            0,
+            &SurfaceParams {
+                neighbour_cap: cap,
+                ..Default::default()
+            },
+            true,
+        );
+        let (cs, ci) = cluster_lists(&surface.neighbour_start, &surface.neighbours, 32);
+        let (start, ids) = expand_clusters(
+            &surface.points,
+            surface.normals.as_deref(),
+            &surface.reach,
+            32,
+            &cs,
+            &ci,
+        );
+        eprintln!(
+            "{kind:?} cap {cap}: {} capped, {:.1} ids per point in lists, {:.1} in clusters",
+            surface.capped,
+            surface.neighbours.len() as f64 / surface.len() as f64,
+            ci.len() as f64 / surface.len() as f64
+        );
+        assert_eq!(start, surface.neighbour_start, "{kind:?} cap {cap}");
+        assert_eq!(ids, surface.neighbours, "{kind:?} cap {cap}");
+    }
+}
