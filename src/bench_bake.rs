@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
-use slosh_cache::{CacheFile, Encoding, LoadedStep, encode_bytes, encode_step};
+use slosh_cache::{CacheFile, Compression, Encoding, LoadedStep, encode_bytes, encode_step};
 use slosh_fileio::FileBytes;
 use slosh_mls::{Surface, SurfaceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
@@ -167,6 +167,16 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
             CacheFile::open(&path).and_then(|f| f.decode_all_into(&mut buffers))
         });
         let open_only = time(load_runs, || CacheFile::open(&path).map(|_| ()));
+        // The same step written uncompressed (`--compress none`): loading is copying.
+        let raw_path = dir.path().join("raw.slc");
+        let baked_raw = bake_step(&inp, &params)?;
+        slosh_fileio::atomic_write(
+            &raw_path,
+            &encode_step(baked_raw.header, &baked_raw.sections, Compression::None)?,
+        )?;
+        let load_raw = time(load_runs, || {
+            CacheFile::open(&raw_path).and_then(|f| f.decode_all_into(&mut buffers))
+        });
         let verify = time(load_runs.min(5), || {
             CacheFile::open(&path).and_then(|f| f.verify())
         });
@@ -178,10 +188,11 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         let raw_total: u64 = file.header().sections.iter().map(|s| s.raw).sum();
         writeln!(
             load_rows,
-            "| {n} | {:.2} ms | {:.2} ms | {:.2} GB/s | {:.1} ms | {:.1} ms |",
+            "| {n} | {:.2} ms | {:.2} ms | {:.2} GB/s | {:.2} ms | {:.1} ms | {:.1} ms |",
             open_only * 1e3,
             load * 1e3,
             raw_total as f64 / load / 1e9,
+            load_raw * 1e3,
             verify * 1e3,
             cpu_ready * 1e3
         )?;
@@ -204,7 +215,7 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
     )?;
     writeln!(
         md,
-        "## Load time (file in the page cache)\n\n| points | open (map + checks) | open + decode every section into ready buffers | effective rate (raw bytes) | open + full verify | open + CPU tracer structures |\n|---|---|---|---|---|---|\n{load_rows}"
+        "## Load time (file in the page cache)\n\n| points | open (map + checks) | open + decode every section into ready buffers | effective rate (raw bytes) | same, written with `--compress none` | open + full verify | open + CPU tracer structures |\n|---|---|---|---|---|---|---|\n{load_rows}"
     )?;
 
     // Encodings measured on the 100k (or largest) step's sections.

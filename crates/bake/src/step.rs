@@ -270,7 +270,8 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             &points,
             Encoding::Shuffle4Zstd,
         ),
-        SectionInput::new(names::BALLS, Element::Ball, &balls, Encoding::Shuffle4Zstd),
+        // Plain zstd: as small as shuffled here (2.31× vs 2.36×) and decodes 1.7× faster.
+        SectionInput::new(names::BALLS, Element::Ball, &balls, Encoding::Zstd),
         SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
         SectionInput::new(
             names::CLUSTER_START,
