@@ -14,14 +14,7 @@ fn spread(v: u64) -> u64 {
 /// The permutation that sorts `points` by 63-bit Morton code over their bounding box
 /// (ties keep input order).
 pub fn morton_order(points: &[[f64; 3]]) -> Vec<u32> {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in points {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
+    let (lo, hi) = slosh_mls::bounds(points);
     let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
     let scale = if extent > 0.0 {
         ((1u64 << 21) - 1) as f64 / extent

@@ -114,14 +114,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
 
     // 2. Recentre and scale: local = (world − origin) / scale, coordinates within [−1, 1].
     let world = permute(&input.positions, &kept);
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in &world {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
+    let (lo, hi) = slosh_mls::bounds(&world);
     let origin: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
     let half = (0..3).map(|a| 0.5 * (hi[a] - lo[a])).fold(0.0, f64::max);
     let scale = if half > 0.0 { half } else { 1.0 };

@@ -40,14 +40,7 @@ fn bake_to_file(input: &StepInput, params: &BakeParams) -> CacheFile {
 }
 
 fn camera_for(points: &[[f64; 3]], size: u32) -> Camera {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in points {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
+    let (lo, hi) = slosh_mls::bounds(points);
     let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
     let r = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt() * 0.5;
     Camera {

@@ -30,5 +30,5 @@ pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
     weight,
 };
-pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts};
+pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds};
 pub use tracer::{BallIndex, Camera, TraceHit};

@@ -584,7 +584,8 @@ fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
     (len.is_finite() && len > 1e-12).then(|| [n[0] / len, n[1] / len, n[2] / len])
 }
 
-pub(crate) fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+/// The axis-aligned bounding box (lo, hi) of `points`; infinite and empty for no points.
+pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in points {
