@@ -83,24 +83,6 @@ pub struct Sphere<T> {
 /// Everything a [`Surface`] holds except its search grid: what a cache stores.
 #[derive(Debug, Clone)]
 pub struct SurfaceParts<T> {
-    pub origin: [f64; 3],
-    pub points: Vec<V3<T>>,
-    pub normals: Option<Vec<V3<T>>>,
-    pub radii: Vec<T>,
-    pub h: T,
-    pub spacing: T,
-    pub neighbour_start: Vec<u32>,
-    pub neighbours: Vec<u32>,
-    pub reach: Vec<T>,
-    pub capped: usize,
-    pub balls: Vec<Ball<T>>,
-    pub ball_fits: Vec<BallFit>,
-    pub spheres: Vec<Sphere<T>>,
-    pub params: SurfaceParams,
-}
-
-#[derive(Debug, Clone)]
-pub struct Surface<T> {
     /// Subtracted from every input coordinate (in f64) before conversion to `T`, so f32 keeps
     /// its precision at any offset.
     pub origin: [f64; 3],
@@ -124,9 +106,23 @@ pub struct Surface<T> {
     /// Droplets; in candidate lists sphere d is item `len() + d`.
     pub spheres: Vec<Sphere<T>>,
     pub params: SurfaceParams,
+}
+
+/// A point set ready for tracing: its parts (read through `Deref`, since a surface is its
+/// parts plus an index over them) and a uniform grid over the balls.
+#[derive(Debug, Clone)]
+pub struct Surface<T> {
+    parts: SurfaceParts<T>,
     /// Seconds spent per stage of [`Surface::build`] (empty for surfaces from parts).
     pub build_seconds: Vec<(&'static str, f64)>,
     pub(crate) grid: Grid,
+}
+
+impl<T> std::ops::Deref for Surface<T> {
+    type Target = SurfaceParts<T>;
+    fn deref(&self) -> &SurfaceParts<T> {
+        &self.parts
+    }
 }
 
 impl<T: Real> Surface<T> {
@@ -388,37 +384,8 @@ impl<T: Real> Surface<T> {
             .collect();
         let mean = parts.radii.iter().map(|&r| Real::to_f64(r)).sum::<f64>() / n.max(1) as f64;
         let grid = Grid::build(&centres, &radii, mean);
-        let SurfaceParts {
-            origin,
-            points,
-            normals,
-            radii,
-            h,
-            spacing,
-            neighbour_start,
-            neighbours,
-            reach,
-            capped,
-            balls,
-            ball_fits,
-            spheres,
-            params,
-        } = parts;
         Ok(Surface {
-            origin,
-            points,
-            normals,
-            radii,
-            h,
-            spacing,
-            neighbour_start,
-            neighbours,
-            reach,
-            capped,
-            balls,
-            ball_fits,
-            spheres,
-            params,
+            parts,
             build_seconds: Vec::new(),
             grid,
         })
@@ -426,22 +393,7 @@ impl<T: Real> Surface<T> {
 
     /// The stored parts, without the grid.
     pub fn into_parts(self) -> SurfaceParts<T> {
-        SurfaceParts {
-            origin: self.origin,
-            points: self.points,
-            normals: self.normals,
-            radii: self.radii,
-            h: self.h,
-            spacing: self.spacing,
-            neighbour_start: self.neighbour_start,
-            neighbours: self.neighbours,
-            reach: self.reach,
-            capped: self.capped,
-            balls: self.balls,
-            ball_fits: self.ball_fits,
-            spheres: self.spheres,
-            params: self.params,
-        }
+        self.parts
     }
 
     pub fn len(&self) -> usize {
