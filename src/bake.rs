@@ -1,6 +1,5 @@
 //! `slosh bake`: the batch driver with a progress bar and a summary.
 
-use std::sync::Mutex;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
@@ -88,7 +87,6 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar.enable_steady_tick(Duration::from_millis(250));
-    let failures = Mutex::new(Vec::new());
     let report = run_batch(source, opts, &|event| match event {
         Event::Planned { steps } => bar.set_length(steps as u64),
         Event::Done { index, outcome } => {
@@ -97,12 +95,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
                     points, seconds, ..
                 } => bar.set_message(format!("step {index}: {points} points in {seconds:.2} s")),
                 Outcome::Kept => bar.set_message(format!("step {index}: kept")),
-                Outcome::Failed(e) => {
-                    bar.println(format!("step {index} failed: {e}"));
-                    if let Ok(mut f) = failures.lock() {
-                        f.push(index);
-                    }
-                }
+                Outcome::Failed(e) => bar.println(format!("step {index} failed: {e}")),
             }
             bar.inc(1);
         }

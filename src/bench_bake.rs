@@ -80,6 +80,12 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         md,
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     )?;
+    let encodings_size = *sizes
+        .iter()
+        .filter(|&&s| s <= 100_000)
+        .max()
+        .unwrap_or(&10_000);
+    let mut encodings_step = None;
     let mut size_rows = String::new();
     let mut load_rows = String::new();
     for &n in &sizes {
@@ -94,6 +100,7 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         let mut totals = Vec::new();
         let mut bares = Vec::new();
         let mut encoded = Vec::new();
+        let mut last_baked = None;
         // Baseline and bake alternate, so that both see the same machine load.
         for _ in 0..runs {
             bares.push(time(1, || {
@@ -108,7 +115,11 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
             let mut stages = baked.header.stats.stage_seconds.clone();
             stages.push(("encode".into(), enc));
             stage_runs.push(stages);
+            last_baked = Some(baked);
         }
+        let Some(baked) = last_baked else {
+            unreachable!("at least one run per size")
+        };
         let stage = |name: &str| {
             median(
                 stage_runs
@@ -173,10 +184,9 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         let open_only = time(load_runs, || CacheFile::open(&path).map(|_| ()));
         // The same step written uncompressed (`--compress none`): loading is copying.
         let raw_path = dir.path().join("raw.slc");
-        let baked_raw = bake_step(&inp, &params)?;
         slosh_fileio::atomic_write(
             &raw_path,
-            &encode_step(baked_raw.header, &baked_raw.sections, Compression::None)?,
+            &encode_step(baked.header.clone(), &baked.sections, Compression::None)?,
         )?;
         let load_raw = time(load_runs, || {
             CacheFile::open(&raw_path).and_then(|f| f.decode_all_into(&mut buffers))
@@ -204,6 +214,9 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
             "{n} points: total {total:.3} s, bare {bare:.3} s, load {:.2} ms",
             load * 1e3
         );
+        if n == encodings_size {
+            encodings_step = Some(baked);
+        }
     }
     writeln!(
         md,
@@ -223,12 +236,10 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
     )?;
 
     // Encodings measured on the 100k (or largest) step's sections.
-    let n = *sizes
-        .iter()
-        .filter(|&&s| s <= 100_000)
-        .max()
-        .unwrap_or(&10_000);
-    let baked = bake_step(&input(n), &params)?;
+    let n = encodings_size;
+    let Some(baked) = encodings_step else {
+        unreachable!("the encodings size is one of the sizes baked")
+    };
     writeln!(
         md,
         "## Section encodings ({n} points, zstd level 1)\n\nRatio = raw / stored; speeds are raw bytes per second, single thread, median of 5.\n\n| section | raw B/pt | encoding | ratio | compress GB/s | decompress GB/s |\n|---|---|---|---|---|---|"

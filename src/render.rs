@@ -155,13 +155,9 @@ pub fn write_npy(
     bytes.extend_from_slice(dict.as_bytes());
     bytes.resize(total - 1, b' ');
     bytes.push(b'\n');
-    bytes.extend_from_slice(bytemuck_f32(data));
+    bytes.extend_from_slice(bytemuck::cast_slice(data));
     slosh_fileio::atomic_write(path, &bytes)?;
     Ok(())
-}
-
-fn bytemuck_f32(data: &[f32]) -> &[u8] {
-    bytemuck::cast_slice(data)
 }
 
 /// The hit buffer of a render: 8 floats per pixel, zeros for a miss.

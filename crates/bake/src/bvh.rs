@@ -47,12 +47,7 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
     let mut nodes: Vec<GpuBvhNode> = Vec::with_capacity(built.nodes.len());
     let mut leaf_items: Vec<u32> = Vec::with_capacity(items.len());
     let mut queue = std::collections::VecDeque::from([(0usize, 0usize)]);
-    nodes.push(GpuBvhNode {
-        lo: [0.0; 3],
-        count: 0,
-        hi: [0.0; 3],
-        first: 0,
-    });
+    nodes.push(bytemuck::Zeroable::zeroed());
     while let Some((src, dst)) = queue.pop_front() {
         let node = &built.nodes[src];
         let lo = node.aabb().min;
@@ -75,12 +70,7 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
             let child = node.first_index as usize;
             for c in 0..2 {
                 queue.push_back((child + c, nodes.len()));
-                nodes.push(GpuBvhNode {
-                    lo: [0.0; 3],
-                    count: 0,
-                    hi: [0.0; 3],
-                    first: 0,
-                });
+                nodes.push(bytemuck::Zeroable::zeroed());
             }
         }
         nodes[dst] = out;

@@ -1,14 +1,12 @@
 //! One step in, one cache out: select → recentre and scale → Morton order → kNN, radii,
 //! neighbour lists, initial fits, droplets (`slosh_mls::Surface::build`) → BVH → sections.
 
-use std::time::Instant;
-
 use slosh_cache::{
     BallState, Element, Encoding, GpuBall, GpuNormal, GpuPoint, GpuSphere, Header, MlsSettings,
     SectionInput, Source, StepStats, Transform, names,
 };
 use slosh_ensight::FieldValues;
-use slosh_mls::{BallFit, FitStatus, Surface, SurfaceError};
+use slosh_mls::{BallFit, FitStatus, StageClock, Surface, SurfaceError};
 
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::select::{StepInput, estimate_surface};
@@ -37,29 +35,12 @@ pub struct BakedStep {
     pub sections: Vec<SectionInput>,
 }
 
-struct Clock {
-    last: Instant,
-    laps: Vec<(String, f64)>,
-}
-
-impl Clock {
-    fn lap(&mut self, name: &str) {
-        let now = Instant::now();
-        self.laps
-            .push((name.to_string(), (now - self.last).as_secs_f64()));
-        self.last = now;
-    }
-}
-
 fn permute<T: Copy>(values: &[T], order: &[u32]) -> Vec<T> {
     order.iter().map(|&i| values[i as usize]).collect()
 }
 
 pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
-    let mut clock = Clock {
-        last: Instant::now(),
-        laps: Vec::new(),
-    };
+    let mut clock = StageClock::start();
     let step = input.index;
     let input_err = |problem: String| BakeError::Input { step, problem };
     let n_in = input.positions.len();
@@ -147,12 +128,13 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     // 4–7. kNN, radii, neighbour lists, initial fits, droplets.
     let surface = Surface::<f64>::build(&local, normals.as_deref(), &params.mls)
         .map_err(|source| BakeError::Surface { step, source })?;
-    for (name, seconds) in &surface.build_seconds {
-        if *name != "grid" {
-            clock.laps.push((name.to_string(), *seconds));
-        }
-    }
-    clock.last = Instant::now();
+    let build_laps: Vec<_> = surface
+        .build_seconds
+        .iter()
+        .copied()
+        .filter(|(name, _)| *name != "grid")
+        .collect();
+    clock.extend(&build_laps);
 
     // 8. BVH over fitted balls and droplet spheres.
     let n = surface.len();
@@ -343,7 +325,11 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         });
     }
     clock.lap("sections");
-    stats.stage_seconds = clock.laps;
+    stats.stage_seconds = clock
+        .laps
+        .iter()
+        .map(|(name, s)| (name.to_string(), *s))
+        .collect();
 
     let header = Header {
         source: Source {

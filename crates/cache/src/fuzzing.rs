@@ -2,27 +2,22 @@
 //! checksum comparisons off so that mutations reach the header parser, the section decoders,
 //! the invariant checks and the CPU tracer. Never used by slosh itself.
 
-use std::cell::Cell;
 use std::path::Path;
 
 use slosh_fileio::FileBytes;
 
 use crate::reader::CacheFile;
 
-thread_local! {
-    pub(crate) static ACTIVE: Cell<bool> = const { Cell::new(false) };
-}
-
 /// Opens, verifies, loads and traces a few rays through `data`: errors are fine, panics,
 /// hangs and huge allocations are bugs.
 pub fn open_verify_trace(data: &[u8]) {
-    ACTIVE.with(|a| a.set(true));
-    let opened = CacheFile::from_bytes(FileBytes::from_vec(Path::new("fuzz.slc"), data.to_vec()));
-    ACTIVE.with(|a| a.set(false));
-    let Ok(mut file) = opened else {
+    let opened = CacheFile::parse(
+        FileBytes::from_vec(Path::new("fuzz.slc"), data.to_vec()),
+        true,
+    );
+    let Ok(file) = opened else {
         return;
     };
-    file.skip_checksums_for_fuzzing();
     if file.verify().is_err() {
         return;
     }

@@ -18,7 +18,9 @@ mod verify;
 mod writer;
 
 pub use bvh::Bvh;
-pub use codec::{DecodeError, shuffle4};
+/// The section codecs by themselves (for measuring encodings); readers use
+/// [`CacheFile::decode_into`].
+pub use codec::{DecodeError, decode_into as decode_bytes, encode as encode_bytes, shuffle4};
 pub use error::{Error, Result};
 pub use format::{
     ALIGN, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings, PREAMBLE_LEN, SectionEntry,
@@ -30,18 +32,3 @@ pub use reader::CacheFile;
 pub use step::LoadedStep;
 pub use verify::VerifyReport;
 pub use writer::{Compression, SectionInput, encode_step, write_step};
-
-/// Decodes stored bytes (for measuring encodings); see [`CacheFile::decode_into`].
-pub fn decode_bytes(
-    stored: &[u8],
-    encoding: Encoding,
-    out: &mut [u8],
-    scratch: &mut Vec<u8>,
-) -> Result<(), DecodeError> {
-    codec::decode_into(stored, encoding, out, scratch)
-}
-
-/// Encodes raw bytes with `encoding` (for measuring encodings).
-pub fn encode_bytes(raw: &[u8], encoding: Encoding, level: i32) -> std::io::Result<Vec<u8>> {
-    codec::encode(raw, encoding, level)
-}

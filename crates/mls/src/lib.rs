@@ -17,6 +17,7 @@ mod real;
 mod roots;
 mod support;
 mod surface;
+mod timing;
 mod tracer;
 
 pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
@@ -31,4 +32,5 @@ pub use support::{
     weight,
 };
 pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds};
+pub use timing::StageClock;
 pub use tracer::{BallIndex, Camera, TraceHit};

@@ -14,6 +14,7 @@ use crate::intersect::{Ball, Params, initial_fit};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
 use crate::support::NormalsMode;
+use crate::timing::StageClock;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SurfaceParams {
@@ -144,7 +145,7 @@ impl<T: Real> Surface<T> {
             });
         }
         let n = points.len();
-        let mut clock = Stages::default();
+        let mut clock = StageClock::start();
         let (lo, hi) = bounds(points);
         let origin = [
             0.5 * (lo[0] + hi[0]),
@@ -406,30 +407,6 @@ impl<T: Real> Surface<T> {
 
     pub fn neighbours_of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.neighbour_start[i] as usize..self.neighbour_start[i + 1] as usize]
-    }
-}
-
-/// Wall-clock laps of the build stages.
-#[derive(Debug)]
-struct Stages {
-    last: std::time::Instant,
-    laps: Vec<(&'static str, f64)>,
-}
-
-impl Default for Stages {
-    fn default() -> Self {
-        Stages {
-            last: std::time::Instant::now(),
-            laps: Vec::new(),
-        }
-    }
-}
-
-impl Stages {
-    fn lap(&mut self, name: &'static str) {
-        let now = std::time::Instant::now();
-        self.laps.push((name, (now - self.last).as_secs_f64()));
-        self.last = now;
     }
 }
 
