@@ -150,6 +150,7 @@ fn render_as<T: Real>(case: &Case, cfg: &Config, iterations: u32, epsilon: f64) 
         iterations,
         epsilon: T::c(epsilon),
         normals: cfg.normals,
+        h_factor: T::one(),
     };
     // One thread: a cost per ray that does not depend on what else the machine runs in parallel.
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;

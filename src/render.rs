@@ -218,6 +218,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             "covariance" => NormalsMode::Covariance,
             _ => NormalsMode::Mean,
         },
+        h_factor: 1.0,
     };
     let start = std::time::Instant::now();
     let hits = step.render(&camera, &params);

@@ -89,6 +89,7 @@ fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
             iterations,
             epsilon: 1e-4,
             normals: NormalsMode::Mean,
+            h_factor: 1.0,
         };
         // The baked BVH and the grid over the same loaded surface find identical hits.
         let via_bvh = step.render(&camera, &f32_params);
@@ -118,6 +119,7 @@ fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
             iterations,
             epsilon: 1e-4,
             normals: NormalsMode::Mean,
+            h_factor: 1.0,
         };
         let reference = oracle.render(&camera, &f64_params);
         // The lists come back from the clusters in f32 with nothing lost (a rounding tie at

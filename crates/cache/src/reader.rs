@@ -247,6 +247,23 @@ impl CacheFile {
         }
     }
 
+    /// The stored bytes of a section after checking its checksum: for a raw section, its
+    /// decoded bytes in place (zero-copy from the map).
+    pub fn checked_stored(&self, entry: &SectionEntry) -> Result<&[u8]> {
+        let stored = self.stored(entry);
+        let sum = hex64(xxh3_64(stored));
+        if sum != entry.xxh3 && !self.skip_checksums {
+            return Err(self.section_error(
+                entry,
+                format!(
+                    "checksum xxh3 {sum}, the table says {} (corrupt)",
+                    entry.xxh3
+                ),
+            ));
+        }
+        Ok(stored)
+    }
+
     /// Checks the section's checksum, then decodes it into `out` (exactly `entry.raw` bytes,
     /// e.g. a mapped GPU staging buffer). `scratch` is reused across calls.
     pub fn decode_into(
@@ -265,17 +282,7 @@ impl CacheFile {
                 ),
             ));
         }
-        let stored = self.stored(entry);
-        let sum = hex64(xxh3_64(stored));
-        if sum != entry.xxh3 && !self.skip_checksums {
-            return Err(self.section_error(
-                entry,
-                format!(
-                    "checksum xxh3 {sum}, the table says {} (corrupt)",
-                    entry.xxh3
-                ),
-            ));
-        }
+        let stored = self.checked_stored(entry)?;
         decode_into(stored, entry.encoding, out, scratch)
             .map_err(|e| self.section_error(entry, e.to_string()))
     }

@@ -36,6 +36,8 @@ pub struct Params<T> {
     /// Converged when successive hits differ by less than `epsilon` · h along the ray.
     pub epsilon: T,
     pub normals: NormalsMode,
+    /// Multiplies each ball's baked smoothing length during refinement (1 = as fitted).
+    pub h_factor: T,
 }
 
 impl<T: Real> Default for Params<T> {
@@ -51,6 +53,7 @@ impl<T: Real> Params<T> {
             iterations: 3,
             epsilon: T::c(1e-4),
             normals: NormalsMode::Mean,
+            h_factor: T::one(),
         }
     }
 }
@@ -202,23 +205,23 @@ pub fn intersect_ball<T: Real>(
     let mut degraded = ball.poly.degree < params.degree;
     let mut iterations = 1;
     let mut status = HitStatus::IterationLimit;
+    // Refinement may use a different smoothing length than the baked initial fit.
+    let h = ball.h * params.h_factor;
     while iterations < params.iterations.max(1) {
         let r = ray.origin + ray.dir * t;
-        let Some(support) =
-            support_normal(r, neighbours, normals, ball.h, params.normals, ray.origin)
+        let Some(support) = support_normal(r, neighbours, normals, h, params.normals, ray.origin)
         else {
             status = HitStatus::NoSupport;
             break;
         };
         let frame = Frame::from_normal(support.normal);
-        let f = fit(r, &frame, neighbours, ball.h, params.degree);
+        let f = fit(r, &frame, neighbours, h, params.degree);
         if f.status == FitStatus::Failed {
             status = HitStatus::DegenerateFit;
             break;
         }
         degraded |= matches!(f.status, FitStatus::Degraded { .. });
-        let Some((t_next, x, y)) = intersect_poly(ray, r, &frame, &f.poly, ball.h, t_lo, t_out)
-        else {
+        let Some((t_next, x, y)) = intersect_poly(ray, r, &frame, &f.poly, h, t_lo, t_out) else {
             return Outcome {
                 iterations: iterations + 1,
                 degree: f.poly.degree,
@@ -231,7 +234,7 @@ pub fn intersect_ball<T: Real>(
         t = t_next;
         normal = hit_normal(&frame, &f.poly, x, y);
         degree = f.poly.degree;
-        if dt < params.epsilon * ball.h {
+        if dt < params.epsilon * h {
             status = HitStatus::Converged;
             break;
         }

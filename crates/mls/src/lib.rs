@@ -33,4 +33,4 @@ pub use support::{
 };
 pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds};
 pub use timing::StageClock;
-pub use tracer::{BallIndex, Camera, TraceHit};
+pub use tracer::{BallIndex, Camera, CameraBasis, TraceHit};

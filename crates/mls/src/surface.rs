@@ -263,6 +263,7 @@ impl<T: Real> Surface<T> {
             iterations: 1,
             epsilon: T::c(1e-4),
             normals: params.normals,
+            h_factor: T::one(),
         };
         let fits: Vec<(Ball<T>, BallFit)> = (0..n)
             .into_par_iter()

@@ -55,21 +55,40 @@ fn normalize(a: [f64; 3]) -> [f64; 3] {
     }
 }
 
+/// A camera's ray basis: the ray through image-plane point (sx, sy) ∈ [−1, 1]² has direction
+/// normalize(forward + sx · right + sy · up).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraBasis {
+    pub forward: [f64; 3],
+    /// Unit right × tan(fov/2) × aspect.
+    pub right: [f64; 3],
+    /// Unit up × tan(fov/2).
+    pub up: [f64; 3],
+}
+
 impl Camera {
-    /// Origin and unit direction of the ray through the centre of pixel (x, y), y down.
-    pub fn ray(&self, x: u32, y: u32) -> ([f64; 3], [f64; 3]) {
+    /// The ray basis, shared by the CPU tracer and the GPU's uniforms.
+    pub fn basis(&self) -> CameraBasis {
         let w = normalize(sub(self.target, self.eye));
         let u = normalize(cross(w, self.up));
         let v = cross(u, w);
         let half = (self.fov_y.to_radians() * 0.5).tan();
         let aspect = f64::from(self.width) / f64::from(self.height.max(1));
-        let sx = ((f64::from(x) + 0.5) / f64::from(self.width) * 2.0 - 1.0) * half * aspect;
-        let sy = (1.0 - (f64::from(y) + 0.5) / f64::from(self.height) * 2.0) * half;
-        let d = normalize([
-            w[0] + sx * u[0] + sy * v[0],
-            w[1] + sx * u[1] + sy * v[1],
-            w[2] + sx * u[2] + sy * v[2],
-        ]);
+        CameraBasis {
+            forward: w,
+            right: u.map(|c| c * half * aspect),
+            up: v.map(|c| c * half),
+        }
+    }
+
+    /// Origin and unit direction of the ray through the centre of pixel (x, y), y down.
+    pub fn ray(&self, x: u32, y: u32) -> ([f64; 3], [f64; 3]) {
+        let b = self.basis();
+        let sx = (f64::from(x) + 0.5) / f64::from(self.width) * 2.0 - 1.0;
+        let sy = 1.0 - (f64::from(y) + 0.5) / f64::from(self.height) * 2.0;
+        let d = normalize(std::array::from_fn(|a| {
+            b.forward[a] + sx * b.right[a] + sy * b.up[a]
+        }));
         (self.eye, d)
     }
 }

@@ -1,0 +1,130 @@
+//! The wgpu instance, adapter, device and queue, with the limits slosh needs checked up front.
+
+use crate::error::{Error, Result};
+
+/// Storage buffers bound per shader stage by the step and frame bind groups.
+pub const STORAGE_BUFFERS_NEEDED: u32 = 12;
+
+/// A GPU device ready for slosh's passes.
+#[derive(Debug)]
+pub struct Gpu {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    /// Whether compute passes can write GPU timestamps (frame times in `slosh bench gpu`).
+    pub timestamps: bool,
+}
+
+/// The adapters wgpu can see, Vulkan first.
+pub fn adapters() -> Vec<wgpu::Adapter> {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
+}
+
+fn describe(info: &wgpu::AdapterInfo) -> String {
+    format!(
+        "{} ({:?}, {:?}, driver {} {})",
+        info.name, info.backend, info.device_type, info.driver, info.driver_info
+    )
+}
+
+impl Gpu {
+    /// Opens the first adapter whose name contains `name` (case-insensitive), or the best one:
+    /// a discrete GPU before an integrated one before a software rasteriser.
+    pub fn new(name: Option<&str>) -> Result<Gpu> {
+        let mut candidates = adapters();
+        if candidates.is_empty() {
+            return Err(Error::NoAdapter(
+                "wgpu found no Vulkan adapter (install a driver, e.g. mesa-vulkan-drivers for lavapipe)"
+                    .into(),
+            ));
+        }
+        if let Some(name) = name {
+            let wanted = name.to_lowercase();
+            let seen: Vec<String> = candidates.iter().map(|a| describe(&a.get_info())).collect();
+            candidates.retain(|a| a.get_info().name.to_lowercase().contains(&wanted));
+            if candidates.is_empty() {
+                return Err(Error::NoAdapter(format!(
+                    "no adapter name contains '{name}'; found: {}",
+                    seen.join("; ")
+                )));
+            }
+        }
+        let rank = |a: &wgpu::Adapter| match a.get_info().device_type {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Cpu => 3,
+            wgpu::DeviceType::Other => 4,
+        };
+        candidates.sort_by_key(rank);
+        let adapter = candidates.remove(0);
+        Gpu::open(adapter)
+    }
+
+    fn open(adapter: wgpu::Adapter) -> Result<Gpu> {
+        let info = adapter.get_info();
+        let available = adapter.limits();
+        if available.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED {
+            return Err(Error::Limits {
+                adapter: describe(&info),
+                problem: format!(
+                    "allows {} storage buffers per shader stage; the tracer binds {STORAGE_BUFFERS_NEEDED}",
+                    available.max_storage_buffers_per_shader_stage
+                ),
+            });
+        }
+        let limits = wgpu::Limits {
+            max_storage_buffers_per_shader_stage: STORAGE_BUFFERS_NEEDED,
+            max_storage_buffer_binding_size: available.max_storage_buffer_binding_size,
+            max_buffer_size: available.max_buffer_size,
+            max_compute_workgroups_per_dimension: available.max_compute_workgroups_per_dimension,
+            ..wgpu::Limits::default()
+        };
+        let wanted = wgpu::Features::TIMESTAMP_QUERY;
+        let timestamps = adapter.features().contains(wanted);
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("slosh"),
+            required_features: if timestamps {
+                wanted
+            } else {
+                wgpu::Features::empty()
+            },
+            required_limits: limits,
+            experimental_features: wgpu::ExperimentalFeatures::default(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|source| Error::Device {
+            adapter: describe(&info),
+            source,
+        })?;
+        Ok(Gpu {
+            adapter,
+            device,
+            queue,
+            info,
+            timestamps,
+        })
+    }
+
+    /// "NAME (backend, type, driver …)".
+    pub fn describe(&self) -> String {
+        describe(&self.info)
+    }
+
+    /// The largest storage binding, in bytes.
+    pub fn max_binding(&self) -> u64 {
+        self.device.limits().max_storage_buffer_binding_size
+    }
+
+    /// Blocks until the GPU has finished all submitted work.
+    pub fn wait(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| Error::Readback(e.to_string()))
+    }
+}

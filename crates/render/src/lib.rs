@@ -1,0 +1,17 @@
+//! The GPU half of slosh: a cache step streamed into wgpu storage buffers, the MLS ray tracer
+//! (`shaders/trace.wgsl` over `shaders/mls.wgsl`) and the shade pass (`shaders/shade.wgsl`) as
+//! compute shaders, and frames read back for files or timed with GPU timestamps. The WGSL is
+//! a line-for-line port of `slosh_mls`; the tests hold it to the CPU f64 oracle.
+
+mod context;
+mod error;
+pub mod layout;
+pub mod shaders;
+mod tracer;
+mod upload;
+
+pub use context::{Gpu, STORAGE_BUFFERS_NEEDED, adapters};
+pub use error::{Error, Result};
+pub use layout::{GpuHit, GpuSettings, status};
+pub use tracer::{Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings};
+pub use upload::{GpuStep, MAX_BVH_DEPTH, StepBuffers, UploadStats};

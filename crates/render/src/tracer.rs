@@ -1,0 +1,405 @@
+//! The trace and shade compute passes: pipelines, bind groups, a frame's buffers, readback and
+//! GPU timestamps.
+
+use slosh_mls::Camera;
+
+use crate::context::Gpu;
+use crate::error::{Error, Result};
+use crate::layout::{GpuHit, GpuSettings};
+use crate::shaders::{SHADE_WGSL, TRACE_WGSL};
+use crate::upload::GpuStep;
+
+/// What the shade pass draws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ShadeMode {
+    /// Blinn–Phong, coloured by the uploaded field if there is one.
+    #[default]
+    Shade,
+    /// Normals as colours.
+    Normals,
+    /// Status and iteration heat map: green converged, yellow iteration limit, red no
+    /// support or degenerate fit, blue droplet; brighter for more iterations.
+    Status,
+    /// Back-facing hits (normal along the ray) in magenta.
+    Backfaces,
+}
+
+/// Tracing parameters, passed to the shaders as uniforms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceParams {
+    /// Iterations counting the initial polynomial (1 = the baked polynomial only).
+    pub iterations: u32,
+    /// Degree of the refinement fits (the baked polynomial keeps its own).
+    pub degree: u8,
+    /// Multiplies each ball's baked smoothing length during refinement.
+    pub h_factor: f32,
+    /// Support normals from the covariance instead of the data normals.
+    pub covariance: bool,
+    /// Converged when successive hits differ by less than `epsilon` · h.
+    pub epsilon: f32,
+    pub mode: ShadeMode,
+}
+
+impl TraceParams {
+    /// The step's baked settings with `iterations`.
+    pub fn for_step(step: &GpuStep, iterations: u32) -> TraceParams {
+        TraceParams {
+            iterations,
+            degree: step.degree,
+            h_factor: 1.0,
+            covariance: step.covariance,
+            epsilon: 1e-4,
+            mode: ShadeMode::Shade,
+        }
+    }
+}
+
+/// A rendered frame read back from the GPU.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major, y down, in the cache's local coordinates.
+    pub hits: Vec<GpuHit>,
+    /// Row-major RGBA8 (sRGB), as little-endian u32s.
+    pub rgba: Vec<u32>,
+}
+
+/// GPU times of one frame's passes, in milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PassTimes {
+    pub trace_ms: f64,
+    pub shade_ms: f64,
+}
+
+/// The compiled passes.
+#[derive(Debug)]
+pub struct Tracer {
+    trace: wgpu::ComputePipeline,
+    shade: wgpu::ComputePipeline,
+    step_layout: wgpu::BindGroupLayout,
+    frame_layout: wgpu::BindGroupLayout,
+}
+
+/// One frame's GPU buffers and bind groups for a given step.
+#[derive(Debug)]
+pub struct FrameTargets {
+    width: u32,
+    height: u32,
+    settings: wgpu::Buffer,
+    hits: wgpu::Buffer,
+    image: wgpu::Buffer,
+    step_group: wgpu::BindGroup,
+    frame_group: wgpu::BindGroup,
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+}
+
+fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn to_f32(a: [f64; 3]) -> [f32; 3] {
+    a.map(|c| c as f32)
+}
+
+/// The uniforms of a frame: the camera moved into the step's local coordinates.
+pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSettings {
+    let basis = camera.basis();
+    let eye = step.transform.to_local(camera.eye);
+    let (field_min, field_max) = step.field.as_ref().map_or((0.0, 0.0), |f| (f.1, f.2));
+    GpuSettings {
+        eye: to_f32(eye),
+        width: camera.width,
+        right: to_f32(basis.right),
+        height: camera.height,
+        up: to_f32(basis.up),
+        iterations: params.iterations.max(1),
+        forward: to_f32(basis.forward),
+        degree: u32::from(params.degree.min(3)),
+        epsilon: params.epsilon,
+        h_factor: params.h_factor,
+        normals_mode: u32::from(params.covariance || !step.has_normals),
+        has_normals: u32::from(step.has_normals),
+        point_count: step.point_count,
+        sphere_count: step.sphere_count,
+        cluster_size: step.cluster_size,
+        mode: params.mode as u32,
+        field_min,
+        field_max,
+        has_field: u32::from(step.field.is_some()),
+        pad: 0,
+    }
+}
+
+impl Tracer {
+    pub fn new(gpu: &Gpu) -> Result<Tracer> {
+        let device = &gpu.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut step_entries: Vec<_> = (0..10).map(|b| storage_entry(b, true)).collect();
+        step_entries.push(wgpu::BindGroupLayoutEntry {
+            binding: 10,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        });
+        let step_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("step"),
+            entries: &step_entries,
+        });
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &[storage_entry(0, false), storage_entry(1, false)],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("slosh"),
+            bind_group_layouts: &[Some(&step_layout), Some(&frame_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |source: &str, entry: &str| {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(entry),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                cache: None,
+            })
+        };
+        let trace = pipeline(TRACE_WGSL, "trace");
+        let shade = pipeline(SHADE_WGSL, "shade");
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
+        }
+        Ok(Tracer {
+            trace,
+            shade,
+            step_layout,
+            frame_layout,
+        })
+    }
+
+    /// Buffers and bind groups for `width` × `height` frames of `step`.
+    pub fn targets(&self, gpu: &Gpu, step: &GpuStep, width: u32, height: u32) -> FrameTargets {
+        let device = &gpu.device;
+        let pixels = u64::from(width) * u64::from(height);
+        let buffer = |label, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let settings = buffer(
+            "settings",
+            size_of::<GpuSettings>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+        let hits = buffer(
+            "hits",
+            pixels * size_of::<GpuHit>() as u64,
+            U::STORAGE | U::COPY_SRC,
+        );
+        let image = buffer("image", pixels * 4, U::STORAGE | U::COPY_SRC);
+        let mut entries: Vec<wgpu::BindGroupEntry> = step
+            .buffers
+            .in_binding_order()
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        entries.push(wgpu::BindGroupEntry {
+            binding: 10,
+            resource: settings.as_entire_binding(),
+        });
+        let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("step"),
+            layout: &self.step_layout,
+            entries: &entries,
+        });
+        let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &self.frame_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: hits.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: image.as_entire_binding(),
+                },
+            ],
+        });
+        let queries = gpu.timestamps.then(|| {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("pass times"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 4,
+            });
+            (
+                set,
+                buffer("timestamps", 32, U::QUERY_RESOLVE | U::COPY_SRC),
+                buffer("timestamps readback", 32, U::MAP_READ | U::COPY_DST),
+            )
+        });
+        FrameTargets {
+            width,
+            height,
+            settings,
+            hits,
+            image,
+            step_group,
+            frame_group,
+            queries,
+        }
+    }
+
+    /// Records the trace and shade passes (with timestamps where the targets have them).
+    fn encode(&self, targets: &FrameTargets, encoder: &mut wgpu::CommandEncoder) {
+        let groups = (targets.width.div_ceil(8), targets.height.div_ceil(8));
+        for (i, pipeline) in [&self.trace, &self.shade].into_iter().enumerate() {
+            let timestamp_writes =
+                targets
+                    .queries
+                    .as_ref()
+                    .map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(2 * i as u32),
+                        end_of_pass_write_index: Some(2 * i as u32 + 1),
+                    });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(if i == 0 { "trace" } else { "shade" }),
+                timestamp_writes,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &targets.step_group, &[]);
+            pass.set_bind_group(1, &targets.frame_group, &[]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        }
+        if let Some((set, resolve, readback)) = &targets.queries {
+            encoder.resolve_query_set(set, 0..4, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 32);
+        }
+    }
+
+    /// Traces and shades one frame on the GPU and waits for it; the pass times when the
+    /// adapter has timestamp queries.
+    pub fn run(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        targets: &FrameTargets,
+        camera: &Camera,
+        params: &TraceParams,
+    ) -> Result<Option<PassTimes>> {
+        let mut camera = *camera;
+        camera.width = targets.width;
+        camera.height = targets.height;
+        gpu.queue.write_buffer(
+            &targets.settings,
+            0,
+            bytemuck::bytes_of(&settings(step, &camera, params)),
+        );
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame"),
+            });
+        self.encode(targets, &mut encoder);
+        gpu.queue.submit([encoder.finish()]);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
+        }
+        let Some((_, _, readback)) = &targets.queries else {
+            gpu.wait()?;
+            return Ok(None);
+        };
+        let stamps: Vec<u64> = read(gpu, readback)?;
+        let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
+        let ms = |a: usize, b: usize| stamps[b].saturating_sub(stamps[a]) as f64 * period;
+        Ok(Some(PassTimes {
+            trace_ms: ms(0, 1),
+            shade_ms: ms(2, 3),
+        }))
+    }
+
+    /// Renders one frame and reads its hits and pixels back.
+    pub fn render(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        camera: &Camera,
+        params: &TraceParams,
+    ) -> Result<Frame> {
+        let targets = self.targets(gpu, step, camera.width, camera.height);
+        self.run(gpu, step, &targets, camera, params)?;
+        let copy = |source: &wgpu::Buffer| -> Result<wgpu::Buffer> {
+            let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback"),
+                size: source.size(),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("readback"),
+                });
+            encoder.copy_buffer_to_buffer(source, 0, &staging, 0, source.size());
+            gpu.queue.submit([encoder.finish()]);
+            Ok(staging)
+        };
+        let hits = read(gpu, &copy(&targets.hits)?)?;
+        let rgba = read(gpu, &copy(&targets.image)?)?;
+        Ok(Frame {
+            width: targets.width,
+            height: targets.height,
+            hits,
+            rgba,
+        })
+    }
+}
+
+/// Maps a MAP_READ buffer and copies its contents out.
+fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
+    let slice = buffer.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    gpu.wait()?;
+    rx.recv()
+        .map_err(|e| Error::Readback(e.to_string()))?
+        .map_err(|e| Error::Readback(e.to_string()))?;
+    let out = {
+        let view = slice
+            .get_mapped_range()
+            .map_err(|e| Error::Readback(e.to_string()))?;
+        bytemuck::pod_collect_to_vec(&view)
+    };
+    buffer.unmap();
+    Ok(out)
+}

@@ -1,0 +1,299 @@
+//! A cache step streamed into GPU storage buffers: each section's bytes go, unconverted, into
+//! a `mapped_at_creation` staging buffer (raw sections straight from the mapped file,
+//! compressed ones through a reused decode buffer, since wgpu's mapped views are write-only),
+//! then `copy_buffer_to_buffer` into device-local storage.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
+
+use crate::context::Gpu;
+use crate::error::{Error, Result};
+
+/// The deepest BVH the trace shader's traversal stack holds.
+pub const MAX_BVH_DEPTH: u64 = 62;
+
+/// The storage buffers of one step, in binding order 0–9 of the step bind group.
+#[derive(Debug)]
+pub struct StepBuffers {
+    pub points: wgpu::Buffer,
+    pub normals: wgpu::Buffer,
+    pub reach: wgpu::Buffer,
+    pub cluster_start: wgpu::Buffer,
+    pub cluster_ids: wgpu::Buffer,
+    pub balls: wgpu::Buffer,
+    pub spheres: wgpu::Buffer,
+    pub bvh_nodes: wgpu::Buffer,
+    pub bvh_items: wgpu::Buffer,
+    pub field: wgpu::Buffer,
+}
+
+impl StepBuffers {
+    pub fn in_binding_order(&self) -> [&wgpu::Buffer; 10] {
+        [
+            &self.points,
+            &self.normals,
+            &self.reach,
+            &self.cluster_start,
+            &self.cluster_ids,
+            &self.balls,
+            &self.spheres,
+            &self.bvh_nodes,
+            &self.bvh_items,
+            &self.field,
+        ]
+    }
+}
+
+/// Where the time of an upload went.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UploadStats {
+    /// Decoded bytes placed on the GPU.
+    pub bytes: u64,
+    /// Bytes read from the file (compressed where the section is).
+    pub stored_bytes: u64,
+    /// Checksums, decompression and copies into the mapped staging buffers.
+    pub host_seconds: f64,
+    /// Staging to device-local copies, from submit to completion.
+    pub gpu_seconds: f64,
+    /// Open to ready, everything included.
+    pub total_seconds: f64,
+}
+
+impl UploadStats {
+    /// Decoded bytes per second of the whole upload, in GB/s.
+    pub fn gigabytes_per_second(&self) -> f64 {
+        self.bytes as f64 / self.total_seconds.max(1e-12) / 1e9
+    }
+}
+
+/// A step on the GPU, with what the passes need to know about it.
+#[derive(Debug)]
+pub struct GpuStep {
+    pub buffers: StepBuffers,
+    pub point_count: u32,
+    pub sphere_count: u32,
+    pub cluster_size: u32,
+    pub has_normals: bool,
+    /// The degree the balls were fitted at, and "mean" or "covariance".
+    pub degree: u8,
+    pub covariance: bool,
+    /// Local = (world − origin) / scale.
+    pub transform: Transform,
+    pub bounds: [[f64; 3]; 2],
+    /// Mean nearest-neighbour spacing in world units.
+    pub spacing: f64,
+    /// The shaded field's name and its finite range.
+    pub field: Option<(String, f32, f32)>,
+    pub upload: UploadStats,
+}
+
+const SECTIONS: [&str; 9] = [
+    names::POINTS,
+    names::NORMALS,
+    names::REACH,
+    names::CLUSTER_START,
+    names::CLUSTER_NEIGHBOURS,
+    names::BALLS,
+    names::SPHERES,
+    names::BVH_NODES,
+    names::BVH_ITEMS,
+];
+
+/// wgpu refuses zero-sized bindings; absent or empty sections bind this many zero bytes.
+const EMPTY_BINDING: u64 = 16;
+
+fn invalid(file: &CacheFile, problem: String) -> Error {
+    Error::Step {
+        path: file.path().to_path_buf(),
+        problem,
+    }
+}
+
+/// Finite minimum and maximum of little-endian f32s (0, 0 when there are none).
+fn finite_range(bytes: &[u8]) -> (f32, f32) {
+    let (lo, hi) = bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
+}
+
+impl GpuStep {
+    /// Uploads `file`'s GPU sections (and `field`'s values, if named).
+    pub fn upload(gpu: &Gpu, file: &CacheFile, field: Option<&str>) -> Result<GpuStep> {
+        let start = Instant::now();
+        let header = file.header();
+        if header.stats.bvh_depth > MAX_BVH_DEPTH {
+            return Err(invalid(
+                file,
+                format!(
+                    "BVH depth {} exceeds the tracer's stack ({MAX_BVH_DEPTH})",
+                    header.stats.bvh_depth
+                ),
+            ));
+        }
+        let field_name = field.map(|f| format!("{}{f}", names::FIELD_PREFIX));
+        if let Some(name) = &field_name
+            && file.section(name).is_none()
+        {
+            let available: Vec<&str> = header
+                .sections
+                .iter()
+                .filter_map(|s| s.name.strip_prefix(names::FIELD_PREFIX))
+                .collect();
+            return Err(invalid(
+                file,
+                format!(
+                    "no field '{}' in this cache; baked fields: {}",
+                    field.unwrap_or_default(),
+                    if available.is_empty() {
+                        "none (bake with --fields NAME)".to_string()
+                    } else {
+                        available.join(", ")
+                    }
+                ),
+            ));
+        }
+        let wanted: Vec<&str> = SECTIONS
+            .iter()
+            .copied()
+            .chain(field_name.as_deref())
+            .collect();
+        let entries: Vec<Option<&SectionEntry>> = wanted.iter().map(|n| file.section(n)).collect();
+        for (name, entry) in wanted.iter().zip(&entries) {
+            match entry {
+                None if *name != names::NORMALS => {
+                    return Err(invalid(file, format!("no section '{name}'")));
+                }
+                Some(e) if e.raw > gpu.max_binding() => {
+                    return Err(invalid(
+                        file,
+                        format!(
+                            "section '{name}' is {} bytes, over this adapter's {}-byte storage binding limit ({})",
+                            e.raw,
+                            gpu.max_binding(),
+                            gpu.describe()
+                        ),
+                    ));
+                }
+                _ => {}
+            }
+        }
+        // Compressed sections are decoded in parallel; raw ones are used in place.
+        let decoded: Vec<Option<Vec<u8>>> = entries
+            .par_iter()
+            .map(|entry| -> Result<Option<Vec<u8>>> {
+                match entry {
+                    Some(e) if e.encoding != Encoding::Raw => {
+                        let mut out = vec![0u8; e.raw as usize];
+                        file.decode_into(e, &mut out, &mut Vec::new())?;
+                        Ok(Some(out))
+                    }
+                    _ => Ok(None),
+                }
+            })
+            .collect::<Result<_>>()?;
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("upload"),
+            });
+        let mut buffers = Vec::with_capacity(wanted.len());
+        let mut stats = UploadStats::default();
+        let mut field_range = None;
+        for ((name, entry), decoded) in wanted.iter().zip(&entries).zip(&decoded) {
+            let bytes: &[u8] = match (entry, decoded) {
+                (_, Some(d)) => d,
+                (Some(e), None) => file.checked_stored(e)?,
+                (None, None) => &[],
+            };
+            if let Some(e) = entry {
+                stats.stored_bytes += e.stored;
+            }
+            if Some(*name) == field_name.as_deref() {
+                field_range = Some(finite_range(bytes));
+            }
+            let size = (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4);
+            let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(name),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            if !bytes.is_empty() {
+                let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("staging"),
+                    size,
+                    usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: true,
+                });
+                {
+                    let mut view = staging
+                        .slice(..)
+                        .get_mapped_range_mut()
+                        .map_err(|e| Error::Readback(e.to_string()))?;
+                    view.slice(..bytes.len()).copy_from_slice(bytes);
+                }
+                staging.unmap();
+                encoder.copy_buffer_to_buffer(&staging, 0, &target, 0, size);
+                stats.bytes += bytes.len() as u64;
+            }
+            buffers.push(target);
+        }
+        if field_name.is_none() {
+            buffers.push(gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("no field"),
+                size: EMPTY_BINDING,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }));
+        }
+        stats.host_seconds = start.elapsed().as_secs_f64();
+        let submitted = Instant::now();
+        gpu.queue.submit([encoder.finish()]);
+        gpu.wait()?;
+        stats.gpu_seconds = submitted.elapsed().as_secs_f64();
+        stats.total_seconds = start.elapsed().as_secs_f64();
+        let mut it = buffers.into_iter();
+        let mut next = || {
+            it.next()
+                .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))
+        };
+        let buffers = StepBuffers {
+            points: next()?,
+            normals: next()?,
+            reach: next()?,
+            cluster_start: next()?,
+            cluster_ids: next()?,
+            balls: next()?,
+            spheres: next()?,
+            bvh_nodes: next()?,
+            bvh_items: next()?,
+            field: next()?,
+        };
+        let count = |name: &str| file.section(name).map_or(0, |e| e.count);
+        let point_count = u32::try_from(header.points)
+            .map_err(|_| invalid(file, format!("{} points exceed u32", header.points)))?;
+        Ok(GpuStep {
+            buffers,
+            point_count,
+            sphere_count: count(names::SPHERES) as u32,
+            cluster_size: header.neighbour_cluster.max(1),
+            has_normals: file.section(names::NORMALS).is_some(),
+            degree: header.mls.degree,
+            covariance: header.mls.normals == "covariance",
+            transform: header.transform,
+            bounds: header.bounds,
+            spacing: header.spacing * header.transform.scale,
+            field: field
+                .zip(field_range)
+                .map(|(n, (lo, hi))| (n.to_string(), lo, hi)),
+            upload: stats,
+        })
+    }
+}

@@ -1,0 +1,774 @@
+// The MLS surface maths of `crates/mls`, ported line for line (docs/algorithm.md is the
+// specification): weights, neighbour lists recovered from cluster candidates, the support
+// plane, the local frame, the scaled polynomial fit with degree degradation, and exact roots.
+// Shared by trace.wgsl and shade.wgsl, which are appended to this file.
+
+// Step data, bound from the cache's sections byte for byte (crates/cache/src/layout.rs).
+struct Point {
+    position: vec3<f32>,
+    radius: f32,
+}
+
+struct Normal {
+    normal: vec3<f32>,
+    pad: f32,
+}
+
+// Camera (already in the cache's local coordinates) and tracing parameters; mirrors
+// `slosh_render::GpuSettings`.
+struct Settings {
+    eye: vec3<f32>,
+    width: u32,
+    // Camera basis scaled by the image plane's half extent: ray = forward + sx right + sy up.
+    right: vec3<f32>,
+    height: u32,
+    up: vec3<f32>,
+    iterations: u32,
+    forward: vec3<f32>,
+    degree: u32,
+    epsilon: f32,
+    // Multiplies each ball's baked smoothing length during refinement (1 = as baked).
+    h_factor: f32,
+    // 0 mean normals (falling back to the covariance), 1 covariance.
+    normals_mode: u32,
+    has_normals: u32,
+    point_count: u32,
+    sphere_count: u32,
+    cluster_size: u32,
+    mode: u32,
+    field_min: f32,
+    field_max: f32,
+    has_field: u32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<storage, read> points: array<Point>;
+@group(0) @binding(1) var<storage, read> normals: array<Normal>;
+@group(0) @binding(2) var<storage, read> reach: array<f32>;
+@group(0) @binding(3) var<storage, read> cluster_start: array<u32>;
+@group(0) @binding(4) var<storage, read> cluster_ids: array<u32>;
+@group(0) @binding(10) var<uniform> settings: Settings;
+
+const F32_EPSILON: f32 = 1.1920929e-7;
+const F32_MIN_POSITIVE: f32 = 1.17549435e-38;
+// 2^64, a stand-in for +∞ in comparisons (WGSL may assume no infinities).
+const FAR: f32 = 1.8446744e19;
+// support.rs: MIN_WEIGHT and CANCELLATION; fit.rs: PIVOT_TOLERANCE.
+const MIN_WEIGHT: f32 = 1e-6;
+const CANCELLATION: f32 = 0.5;
+const PIVOT_TOLERANCE: f32 = 1e-5;
+
+// Bit tests, because WGSL lets a compiler assume floats are never NaN or infinite.
+fn finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn finite3(v: vec3<f32>) -> bool {
+    return finite(v.x) && finite(v.y) && finite(v.z);
+}
+
+// Rust's f32::signum: ±1 by the sign bit (so +0 → 1, −0 → −1), unlike WGSL's sign().
+fn signum(x: f32) -> f32 {
+    return select(1.0, -1.0, (bitcast<u32>(x) >> 31u) == 1u);
+}
+
+// θ(d) = exp(−d²/h²).
+fn weight(d2: f32, h2: f32) -> f32 {
+    return exp(-d2 / h2);
+}
+
+fn length_squared(v: vec3<f32>) -> f32 {
+    return v.x * v.x + v.y * v.y + v.z * v.z;
+}
+
+// V3::normalized: the unit vector, or (false) when the length is not a usable positive number.
+struct Unit {
+    ok: bool,
+    v: vec3<f32>,
+}
+
+fn normalized(v: vec3<f32>) -> Unit {
+    let len = sqrt(length_squared(v));
+    if finite(len) && len > sqrt(F32_MIN_POSITIVE) {
+        return Unit(true, v * (1.0 / len));
+    }
+    return Unit(false, vec3<f32>(0.0));
+}
+
+// ---- Neighbour lists (clusters.rs: expand_one) ----------------------------------------------
+
+// The neighbours of ball `centre`: its cluster's candidates within reach, minus points whose
+// normal opposes the centre's (both valid), visited in index order.
+struct Neighbourhood {
+    first: u32,
+    last: u32,
+    centre: vec3<f32>,
+    reach2: f32,
+    own_normal: vec3<f32>,
+    check_normals: bool,
+}
+
+fn neighbourhood(centre: u32) -> Neighbourhood {
+    let c = centre / max(settings.cluster_size, 1u);
+    var nb: Neighbourhood;
+    nb.first = cluster_start[c];
+    nb.last = min(cluster_start[c + 1u], arrayLength(&cluster_ids));
+    nb.centre = points[centre].position;
+    let r = reach[centre];
+    nb.reach2 = r * r;
+    nb.own_normal = vec3<f32>(0.0);
+    nb.check_normals = false;
+    if settings.has_normals != 0u {
+        nb.own_normal = normals[centre].normal;
+        nb.check_normals = length_squared(nb.own_normal) > 0.0;
+    }
+    return nb;
+}
+
+// Index of the candidate at slot `k` if it belongs to the list, else 0xffffffff.
+fn neighbour_at(nb: Neighbourhood, k: u32) -> u32 {
+    let j = cluster_ids[k];
+    if j >= settings.point_count {
+        return 0xffffffffu;
+    }
+    let d = points[j].position - nb.centre;
+    if !(length_squared(d) <= nb.reach2) {
+        return 0xffffffffu;
+    }
+    if nb.check_normals {
+        let b = normals[j].normal;
+        if length_squared(b) > 0.0 && dot(nb.own_normal, b) < 0.0 {
+            return 0xffffffffu;
+        }
+    }
+    return j;
+}
+
+// ---- Local frame (frame.rs) -----------------------------------------------------------------
+
+struct Frame {
+    u: vec3<f32>,
+    v: vec3<f32>,
+    n: vec3<f32>,
+}
+
+fn frame_from_normal(n: vec3<f32>) -> Frame {
+    let s = signum(n.z);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    let u = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    let v = vec3<f32>(b, s + n.y * n.y * a, -n.y);
+    return Frame(u, v, n);
+}
+
+fn to_local(f: Frame, w: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(f.u, w), dot(f.v, w), dot(f.n, w));
+}
+
+// ---- Support plane (support.rs) -------------------------------------------------------------
+
+struct Support {
+    ok: bool,
+    normal: vec3<f32>,
+}
+
+struct Eigen {
+    values: vec3<f32>,
+    // Columns are eigenvectors.
+    vectors: mat3x3<f32>,
+}
+
+// Cyclic Jacobi rotations over (0,1), (0,2), (1,2), at most 16 sweeps (jacobi_eigen).
+fn jacobi_eigen(m: mat3x3<f32>) -> Eigen {
+    // a[row][col], stored as a flat array to allow dynamic indices.
+    var a: array<f32, 9>;
+    var v: array<f32, 9>;
+    for (var i = 0u; i < 3u; i++) {
+        for (var j = 0u; j < 3u; j++) {
+            a[i * 3u + j] = m[j][i];
+            v[i * 3u + j] = select(0.0, 1.0, i == j);
+        }
+    }
+    for (var sweep = 0u; sweep < 16u; sweep++) {
+        let off = a[1] * a[1] + a[2] * a[2] + a[5] * a[5];
+        let diag = a[0] * a[0] + a[4] * a[4] + a[8] * a[8];
+        if !(off > F32_EPSILON * F32_EPSILON * diag) {
+            break;
+        }
+        for (var pair = 0u; pair < 3u; pair++) {
+            let p = select(0u, 1u, pair == 2u);
+            let q = select(1u, 2u, pair != 0u);
+            let apq = a[p * 3u + q];
+            if apq == 0.0 {
+                continue;
+            }
+            let theta = (a[q * 3u + q] - a[p * 3u + p]) / (2.0 * apq);
+            var t = signum(theta) / (abs(theta) + sqrt(theta * theta + 1.0));
+            if !finite(theta) || !finite(t) {
+                t = 0.0;
+            }
+            let c = 1.0 / sqrt(t * t + 1.0);
+            let s = t * c;
+            for (var k = 0u; k < 3u; k++) {
+                let akp = a[k * 3u + p];
+                let akq = a[k * 3u + q];
+                a[k * 3u + p] = c * akp - s * akq;
+                a[k * 3u + q] = s * akp + c * akq;
+            }
+            for (var k = 0u; k < 3u; k++) {
+                let apk = a[p * 3u + k];
+                let aqk = a[q * 3u + k];
+                a[p * 3u + k] = c * apk - s * aqk;
+                a[q * 3u + k] = s * apk + c * aqk;
+            }
+            for (var k = 0u; k < 3u; k++) {
+                let vkp = v[k * 3u + p];
+                let vkq = v[k * 3u + q];
+                v[k * 3u + p] = c * vkp - s * vkq;
+                v[k * 3u + q] = s * vkp + c * vkq;
+            }
+        }
+    }
+    var out: Eigen;
+    out.values = vec3<f32>(a[0], a[4], a[8]);
+    out.vectors = mat3x3<f32>(
+        vec3<f32>(v[0], v[3], v[6]),
+        vec3<f32>(v[1], v[4], v[7]),
+        vec3<f32>(v[2], v[5], v[8]),
+    );
+    return out;
+}
+
+// Smallest-eigenvalue eigenvector of B = Σθ (p−r)(p−r)ᵀ / (h² Σθ) (covariance_normal).
+fn covariance_normal(r: vec3<f32>, nb: Neighbourhood, h2: f32, weight_sum: f32) -> vec3<f32> {
+    var b00 = 0.0;
+    var b01 = 0.0;
+    var b02 = 0.0;
+    var b11 = 0.0;
+    var b12 = 0.0;
+    var b22 = 0.0;
+    let scale = 1.0 / (h2 * weight_sum);
+    for (var k = nb.first; k < nb.last; k++) {
+        let j = neighbour_at(nb, k);
+        if j == 0xffffffffu {
+            continue;
+        }
+        let q = points[j].position - r;
+        let w = weight(length_squared(q), h2) * scale;
+        b00 += w * q.x * q.x;
+        b01 += w * q.x * q.y;
+        b02 += w * q.x * q.z;
+        b11 += w * q.y * q.y;
+        b12 += w * q.y * q.z;
+        b22 += w * q.z * q.z;
+    }
+    let e = jacobi_eigen(mat3x3<f32>(
+        vec3<f32>(b00, b01, b02),
+        vec3<f32>(b01, b11, b12),
+        vec3<f32>(b02, b12, b22),
+    ));
+    // The first index of the smallest eigenvalue (a stable sort's first element).
+    var k = 0u;
+    if e.values[1] < e.values[k] {
+        k = 1u;
+    }
+    if e.values[2] < e.values[k] {
+        k = 2u;
+    }
+    let n = normalized(e.vectors[k]);
+    return select(vec3<f32>(0.0, 0.0, 1.0), n.v, n.ok);
+}
+
+// The support plane normal at r from the neighbourhood, smoothing length h (support_normal).
+fn support_normal(r: vec3<f32>, nb: Neighbourhood, h: f32, toward: vec3<f32>) -> Support {
+    let h2 = h * h;
+    var weight_sum = 0.0;
+    var mean = vec3<f32>(0.0);
+    var magnitude = 0.0;
+    let use_normals = settings.has_normals != 0u;
+    for (var k = nb.first; k < nb.last; k++) {
+        let j = neighbour_at(nb, k);
+        if j == 0xffffffffu {
+            continue;
+        }
+        let w = weight(length_squared(points[j].position - r), h2);
+        weight_sum += w;
+        if use_normals {
+            let n = normalized(normals[j].normal);
+            if n.ok {
+                mean += n.v * w;
+                magnitude += w;
+            }
+        }
+    }
+    if !(weight_sum > MIN_WEIGHT) {
+        return Support(false, vec3<f32>(0.0));
+    }
+    if settings.normals_mode == 0u {
+        let len = sqrt(length_squared(mean));
+        if magnitude > 0.0 && len >= CANCELLATION * magnitude {
+            return Support(true, mean * (1.0 / len));
+        }
+    }
+    let normal = covariance_normal(r, nb, h2, weight_sum);
+    // Orientation: the weighted majority of the data normals, else toward the ray origin.
+    var vote = 0.0;
+    if use_normals {
+        for (var k = nb.first; k < nb.last; k++) {
+            let j = neighbour_at(nb, k);
+            if j == 0xffffffffu {
+                continue;
+            }
+            let n = normalized(normals[j].normal);
+            if n.ok {
+                let w = weight(length_squared(points[j].position - r), h2);
+                vote += w * signum(dot(n.v, normal));
+            }
+        }
+    }
+    var flip = dot(toward - r, normal) < 0.0;
+    if vote != 0.0 {
+        flip = vote < 0.0;
+    }
+    return Support(true, select(normal, -normal, flip));
+}
+
+// ---- Polynomials (poly.rs) ------------------------------------------------------------------
+
+fn coefficient_count(degree: u32) -> u32 {
+    switch degree {
+        case 0u: {
+            return 1u;
+        }
+        case 1u: {
+            return 3u;
+        }
+        case 2u: {
+            return 6u;
+        }
+        default: {
+            return 10u;
+        }
+    }
+}
+
+fn monomials(x: f32, y: f32) -> array<f32, 10> {
+    return array<f32, 10>(1.0, x, y, x * x, y * y, x * y, x * x * x, y * y * y, x * x * y, x * y * y);
+}
+
+struct Poly {
+    degree: u32,
+    c: array<f32, 10>,
+}
+
+fn poly_gradient(p: Poly, x: f32, y: f32) -> vec2<f32> {
+    let c = p.c;
+    let fx = c[1] + 2.0 * c[3] * x + c[5] * y + 3.0 * c[6] * x * x + 2.0 * c[8] * x * y + c[9] * y * y;
+    let fy = c[2] + 2.0 * c[4] * y + c[5] * x + 3.0 * c[7] * y * y + c[8] * x * x + 2.0 * c[9] * x * y;
+    return vec2<f32>(fx, fy);
+}
+
+// Product of two cubics in s, truncated at s³.
+fn mul4(a: vec4<f32>, b: vec4<f32>) -> vec4<f32> {
+    return vec4<f32>(
+        a[0] * b[0],
+        a[0] * b[1] + a[1] * b[0],
+        a[0] * b[2] + a[1] * b[1] + a[2] * b[0],
+        a[0] * b[3] + a[1] * b[2] + a[2] * b[1] + a[3] * b[0],
+    );
+}
+
+// Coefficients (ascending powers of s) of s ↦ f(x0 + s dx, y0 + s dy) (Poly::along_line).
+fn along_line(p: Poly, x0: f32, y0: f32, dx: f32, dy: f32) -> vec4<f32> {
+    let x = vec4<f32>(x0, dx, 0.0, 0.0);
+    let y = vec4<f32>(y0, dy, 0.0, 0.0);
+    let xx = mul4(x, x);
+    let yy = mul4(y, y);
+    let xy = mul4(x, y);
+    let terms = array<vec4<f32>, 10>(
+        vec4<f32>(1.0, 0.0, 0.0, 0.0), x, y, xx, yy, xy,
+        mul4(xx, x), mul4(yy, y), mul4(xx, y), mul4(x, yy),
+    );
+    var out = vec4<f32>(0.0);
+    let n = coefficient_count(p.degree);
+    for (var k = 0u; k < n; k++) {
+        out += p.c[k] * terms[k];
+    }
+    return out;
+}
+
+// ---- Weighted least squares fit (fit.rs) ----------------------------------------------------
+
+struct Fit {
+    ok: bool,
+    degraded: bool,
+    poly: Poly,
+}
+
+// Index of (i, j), j ≤ i, in a packed lower triangle.
+fn tri(i: u32, j: u32) -> u32 {
+    return i * (i + 1u) / 2u + j;
+}
+
+fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32, requested: u32) -> Fit {
+    let degree = min(requested, 3u);
+    let n = coefficient_count(degree);
+    let inv_h = 1.0 / h;
+    let h2 = h * h;
+    // The symmetric A as a packed lower triangle (55 entries, not 100: private memory is
+    // scarce per invocation); the factorisation overwrites it with L and D in place, and the
+    // solves run in place in b.
+    var a: array<f32, 55>;
+    var b: array<f32, 10>;
+    var total = 0.0;
+    for (var k = nb.first; k < nb.last; k++) {
+        let j = neighbour_at(nb, k);
+        if j == 0xffffffffu {
+            continue;
+        }
+        let q = points[j].position - r;
+        let w = weight(length_squared(q), h2);
+        if !(w > 0.0) {
+            continue;
+        }
+        let l = to_local(frame, q) * inv_h;
+        let m = monomials(l.x, l.y);
+        total += w;
+        for (var i = 0u; i < n; i++) {
+            let wm = w * m[i];
+            b[i] += wm * l.z;
+            for (var jj = i; jj < n; jj++) {
+                a[tri(jj, i)] += wm * m[jj];
+            }
+        }
+    }
+    var failed: Fit;
+    failed.ok = false;
+    failed.degraded = false;
+    failed.poly.degree = 0u;
+    if !(total > 0.0) {
+        return failed;
+    }
+    let inv_total = 1.0 / total;
+    for (var i = 0u; i < n; i++) {
+        b[i] *= inv_total;
+        for (var jj = i; jj < n; jj++) {
+            a[tri(jj, i)] *= inv_total;
+        }
+    }
+    // LDLᵀ without pivoting, stopping at the first bad pivot (ldlt): D on the diagonal, L
+    // below it.
+    var rank = n;
+    for (var j = 0u; j < n; j++) {
+        let ajj = a[tri(j, j)];
+        var dj = ajj;
+        for (var k = 0u; k < j; k++) {
+            let ljk = a[tri(j, k)];
+            dj = dj - ljk * ljk * a[tri(k, k)];
+        }
+        if !(dj > PIVOT_TOLERANCE * ajj) || !finite(dj) {
+            rank = j;
+            break;
+        }
+        a[tri(j, j)] = dj;
+        for (var i = j + 1u; i < n; i++) {
+            var s = a[tri(i, j)];
+            for (var k = 0u; k < j; k++) {
+                s = s - a[tri(i, k)] * a[tri(j, k)] * a[tri(k, k)];
+            }
+            a[tri(i, j)] = s / dj;
+        }
+    }
+    // The highest degree whose coefficients all have good pivots.
+    var used = 0u;
+    var any = false;
+    for (var g = 0u; g <= degree; g++) {
+        if coefficient_count(g) <= rank {
+            used = g;
+            any = true;
+        }
+    }
+    if !any {
+        return failed;
+    }
+    let m = coefficient_count(used);
+    for (var i = 0u; i < m; i++) {
+        var s = b[i];
+        for (var k = 0u; k < i; k++) {
+            s = s - a[tri(i, k)] * b[k];
+        }
+        b[i] = s;
+    }
+    for (var i = 0u; i < m; i++) {
+        b[i] = b[i] / a[tri(i, i)];
+    }
+    var out: Fit;
+    out.ok = true;
+    out.degraded = used != degree;
+    out.poly.degree = used;
+    for (var ii = 0u; ii < m; ii++) {
+        let i = m - 1u - ii;
+        var s = b[i];
+        for (var k = i + 1u; k < m; k++) {
+            s = s - a[tri(k, i)] * out.poly.c[k];
+        }
+        out.poly.c[i] = s;
+    }
+    return out;
+}
+
+// ---- Roots (roots.rs) -----------------------------------------------------------------------
+
+fn eval_cubic(c: vec4<f32>, s: f32) -> f32 {
+    return ((c[3] * s + c[2]) * s + c[1]) * s + c[0];
+}
+
+fn derivative_cubic(c: vec4<f32>, s: f32) -> f32 {
+    return (3.0 * c[3] * s + 2.0 * c[2]) * s + c[1];
+}
+
+struct Roots {
+    count: u32,
+    r: vec2<f32>,
+}
+
+// Real roots of a s² + b s + c, ascending, without cancellation.
+fn quadratic_roots(a: f32, b: f32, c: f32) -> Roots {
+    if a == 0.0 {
+        if b == 0.0 {
+            return Roots(0u, vec2<f32>(0.0));
+        }
+        return Roots(1u, vec2<f32>(-c / b, 0.0));
+    }
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return Roots(0u, vec2<f32>(0.0));
+    }
+    let q = -(b + signum(b) * sqrt(disc)) * 0.5;
+    if q == 0.0 {
+        return Roots(2u, vec2<f32>(0.0));
+    }
+    let r1 = q / a;
+    let r2 = c / q;
+    return Roots(2u, vec2<f32>(min(r1, r2), max(r1, r2)));
+}
+
+// Root of h in [a, b], h(a) with the sign of fa and h(b) the other: Newton inside the bracket.
+fn bracketed_root(c: vec4<f32>, a_in: f32, b_in: f32, fa: f32) -> f32 {
+    var a = a_in;
+    var b = b_in;
+    let sa = signum(fa);
+    var s = (a + b) * 0.5;
+    for (var i = 0u; i < 100u; i++) {
+        let f = eval_cubic(c, s);
+        if f == 0.0 {
+            return s;
+        }
+        if signum(f) == sa {
+            a = s;
+        } else {
+            b = s;
+        }
+        let df = derivative_cubic(c, s);
+        let newton = s - f / df;
+        var next = (a + b) * 0.5;
+        if newton > a && newton < b && finite(newton) {
+            next = newton;
+        }
+        if next == s || b - a <= F32_EPSILON * (abs(a) + abs(b)) {
+            return next;
+        }
+        s = next;
+    }
+    return s;
+}
+
+struct Root {
+    ok: bool,
+    s: f32,
+}
+
+// The smallest root of c0 + c1 s + c2 s² + c3 s³ in [lo, hi] (first_root_in).
+fn first_root_in(c: vec4<f32>, lo: f32, hi: f32) -> Root {
+    let none = Root(false, 0.0);
+    if !(lo <= hi) || !finite(c[0]) || !finite(c[1]) || !finite(c[2]) || !finite(c[3]) {
+        return none;
+    }
+    if c[3] == 0.0 {
+        let q = quadratic_roots(c[2], c[1], c[0]);
+        for (var i = 0u; i < q.count; i++) {
+            if q.r[i] >= lo && q.r[i] <= hi {
+                return Root(true, q.r[i]);
+            }
+        }
+        return none;
+    }
+    let crit = quadratic_roots(3.0 * c[3], 2.0 * c[2], c[1]);
+    var pts = array<f32, 4>(lo, hi, hi, hi);
+    var k = 1u;
+    for (var i = 0u; i < crit.count; i++) {
+        let s = crit.r[i];
+        if s > lo && s < hi {
+            pts[k] = s;
+            k++;
+        }
+    }
+    pts[k] = hi;
+    let scale = abs(c[0]) + abs(c[1]) + abs(c[2]) + abs(c[3]);
+    let touch = 64.0 * F32_EPSILON * max(scale, F32_MIN_POSITIVE);
+    for (var i = 0u; i < k; i++) {
+        let a = pts[i];
+        let b = pts[i + 1u];
+        let fa = eval_cubic(c, a);
+        let fb = eval_cubic(c, b);
+        if fa == 0.0 {
+            return Root(true, a);
+        }
+        if signum(fa) != signum(fb) {
+            return Root(true, bracketed_root(c, a, b, fa));
+        }
+        if i + 1u < k && abs(fb) <= touch {
+            return Root(true, b);
+        }
+    }
+    if eval_cubic(c, hi) == 0.0 {
+        return Root(true, hi);
+    }
+    return none;
+}
+
+// ---- Ray against a polynomial and a ball (intersect.rs) -------------------------------------
+
+struct Ray {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+}
+
+struct Interval {
+    ok: bool,
+    t_in: f32,
+    t_out: f32,
+}
+
+fn ray_ball(ray: Ray, centre: vec3<f32>, radius: f32) -> Interval {
+    let oc = centre - ray.origin;
+    let tc = dot(oc, ray.dir);
+    let perp = oc - ray.dir * tc;
+    let d2 = length_squared(perp);
+    let r2 = radius * radius;
+    if !(d2 <= r2) {
+        return Interval(false, 0.0, 0.0);
+    }
+    let half = sqrt(r2 - d2);
+    return Interval(true, tc - half, tc + half);
+}
+
+struct PolyHit {
+    ok: bool,
+    t: f32,
+    x: f32,
+    y: f32,
+}
+
+fn intersect_poly(ray: Ray, r: vec3<f32>, frame: Frame, p: Poly, h: f32, t_lo: f32, t_hi: f32) -> PolyHit {
+    let rel = ray.origin - r;
+    let t0 = min(max(-dot(rel, ray.dir), t_lo), t_hi);
+    let inv_h = 1.0 / h;
+    let q0 = to_local(frame, rel + ray.dir * t0) * inv_h;
+    let dl = to_local(frame, ray.dir);
+    var c = along_line(p, q0.x, q0.y, dl.x, dl.y);
+    c[0] = c[0] - q0.z;
+    c[1] = c[1] - dl.z;
+    let root = first_root_in(c, (t_lo - t0) * inv_h, (t_hi - t0) * inv_h);
+    if !root.ok {
+        return PolyHit(false, 0.0, 0.0, 0.0);
+    }
+    return PolyHit(true, t0 + root.s * h, q0.x + root.s * dl.x, q0.y + root.s * dl.y);
+}
+
+fn hit_normal(frame: Frame, p: Poly, x: f32, y: f32) -> vec3<f32> {
+    let g = poly_gradient(p, x, y);
+    let n = normalized(frame.n - frame.u * g.x - frame.v * g.y);
+    return select(frame.n, n.v, n.ok);
+}
+
+// Hit statuses, numbered as the hit buffer's status channel.
+const STATUS_MISS: u32 = 0u;
+const STATUS_CONVERGED: u32 = 1u;
+const STATUS_ITERATION_LIMIT: u32 = 2u;
+const STATUS_NO_SUPPORT: u32 = 3u;
+const STATUS_DEGENERATE_FIT: u32 = 4u;
+const STATUS_DROPLET: u32 = 5u;
+
+struct Outcome {
+    status: u32,
+    t: f32,
+    normal: vec3<f32>,
+    iterations: u32,
+    degree: u32,
+    degraded: bool,
+}
+
+// The ball's initial polynomial, then refinement with the centre's neighbours (intersect_ball).
+// Misses come back with STATUS_MISS.
+fn intersect_ball(ray: Ray, centre: u32, bh: f32, ball_normal: vec3<f32>, initial: Poly, t_lo: f32, t_out: f32) -> Outcome {
+    var out: Outcome;
+    out.status = STATUS_MISS;
+    out.t = 0.0;
+    out.normal = vec3<f32>(0.0);
+    out.iterations = 0u;
+    out.degree = 0u;
+    out.degraded = false;
+    let c = points[centre].position;
+    let frame0 = frame_from_normal(ball_normal);
+    let first = intersect_poly(ray, c, frame0, initial, bh, t_lo, t_out);
+    if !first.ok {
+        return out;
+    }
+    var t = first.t;
+    var normal = hit_normal(frame0, initial, first.x, first.y);
+    var degree = initial.degree;
+    var degraded = initial.degree < settings.degree;
+    var iterations = 1u;
+    var status = STATUS_ITERATION_LIMIT;
+    let h = bh * settings.h_factor;
+    let nb = neighbourhood(centre);
+    let limit = max(settings.iterations, 1u);
+    while iterations < limit {
+        let r = ray.origin + ray.dir * t;
+        let support = support_normal(r, nb, h, ray.origin);
+        if !support.ok {
+            status = STATUS_NO_SUPPORT;
+            break;
+        }
+        let frame = frame_from_normal(support.normal);
+        let f = fit(r, frame, nb, h, settings.degree);
+        if !f.ok {
+            status = STATUS_DEGENERATE_FIT;
+            break;
+        }
+        degraded = degraded || f.degraded;
+        let next = intersect_poly(ray, r, frame, f.poly, h, t_lo, t_out);
+        if !next.ok {
+            // Left the trust region: no hit from this ball.
+            out.iterations = iterations + 1u;
+            return out;
+        }
+        iterations++;
+        let dt = abs(next.t - t);
+        t = next.t;
+        normal = hit_normal(frame, f.poly, next.x, next.y);
+        degree = f.poly.degree;
+        if dt < settings.epsilon * h {
+            status = STATUS_CONVERGED;
+            break;
+        }
+    }
+    out.status = status;
+    out.t = t;
+    out.normal = normal;
+    out.iterations = iterations;
+    out.degree = degree;
+    out.degraded = degraded;
+    return out;
+}
