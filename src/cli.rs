@@ -39,6 +39,31 @@ pub enum BenchCommand {
     Accuracy(AccuracyArgs),
     /// Bake stage times against the thesis, bytes per point, section encodings, load times.
     Bake(BakeBenchArgs),
+    /// GPU frame times (timestamp queries) against the thesis's tables, with upload times and
+    /// the error of each setting.
+    Gpu(GpuBenchArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct GpuBenchArgs {
+    /// Markdown report to write.
+    #[arg(long, default_value = "docs/results-gpu.md")]
+    pub out: PathBuf,
+    /// Timed frames per row (median reported), after 10 warm-up frames.
+    #[arg(long, default_value_t = 50)]
+    pub frames: usize,
+    /// Small scenes and images only (checks the harness; lavapipe-friendly).
+    #[arg(long)]
+    pub quick: bool,
+    /// The 28k-vertex bunny.obj of the pymeshlab wheel (default: $SLOSH_DATA/bunny.obj).
+    #[arg(long)]
+    pub bunny: Option<PathBuf>,
+    /// Folder for rendered frames of the tank and the bunny (PNG).
+    #[arg(long, default_value = "docs/img")]
+    pub images: PathBuf,
+    /// GPU adapter whose name contains this.
+    #[arg(long)]
+    pub adapter: Option<String>,
 }
 
 #[derive(Debug, Args)]
@@ -232,9 +257,15 @@ pub struct InspectArgs {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ModeArg {
+    /// Blinn–Phong (coloured by --field if given).
     Shade,
+    /// Normals as colours.
     Normals,
+    /// Status and iteration heat map: green converged, yellow iteration limit, red no
+    /// support or degenerate fit, blue droplet; brighter for more iterations.
     Status,
+    /// Back-facing hits in magenta.
+    Backfaces,
 }
 
 #[derive(Debug, Args)]
@@ -244,6 +275,10 @@ pub struct RenderArgs {
     /// Step index (cache directories).
     #[arg(long, default_value_t = 0)]
     pub step: usize,
+    /// A range of steps, A..B (B excluded) or A..=B, for a video: --out and --aov then take
+    /// a pattern with {} or {:05} for the step number. The camera frames the first step.
+    #[arg(long)]
+    pub steps: Option<String>,
     /// Camera position X,Y,Z (default: framing the step's bounds).
     #[arg(long)]
     pub eye: Option<String>,
@@ -271,4 +306,19 @@ pub struct RenderArgs {
     /// Trace on the CPU with the reference tracer.
     #[arg(long)]
     pub cpu: bool,
+    /// Degree of the refinement fits (default: the degree the cache was baked with).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=3))]
+    pub degree: Option<u8>,
+    /// Smoothing length scale for refinement, as h = SCALE × mean radius (default: as baked).
+    #[arg(long)]
+    pub h_scale: Option<f64>,
+    /// Support normals from the weighted covariance instead of the data normals.
+    #[arg(long)]
+    pub covariance: bool,
+    /// Colour the surface by this baked field (GPU only).
+    #[arg(long)]
+    pub field: Option<String>,
+    /// GPU adapter whose name contains this (default: the best one wgpu finds).
+    #[arg(long)]
+    pub adapter: Option<String>,
 }

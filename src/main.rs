@@ -4,6 +4,7 @@
 mod accuracy;
 mod bake;
 mod bench_bake;
+mod bench_gpu;
 mod cli;
 mod config;
 mod generate;
@@ -33,6 +34,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
         Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
         Command::Bench(cli::BenchCommand::Bake(args)) => bench_bake::run(&args),
+        Command::Bench(cli::BenchCommand::Gpu(args)) => bench_gpu::run(&args),
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
         Command::Inspect(args) => inspect::run(&args),

@@ -1,11 +1,13 @@
-//! `slosh render`: a frame (PNG) and its hit buffer (.npy) from a cache. The CPU reference
-//! tracer runs straight on the mapped cache through its baked BVH.
+//! `slosh render`: frames (PNG) and hit buffers (.npy) from a cache, one step or a range of
+//! steps. The GPU path uploads each step into wgpu buffers and runs the WGSL trace and shade
+//! passes; `--cpu` runs the CPU reference tracer on the mapped cache through its baked BVH.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use slosh_cache::{CacheFile, LoadedStep, step_file_name};
 use slosh_mls::{Camera, HitStatus, NormalsMode, Params, TraceHit};
+use slosh_render::{GpuHit, GpuStep, ShadeMode, TraceParams, Tracer};
 
 use crate::cli::{ModeArg, RenderArgs};
 
@@ -94,6 +96,15 @@ fn shade(hit: &TraceHit, dir: [f64; 3], mode: ModeArg) -> [f64; 3] {
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     match mode {
         ModeArg::Normals => hit.normal.map(|c| 0.5 + 0.5 * c),
+        ModeArg::Backfaces => {
+            let dot = hit.normal[0] * dir[0] + hit.normal[1] * dir[1] + hit.normal[2] * dir[2];
+            let base = if dot > 0.0 {
+                [0.95, 0.1, 0.85]
+            } else {
+                [0.6; 3]
+            };
+            base.map(|c| c * (0.4 + 0.6 * dot.abs()))
+        }
         ModeArg::Status => match hit.status {
             HitStatus::Converged => [0.1, 0.7, 0.2],
             HitStatus::IterationLimit => [0.9, 0.8, 0.1],
@@ -123,7 +134,7 @@ fn shade(hit: &TraceHit, dir: [f64; 3], mode: ModeArg) -> [f64; 3] {
     }
 }
 
-fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
+pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
     let mut bytes = Vec::new();
     {
         let mut enc = png::Encoder::new(&mut bytes, width, height);
@@ -183,24 +194,105 @@ pub fn hit_buffer(hits: &[Option<TraceHit>]) -> Vec<f32> {
     out
 }
 
-pub fn run(args: &RenderArgs) -> Result<()> {
-    if !args.cpu {
-        bail!(
-            "this build traces on the CPU only: pass --cpu (the GPU tracer is not part of it yet)"
-        );
+/// `{}` or `{:0N}` in `pattern` replaced by `step` (zero-padded to N digits).
+fn expand_pattern(pattern: &Path, step: usize) -> PathBuf {
+    let text = pattern.to_string_lossy();
+    let Some(open) = text.find('{') else {
+        return pattern.to_path_buf();
+    };
+    let Some(close) = text[open..].find('}').map(|c| open + c) else {
+        return pattern.to_path_buf();
+    };
+    let width: usize = text[open + 1..close]
+        .trim_start_matches(':')
+        .parse()
+        .unwrap_or(0);
+    PathBuf::from(format!(
+        "{}{step:0width$}{}",
+        &text[..open],
+        &text[close + 1..]
+    ))
+}
+
+/// "A..B" (B excluded) or "A..=B".
+fn parse_steps(s: &str) -> Result<Vec<usize>> {
+    let bad = || anyhow::anyhow!("--steps {s}: expected A..B or A..=B, e.g. 0..100");
+    let (a, b, inclusive) = if let Some((a, b)) = s.split_once("..=") {
+        (a, b, true)
+    } else {
+        let (a, b) = s.split_once("..").ok_or_else(bad)?;
+        (a, b, false)
+    };
+    let (a, b): (usize, usize) = (
+        a.trim().parse().map_err(|_| bad())?,
+        b.trim().parse().map_err(|_| bad())?,
+    );
+    let steps: Vec<usize> = if inclusive {
+        (a..=b).collect()
+    } else {
+        (a..b).collect()
+    };
+    if steps.is_empty() {
+        return Err(bad());
     }
-    if args.out.is_none() && args.aov.is_none() {
-        bail!("nothing to write: give --out frame.png and/or --aov hits.npy");
+    Ok(steps)
+}
+
+/// The validated settings of one `slosh render` run.
+struct RenderConfig {
+    steps: Vec<usize>,
+    sequence: bool,
+    width: u32,
+    height: u32,
+}
+
+impl RenderConfig {
+    fn from_args(args: &RenderArgs) -> Result<RenderConfig> {
+        if args.out.is_none() && args.aov.is_none() {
+            bail!("nothing to write: give --out frame.png and/or --aov hits.npy");
+        }
+        if args.iterations == 0 {
+            bail!("--iterations must be at least 1");
+        }
+        if args.h_scale.is_some_and(|h| !(h.is_finite() && h > 0.0)) {
+            bail!("--h-scale must be a positive number");
+        }
+        if args.cpu && args.field.is_some() {
+            bail!("--field colours on the GPU path only; drop --cpu");
+        }
+        let (width, height) = parse_size(&args.size)?;
+        let (steps, sequence) = match &args.steps {
+            Some(range) => (parse_steps(range)?, true),
+            None => (vec![args.step], false),
+        };
+        if sequence {
+            for (flag, path) in [("--out", &args.out), ("--aov", &args.aov)] {
+                if let Some(p) = path
+                    && !p.to_string_lossy().contains('{')
+                {
+                    bail!(
+                        "{flag} {}: a sequence needs a pattern with {{}} or {{:05}} for the step number",
+                        p.display()
+                    );
+                }
+            }
+        }
+        Ok(RenderConfig {
+            steps,
+            sequence,
+            width,
+            height,
+        })
     }
-    if args.iterations == 0 {
-        bail!("--iterations must be at least 1");
-    }
-    let (width, height) = parse_size(&args.size)?;
-    let path = step_path(&args.path, args.step);
-    let file = CacheFile::open(&path).with_context(|| format!("opening step {}", args.step))?;
-    let step = LoadedStep::load(&file)?;
-    let h = file.header();
-    let mut camera = framing_camera(&h.bounds, args.fov, width, height);
+}
+
+fn camera_for(
+    args: &RenderArgs,
+    bounds: &[[f64; 3]; 2],
+    width: u32,
+    height: u32,
+) -> Result<Camera> {
+    let mut camera = framing_camera(bounds, args.fov, width, height);
     if let Some(e) = &args.eye {
         camera.eye = parse_vec3("eye", e)?;
     }
@@ -210,36 +302,169 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(u) = &args.up {
         camera.up = parse_vec3("up", u)?;
     }
+    Ok(camera)
+}
+
+fn background(y: u32, height: u32) -> [f64; 3] {
+    let t = f64::from(y) / f64::from(height);
+    [0.03 + 0.05 * t, 0.035 + 0.05 * t, 0.05 + 0.06 * t]
+}
+
+/// The GPU's hits in world coordinates, as the `.npy` layout.
+fn gpu_hit_buffer(step: &GpuStep, hits: &[GpuHit]) -> Vec<f32> {
+    let mut out = vec![0f32; hits.len() * 8];
+    for (px, h) in out.chunks_exact_mut(8).zip(hits) {
+        if h.status == slosh_render::status::MISS {
+            continue;
+        }
+        let p = step.transform.to_world(h.position.map(f64::from));
+        let t = f64::from(h.t) * step.transform.scale;
+        let v = [p[0], p[1], p[2]];
+        for (o, x) in px.iter_mut().zip(v) {
+            *o = x as f32;
+        }
+        px[3..6].copy_from_slice(&h.normal);
+        px[6] = t as f32;
+        px[7] = h.status as f32;
+    }
+    out
+}
+
+fn h_factor(args: &RenderArgs, baked: f64) -> f64 {
+    args.h_scale.map_or(1.0, |h| h / baked)
+}
+
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let config = RenderConfig::from_args(args)?;
+    let first = CacheFile::open(&step_path(&args.path, config.steps[0]))
+        .with_context(|| format!("opening step {}", config.steps[0]))?;
+    let camera = camera_for(args, &first.header().bounds, config.width, config.height)?;
+    drop(first);
+    // Output folders (e.g. frames/ of a sequence) are created as needed.
+    for pattern in [&args.out, &args.aov].into_iter().flatten() {
+        if let Some(dir) = expand_pattern(pattern, 0).parent()
+            && !dir.as_os_str().is_empty()
+        {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+    }
+    let targets = |step: usize| {
+        (
+            args.out.as_ref().map(|p| expand_pattern(p, step)),
+            args.aov.as_ref().map(|p| expand_pattern(p, step)),
+        )
+    };
+    if args.cpu {
+        for &step in &config.steps {
+            let (out, aov) = targets(step);
+            render_cpu(args, &camera, step, out.as_deref(), aov.as_deref())?;
+        }
+        return Ok(());
+    }
+    let gpu = slosh_render::Gpu::new(args.adapter.as_deref())?;
+    let tracer = Tracer::new(&gpu)?;
+    if config.sequence {
+        println!(
+            "rendering {} steps on {}",
+            config.steps.len(),
+            gpu.describe()
+        );
+    }
+    for &step in &config.steps {
+        let path = step_path(&args.path, step);
+        let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
+        let gpu_step = GpuStep::upload(&gpu, &file, args.field.as_deref())?;
+        let h = file.header();
+        let params = TraceParams {
+            iterations: args.iterations,
+            degree: args.degree.unwrap_or(h.mls.degree),
+            h_factor: h_factor(args, h.mls.h_scale) as f32,
+            covariance: args.covariance || h.mls.normals == "covariance",
+            epsilon: 1e-4,
+            mode: match args.mode {
+                ModeArg::Shade => ShadeMode::Shade,
+                ModeArg::Normals => ShadeMode::Normals,
+                ModeArg::Status => ShadeMode::Status,
+                ModeArg::Backfaces => ShadeMode::Backfaces,
+            },
+        };
+        let start = std::time::Instant::now();
+        let frame = tracer.render(&gpu, &gpu_step, &camera, &params)?;
+        let seconds = start.elapsed().as_secs_f64();
+        let (out, aov) = targets(step);
+        if let Some(out) = &out {
+            let rgb: Vec<u8> = bytemuck::cast_slice::<u32, u8>(&frame.rgba)
+                .chunks_exact(4)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect();
+            write_png(out, frame.width, frame.height, &rgb)?;
+        }
+        if let Some(aov) = &aov {
+            write_npy(
+                aov,
+                frame.height,
+                frame.width,
+                8,
+                &gpu_hit_buffer(&gpu_step, &frame.hits),
+            )?;
+        }
+        let hits = frame.hits.iter().filter(|h| h.status != 0).count();
+        let up = gpu_step.upload;
+        println!(
+            "step {step} ({} points): {}x{}, {} iterations, {hits} hit pixels; upload {:.1} ms ({:.2} GB/s), frame {:.1} ms with readback, on {}",
+            h.points,
+            frame.width,
+            frame.height,
+            params.iterations,
+            up.total_seconds * 1e3,
+            up.gigabytes_per_second(),
+            seconds * 1e3,
+            gpu.info.name
+        );
+    }
+    Ok(())
+}
+
+fn render_cpu(
+    args: &RenderArgs,
+    camera: &Camera,
+    step_index: usize,
+    out: Option<&Path>,
+    aov: Option<&Path>,
+) -> Result<()> {
+    let (width, height) = (camera.width, camera.height);
+    let path = step_path(&args.path, step_index);
+    let file = CacheFile::open(&path).with_context(|| format!("opening step {step_index}"))?;
+    let step = LoadedStep::load(&file)?;
+    let h = file.header();
     let params = Params {
-        degree: h.mls.degree,
+        degree: args.degree.unwrap_or(h.mls.degree),
         iterations: args.iterations,
         epsilon: 1e-4,
-        normals: match h.mls.normals.as_str() {
-            "covariance" => NormalsMode::Covariance,
-            _ => NormalsMode::Mean,
+        normals: if args.covariance || h.mls.normals == "covariance" {
+            NormalsMode::Covariance
+        } else {
+            NormalsMode::Mean
         },
-        h_factor: 1.0,
+        h_factor: h_factor(args, h.mls.h_scale) as f32,
     };
     let start = std::time::Instant::now();
-    let hits = step.render(&camera, &params);
+    let hits = step.render(camera, &params);
     let seconds = start.elapsed().as_secs_f64();
     let hit_count = hits.iter().filter(|h| h.is_some()).count();
-    if let Some(out) = &args.out {
+    if let Some(out) = out {
         let mut rgb = Vec::with_capacity(hits.len() * 3);
         for (i, hit) in hits.iter().enumerate() {
             let (x, y) = (i as u32 % width, i as u32 / width);
             let colour = match hit {
                 Some(hit) => shade(hit, camera.ray(x, y).1, args.mode),
-                None => {
-                    let t = f64::from(y) / f64::from(height);
-                    [0.03 + 0.05 * t, 0.035 + 0.05 * t, 0.05 + 0.06 * t]
-                }
+                None => background(y, height),
             };
             rgb.extend(colour.map(srgb));
         }
         write_png(out, width, height, &rgb)?;
     }
-    if let Some(aov) = &args.aov {
+    if let Some(aov) = aov {
         write_npy(aov, height, width, 8, &hit_buffer(&hits))?;
     }
     println!(

@@ -1,0 +1,407 @@
+//! `slosh bench gpu`: frame times of the trace and shade passes by GPU timestamp queries
+//! (warm-up, then the median of N frames), in the setups of the thesis's tables 4.1, 4.5 and
+//! 4.6 plus 1M points and 1920×1080, each row beside its error against the analytic surface
+//! (or, for the bunny, against the 5-iteration solution), and upload times per step.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
+use slosh_cache::{CacheFile, Compression, encode_step};
+use slosh_fileio::FileBytes;
+use slosh_mls::Camera;
+use slosh_render::{Gpu, GpuStep, ShadeMode, TraceParams, Tracer, status};
+use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
+
+use crate::cli::GpuBenchArgs;
+use crate::render::{framing_camera, write_png};
+
+/// A baked step in memory, its analytic truth if it has one, and its world spacing.
+struct Bench {
+    label: String,
+    file: CacheFile,
+    truth: Option<Truth>,
+    points: usize,
+}
+
+fn bake(label: &str, input: &StepInput, degree: u8, truth: Option<Truth>) -> Result<Bench> {
+    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    params.mls.degree = degree;
+    params.compression = Compression::Level(3);
+    let baked = bake_step(input, &params)?;
+    let bytes = encode_step(baked.header, &baked.sections, params.compression)?;
+    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new(label), bytes))?;
+    Ok(Bench {
+        label: label.to_string(),
+        points: input.positions.len(),
+        file,
+        truth,
+    })
+}
+
+fn scene(kind: SceneKind, points: usize, degree: u8) -> Result<Bench> {
+    let scene = Scene::new(SceneSpec::new(kind, points, 1))?;
+    let (positions, normals) = scene.particles(0).surface_arrays();
+    let input = StepInput {
+        source: format!("{} {points}", kind.name()),
+        positions,
+        normals: Some(normals),
+        ..StepInput::default()
+    };
+    let label = format!("{} ({} surface points)", kind.name(), input.positions.len());
+    bake(&label, &input, degree, Some(scene.truth(scene.time(0))))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Median and 99th percentile of |distance to the truth| / spacing over the hit pixels.
+fn error(
+    bench: &Bench,
+    step: &GpuStep,
+    hits: &[slosh_render::GpuHit],
+    reference: Option<&[slosh_render::GpuHit]>,
+) -> Option<(f64, f64)> {
+    let mut d: Vec<f64> = Vec::new();
+    for (i, h) in hits.iter().enumerate() {
+        if h.status == status::MISS || h.status == status::DROPLET {
+            continue;
+        }
+        let p = step.transform.to_world(h.position.map(f64::from));
+        if let Some(truth) = &bench.truth {
+            d.push(truth.signed_distance(p.into()).abs() / step.spacing);
+        } else if let Some(r) = reference.and_then(|r| r.get(i)).filter(|r| r.status != 0) {
+            d.push(f64::from((r.t - h.t).abs()) * step.transform.scale / step.spacing);
+        }
+    }
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_by(f64::total_cmp);
+    Some((d[d.len() / 2], d[(d.len() * 99 / 100).min(d.len() - 1)]))
+}
+
+struct Row {
+    table: &'static str,
+    scene: String,
+    size: (u32, u32),
+    degree: u8,
+    iterations: u32,
+    trace_ms: f64,
+    shade_ms: f64,
+    error: Option<(f64, f64)>,
+    thesis_fps: Option<f64>,
+}
+
+struct Runner<'a> {
+    gpu: &'a Gpu,
+    tracer: Tracer,
+    frames: usize,
+}
+
+impl Runner<'_> {
+    fn camera(bench: &Bench, w: u32, h: u32) -> Camera {
+        framing_camera(&bench.file.header().bounds, 40.0, w, h)
+    }
+
+    /// Times `iterations` on `bench` at w × h; also returns the frame for errors and images.
+    fn time(
+        &self,
+        bench: &Bench,
+        step: &GpuStep,
+        (w, h): (u32, u32),
+        degree: u8,
+        iterations: u32,
+    ) -> Result<(f64, f64, slosh_render::Frame)> {
+        let camera = Self::camera(bench, w, h);
+        let mut params = TraceParams::for_step(step, iterations);
+        params.degree = degree;
+        params.mode = ShadeMode::Shade;
+        let targets = self.tracer.targets(self.gpu, step, w, h);
+        let mut trace = Vec::new();
+        let mut shade = Vec::new();
+        for i in 0..10 + self.frames {
+            let times = self
+                .tracer
+                .run(self.gpu, step, &targets, &camera, &params)?
+                .context("this adapter has no timestamp queries")?;
+            if i >= 10 {
+                trace.push(times.trace_ms);
+                shade.push(times.shade_ms);
+            }
+        }
+        let frame = self.tracer.render(self.gpu, step, &camera, &params)?;
+        Ok((median(trace), median(shade), frame))
+    }
+}
+
+/// Thesis table 4.1 (35k-point bunny, 800×800, OptiX): fps at iterations 1–5, quadratic LU
+/// and cubic bisection LU.
+const THESIS_BUNNY_FPS: [[f64; 5]; 2] = [
+    [39.81, 1.67, 0.85, 0.58, 0.43],
+    [38.72, 1.04, 0.52, 0.35, 0.26],
+];
+/// Thesis table 4.5 (tank, ~10k points): fps by image size at iterations 1–3.
+const THESIS_TANK_FPS: [((u32, u32), [f64; 3]); 4] = [
+    ((200, 100), [212.57, 19.16, 10.19]),
+    ((400, 200), [145.27, 7.98, 4.14]),
+    ((800, 400), [83.40, 3.11, 1.60]),
+    ((1600, 800), [36.24, 1.17, 0.55]),
+];
+/// Thesis table 4.6 (1280×800): fps by point count at iterations 1–3.
+const THESIS_POINTS_FPS: [(usize, [f64; 3]); 3] = [
+    (2_500, [73.05, 4.18, 2.17]),
+    (10_000, [65.35, 2.81, 1.44]),
+    (100_000, [28.43, 1.47, 0.75]),
+];
+
+pub fn run(args: &GpuBenchArgs) -> Result<()> {
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let gpu = Gpu::new(args.adapter.as_deref())?;
+    if !gpu.timestamps {
+        bail!(
+            "{} has no timestamp queries: GPU frame times cannot be measured",
+            gpu.describe()
+        );
+    }
+    let runner = Runner {
+        gpu: &gpu,
+        tracer: Tracer::new(&gpu)?,
+        frames: args.frames,
+    };
+    println!("GPU benchmark on {}", gpu.describe());
+    let mut rows: Vec<Row> = Vec::new();
+    let mut uploads: Vec<(String, usize, slosh_render::UploadStats)> = Vec::new();
+    std::fs::create_dir_all(&args.images).ok();
+
+    // Table 4.1: the bunny.
+    let bunny_path = args
+        .bunny
+        .clone()
+        .or_else(|| std::env::var_os("SLOSH_DATA").map(|d| PathBuf::from(d).join("bunny.obj")));
+    let bunny = bunny_path.filter(|p| p.exists());
+    if let Some(path) = &bunny {
+        let cloud = crate::import::read_point_cloud(path)?;
+        let input = StepInput {
+            source: path.display().to_string(),
+            positions: cloud.positions,
+            normals: cloud.normals,
+            ..StepInput::default()
+        };
+        let size = if args.quick { (200, 200) } else { (800, 800) };
+        for degree in [2u8, 3] {
+            let bench = bake(
+                &format!("bunny.obj ({} points)", input.positions.len()),
+                &input,
+                degree,
+                None,
+            )?;
+            let step = GpuStep::upload(&gpu, &bench.file, None)?;
+            let (_, _, reference) = runner.time(&bench, &step, size, degree, 8)?;
+            for iterations in 1..=5u32 {
+                let (trace_ms, shade_ms, frame) =
+                    runner.time(&bench, &step, size, degree, iterations)?;
+                if degree == 3 && iterations == 5 {
+                    save(&args.images.join("bunny.png"), &frame)?;
+                }
+                rows.push(Row {
+                    table: "4.1",
+                    scene: bench.label.clone(),
+                    size,
+                    degree,
+                    iterations,
+                    trace_ms,
+                    shade_ms,
+                    error: error(&bench, &step, &frame.hits, Some(&reference.hits)),
+                    thesis_fps: Some(
+                        THESIS_BUNNY_FPS[usize::from(degree == 3)][iterations as usize - 1],
+                    ),
+                });
+                println!(
+                    "  bunny degree {degree} {iterations} it: {:.3} ms",
+                    trace_ms + shade_ms
+                );
+            }
+        }
+    } else {
+        println!("  (no bunny.obj: give --bunny or set SLOSH_DATA; table 4.1 skipped)");
+    }
+
+    // Table 4.5: the tank, ~10k surface points, image sizes.
+    let tank = scene(
+        SceneKind::Tank,
+        if args.quick { 60_000 } else { 250_000 },
+        2,
+    )?;
+    let tank_step = GpuStep::upload(&gpu, &tank.file, None)?;
+    let sizes: &[(u32, u32)] = if args.quick {
+        &[(200, 100), (400, 200)]
+    } else {
+        &[(200, 100), (400, 200), (800, 400), (1600, 800)]
+    };
+    for &size in sizes {
+        for iterations in 1..=3u32 {
+            let (trace_ms, shade_ms, frame) =
+                runner.time(&tank, &tank_step, size, 2, iterations)?;
+            if size == *sizes.last().unwrap_or(&size) && iterations == 3 {
+                save(&args.images.join("tank.png"), &frame)?;
+            }
+            rows.push(Row {
+                table: "4.5",
+                scene: tank.label.clone(),
+                size,
+                degree: 2,
+                iterations,
+                trace_ms,
+                shade_ms,
+                error: error(&tank, &tank_step, &frame.hits, None),
+                thesis_fps: THESIS_TANK_FPS
+                    .iter()
+                    .find(|(s, _)| *s == size)
+                    .map(|(_, f)| f[iterations as usize - 1]),
+            });
+        }
+    }
+    println!("  tank done");
+
+    // Table 4.6: point counts at 1280×800, plus 1M points and 1920×1080.
+    let counts: &[usize] = if args.quick {
+        &[2_500, 10_000]
+    } else {
+        &[2_500, 10_000, 100_000, 1_000_000]
+    };
+    for &points in counts {
+        let start = Instant::now();
+        let bench = scene(SceneKind::Sphere, points, 2)?;
+        println!(
+            "  sphere {points}: baked in {:.1} s",
+            start.elapsed().as_secs_f64()
+        );
+        let step = GpuStep::upload(&gpu, &bench.file, None)?;
+        // Upload: the median of 5 uploads of the same in-memory step.
+        let mut best = Vec::new();
+        for _ in 0..5 {
+            best.push(GpuStep::upload(&gpu, &bench.file, None)?.upload);
+        }
+        best.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
+        uploads.push((bench.label.clone(), bench.points, best[2]));
+        let mut sizes = vec![(1280, 800)];
+        if points >= 100_000 && !args.quick {
+            sizes.push((1920, 1080));
+        }
+        for size in sizes {
+            for iterations in 1..=3u32 {
+                let (trace_ms, shade_ms, frame) =
+                    runner.time(&bench, &step, size, 2, iterations)?;
+                rows.push(Row {
+                    table: "4.6",
+                    scene: bench.label.clone(),
+                    size,
+                    degree: 2,
+                    iterations,
+                    trace_ms,
+                    shade_ms,
+                    error: error(&bench, &step, &frame.hits, None),
+                    thesis_fps: THESIS_POINTS_FPS
+                        .iter()
+                        .find(|(n, _)| *n == points && size == (1280, 800))
+                        .map(|(_, f)| f[iterations as usize - 1]),
+                });
+            }
+        }
+    }
+    write_report(args, &gpu, &rows, &uploads)
+}
+
+fn save(path: &Path, frame: &slosh_render::Frame) -> Result<()> {
+    let rgb: Vec<u8> = bytemuck::cast_slice::<u32, u8>(&frame.rgba)
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    write_png(path, frame.width, frame.height, &rgb)
+}
+
+fn write_report(
+    args: &GpuBenchArgs,
+    gpu: &Gpu,
+    rows: &[Row],
+    uploads: &[(String, usize, slosh_render::UploadStats)],
+) -> Result<()> {
+    let mut md = String::new();
+    let _ = writeln!(md, "# GPU results (`slosh bench gpu`)\n");
+    let _ = writeln!(
+        md,
+        "Measured on **{}**, with GPU timestamp queries around the trace and the shade pass: 10 warm-up frames, then the median of {} frames. fps = 1000 / (trace + shade). Error: median and 99th percentile over hit pixels of the distance to the analytic surface in mean spacings (the bunny has no analytic surface: its error is |Δt| against 8 iterations of the same fit, in spacings).\n",
+        gpu.describe(),
+        args.frames
+    );
+    for (table, title) in [
+        (
+            "4.1",
+            "Thesis table 4.1: the bunny at 800×800 (thesis: OptiX, 35k-point bunny; here the 28k-vertex bunny.obj of the pymeshlab wheel)",
+        ),
+        ("4.5", "Thesis table 4.5: tank, image sizes"),
+        (
+            "4.6",
+            "Thesis table 4.6: point counts at 1280×800 (sphere), extended to 1M points and 1920×1080",
+        ),
+    ] {
+        let rows: Vec<&Row> = rows.iter().filter(|r| r.table == table).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let _ = writeln!(md, "## {title}\n");
+        let _ = writeln!(
+            md,
+            "| scene | image | degree | iterations | trace ms | shade ms | fps | thesis fps | speed-up | error median | error p99 |"
+        );
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+        for r in rows {
+            let fps = 1000.0 / (r.trace_ms + r.shade_ms);
+            let (thesis, speedup) = match r.thesis_fps {
+                Some(t) => (format!("{t}"), format!("{:.0}×", fps / t)),
+                None => ("—".into(), "—".into()),
+            };
+            let (e50, e99) = r.error.map_or(("—".into(), "—".into()), |(a, b)| {
+                (format!("{a:.2e}"), format!("{b:.2e}"))
+            });
+            let _ = writeln!(
+                md,
+                "| {} | {}×{} | {} | {} | {:.3} | {:.3} | {:.0} | {thesis} | {speedup} | {e50} | {e99} |",
+                r.scene, r.size.0, r.size.1, r.degree, r.iterations, r.trace_ms, r.shade_ms, fps
+            );
+        }
+        md.push('\n');
+    }
+    let _ = writeln!(
+        md,
+        "## Upload per step\n\nFrom a step in memory (as from the page cache): checksums, decompression, copies into `mapped_at_creation` staging buffers, `copy_buffer_to_buffer` into device-local storage, waited for. Median of 5.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| step | bytes on the GPU | bytes stored | host ms | GPU copy ms | total ms | GB/s |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    for (label, _, u) in uploads {
+        let _ = writeln!(
+            md,
+            "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            u.bytes,
+            u.stored_bytes,
+            u.host_seconds * 1e3,
+            u.gpu_seconds * 1e3,
+            u.total_seconds * 1e3,
+            u.gigabytes_per_second()
+        );
+    }
+    slosh_fileio::atomic_write(&args.out, md.as_bytes())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    print!("{md}");
+    Ok(())
+}
