@@ -203,11 +203,11 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
                 None,
             )?;
             let step = GpuStep::upload(&gpu, &bench.file, None)?;
-            let (_, _, reference) = runner.time(&bench, &step, size, degree, 8)?;
-            for iterations in 1..=5u32 {
+            let (_, _, reference) = runner.time(&bench, &step, size, degree, args.max_iterations.min(5) + 3)?;
+            for iterations in 1..=args.max_iterations.min(5) {
                 let (trace_ms, shade_ms, frame) =
                     runner.time(&bench, &step, size, degree, iterations)?;
-                if degree == 3 && iterations == 5 {
+                if degree == 3 && iterations == args.max_iterations.min(5) {
                     save(&args.images.join("bunny.png"), &frame)?;
                 }
                 rows.push(Row {
@@ -246,10 +246,10 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
         &[(200, 100), (400, 200), (800, 400), (1600, 800)]
     };
     for &size in sizes {
-        for iterations in 1..=3u32 {
+        for iterations in 1..=args.max_iterations.min(3) {
             let (trace_ms, shade_ms, frame) =
                 runner.time(&tank, &tank_step, size, 2, iterations)?;
-            if size == *sizes.last().unwrap_or(&size) && iterations == 3 {
+            if size == *sizes.last().unwrap_or(&size) && iterations == args.max_iterations.min(3) {
                 save(&args.images.join("tank.png"), &frame)?;
             }
             rows.push(Row {
@@ -296,7 +296,7 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
             sizes.push((1920, 1080));
         }
         for size in sizes {
-            for iterations in 1..=3u32 {
+            for iterations in 1..=args.max_iterations.min(3) {
                 let (trace_ms, shade_ms, frame) =
                     runner.time(&bench, &step, size, 2, iterations)?;
                 rows.push(Row {

@@ -52,6 +52,9 @@ pub struct GpuBenchArgs {
     /// Timed frames per row (median reported), after 10 warm-up frames.
     #[arg(long, default_value_t = 50)]
     pub frames: usize,
+    /// Highest iteration count measured (refinement is slow; cap it to bound the run).
+    #[arg(long, default_value_t = 5)]
+    pub max_iterations: u32,
     /// Small scenes and images only (checks the harness; lavapipe-friendly).
     #[arg(long)]
     pub quick: bool,
