@@ -203,7 +203,8 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
                 None,
             )?;
             let step = GpuStep::upload(&gpu, &bench.file, None)?;
-            let (_, _, reference) = runner.time(&bench, &step, size, degree, args.max_iterations.min(5) + 3)?;
+            let (_, _, reference) =
+                runner.time(&bench, &step, size, degree, args.max_iterations.min(5) + 3)?;
             for iterations in 1..=args.max_iterations.min(5) {
                 let (trace_ms, shade_ms, frame) =
                     runner.time(&bench, &step, size, degree, iterations)?;
