@@ -14,6 +14,28 @@ struct Normal {
     pad: f32,
 }
 
+// A ball's initial support normal and polynomial (mirrors `slosh_cache::GpuBall`).
+struct Ball {
+    normal: vec3<f32>,
+    h: f32,
+    coeffs: array<f32, 10>,
+    degree: u32,
+    state: u32,
+}
+
+// One pixel of the hit buffer; mirrors `slosh_render::GpuHit`. Position and t are in the
+// cache's local coordinates.
+struct Hit {
+    position: vec3<f32>,
+    t: f32,
+    normal: vec3<f32>,
+    status: u32,
+    item: u32,
+    iterations: u32,
+    degree: u32,
+    degraded: u32,
+}
+
 // Camera (already in the cache's local coordinates) and tracing parameters; mirrors
 // `slosh_render::GpuSettings`.
 struct Settings {

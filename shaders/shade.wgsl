@@ -3,25 +3,6 @@
 // coloured by a scalar field when one is bound), 1 normals, 2 status and iteration heat map,
 // 3 back faces flagged. Appended to mls.wgsl.
 
-struct Ball {
-    normal: vec3<f32>,
-    h: f32,
-    coeffs: array<f32, 10>,
-    degree: u32,
-    state: u32,
-}
-
-struct Hit {
-    position: vec3<f32>,
-    t: f32,
-    normal: vec3<f32>,
-    status: u32,
-    item: u32,
-    iterations: u32,
-    degree: u32,
-    degraded: u32,
-}
-
 @group(0) @binding(5) var<storage, read> balls: array<Ball>;
 @group(0) @binding(9) var<storage, read> field: array<f32>;
 @group(1) @binding(0) var<storage, read_write> hits: array<Hit>;

@@ -4,14 +4,6 @@
 // to the lower item. Droplet spheres are items after the balls. Mirrors crates/mls/src/tracer.rs
 // and crates/cache/src/bvh.rs. Appended to mls.wgsl.
 
-struct Ball {
-    normal: vec3<f32>,
-    h: f32,
-    coeffs: array<f32, 10>,
-    degree: u32,
-    state: u32,
-}
-
 struct Sphere {
     centre: vec3<f32>,
     radius: f32,
@@ -22,19 +14,6 @@ struct BvhNode {
     count: u32,
     hi: vec3<f32>,
     first: u32,
-}
-
-// One pixel of the hit buffer; mirrors `slosh_render::GpuHit`. Position and t are in the
-// cache's local coordinates.
-struct Hit {
-    position: vec3<f32>,
-    t: f32,
-    normal: vec3<f32>,
-    status: u32,
-    item: u32,
-    iterations: u32,
-    degree: u32,
-    degraded: u32,
 }
 
 @group(0) @binding(5) var<storage, read> balls: array<Ball>;

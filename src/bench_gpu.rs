@@ -16,7 +16,7 @@ use slosh_render::{Gpu, GpuStep, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 
 use crate::cli::GpuBenchArgs;
-use crate::render::{framing_camera, write_png};
+use crate::render::{framing_camera, write_frame_png};
 
 /// A baked step in memory, its analytic truth if it has one, and its world spacing.
 struct Bench {
@@ -209,7 +209,7 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
                 let (trace_ms, shade_ms, frame) =
                     runner.time(&bench, &step, size, degree, iterations)?;
                 if degree == 3 && iterations == args.max_iterations.min(5) {
-                    save(&args.images.join("bunny.png"), &frame)?;
+                    write_frame_png(&args.images.join("bunny.png"), &frame)?;
                 }
                 rows.push(Row {
                     table: "4.1",
@@ -251,7 +251,7 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
             let (trace_ms, shade_ms, frame) =
                 runner.time(&tank, &tank_step, size, 2, iterations)?;
             if size == *sizes.last().unwrap_or(&size) && iterations == args.max_iterations.min(3) {
-                save(&args.images.join("tank.png"), &frame)?;
+                write_frame_png(&args.images.join("tank.png"), &frame)?;
             }
             rows.push(Row {
                 table: "4.5",
@@ -318,14 +318,6 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
         }
     }
     write_report(args, &gpu, &rows, &uploads)
-}
-
-fn save(path: &Path, frame: &slosh_render::Frame) -> Result<()> {
-    let rgb: Vec<u8> = bytemuck::cast_slice::<u32, u8>(&frame.rgba)
-        .chunks_exact(4)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect();
-    write_png(path, frame.width, frame.height, &rgb)
 }
 
 fn write_report(

@@ -134,7 +134,7 @@ fn shade(hit: &TraceHit, dir: [f64; 3], mode: ModeArg) -> [f64; 3] {
     }
 }
 
-pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
+fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
     let mut bytes = Vec::new();
     {
         let mut enc = png::Encoder::new(&mut bytes, width, height);
@@ -145,6 +145,15 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()>
     }
     slosh_fileio::atomic_write(path, &bytes)?;
     Ok(())
+}
+
+/// A GPU frame's RGBA pixels as an RGB PNG.
+pub fn write_frame_png(path: &Path, frame: &slosh_render::Frame) -> Result<()> {
+    let rgb: Vec<u8> = bytemuck::cast_slice::<u32, u8>(&frame.rgba)
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    write_png(path, frame.width, frame.height, &rgb)
 }
 
 /// float32 H×W×C little-endian .npy.
@@ -393,11 +402,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let seconds = start.elapsed().as_secs_f64();
         let (out, aov) = targets(step);
         if let Some(out) = &out {
-            let rgb: Vec<u8> = bytemuck::cast_slice::<u32, u8>(&frame.rgba)
-                .chunks_exact(4)
-                .flat_map(|p| [p[0], p[1], p[2]])
-                .collect();
-            write_png(out, frame.width, frame.height, &rgb)?;
+            write_frame_png(out, &frame)?;
         }
         if let Some(aov) = &aov {
             write_npy(
