@@ -731,66 +731,43 @@ struct Outcome {
     degraded: bool,
 }
 
-// The ball's initial polynomial, then refinement with the centre's neighbours (intersect_ball).
-// Misses come back with STATUS_MISS.
-fn intersect_ball(ray: Ray, centre: u32, bh: f32, ball_normal: vec3<f32>, initial: Poly, t_lo: f32, t_out: f32) -> Outcome {
-    var out: Outcome;
-    out.status = STATUS_MISS;
-    out.t = 0.0;
-    out.normal = vec3<f32>(0.0);
-    out.iterations = 0u;
-    out.degree = 0u;
-    out.degraded = false;
-    let c = points[centre].position;
-    let frame0 = frame_from_normal(ball_normal);
-    let first = intersect_poly(ray, c, frame0, initial, bh, t_lo, t_out);
-    if !first.ok {
-        return out;
-    }
-    var t = first.t;
-    var normal = hit_normal(frame0, initial, first.x, first.y);
-    var degree = initial.degree;
-    var degraded = initial.degree < settings.degree;
-    var iterations = 1u;
-    var status = STATUS_ITERATION_LIMIT;
+// Iterations 2 and on from a ball's initial hit `start` (iteration 1, status iteration limit),
+// with the centre's neighbours (refine). Leaving the ball comes back with STATUS_MISS.
+fn refine(ray: Ray, centre: u32, bh: f32, start: Outcome, t_lo: f32, t_out: f32) -> Outcome {
+    var out = start;
     let h = bh * settings.h_factor;
     let nb = neighbourhood(centre);
     let limit = max(settings.iterations, 1u);
-    while iterations < limit {
-        let r = ray.origin + ray.dir * t;
+    while out.iterations < limit {
+        let r = ray.origin + ray.dir * out.t;
         let support = support_normal(r, nb, h, ray.origin);
         if !support.ok {
-            status = STATUS_NO_SUPPORT;
+            out.status = STATUS_NO_SUPPORT;
             break;
         }
         let frame = frame_from_normal(support.normal);
         let f = fit(r, frame, nb, h, settings.degree);
         if !f.ok {
-            status = STATUS_DEGENERATE_FIT;
+            out.status = STATUS_DEGENERATE_FIT;
             break;
         }
-        degraded = degraded || f.degraded;
+        out.degraded = out.degraded || f.degraded;
         let next = intersect_poly(ray, r, frame, f.poly, h, t_lo, t_out);
         if !next.ok {
             // Left the trust region: no hit from this ball.
-            out.iterations = iterations + 1u;
+            out.status = STATUS_MISS;
+            out.iterations += 1u;
             return out;
         }
-        iterations++;
-        let dt = abs(next.t - t);
-        t = next.t;
-        normal = hit_normal(frame, f.poly, next.x, next.y);
-        degree = f.poly.degree;
+        out.iterations += 1u;
+        let dt = abs(next.t - out.t);
+        out.t = next.t;
+        out.normal = hit_normal(frame, f.poly, next.x, next.y);
+        out.degree = f.poly.degree;
         if dt < settings.epsilon * h {
-            status = STATUS_CONVERGED;
+            out.status = STATUS_CONVERGED;
             break;
         }
     }
-    out.status = status;
-    out.t = t;
-    out.normal = normal;
-    out.iterations = iterations;
-    out.degree = degree;
-    out.degraded = degraded;
     return out;
 }

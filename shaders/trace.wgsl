@@ -51,27 +51,34 @@ fn camera_ray(x: u32, y: u32) -> Ray {
     return Ray(settings.eye, d / sqrt(length_squared(d)));
 }
 
-// Whether a hit at t by `item` beats the best so far (tracer.rs: nearer).
-fn nearer(t: f32, item: u32, best_t: f32, best_item: u32) -> bool {
-    return t < best_t || (t == best_t && item < best_item);
+// Candidates refined per ray before it counts as a miss (tracer.rs: MAX_CANDIDATES).
+const MAX_CANDIDATES: u32 = 16u;
+
+// An initial hit: a ball's baked polynomial inside the ball (iteration 1), or a droplet
+// sphere. Candidates are ordered by the key (t, item), an exact tie going to the lower item.
+struct Candidate {
+    found: bool,
+    droplet: bool,
+    item: u32,
+    t: f32,
+    // The ray's interval inside the ball, and the local hit in the ball's frame.
+    t_lo: f32,
+    t_out: f32,
+    x: f32,
+    y: f32,
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= settings.width || gid.y >= settings.height {
-        return;
-    }
-    let ray = camera_ray(gid.x, gid.y);
-    var best: Hit;
-    best.position = vec3<f32>(0.0);
-    best.t = FAR;
-    best.normal = vec3<f32>(0.0);
-    best.status = STATUS_MISS;
-    best.item = 0xffffffffu;
-    best.iterations = 0u;
-    best.degree = 0u;
-    best.degraded = 0u;
+fn key_before(t: f32, item: u32, other_t: f32, other_item: u32) -> bool {
+    return t < other_t || (t == other_t && item < other_item);
+}
 
+// The nearest initial hit whose key comes after (after_t, after_item), through the BVH
+// (tracer.rs: next_candidate).
+fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
+    var best: Candidate;
+    best.found = false;
+    best.t = FAR;
+    best.item = 0xffffffffu;
     let parallel = abs(ray.dir) < vec3<f32>(1e-30);
     let inv_dir = 1.0 / select(ray.dir, vec3<f32>(1.0), parallel);
     var stack_node: array<u32, STACK_SIZE>;
@@ -108,19 +115,14 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
                     }
                     // From inside a droplet the ray sees its far wall.
                     let t = select(iv.t_out, iv.t_in, iv.t_in >= 0.0);
-                    if !(t >= 0.0) || !nearer(t, item, best.t, best.item) {
+                    if !(t >= 0.0) || !key_before(after_t, after_item, t, item)
+                        || !key_before(t, item, best.t, best.item) {
                         continue;
                     }
-                    let p = ray.origin + ray.dir * t;
-                    let nrm = normalized(p - sphere.centre);
-                    best.position = p;
-                    best.t = t;
-                    best.normal = select(vec3<f32>(0.0, 0.0, 1.0), nrm.v, nrm.ok);
-                    best.status = STATUS_DROPLET;
+                    best.found = true;
+                    best.droplet = true;
                     best.item = item;
-                    best.iterations = 0u;
-                    best.degree = 0u;
-                    best.degraded = 0u;
+                    best.t = t;
                     continue;
                 }
                 let ball = balls[item];
@@ -130,7 +132,7 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 let point = points[item];
                 let iv = ray_ball(ray, point.position, point.radius);
-                if !iv.ok || iv.t_in > best.t {
+                if !iv.ok || iv.t_in > best.t || iv.t_out < after_t {
                     continue;
                 }
                 let t_lo = max(iv.t_in, 0.0);
@@ -140,16 +142,17 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var initial: Poly;
                 initial.degree = min(ball.degree, 3u);
                 initial.c = ball.coeffs;
-                let out = intersect_ball(ray, item, ball.h, ball.normal, initial, t_lo, iv.t_out);
-                if out.status != STATUS_MISS && finite(out.t) && nearer(out.t, item, best.t, best.item) {
-                    best.position = ray.origin + ray.dir * out.t;
-                    best.t = out.t;
-                    best.normal = out.normal;
-                    best.status = out.status;
+                let hit = intersect_poly(ray, point.position, frame_from_normal(ball.normal), initial, ball.h, t_lo, iv.t_out);
+                if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
+                    && key_before(hit.t, item, best.t, best.item) {
+                    best.found = true;
+                    best.droplet = false;
                     best.item = item;
-                    best.iterations = out.iterations;
-                    best.degree = out.degree;
-                    best.degraded = select(0u, 1u, out.degraded);
+                    best.t = hit.t;
+                    best.t_lo = t_lo;
+                    best.t_out = iv.t_out;
+                    best.x = hit.x;
+                    best.y = hit.y;
                 }
             }
             continue;
@@ -182,15 +185,110 @@ fn trace(@builtin(global_invocation_id) gid: vec3<u32>) {
             sp += 1u;
         }
     }
-    // No NaN reaches the buffer: a non-finite hit is reported as a miss.
-    if best.status != STATUS_MISS && !(finite(best.t) && finite3(best.position) && finite3(best.normal)) {
-        best.status = STATUS_MISS;
+    return best;
+}
+
+// A candidate as a hit of iteration 1: the droplet's sphere point or the ball's initial
+// polynomial.
+fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
+    var out: Outcome;
+    out.t = c.t;
+    out.iterations = 0u;
+    out.degree = 0u;
+    out.degraded = false;
+    let p = ray.origin + ray.dir * c.t;
+    if c.droplet {
+        let nrm = normalized(p - spheres[c.item - settings.point_count].centre);
+        out.status = STATUS_DROPLET;
+        out.normal = select(vec3<f32>(0.0, 0.0, 1.0), nrm.v, nrm.ok);
+        return out;
     }
-    if best.status == STATUS_MISS {
-        best.position = vec3<f32>(0.0);
-        best.t = 0.0;
-        best.normal = vec3<f32>(0.0);
-        best.item = 0xffffffffu;
+    let ball = balls[c.item];
+    var initial: Poly;
+    initial.degree = min(ball.degree, 3u);
+    initial.c = ball.coeffs;
+    out.status = STATUS_ITERATION_LIMIT;
+    out.normal = hit_normal(frame_from_normal(ball.normal), initial, c.x, c.y);
+    out.iterations = 1u;
+    out.degree = initial.degree;
+    out.degraded = initial.degree < settings.degree;
+    return out;
+}
+
+// Writes pixel `gid`'s hit; no NaN reaches the buffer: a non-finite hit is a miss.
+fn store(gid: vec3<u32>, ray: Ray, item: u32, out: Outcome) {
+    var hit: Hit;
+    hit.position = ray.origin + ray.dir * out.t;
+    hit.t = out.t;
+    hit.normal = out.normal;
+    hit.status = out.status;
+    hit.item = item;
+    hit.iterations = out.iterations;
+    hit.degree = out.degree;
+    hit.degraded = select(0u, 1u, out.degraded);
+    if hit.status != STATUS_MISS && !(finite(hit.t) && finite3(hit.position) && finite3(hit.normal)) {
+        hit.status = STATUS_MISS;
     }
-    hits[gid.y * settings.width + gid.x] = best;
+    if hit.status == STATUS_MISS {
+        hit.position = vec3<f32>(0.0);
+        hit.t = 0.0;
+        hit.normal = vec3<f32>(0.0);
+        hit.item = 0xffffffffu;
+        hit.iterations = 0u;
+        hit.degree = 0u;
+        hit.degraded = 0u;
+    }
+    hits[gid.y * settings.width + gid.x] = hit;
+}
+
+fn missed() -> Outcome {
+    var out: Outcome;
+    out.status = STATUS_MISS;
+    return out;
+}
+
+// One iteration: the nearest initial hit, with no refinement code to weigh the kernel down.
+@compute @workgroup_size(8, 8, 1)
+fn trace_initial(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= settings.width || gid.y >= settings.height {
+        return;
+    }
+    let ray = camera_ray(gid.x, gid.y);
+    let c = next_candidate(ray, -FAR, 0u);
+    if !c.found {
+        store(gid, ray, 0u, missed());
+        return;
+    }
+    store(gid, ray, c.item, initial_outcome(ray, c));
+}
+
+// More iterations: candidates in the order of their initial hits; the first whose refinement
+// stays inside its ball is the hit (Adamson & Alexa 2003; tracer.rs: trace_in).
+@compute @workgroup_size(8, 8, 1)
+fn trace_refined(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= settings.width || gid.y >= settings.height {
+        return;
+    }
+    let ray = camera_ray(gid.x, gid.y);
+    var after_t = -FAR;
+    var after_item = 0u;
+    for (var attempt = 0u; attempt < MAX_CANDIDATES; attempt++) {
+        let c = next_candidate(ray, after_t, after_item);
+        if !c.found {
+            break;
+        }
+        let start = initial_outcome(ray, c);
+        if c.droplet {
+            store(gid, ray, c.item, start);
+            return;
+        }
+        let out = refine(ray, c.item, balls[c.item].h, start, c.t_lo, c.t_out);
+        if out.status != STATUS_MISS && finite(out.t) {
+            store(gid, ray, c.item, out);
+            return;
+        }
+        after_t = c.t;
+        after_item = c.item;
+    }
+    store(gid, ray, 0u, missed());
 }

@@ -107,6 +107,21 @@ pub struct Outcome<T> {
     pub degraded: bool,
 }
 
+impl<T: Real> Outcome<T> {
+    /// No hit, for `status`.
+    pub fn miss(status: HitStatus) -> Outcome<T> {
+        Outcome {
+            status,
+            t: T::zero(),
+            position: V3::zero(),
+            normal: V3::zero(),
+            iterations: 0,
+            degree: 0,
+            degraded: false,
+        }
+    }
+}
+
 /// Entry and exit parameters of the ray through a ball (t_in may be negative when the origin
 /// is inside).
 pub fn ray_ball<T: Real>(ray: &Ray<T>, centre: V3<T>, radius: T) -> Option<(T, T)> {
@@ -169,6 +184,36 @@ pub fn initial_fit<T: Real>(
     (f.status != FitStatus::Failed).then_some((support.normal, f))
 }
 
+/// Where the ray first meets a ball's initial polynomial inside the ball: iteration 1 of
+/// `intersect_ball`, and the key candidates are ordered by.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InitialHit<T> {
+    pub t: T,
+    /// The ray's interval inside the ball, t_lo ≥ 0: every refined hit must lie in it.
+    pub t_lo: T,
+    pub t_out: T,
+    pub normal: V3<T>,
+}
+
+/// Iteration 1: the ball's initial polynomial against the ray inside the ball, or why not
+/// (`MissedBall`, `NoInitialRoot`).
+pub fn initial_hit<T: Real>(ray: &Ray<T>, ball: &Ball<T>) -> Result<InitialHit<T>, HitStatus> {
+    let (t_in, t_out) = ray_ball(ray, ball.centre, ball.radius).ok_or(HitStatus::MissedBall)?;
+    let t_lo = t_in.max(T::zero());
+    if t_lo > t_out {
+        return Err(HitStatus::MissedBall);
+    }
+    let frame = Frame::from_normal(ball.normal);
+    let (t, x, y) = intersect_poly(ray, ball.centre, &frame, &ball.poly, ball.h, t_lo, t_out)
+        .ok_or(HitStatus::NoInitialRoot)?;
+    Ok(InitialHit {
+        t,
+        t_lo,
+        t_out,
+        normal: hit_normal(&frame, &ball.poly, x, y),
+    })
+}
+
 /// Intersects the ray with the MLS surface inside `ball`, refining with the ball centre's
 /// `neighbours` (and their `normals`, if any).
 pub fn intersect_ball<T: Real>(
@@ -178,29 +223,24 @@ pub fn intersect_ball<T: Real>(
     normals: Option<&[V3<T>]>,
     params: &Params<T>,
 ) -> Outcome<T> {
-    let miss = |status| Outcome {
-        status,
-        t: T::zero(),
-        position: V3::zero(),
-        normal: V3::zero(),
-        iterations: 0,
-        degree: 0,
-        degraded: false,
-    };
-    let Some((t_in, t_out)) = ray_ball(ray, ball.centre, ball.radius) else {
-        return miss(HitStatus::MissedBall);
-    };
-    let t_lo = t_in.max(T::zero());
-    if t_lo > t_out {
-        return miss(HitStatus::MissedBall);
+    match initial_hit(ray, ball) {
+        Ok(initial) => refine(ray, ball, &initial, neighbours, normals, params),
+        Err(status) => Outcome::miss(status),
     }
-    let frame = Frame::from_normal(ball.normal);
-    let Some((mut t, x, y)) =
-        intersect_poly(ray, ball.centre, &frame, &ball.poly, ball.h, t_lo, t_out)
-    else {
-        return miss(HitStatus::NoInitialRoot);
-    };
-    let mut normal = hit_normal(&frame, &ball.poly, x, y);
+}
+
+/// Iterations 2 and on from a ball's initial hit, with the ball centre's `neighbours`.
+pub fn refine<T: Real>(
+    ray: &Ray<T>,
+    ball: &Ball<T>,
+    initial: &InitialHit<T>,
+    neighbours: &[V3<T>],
+    normals: Option<&[V3<T>]>,
+    params: &Params<T>,
+) -> Outcome<T> {
+    let (t_lo, t_out) = (initial.t_lo, initial.t_out);
+    let mut t = initial.t;
+    let mut normal = initial.normal;
     let mut degree = ball.poly.degree;
     let mut degraded = ball.poly.degree < params.degree;
     let mut iterations = 1;
@@ -226,7 +266,7 @@ pub fn intersect_ball<T: Real>(
                 iterations: iterations + 1,
                 degree: f.poly.degree,
                 degraded,
-                ..miss(HitStatus::LeftTrustRegion)
+                ..Outcome::miss(HitStatus::LeftTrustRegion)
             };
         };
         iterations += 1;

@@ -23,7 +23,10 @@ mod tracer;
 pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use frame::Frame;
-pub use intersect::{Ball, HitStatus, Outcome, Params, Ray, initial_fit, intersect_ball, ray_ball};
+pub use intersect::{
+    Ball, HitStatus, InitialHit, Outcome, Params, Ray, initial_fit, initial_hit, intersect_ball,
+    ray_ball, refine,
+};
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};
@@ -33,4 +36,4 @@ pub use support::{
 };
 pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds};
 pub use timing::StageClock;
-pub use tracer::{BallIndex, Camera, CameraBasis, TraceHit};
+pub use tracer::{BallIndex, Camera, CameraBasis, MAX_CANDIDATES, TraceHit};

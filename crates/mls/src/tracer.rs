@@ -3,14 +3,25 @@
 
 use rayon::prelude::*;
 
-use crate::intersect::{HitStatus, Params, Ray, intersect_ball, ray_ball};
+use crate::intersect::{HitStatus, InitialHit, Params, Ray, initial_hit, ray_ball, refine};
 use crate::real::{Real, V3};
 use crate::surface::{BallFit, Surface, gather};
 
-/// Whether a hit at `t` by item `b` beats `best`: nearer, or as near from a lower item, so
-/// the result does not depend on the order an index visits items in.
-fn nearer(t: f64, b: u32, best: Option<TraceHit>) -> bool {
-    best.is_none_or(|h| t < h.t || (t == h.t && b < h.ball))
+/// Candidates refined per ray before it counts as a miss: each one that leaves its ball hands
+/// over to the next initial hit, and a grazing ray could otherwise try hundreds.
+pub const MAX_CANDIDATES: u32 = 16;
+
+/// An initial hit, ordered by the key (t, item): nearer first, an exact tie to the lower
+/// item, so the result does not depend on the order an index visits items in.
+struct Candidate<T> {
+    t: T,
+    item: u32,
+    kind: CandidateKind<T>,
+}
+
+enum CandidateKind<T> {
+    Ball(InitialHit<T>),
+    Droplet { normal: V3<T> },
 }
 
 /// A spatial index over a surface's candidates: ball i is item i, droplet sphere d is item
@@ -112,7 +123,8 @@ impl<T: Real> Surface<T> {
         self.trace_in(&self.grid, origin, dir, params)
     }
 
-    /// Traces one world-space ray through `index`.
+    /// Traces one world-space ray through `index`: candidates in the order of their initial
+    /// hits, the first whose refinement stays inside its ball wins (Adamson & Alexa 2003).
     pub fn trace_in(
         &self,
         index: &dyn BallIndex,
@@ -125,18 +137,73 @@ impl<T: Real> Surface<T> {
             origin: V3::from_f64(rel),
             dir: V3::from_f64(dir),
         };
-        let mut best: Option<TraceHit> = None;
-        let mut tested: Vec<u32> = Vec::new();
-        let (mut np, mut nn) = (Vec::new(), Vec::new());
-        let n = self.len();
-        let to_world = |p: [f64; 3]| {
-            [
-                p[0] + self.origin[0],
-                p[1] + self.origin[1],
-                p[2] + self.origin[2],
-            ]
+        let to_world = |p: V3<T>| {
+            let p = p.to_f64();
+            std::array::from_fn(|a| p[a] + self.origin[a])
         };
-        index.walk(rel, dir, &mut |items| {
+        let (mut np, mut nn) = (Vec::new(), Vec::new());
+        let mut after = None;
+        for _ in 0..MAX_CANDIDATES {
+            let candidate = self.next_candidate(index, &ray, (rel, dir), after)?;
+            let item = candidate.item;
+            let hit = |t: T, normal: V3<T>, status, iterations, degree| TraceHit {
+                t: t.to_f64(),
+                position: to_world(ray.origin + ray.dir * t),
+                normal: normal.to_f64(),
+                ball: item,
+                iterations,
+                status,
+                degree,
+            };
+            let initial = match candidate.kind {
+                CandidateKind::Droplet { normal } => {
+                    return Some(hit(candidate.t, normal, HitStatus::Droplet, 0, 0));
+                }
+                CandidateKind::Ball(initial) => initial,
+            };
+            let i = item as usize;
+            let ball = &self.balls[i];
+            gather(
+                &self.points,
+                self.normals.as_deref(),
+                self.neighbours_of(i),
+                &mut np,
+                &mut nn,
+            );
+            let normals = self.normals.as_ref().map(|_| nn.as_slice());
+            let out = refine(&ray, ball, &initial, &np, normals, params);
+            if out.status.is_hit() && out.t.is_finite() {
+                return Some(hit(
+                    out.t,
+                    out.normal,
+                    out.status,
+                    out.iterations,
+                    out.degree,
+                ));
+            }
+            after = Some((candidate.t, item));
+        }
+        None
+    }
+
+    /// The nearest initial hit along `ray` whose key (t, item) comes after `after`: a ball's
+    /// initial polynomial or a droplet sphere.
+    fn next_candidate(
+        &self,
+        index: &dyn BallIndex,
+        ray: &Ray<T>,
+        (origin, dir): ([f64; 3], [f64; 3]),
+        after: Option<(T, u32)>,
+    ) -> Option<Candidate<T>> {
+        let mut best: Option<Candidate<T>> = None;
+        let mut tested: Vec<u32> = Vec::new();
+        let n = self.len();
+        let later = |t: T, item: u32| after.is_none_or(|(a, b)| t > a || (t == a && item > b));
+        let nearer = |t: T, item: u32, best: &Option<Candidate<T>>| {
+            best.as_ref()
+                .is_none_or(|c| t < c.t || (t == c.t && item < c.item))
+        };
+        index.walk(origin, dir, &mut |items| {
             for &b in items {
                 let i = b as usize;
                 if tested.contains(&b) {
@@ -147,12 +214,12 @@ impl<T: Real> Surface<T> {
                     let Some(sphere) = self.spheres.get(i - n) else {
                         continue;
                     };
-                    let Some((t_in, t_out)) = ray_ball(&ray, sphere.centre, sphere.radius) else {
+                    let Some((t_in, t_out)) = ray_ball(ray, sphere.centre, sphere.radius) else {
                         continue;
                     };
                     // From inside a droplet the ray sees its far wall.
                     let t = if t_in >= T::zero() { t_in } else { t_out };
-                    if !(t >= T::zero()) || !nearer(t.to_f64(), b, best) {
+                    if !(t >= T::zero()) || !later(t, b) || !nearer(t, b, &best) {
                         continue;
                     }
                     let p = ray.origin + ray.dir * t;
@@ -161,14 +228,10 @@ impl<T: Real> Surface<T> {
                         T::zero(),
                         T::one(),
                     ));
-                    best = Some(TraceHit {
-                        t: t.to_f64(),
-                        position: to_world(p.to_f64()),
-                        normal: normal.to_f64(),
-                        ball: b,
-                        iterations: 0,
-                        status: HitStatus::Droplet,
-                        degree: 0,
+                    best = Some(Candidate {
+                        t,
+                        item: b,
+                        kind: CandidateKind::Droplet { normal },
                     });
                     continue;
                 }
@@ -176,34 +239,27 @@ impl<T: Real> Surface<T> {
                     continue;
                 }
                 let ball = &self.balls[i];
-                let Some((t_in, _)) = ray_ball(&ray, ball.centre, ball.radius) else {
+                let Some((t_in, t_out)) = ray_ball(ray, ball.centre, ball.radius) else {
                     continue;
                 };
-                if best.is_some_and(|h| t_in.to_f64() > h.t) {
+                if best.as_ref().is_some_and(|c| t_in > c.t)
+                    || after.is_some_and(|(a, _)| t_out < a)
+                {
                     continue;
                 }
-                gather(
-                    &self.points,
-                    self.normals.as_deref(),
-                    self.neighbours_of(i),
-                    &mut np,
-                    &mut nn,
-                );
-                let normals = self.normals.as_ref().map(|_| nn.as_slice());
-                let out = intersect_ball(&ray, ball, &np, normals, params);
-                if out.status.is_hit() && out.t.is_finite() && nearer(out.t.to_f64(), b, best) {
-                    best = Some(TraceHit {
-                        t: out.t.to_f64(),
-                        position: to_world(out.position.to_f64()),
-                        normal: out.normal.to_f64(),
-                        ball: b,
-                        iterations: out.iterations,
-                        status: out.status,
-                        degree: out.degree,
+                let Ok(initial) = initial_hit(ray, ball) else {
+                    continue;
+                };
+                let t = initial.t;
+                if t.is_finite() && later(t, b) && nearer(t, b, &best) {
+                    best = Some(Candidate {
+                        t,
+                        item: b,
+                        kind: CandidateKind::Ball(initial),
                     });
                 }
             }
-            best.map_or(f64::INFINITY, |h| h.t)
+            best.as_ref().map_or(f64::INFINITY, |c| c.t.to_f64())
         });
         best
     }

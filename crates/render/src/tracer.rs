@@ -75,7 +75,10 @@ pub struct PassTimes {
 /// The compiled passes.
 #[derive(Debug)]
 pub struct Tracer {
-    trace: wgpu::ComputePipeline,
+    /// One iteration: the nearest initial hit, a lean kernel.
+    trace_initial: wgpu::ComputePipeline,
+    /// More: candidates refined in the order of their initial hits.
+    trace_refined: wgpu::ComputePipeline,
     shade: wgpu::ComputePipeline,
     step_layout: wgpu::BindGroupLayout,
     frame_layout: wgpu::BindGroupLayout,
@@ -182,13 +185,15 @@ impl Tracer {
                 cache: None,
             })
         };
-        let trace = pipeline(TRACE_WGSL, "trace");
+        let trace_initial = pipeline(TRACE_WGSL, "trace_initial");
+        let trace_refined = pipeline(TRACE_WGSL, "trace_refined");
         let shade = pipeline(SHADE_WGSL, "shade");
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
         Ok(Tracer {
-            trace,
+            trace_initial,
+            trace_refined,
             shade,
             step_layout,
             frame_layout,
@@ -277,9 +282,19 @@ impl Tracer {
     }
 
     /// Records the trace and shade passes (with timestamps where the targets have them).
-    fn encode(&self, targets: &FrameTargets, encoder: &mut wgpu::CommandEncoder) {
+    fn encode(
+        &self,
+        targets: &FrameTargets,
+        params: &TraceParams,
+        encoder: &mut wgpu::CommandEncoder,
+    ) {
         let groups = (targets.width.div_ceil(8), targets.height.div_ceil(8));
-        for (i, pipeline) in [&self.trace, &self.shade].into_iter().enumerate() {
+        let trace = if params.iterations > 1 {
+            &self.trace_refined
+        } else {
+            &self.trace_initial
+        };
+        for (i, pipeline) in [trace, &self.shade].into_iter().enumerate() {
             let timestamp_writes =
                 targets
                     .queries
@@ -328,7 +343,7 @@ impl Tracer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        self.encode(targets, &mut encoder);
+        self.encode(targets, params, &mut encoder);
         gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));

@@ -29,7 +29,7 @@ use std::sync::OnceLock;
 use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{CacheFile, encode_step};
 use slosh_fileio::FileBytes;
-use slosh_mls::{Camera, NormalsMode, Params, Surface, TraceHit};
+use slosh_mls::{Camera, HitStatus, NormalsMode, Params, Surface, TraceHit};
 use slosh_render::{Frame, Gpu, GpuHit, GpuStep, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
 
@@ -173,8 +173,9 @@ struct Agreement {
     disagree: usize,
     shared: usize,
     close: usize,
-    /// Shared hits within 1e-2 spacing.
-    near: usize,
+    /// Shared hits whose oracle refinement settled, and those of them within 1e-3 spacing.
+    settled: usize,
+    settled_close: usize,
     worst: f64,
 }
 
@@ -190,7 +191,8 @@ fn compare(
         disagree: 0,
         shared: 0,
         close: 0,
-        near: 0,
+        settled: 0,
+        settled_close: 0,
         worst: 0.0,
     };
     for i in 0..oracle.len() {
@@ -204,7 +206,11 @@ fn compare(
                 let dt = (o.t - t).abs() / spacing;
                 a.worst = a.worst.max(dt);
                 a.close += usize::from(dt <= 1e-3);
-                a.near += usize::from(dt <= 1e-2);
+                // Settled: the oracle's refinement converged, or there was none to do.
+                if o.status == HitStatus::Converged || o.iterations <= 1 {
+                    a.settled += 1;
+                    a.settled_close += usize::from(dt <= 1e-3);
+                }
             }
             (None, None) => {}
             _ => a.disagree += 1,
@@ -216,7 +222,7 @@ fn compare(
 #[test]
 fn gpu_hits_agree_with_the_cpu_f64_oracle() {
     let Some(dev) = device() else { return };
-    const SIZE: u32 = 64;
+    const SIZE: u32 = 96;
     let mut failures = Vec::new();
     for case in cases() {
         let input = input_of(&case.spec);
@@ -250,7 +256,7 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
                 let gpu: Vec<_> = frame.hits.iter().map(|h| world_hit(&step, h)).collect();
                 let a = compare(&reference, &gpu, SIZE as usize, step.spacing);
                 eprintln!(
-                    "{} degree {degree} {iterations} it: hit/miss {} of {} pixels agree ({:.3} %), |Δt| ≤ 1e-3 spacing on {} of {} shared hits ({:.3} %), worst {:.2e} spacing",
+                    "{} degree {degree} {iterations} it: hit/miss {} of {} pixels agree ({:.3} %), |Δt| ≤ 1e-3 spacing on {} of {} shared hits ({:.3} %) and on {} of {} settled ones, worst {:.2e} spacing",
                     case.name,
                     a.away - a.disagree,
                     a.away,
@@ -258,17 +264,21 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
                     a.close,
                     a.shared,
                     100.0 * a.close as f64 / a.shared.max(1) as f64,
+                    a.settled_close,
+                    a.settled,
                     a.worst
                 );
-                // Cubic refinement solves 10×10 normal equations in f32 (pivots down to 1e-5 of
-                // their diagonal): on 99 % of hits it stays within 1e-3 spacing of the f64
-                // oracle, and within 1e-2 on 99.9 %. Quadratic holds 1e-3 on 99.9 %.
-                let t_ok = if degree == 3 && iterations > 1 {
-                    a.close * 100 >= a.shared * 99 && a.near * 1000 >= a.shared * 999
+                // Where the oracle's refinement converged (or none was asked for), f32 holds
+                // 1e-3 spacing on 99.9 % of hits. An unconverged cubic iterate (10×10 normal
+                // equations in f32, pivots down to 1e-5 of their diagonal, on a droplet's few
+                // points) is sensitive to rounding: there 99 % of all shared hits must hold.
+                let all_ok = if degree == 3 && iterations > 1 {
+                    a.close * 100 >= a.shared * 99
                 } else {
                     a.close * 1000 >= a.shared * 999
                 };
-                if a.shared < 400 || a.disagree * 1000 > a.away || !t_ok {
+                let t_ok = all_ok && a.settled_close * 1000 >= a.settled * 999;
+                if a.shared < 1000 || a.disagree * 1000 > a.away || !t_ok {
                     failures.push(format!("{} degree {degree} {iterations} it", case.name));
                 }
                 // No NaN reaches the buffer.
