@@ -400,21 +400,30 @@ fn mul4(a: vec4<f32>, b: vec4<f32>) -> vec4<f32> {
     );
 }
 
-// Coefficients (ascending powers of s) of s ↦ f(x0 + s dx, y0 + s dy) (Poly::along_line).
+// Coefficients (ascending powers of s) of s ↦ f(x0 + s dx, y0 + s dy) (Poly::along_line),
+// summed term by term in the same order, with constant indices only: a dynamically indexed
+// array would live in slow per-thread memory on a GPU.
 fn along_line(p: Poly, x0: f32, y0: f32, dx: f32, dy: f32) -> vec4<f32> {
+    let c = p.c;
     let x = vec4<f32>(x0, dx, 0.0, 0.0);
     let y = vec4<f32>(y0, dy, 0.0, 0.0);
-    let xx = mul4(x, x);
-    let yy = mul4(y, y);
-    let xy = mul4(x, y);
-    let terms = array<vec4<f32>, 10>(
-        vec4<f32>(1.0, 0.0, 0.0, 0.0), x, y, xx, yy, xy,
-        mul4(xx, x), mul4(yy, y), mul4(xx, y), mul4(x, yy),
-    );
-    var out = vec4<f32>(0.0);
-    let n = coefficient_count(p.degree);
-    for (var k = 0u; k < n; k++) {
-        out += p.c[k] * terms[k];
+    var out = c[0] * vec4<f32>(1.0, 0.0, 0.0, 0.0);
+    if p.degree >= 1u {
+        out += c[1] * x;
+        out += c[2] * y;
+    }
+    if p.degree >= 2u {
+        let xx = mul4(x, x);
+        let yy = mul4(y, y);
+        out += c[3] * xx;
+        out += c[4] * yy;
+        out += c[5] * mul4(x, y);
+        if p.degree >= 3u {
+            out += c[6] * mul4(xx, x);
+            out += c[7] * mul4(yy, y);
+            out += c[8] * mul4(xx, y);
+            out += c[9] * mul4(x, yy);
+        }
     }
     return out;
 }
@@ -432,8 +441,12 @@ fn tri(i: u32, j: u32) -> u32 {
     return i * (i + 1u) / 2u + j;
 }
 
-fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32, requested: u32) -> Fit {
-    let degree = min(requested, 3u);
+// The refinement fits' requested degree (Params::degree), fixed per pipeline: the fit's loops
+// then have constant bounds, which lets a compiler unroll them and keep A in registers.
+override FIT_DEGREE: u32 = 2u;
+
+fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32) -> Fit {
+    let degree = min(FIT_DEGREE, 3u);
     let n = coefficient_count(degree);
     let inv_h = 1.0 / h;
     let h2 = h * h;
@@ -626,7 +639,8 @@ fn first_root_in(c: vec4<f32>, lo: f32, hi: f32) -> Root {
         return none;
     }
     let crit = quadratic_roots(3.0 * c[3], 2.0 * c[2], c[1]);
-    var pts = array<f32, 4>(lo, hi, hi, hi);
+    // Piece boundaries; a vector, not an array, so it stays in registers.
+    var pts = vec4<f32>(lo, hi, hi, hi);
     var k = 1u;
     for (var i = 0u; i < crit.count; i++) {
         let s = crit.r[i];
@@ -746,7 +760,7 @@ fn refine(ray: Ray, centre: u32, bh: f32, start: Outcome, t_lo: f32, t_out: f32)
             break;
         }
         let frame = frame_from_normal(support.normal);
-        let f = fit(r, frame, nb, h, settings.degree);
+        let f = fit(r, frame, nb, h);
         if !f.ok {
             out.status = STATUS_DEGENERATE_FIT;
             break;

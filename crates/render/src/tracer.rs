@@ -1,6 +1,8 @@
 //! The trace and shade compute passes: pipelines, bind groups, a frame's buffers, readback and
 //! GPU timestamps.
 
+use std::sync::OnceLock;
+
 use slosh_mls::Camera;
 
 use crate::context::Gpu;
@@ -77,8 +79,11 @@ pub struct PassTimes {
 pub struct Tracer {
     /// One iteration: the nearest initial hit, a lean kernel.
     trace_initial: wgpu::ComputePipeline,
-    /// More: candidates refined in the order of their initial hits.
-    trace_refined: wgpu::ComputePipeline,
+    /// More: candidates refined in the order of their initial hits, one pipeline per fit
+    /// degree (1–3), built when first asked for.
+    trace_refined: [OnceLock<wgpu::ComputePipeline>; 3],
+    trace_module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
     shade: wgpu::ComputePipeline,
     step_layout: wgpu::BindGroupLayout,
     frame_layout: wgpu::BindGroupLayout,
@@ -108,6 +113,26 @@ fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
         },
         count: None,
     }
+}
+
+fn compute_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    constants: &[(&str, f64)],
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(entry),
+        layout: Some(layout),
+        module,
+        entry_point: Some(entry),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants,
+            ..Default::default()
+        },
+        cache: None,
+    })
 }
 
 fn to_f32(a: [f64; 3]) -> [f32; 3] {
@@ -171,29 +196,23 @@ impl Tracer {
             bind_group_layouts: &[Some(&step_layout), Some(&frame_layout)],
             immediate_size: 0,
         });
-        let pipeline = |source: &str, entry: &str| {
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(entry),
+        let module = |source: &str, label: &str| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                cache: None,
             })
         };
-        let trace_initial = pipeline(TRACE_WGSL, "trace_initial");
-        let trace_refined = pipeline(TRACE_WGSL, "trace_refined");
-        let shade = pipeline(SHADE_WGSL, "shade");
+        let trace_module = module(TRACE_WGSL, "trace");
+        let trace_initial = compute_pipeline(device, &layout, &trace_module, "trace_initial", &[]);
+        let shade = compute_pipeline(device, &layout, &module(SHADE_WGSL, "shade"), "shade", &[]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
         Ok(Tracer {
             trace_initial,
-            trace_refined,
+            trace_refined: Default::default(),
+            trace_module,
+            layout,
             shade,
             step_layout,
             frame_layout,
@@ -281,19 +300,35 @@ impl Tracer {
         }
     }
 
+    /// The refining trace pipeline for fits of `degree` (1–3).
+    fn refined(&self, gpu: &Gpu, degree: u8) -> Result<&wgpu::ComputePipeline> {
+        let degree = degree.clamp(1, 3);
+        let slot = &self.trace_refined[usize::from(degree) - 1];
+        if let Some(pipeline) = slot.get() {
+            return Ok(pipeline);
+        }
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipeline = compute_pipeline(
+            &gpu.device,
+            &self.layout,
+            &self.trace_module,
+            "trace_refined",
+            &[("FIT_DEGREE", f64::from(degree))],
+        );
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
+        }
+        Ok(slot.get_or_init(|| pipeline))
+    }
+
     /// Records the trace and shade passes (with timestamps where the targets have them).
     fn encode(
         &self,
         targets: &FrameTargets,
-        params: &TraceParams,
+        trace: &wgpu::ComputePipeline,
         encoder: &mut wgpu::CommandEncoder,
     ) {
         let groups = (targets.width.div_ceil(8), targets.height.div_ceil(8));
-        let trace = if params.iterations > 1 {
-            &self.trace_refined
-        } else {
-            &self.trace_initial
-        };
         for (i, pipeline) in [trace, &self.shade].into_iter().enumerate() {
             let timestamp_writes =
                 targets
@@ -337,13 +372,18 @@ impl Tracer {
             0,
             bytemuck::bytes_of(&settings(step, &camera, params)),
         );
+        let trace = if params.iterations > 1 {
+            self.refined(gpu, params.degree)?
+        } else {
+            &self.trace_initial
+        };
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        self.encode(targets, params, &mut encoder);
+        self.encode(targets, trace, &mut encoder);
         gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
