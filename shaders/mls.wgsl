@@ -374,10 +374,6 @@ fn coefficient_count(degree: u32) -> u32 {
     }
 }
 
-fn monomials(x: f32, y: f32) -> array<f32, 10> {
-    return array<f32, 10>(1.0, x, y, x * x, y * y, x * y, x * x * x, y * y * y, x * x * y, x * y * y);
-}
-
 struct Poly {
     degree: u32,
     c: array<f32, 10>,
@@ -450,11 +446,19 @@ fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32) -> Fit {
     let n = coefficient_count(degree);
     let inv_h = 1.0 / h;
     let h2 = h * h;
-    // The symmetric A as a packed lower triangle (55 entries, not 100: private memory is
-    // scarce per invocation); the factorisation overwrites it with L and D in place, and the
-    // solves run in place in b.
-    var a: array<f32, 55>;
-    var b: array<f32, 10>;
+    // A = Σ w m mᵀ accumulates in registers, as blocks over the monomials split into vectors
+    // m0 = (1, x, y, x²), m1 = (y², xy, x³, y³), m2 = (x²y, xy²): only constant indices, so
+    // nothing spills to per-thread memory in the loop (entry (row r, column c) gains
+    // (w m_c) m_r, the same products as fit.rs). Cubic blocks only for cubic fits.
+    var a00 = mat4x4<f32>();
+    var a10 = mat4x4<f32>();
+    var a11 = mat4x4<f32>();
+    var a20 = mat4x2<f32>();
+    var a21 = mat4x2<f32>();
+    var a22 = mat2x2<f32>();
+    var b0 = vec4<f32>(0.0);
+    var b1 = vec4<f32>(0.0);
+    var b2 = vec2<f32>(0.0);
     var total = 0.0;
     for (var k = nb.first; k < nb.last; k++) {
         let j = neighbour_at(nb, k);
@@ -467,14 +471,25 @@ fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32) -> Fit {
             continue;
         }
         let l = to_local(frame, q) * inv_h;
-        let m = monomials(l.x, l.y);
+        let x = l.x;
+        let y = l.y;
+        let m0 = vec4<f32>(1.0, x, y, x * x);
+        let m1 = vec4<f32>(y * y, x * y, x * x * x, y * y * y);
+        let w0 = w * m0;
+        let w1 = w * m1;
         total += w;
-        for (var i = 0u; i < n; i++) {
-            let wm = w * m[i];
-            b[i] += wm * l.z;
-            for (var jj = i; jj < n; jj++) {
-                a[tri(jj, i)] += wm * m[jj];
-            }
+        a00 += mat4x4<f32>(m0 * w0.x, m0 * w0.y, m0 * w0.z, m0 * w0.w);
+        a10 += mat4x4<f32>(m1 * w0.x, m1 * w0.y, m1 * w0.z, m1 * w0.w);
+        a11 += mat4x4<f32>(m1 * w1.x, m1 * w1.y, m1 * w1.z, m1 * w1.w);
+        b0 += w0 * l.z;
+        b1 += w1 * l.z;
+        if degree >= 3u {
+            let m2 = vec2<f32>(x * x * y, x * y * y);
+            let w2 = w * m2;
+            a20 += mat4x2<f32>(m2 * w0.x, m2 * w0.y, m2 * w0.z, m2 * w0.w);
+            a21 += mat4x2<f32>(m2 * w1.x, m2 * w1.y, m2 * w1.z, m2 * w1.w);
+            a22 += mat2x2<f32>(m2 * w2.x, m2 * w2.y);
+            b2 += w2 * l.z;
         }
     }
     var failed: Fit;
@@ -484,11 +499,30 @@ fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32) -> Fit {
     if !(total > 0.0) {
         return failed;
     }
+    // Unpacked into the packed lower triangle the factorisation overwrites in place (55
+    // entries, not 100: private memory is scarce per invocation), divided by Σθ.
     let inv_total = 1.0 / total;
-    for (var i = 0u; i < n; i++) {
-        b[i] *= inv_total;
-        for (var jj = i; jj < n; jj++) {
-            a[tri(jj, i)] *= inv_total;
+    var a: array<f32, 55>;
+    var b: array<f32, 10>;
+    for (var c = 0u; c < 4u; c++) {
+        b[c] = b0[c] * inv_total;
+        b[c + 4u] = b1[c] * inv_total;
+        for (var row = c; row < 4u; row++) {
+            a[tri(row, c)] = a00[c][row] * inv_total;
+            a[tri(row + 4u, c + 4u)] = a11[c][row] * inv_total;
+        }
+        for (var row = 0u; row < 4u; row++) {
+            a[tri(row + 4u, c)] = a10[c][row] * inv_total;
+        }
+        for (var row = 0u; row < 2u; row++) {
+            a[tri(row + 8u, c)] = a20[c][row] * inv_total;
+            a[tri(row + 8u, c + 4u)] = a21[c][row] * inv_total;
+        }
+    }
+    for (var c = 0u; c < 2u; c++) {
+        b[c + 8u] = b2[c] * inv_total;
+        for (var row = c; row < 2u; row++) {
+            a[tri(row + 8u, c + 8u)] = a22[c][row] * inv_total;
         }
     }
     // LDLᵀ without pivoting, stopping at the first bad pivot (ldlt): D on the diagonal, L
