@@ -61,12 +61,14 @@ struct Settings {
     field_min: f32,
     field_max: f32,
     has_field: u32,
-    pad: u32,
+    // Words of neighbour_masks per point.
+    mask_words: u32,
 }
 
 @group(0) @binding(0) var<storage, read> points: array<Point>;
 @group(0) @binding(1) var<storage, read> normals: array<Normal>;
-@group(0) @binding(2) var<storage, read> reach: array<f32>;
+// Bit masks over each point's cluster candidates, written per step by expand.wgsl.
+@group(0) @binding(2) var<storage, read> neighbour_masks: array<u32>;
 @group(0) @binding(3) var<storage, read> cluster_start: array<u32>;
 @group(0) @binding(4) var<storage, read> cluster_ids: array<u32>;
 @group(0) @binding(10) var<uniform> settings: Settings;
@@ -119,51 +121,45 @@ fn normalized(v: vec3<f32>) -> Unit {
 
 // ---- Neighbour lists (clusters.rs: expand_one) ----------------------------------------------
 
-// The neighbours of ball `centre`: its cluster's candidates within reach, minus points whose
-// normal opposes the centre's (both valid), visited in index order.
+// A ball's neighbours are its cluster's candidates within reach, minus points whose normal
+// opposes the centre's (both valid). expand.wgsl applies that rule once per step and leaves a
+// bit per candidate slot: `mask_words` words per point, bit b of word w for slot 32 w + b.
+// Visiting set bits in order visits the list in index order, as the CPU does.
 struct Neighbourhood {
     first: u32,
-    last: u32,
-    centre: vec3<f32>,
-    reach2: f32,
-    own_normal: vec3<f32>,
-    check_normals: bool,
+    mask: u32,
+    words: u32,
 }
 
 fn neighbourhood(centre: u32) -> Neighbourhood {
     let c = centre / max(settings.cluster_size, 1u);
-    var nb: Neighbourhood;
-    nb.first = cluster_start[c];
-    nb.last = min(cluster_start[c + 1u], arrayLength(&cluster_ids));
-    nb.centre = points[centre].position;
-    let r = reach[centre];
-    nb.reach2 = r * r;
-    nb.own_normal = vec3<f32>(0.0);
-    nb.check_normals = false;
-    if settings.has_normals != 0u {
-        nb.own_normal = normals[centre].normal;
-        nb.check_normals = length_squared(nb.own_normal) > 0.0;
-    }
-    return nb;
+    return Neighbourhood(cluster_start[c], centre * settings.mask_words, settings.mask_words);
 }
 
-// Index of the candidate at slot `k` if it belongs to the list, else 0xffffffff.
-fn neighbour_at(nb: Neighbourhood, k: u32) -> u32 {
-    let j = cluster_ids[k];
-    if j >= settings.point_count {
-        return 0xffffffffu;
-    }
-    let d = points[j].position - nb.centre;
-    if !(length_squared(d) <= nb.reach2) {
-        return 0xffffffffu;
-    }
-    if nb.check_normals {
-        let b = normals[j].normal;
-        if length_squared(b) > 0.0 && dot(nb.own_normal, b) < 0.0 {
-            return 0xffffffffu;
+// Where a walk over a neighbourhood stands: the current word and its unvisited bits.
+struct Cursor {
+    word: u32,
+    bits: u32,
+}
+
+const NO_NEIGHBOUR: u32 = 0xffffffffu;
+
+fn first_neighbours(nb: Neighbourhood) -> Cursor {
+    return Cursor(0u, select(0u, neighbour_masks[nb.mask], nb.words > 0u));
+}
+
+// The next neighbour's point index, or NO_NEIGHBOUR after the last.
+fn next_neighbour(nb: Neighbourhood, cursor: ptr<function, Cursor>) -> u32 {
+    while (*cursor).bits == 0u {
+        (*cursor).word += 1u;
+        if (*cursor).word >= nb.words {
+            return NO_NEIGHBOUR;
         }
+        (*cursor).bits = neighbour_masks[nb.mask + (*cursor).word];
     }
-    return j;
+    let bits = (*cursor).bits;
+    (*cursor).bits = bits & (bits - 1u);
+    return cluster_ids[nb.first + (*cursor).word * 32u + firstTrailingBit(bits)];
 }
 
 // ---- Local frame (frame.rs) -----------------------------------------------------------------
@@ -270,10 +266,11 @@ fn covariance_normal(r: vec3<f32>, nb: Neighbourhood, h2: f32, weight_sum: f32) 
     var b12 = 0.0;
     var b22 = 0.0;
     let scale = 1.0 / (h2 * weight_sum);
-    for (var k = nb.first; k < nb.last; k++) {
-        let j = neighbour_at(nb, k);
-        if j == 0xffffffffu {
-            continue;
+    var cursor = first_neighbours(nb);
+    loop {
+        let j = next_neighbour(nb, &cursor);
+        if j == NO_NEIGHBOUR {
+            break;
         }
         let q = points[j].position - r;
         let w = weight(length_squared(q), h2) * scale;
@@ -308,10 +305,11 @@ fn support_normal(r: vec3<f32>, nb: Neighbourhood, h: f32, toward: vec3<f32>) ->
     var mean = vec3<f32>(0.0);
     var magnitude = 0.0;
     let use_normals = settings.has_normals != 0u;
-    for (var k = nb.first; k < nb.last; k++) {
-        let j = neighbour_at(nb, k);
-        if j == 0xffffffffu {
-            continue;
+    var cursor = first_neighbours(nb);
+    loop {
+        let j = next_neighbour(nb, &cursor);
+        if j == NO_NEIGHBOUR {
+            break;
         }
         let w = weight(length_squared(points[j].position - r), h2);
         weight_sum += w;
@@ -336,10 +334,11 @@ fn support_normal(r: vec3<f32>, nb: Neighbourhood, h: f32, toward: vec3<f32>) ->
     // Orientation: the weighted majority of the data normals, else toward the ray origin.
     var vote = 0.0;
     if use_normals {
-        for (var k = nb.first; k < nb.last; k++) {
-            let j = neighbour_at(nb, k);
-            if j == 0xffffffffu {
-                continue;
+        var cursor = first_neighbours(nb);
+        loop {
+            let j = next_neighbour(nb, &cursor);
+            if j == NO_NEIGHBOUR {
+                break;
             }
             let n = normalized(normals[j].normal);
             if n.ok {
@@ -460,10 +459,11 @@ fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32) -> Fit {
     var b1 = vec4<f32>(0.0);
     var b2 = vec2<f32>(0.0);
     var total = 0.0;
-    for (var k = nb.first; k < nb.last; k++) {
-        let j = neighbour_at(nb, k);
-        if j == 0xffffffffu {
-            continue;
+    var cursor = first_neighbours(nb);
+    loop {
+        let j = next_neighbour(nb, &cursor);
+        if j == NO_NEIGHBOUR {
+            break;
         }
         let q = points[j].position - r;
         let w = weight(length_squared(q), h2);

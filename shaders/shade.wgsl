@@ -44,10 +44,11 @@ fn field_at(hit: Hit) -> f32 {
     let h2 = h * h;
     var sum = 0.0;
     var wsum = 0.0;
-    for (var k = nb.first; k < nb.last; k++) {
-        let j = neighbour_at(nb, k);
-        if j == 0xffffffffu {
-            continue;
+    var cursor = first_neighbours(nb);
+    loop {
+        let j = next_neighbour(nb, &cursor);
+        if j == NO_NEIGHBOUR {
+            break;
         }
         let w = weight(length_squared(points[j].position - hit.position), h2);
         sum += w * field[j];

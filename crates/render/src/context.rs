@@ -1,6 +1,9 @@
 //! The wgpu instance, adapter, device and queue, with the limits slosh needs checked up front.
 
+use std::sync::OnceLock;
+
 use crate::error::{Error, Result};
+use crate::expand::Expander;
 
 /// Storage buffers bound per shader stage by the step and frame bind groups.
 pub const STORAGE_BUFFERS_NEEDED: u32 = 12;
@@ -14,6 +17,8 @@ pub struct Gpu {
     pub info: wgpu::AdapterInfo,
     /// Whether compute passes can write GPU timestamps (frame times in `slosh bench gpu`).
     pub timestamps: bool,
+    /// The neighbour-mask pass every upload runs, compiled on first use.
+    pub(crate) expander: OnceLock<Expander>,
 }
 
 /// The adapters wgpu can see, Vulkan first.
@@ -107,12 +112,17 @@ impl Gpu {
             queue,
             info,
             timestamps,
+            expander: OnceLock::new(),
         })
     }
 
     /// "NAME (backend, type, driver …)".
     pub fn describe(&self) -> String {
         describe(&self.info)
+    }
+
+    pub(crate) fn expander(&self) -> &Expander {
+        self.expander.get_or_init(|| Expander::new(&self.device))
     }
 
     /// The largest storage binding, in bytes.

@@ -31,7 +31,23 @@ pub struct GpuSettings {
     pub field_min: f32,
     pub field_max: f32,
     pub has_field: u32,
-    pub pad: u32,
+    /// Words of the neighbour masks per point.
+    pub mask_words: u32,
+}
+
+/// `struct ExpandSettings` in expand.wgsl: the neighbour-mask pass's uniforms.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct ExpandSettings {
+    pub point_count: u32,
+    pub cluster_size: u32,
+    pub mask_words: u32,
+    pub has_normals: u32,
+    /// Threads per row of the 2D dispatch.
+    pub row_threads: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// `struct Hit` in trace.wgsl: one pixel of the hit buffer, in the cache's local coordinates.

@@ -5,6 +5,7 @@
 
 mod context;
 mod error;
+mod expand;
 pub mod layout;
 pub mod shaders;
 mod tracer;
@@ -12,6 +13,6 @@ mod upload;
 
 pub use context::{Gpu, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
-pub use layout::{GpuHit, GpuSettings, status};
+pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
 pub use tracer::{Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings};
 pub use upload::{GpuStep, MAX_BVH_DEPTH, StepBuffers, UploadStats};

@@ -4,7 +4,10 @@
 /// The shared MLS maths alone (validated on its own in the tests).
 pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
 
-/// The trace pass: mls.wgsl + trace.wgsl, entry point `trace`.
+/// The neighbour-mask pass, standalone, entry point `expand`.
+pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
+
+/// The trace pass: mls.wgsl + trace.wgsl, entry points `trace_initial` and `trace_refined`.
 pub const TRACE_WGSL: &str = concat!(
     include_str!("../../../shaders/mls.wgsl"),
     include_str!("../../../shaders/trace.wgsl")

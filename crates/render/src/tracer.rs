@@ -164,7 +164,7 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         field_min,
         field_max,
         has_field: u32::from(step.field.is_some()),
-        pad: 0,
+        mask_words: step.mask_words,
     }
 }
 

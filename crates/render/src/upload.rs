@@ -8,18 +8,25 @@ use std::time::Instant;
 use rayon::prelude::*;
 use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
 
+use bytemuck::Zeroable;
+
 use crate::context::Gpu;
 use crate::error::{Error, Result};
+use crate::expand::ExpandInputs;
+use crate::layout::ExpandSettings;
 
 /// The deepest BVH the trace shader's traversal stack holds.
 pub const MAX_BVH_DEPTH: u64 = 62;
 
-/// The storage buffers of one step, in binding order 0–9 of the step bind group.
+/// The storage buffers of one step.
 #[derive(Debug)]
 pub struct StepBuffers {
     pub points: wgpu::Buffer,
     pub normals: wgpu::Buffer,
+    /// Read by the neighbour-mask pass only.
     pub reach: wgpu::Buffer,
+    /// Written by the neighbour-mask pass at upload: `mask_words` u32s per point.
+    pub masks: wgpu::Buffer,
     pub cluster_start: wgpu::Buffer,
     pub cluster_ids: wgpu::Buffer,
     pub balls: wgpu::Buffer,
@@ -30,11 +37,12 @@ pub struct StepBuffers {
 }
 
 impl StepBuffers {
+    /// The buffers of bindings 0–9 of the trace and shade passes' step bind group.
     pub fn in_binding_order(&self) -> [&wgpu::Buffer; 10] {
         [
             &self.points,
             &self.normals,
-            &self.reach,
+            &self.masks,
             &self.cluster_start,
             &self.cluster_ids,
             &self.balls,
@@ -55,7 +63,8 @@ pub struct UploadStats {
     pub stored_bytes: u64,
     /// Checksums, decompression and copies into the mapped staging buffers.
     pub host_seconds: f64,
-    /// Staging to device-local copies, from submit to completion.
+    /// Staging to device-local copies and the neighbour-mask pass, from submit to
+    /// completion.
     pub gpu_seconds: f64,
     /// Open to ready, everything included.
     pub total_seconds: f64,
@@ -75,6 +84,8 @@ pub struct GpuStep {
     pub point_count: u32,
     pub sphere_count: u32,
     pub cluster_size: u32,
+    /// Words of neighbour mask per point: the most candidates of any cluster, over 32.
+    pub mask_words: u32,
     pub has_normals: bool,
     /// The degree the balls were fitted at, and "mean" or "covariance".
     pub degree: u8,
@@ -109,6 +120,20 @@ fn invalid(file: &CacheFile, problem: String) -> Error {
         path: file.path().to_path_buf(),
         problem,
     }
+}
+
+/// Words of neighbour mask per point: one bit per candidate of the largest cluster.
+fn mask_words(cluster_start: &[u8]) -> u32 {
+    let starts: Vec<u32> = cluster_start
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let most = starts
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .max()
+        .unwrap_or(0);
+    most.div_ceil(32)
 }
 
 /// Finite minimum and maximum of little-endian f32s (0, 0 when there are none).
@@ -198,6 +223,29 @@ impl GpuStep {
                 }
             })
             .collect::<Result<_>>()?;
+        let point_count = u32::try_from(header.points)
+            .map_err(|_| invalid(file, format!("{} points exceed u32", header.points)))?;
+        let cluster_slot = SECTIONS
+            .iter()
+            .position(|n| *n == names::CLUSTER_START)
+            .unwrap_or_default();
+        let cluster_start: &[u8] = match (&entries[cluster_slot], &decoded[cluster_slot]) {
+            (_, Some(d)) => d,
+            (Some(e), None) => file.checked_stored(e)?,
+            (None, None) => &[],
+        };
+        let mask_words = mask_words(cluster_start);
+        let mask_bytes = u64::from(point_count) * u64::from(mask_words) * 4;
+        if mask_bytes > gpu.max_binding() {
+            return Err(invalid(
+                file,
+                format!(
+                    "the neighbour masks take {mask_bytes} bytes ({mask_words} words per point), over this adapter's {}-byte storage binding limit ({})",
+                    gpu.max_binding(),
+                    gpu.describe()
+                ),
+            ));
+        }
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -253,23 +301,57 @@ impl GpuStep {
                 mapped_at_creation: false,
             }));
         }
-        stats.host_seconds = start.elapsed().as_secs_f64();
-        let submitted = Instant::now();
-        gpu.queue.submit([encoder.finish()]);
-        gpu.wait()?;
-        stats.gpu_seconds = submitted.elapsed().as_secs_f64();
-        stats.total_seconds = start.elapsed().as_secs_f64();
         let mut it = buffers.into_iter();
         let mut next = || {
             it.next()
                 .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))
         };
+        let (points, normals, reach) = (next()?, next()?, next()?);
+        let (cluster_start, cluster_ids) = (next()?, next()?);
+        let masks = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("neighbour masks"),
+            size: mask_bytes.max(EMPTY_BINDING),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let has_normals = file.section(names::NORMALS).is_some();
+        let cluster_size = header.neighbour_cluster.max(1);
+        gpu.expander().encode(
+            gpu,
+            &ExpandInputs {
+                points: &points,
+                normals: &normals,
+                reach: &reach,
+                cluster_start: &cluster_start,
+                cluster_ids: &cluster_ids,
+                masks: &masks,
+            },
+            ExpandSettings {
+                point_count,
+                cluster_size,
+                mask_words,
+                has_normals: u32::from(has_normals),
+                ..ExpandSettings::zeroed()
+            },
+            &mut encoder,
+        )?;
+        stats.host_seconds = start.elapsed().as_secs_f64();
+        let submitted = Instant::now();
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        gpu.queue.submit([encoder.finish()]);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
+        }
+        gpu.wait()?;
+        stats.gpu_seconds = submitted.elapsed().as_secs_f64();
+        stats.total_seconds = start.elapsed().as_secs_f64();
         let buffers = StepBuffers {
-            points: next()?,
-            normals: next()?,
-            reach: next()?,
-            cluster_start: next()?,
-            cluster_ids: next()?,
+            points,
+            normals,
+            reach,
+            masks,
+            cluster_start,
+            cluster_ids,
             balls: next()?,
             spheres: next()?,
             bvh_nodes: next()?,
@@ -277,14 +359,13 @@ impl GpuStep {
             field: next()?,
         };
         let count = |name: &str| file.section(name).map_or(0, |e| e.count);
-        let point_count = u32::try_from(header.points)
-            .map_err(|_| invalid(file, format!("{} points exceed u32", header.points)))?;
         Ok(GpuStep {
             buffers,
             point_count,
             sphere_count: count(names::SPHERES) as u32,
-            cluster_size: header.neighbour_cluster.max(1),
-            has_normals: file.section(names::NORMALS).is_some(),
+            cluster_size,
+            mask_words,
+            has_normals,
             degree: header.mls.degree,
             covariance: header.mls.normals == "covariance",
             transform: header.transform,

@@ -2,7 +2,7 @@
 //! The GPU tracer against the CPU f64 oracle, the WGSL against naga, the Pod mirrors against
 //! naga's layouts, and a golden image.
 
-use slosh_render::shaders::{MLS_WGSL, SHADE_WGSL, TRACE_WGSL};
+use slosh_render::shaders::{EXPAND_WGSL, MLS_WGSL, SHADE_WGSL, TRACE_WGSL};
 
 fn validate(name: &str, source: &str) -> naga::Module {
     let module = naga::front::wgsl::parse_str(source)
@@ -21,6 +21,7 @@ fn every_wgsl_file_validates_with_naga() {
     validate("mls.wgsl", MLS_WGSL);
     validate("mls.wgsl + trace.wgsl", TRACE_WGSL);
     validate("mls.wgsl + shade.wgsl", SHADE_WGSL);
+    validate("expand.wgsl", EXPAND_WGSL);
 }
 
 use std::path::Path;
@@ -365,10 +366,28 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 field_min,
                 field_max,
                 has_field,
-                pad
+                mask_words
             ]
         );
     }
+    let expand = validate("expand", EXPAND_WGSL);
+    check_layout!(&expand, "Point", GpuPoint, [position, radius]);
+    check_layout!(&expand, "Normal", GpuNormal, [normal, pad]);
+    check_layout!(
+        &expand,
+        "ExpandSettings",
+        slosh_render::ExpandSettings,
+        [
+            point_count,
+            cluster_size,
+            mask_words,
+            has_normals,
+            row_threads,
+            pad0,
+            pad1,
+            pad2
+        ]
+    );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);
     check_layout!(&trace, "BvhNode", GpuBvhNode, [lo, count, hi, first]);
 }
