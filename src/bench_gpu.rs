@@ -126,7 +126,7 @@ impl Runner<'_> {
         let mut shade = Vec::new();
         // Warm-up: 10 frames and at least half a second, so that the GPU's clocks have risen
         // after the host-side work before this row (a bake, an upload).
-        let warm_up = std::time::Instant::now();
+        let warm_up = Instant::now();
         let mut warm = 0;
         while warm < 10 || warm_up.elapsed().as_secs_f64() < 0.5 {
             self.tracer
