@@ -25,22 +25,17 @@ struct BvhNode {
 // Deeper trees are refused at upload (slosh_render::MAX_BVH_DEPTH).
 const STACK_SIZE: u32 = 64u;
 
-// Entry parameter of the ray (t ≥ 0) into a node's box, or −1 when it misses.
+// Entry parameter of the ray (t ≥ 0) into a node's box, or −1 when it misses. Branch free:
+// an axis the ray is parallel to admits everything or nothing, by whether the origin lies
+// within the box's slab.
 fn enter(node: BvhNode, origin: vec3<f32>, inv_dir: vec3<f32>, parallel: vec3<bool>) -> f32 {
-    var t0 = 0.0;
-    var t1 = FAR;
-    for (var a = 0u; a < 3u; a++) {
-        if parallel[a] {
-            if origin[a] < node.lo[a] || origin[a] > node.hi[a] {
-                return -1.0;
-            }
-            continue;
-        }
-        let ta = (node.lo[a] - origin[a]) * inv_dir[a];
-        let tb = (node.hi[a] - origin[a]) * inv_dir[a];
-        t0 = max(t0, min(ta, tb));
-        t1 = min(t1, max(ta, tb));
-    }
+    let ta = (node.lo - origin) * inv_dir;
+    let tb = (node.hi - origin) * inv_dir;
+    let inside = (origin >= node.lo) & (origin <= node.hi);
+    let near = select(min(ta, tb), select(vec3<f32>(FAR), vec3<f32>(-FAR), inside), parallel);
+    let far = select(max(ta, tb), select(vec3<f32>(-FAR), vec3<f32>(FAR), inside), parallel);
+    let t0 = max(max(near.x, near.y), max(near.z, 0.0));
+    let t1 = min(min(far.x, far.y), min(far.z, FAR));
     return select(-1.0, t0, t0 <= t1);
 }
 
@@ -125,11 +120,7 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
                     best.t = t;
                     continue;
                 }
-                let ball = balls[item];
-                // Unfitted balls and droplet members are never candidates.
-                if (ball.state & 3u) >= 2u {
-                    continue;
-                }
+                // The ball (64 bytes) is read only once the ray is known to cross its sphere.
                 let point = points[item];
                 let iv = ray_ball(ray, point.position, point.radius);
                 if !iv.ok || iv.t_in > best.t || iv.t_out < after_t {
@@ -137,6 +128,11 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
                 }
                 let t_lo = max(iv.t_in, 0.0);
                 if t_lo > iv.t_out {
+                    continue;
+                }
+                let ball = balls[item];
+                // Unfitted balls and droplet members are never candidates.
+                if (ball.state & 3u) >= 2u {
                     continue;
                 }
                 var initial: Poly;
