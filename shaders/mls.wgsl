@@ -385,42 +385,63 @@ fn poly_gradient(p: Poly, x: f32, y: f32) -> vec2<f32> {
     return vec2<f32>(fx, fy);
 }
 
-// Product of two cubics in s, truncated at s³.
-fn mul4(a: vec4<f32>, b: vec4<f32>) -> vec4<f32> {
-    return vec4<f32>(
-        a[0] * b[0],
-        a[0] * b[1] + a[1] * b[0],
-        a[0] * b[2] + a[1] * b[1] + a[2] * b[0],
-        a[0] * b[3] + a[1] * b[2] + a[2] * b[1] + a[3] * b[0],
-    );
+// Products of polynomials in s whose zero coefficients are known, so only the others are
+// multiplied: linear × linear (Poly::along_line's mul, with its zero terms dropped: adding
+// an exact zero changes no sum, so the result is the same).
+fn lin_mul(a: vec2<f32>, b: vec2<f32>) -> vec3<f32> {
+    return vec3<f32>(a[0] * b[0], a[0] * b[1] + a[1] * b[0], a[1] * b[1]);
+}
+
+// Quadratic × linear.
+fn quad_mul(q: vec3<f32>, l: vec2<f32>) -> vec4<f32> {
+    return vec4<f32>(q[0] * l[0], q[0] * l[1] + q[1] * l[0], q[1] * l[1] + q[2] * l[0], q[2] * l[1]);
 }
 
 // Coefficients (ascending powers of s) of s ↦ f(x0 + s dx, y0 + s dy) (Poly::along_line),
-// summed term by term in the same order, with constant indices only: a dynamically indexed
-// array would live in slow per-thread memory on a GPU.
+// each power summed over the terms in the same order, with constant indices only: a
+// dynamically indexed array would live in slow per-thread memory on a GPU.
 fn along_line(p: Poly, x0: f32, y0: f32, dx: f32, dy: f32) -> vec4<f32> {
     let c = p.c;
-    let x = vec4<f32>(x0, dx, 0.0, 0.0);
-    let y = vec4<f32>(y0, dy, 0.0, 0.0);
-    var out = c[0] * vec4<f32>(1.0, 0.0, 0.0, 0.0);
+    let x = vec2<f32>(x0, dx);
+    let y = vec2<f32>(y0, dy);
+    // Powers s⁰ and s¹, then s² and s³.
+    var low = vec2<f32>(c[0], 0.0);
+    var s2 = 0.0;
+    var s3 = 0.0;
     if p.degree >= 1u {
-        out += c[1] * x;
-        out += c[2] * y;
+        low += c[1] * x;
+        low += c[2] * y;
     }
     if p.degree >= 2u {
-        let xx = mul4(x, x);
-        let yy = mul4(y, y);
-        out += c[3] * xx;
-        out += c[4] * yy;
-        out += c[5] * mul4(x, y);
+        let xx = lin_mul(x, x);
+        let yy = lin_mul(y, y);
+        let xy = lin_mul(x, y);
+        low += c[3] * xx.xy;
+        s2 += c[3] * xx.z;
+        low += c[4] * yy.xy;
+        s2 += c[4] * yy.z;
+        low += c[5] * xy.xy;
+        s2 += c[5] * xy.z;
         if p.degree >= 3u {
-            out += c[6] * mul4(xx, x);
-            out += c[7] * mul4(yy, y);
-            out += c[8] * mul4(xx, y);
-            out += c[9] * mul4(x, yy);
+            let xxx = quad_mul(xx, x);
+            let yyy = quad_mul(yy, y);
+            let xxy = quad_mul(xx, y);
+            let xyy = quad_mul(yy, x);
+            low += c[6] * xxx.xy;
+            s2 += c[6] * xxx.z;
+            s3 += c[6] * xxx.w;
+            low += c[7] * yyy.xy;
+            s2 += c[7] * yyy.z;
+            s3 += c[7] * yyy.w;
+            low += c[8] * xxy.xy;
+            s2 += c[8] * xxy.z;
+            s3 += c[8] * xxy.w;
+            low += c[9] * xyy.xy;
+            s2 += c[9] * xyy.z;
+            s3 += c[9] * xyy.w;
         }
     }
-    return out;
+    return vec4<f32>(low, s2, s3);
 }
 
 // ---- Weighted least squares fit (fit.rs) ----------------------------------------------------

@@ -8,7 +8,7 @@ use slosh_mls::Camera;
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings};
-use crate::shaders::{SHADE_WGSL, TRACE_WGSL};
+use crate::shaders::{SHADE_WGSL, TRACE_STACK_SIZES, trace_wgsl};
 use crate::upload::GpuStep;
 
 /// What the shade pass draws.
@@ -74,15 +74,22 @@ pub struct PassTimes {
     pub shade_ms: f64,
 }
 
-/// The compiled passes.
+/// The trace pass built for one traversal stack size.
 #[derive(Debug)]
-pub struct Tracer {
+struct TraceVariant {
+    module: wgpu::ShaderModule,
     /// One iteration: the nearest initial hit, a lean kernel.
-    trace_initial: wgpu::ComputePipeline,
+    initial: wgpu::ComputePipeline,
     /// More: candidates refined in the order of their initial hits, one pipeline per fit
     /// degree (1–3), built when first asked for.
-    trace_refined: [OnceLock<wgpu::ComputePipeline>; 3],
-    trace_module: wgpu::ShaderModule,
+    refined: [OnceLock<wgpu::ComputePipeline>; 3],
+}
+
+/// The compiled passes. Trace pipelines are built on first use, for the smallest stack in
+/// `TRACE_STACK_SIZES` that holds the step's BVH.
+#[derive(Debug)]
+pub struct Tracer {
+    traces: [OnceLock<TraceVariant>; TRACE_STACK_SIZES.len()],
     layout: wgpu::PipelineLayout,
     shade: wgpu::ComputePipeline,
     step_layout: wgpu::BindGroupLayout,
@@ -202,16 +209,12 @@ impl Tracer {
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             })
         };
-        let trace_module = module(TRACE_WGSL, "trace");
-        let trace_initial = compute_pipeline(device, &layout, &trace_module, "trace_initial", &[]);
         let shade = compute_pipeline(device, &layout, &module(SHADE_WGSL, "shade"), "shade", &[]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
         Ok(Tracer {
-            trace_initial,
-            trace_refined: Default::default(),
-            trace_module,
+            traces: Default::default(),
             layout,
             shade,
             step_layout,
@@ -300,25 +303,66 @@ impl Tracer {
         }
     }
 
-    /// The refining trace pipeline for fits of `degree` (1–3).
-    fn refined(&self, gpu: &Gpu, degree: u8) -> Result<&wgpu::ComputePipeline> {
+    /// The trace pipeline for `step`: one iteration, or refinement with fits of `degree`
+    /// (1–3).
+    fn trace_pipeline(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        iterations: u32,
+        degree: u8,
+    ) -> Result<&wgpu::ComputePipeline> {
+        let needed = u32::try_from(step.bvh_depth + 1).unwrap_or(u32::MAX);
+        let slot = TRACE_STACK_SIZES
+            .iter()
+            .position(|&size| size >= needed)
+            .ok_or_else(|| {
+                Error::Validation(format!(
+                    "BVH depth {} exceeds the trace stack",
+                    step.bvh_depth
+                ))
+            })?;
+        let build = |entry: &str, constants: &[(&str, f64)], module: &wgpu::ShaderModule| {
+            let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+            let pipeline = compute_pipeline(&gpu.device, &self.layout, module, entry, constants);
+            match pollster::block_on(scope.pop()) {
+                Some(e) => Err(Error::Validation(e.to_string())),
+                None => Ok(pipeline),
+            }
+        };
+        let variant = match self.traces[slot].get() {
+            Some(v) => v,
+            None => {
+                let module = gpu
+                    .device
+                    .create_shader_module(wgpu::ShaderModuleDescriptor {
+                        label: Some("trace"),
+                        source: wgpu::ShaderSource::Wgsl(
+                            trace_wgsl(TRACE_STACK_SIZES[slot]).into(),
+                        ),
+                    });
+                let initial = build("trace_initial", &[], &module)?;
+                self.traces[slot].get_or_init(|| TraceVariant {
+                    module,
+                    initial,
+                    refined: Default::default(),
+                })
+            }
+        };
+        if iterations <= 1 {
+            return Ok(&variant.initial);
+        }
         let degree = degree.clamp(1, 3);
-        let slot = &self.trace_refined[usize::from(degree) - 1];
-        if let Some(pipeline) = slot.get() {
+        let refined = &variant.refined[usize::from(degree) - 1];
+        if let Some(pipeline) = refined.get() {
             return Ok(pipeline);
         }
-        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipeline = compute_pipeline(
-            &gpu.device,
-            &self.layout,
-            &self.trace_module,
+        let pipeline = build(
             "trace_refined",
             &[("FIT_DEGREE", f64::from(degree))],
-        );
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(Error::Validation(e.to_string()));
-        }
-        Ok(slot.get_or_init(|| pipeline))
+            &variant.module,
+        )?;
+        Ok(refined.get_or_init(|| pipeline))
     }
 
     /// Records the trace and shade passes (with timestamps where the targets have them).
@@ -372,11 +416,7 @@ impl Tracer {
             0,
             bytemuck::bytes_of(&settings(step, &camera, params)),
         );
-        let trace = if params.iterations > 1 {
-            self.refined(gpu, params.degree)?
-        } else {
-            &self.trace_initial
-        };
+        let trace = self.trace_pipeline(gpu, step, params.iterations, params.degree)?;
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = gpu
             .device

@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 use crate::expand::ExpandInputs;
 use crate::layout::ExpandSettings;
 
-/// The deepest BVH the trace shader's traversal stack holds.
+/// The deepest BVH the trace shader's largest traversal stack (64 entries) holds.
 pub const MAX_BVH_DEPTH: u64 = 62;
 
 /// The storage buffers of one step.
@@ -84,6 +84,8 @@ pub struct GpuStep {
     pub point_count: u32,
     pub sphere_count: u32,
     pub cluster_size: u32,
+    /// Depth of the step's BVH (the traversal stack needs one entry more).
+    pub bvh_depth: u64,
     /// Words of neighbour mask per point: the most candidates of any cluster, over 32.
     pub mask_words: u32,
     pub has_normals: bool,
@@ -364,6 +366,7 @@ impl GpuStep {
             point_count,
             sphere_count: count(names::SPHERES) as u32,
             cluster_size,
+            bvh_depth: header.stats.bvh_depth,
             mask_words,
             has_normals,
             degree: header.mls.degree,

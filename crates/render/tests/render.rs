@@ -2,7 +2,9 @@
 //! The GPU tracer against the CPU f64 oracle, the WGSL against naga, the Pod mirrors against
 //! naga's layouts, and a golden image.
 
-use slosh_render::shaders::{EXPAND_WGSL, MLS_WGSL, SHADE_WGSL, TRACE_WGSL};
+use slosh_render::shaders::{
+    EXPAND_WGSL, MLS_WGSL, SHADE_WGSL, TRACE_STACK_SIZES, TRACE_WGSL, trace_wgsl,
+};
 
 fn validate(name: &str, source: &str) -> naga::Module {
     let module = naga::front::wgsl::parse_str(source)
@@ -22,6 +24,11 @@ fn every_wgsl_file_validates_with_naga() {
     validate("mls.wgsl + trace.wgsl", TRACE_WGSL);
     validate("mls.wgsl + shade.wgsl", SHADE_WGSL);
     validate("expand.wgsl", EXPAND_WGSL);
+    for entries in TRACE_STACK_SIZES {
+        let source = trace_wgsl(entries);
+        assert!(source.contains(&format!("const STACK_SIZE: u32 = {entries}u;")));
+        validate(&format!("trace with a {entries}-entry stack"), &source);
+    }
 }
 
 use std::path::Path;
