@@ -1,7 +1,7 @@
 // The shade pass: one thread per pixel, from the hit buffer to an sRGB pixel. Modes (mirrors
 // `slosh_render::ShadeMode`): 0 shade (Blinn–Phong under a key, a fill and a rim light;
 // coloured by a scalar field when one is bound), 1 normals, 2 status and iteration heat map,
-// 3 back faces flagged. Appended to mls.wgsl.
+// 3 back faces flagged. Appended to mls.wgsl and light.wgsl.
 
 @group(0) @binding(5) var<storage, read> balls: array<Ball>;
 @group(0) @binding(9) var<storage, read> field: array<f32>;
@@ -12,16 +12,6 @@ const MODE_SHADE: u32 = 0u;
 const MODE_NORMALS: u32 = 1u;
 const MODE_STATUS: u32 = 2u;
 const MODE_BACKFACES: u32 = 3u;
-
-fn srgb(v: f32) -> f32 {
-    let c = clamp(v, 0.0, 1.0);
-    return select(1.055 * pow(c, 1.0 / 2.4) - 0.055, 12.92 * c, c <= 0.0031308);
-}
-
-fn pack(rgb: vec3<f32>) -> u32 {
-    let c = vec3<u32>(round(vec3<f32>(srgb(rgb.x), srgb(rgb.y), srgb(rgb.z)) * 255.0));
-    return c.x | (c.y << 8u) | (c.z << 16u) | (255u << 24u);
-}
 
 // Viridis (perceptually uniform), a degree-6 fit of the matplotlib table; t in [0, 1].
 fn viridis(t_in: f32) -> vec3<f32> {
@@ -57,11 +47,6 @@ fn field_at(hit: Hit) -> f32 {
     return select(field[hit.item], sum / wsum, wsum > MIN_WEIGHT);
 }
 
-fn background(y: u32) -> vec3<f32> {
-    let t = f32(y) / f32(settings.height);
-    return vec3<f32>(0.03 + 0.05 * t, 0.035 + 0.05 * t, 0.05 + 0.06 * t);
-}
-
 fn status_colour(hit: Hit) -> vec3<f32> {
     // Brighter for more iterations used: where did refinement have to work?
     let work = 0.35 + 0.65 * f32(hit.iterations) / f32(max(settings.iterations, 1u));
@@ -79,19 +64,6 @@ fn status_colour(hit: Hit) -> vec3<f32> {
             return vec3<f32>(0.9, 0.15, 0.1);
         }
     }
-}
-
-fn blinn_phong(n_in: vec3<f32>, dir: vec3<f32>, base: vec3<f32>) -> vec3<f32> {
-    let n = select(n_in, -n_in, dot(n_in, dir) > 0.0);
-    let view = -dir;
-    let key = normalize(vec3<f32>(0.4, -0.3, 0.85));
-    let fill = normalize(vec3<f32>(-0.6, 0.5, 0.3));
-    let half_vector = normalize(key + view);
-    let diffuse = 0.85 * max(dot(n, key), 0.0) + 0.25 * max(dot(n, fill), 0.0);
-    let spec = 0.6 * pow(max(dot(n, half_vector), 0.0), 60.0);
-    // A rim term reads the silhouette of thin sheets against the background.
-    let rim = 0.25 * pow(1.0 - max(dot(n, view), 0.0), 3.0);
-    return base * (0.12 + diffuse) + vec3<f32>(spec + rim);
 }
 
 @compute @workgroup_size(8, 8, 1)

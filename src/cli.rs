@@ -269,6 +269,9 @@ pub enum ModeArg {
     Status,
     /// Back-facing hits in magenta.
     Backfaces,
+    /// Water over a checkerboard floor: reflection, refraction and shadows by secondary rays
+    /// (GPU only).
+    Water,
 }
 
 #[derive(Debug, Args)]

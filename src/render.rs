@@ -111,7 +111,8 @@ fn shade(hit: &TraceHit, dir: [f64; 3], mode: ModeArg) -> [f64; 3] {
             HitStatus::Droplet => [0.2, 0.4, 0.95],
             _ => [0.9, 0.15, 0.1],
         },
-        ModeArg::Shade => {
+        // Water is refused on the CPU path (RenderConfig::from_args).
+        ModeArg::Shade | ModeArg::Water => {
             let mut n = hit.normal;
             if dot(n, dir) > 0.0 {
                 n = n.map(|c| -c);
@@ -269,6 +270,9 @@ impl RenderConfig {
         if args.cpu && args.field.is_some() {
             bail!("--field colours on the GPU path only; drop --cpu");
         }
+        if args.cpu && matches!(args.mode, ModeArg::Water) {
+            bail!("--mode water traces secondary rays on the GPU only; drop --cpu");
+        }
         let (width, height) = parse_size(&args.size)?;
         let (steps, sequence) = match &args.steps {
             Some(range) => (parse_steps(range)?, true),
@@ -395,6 +399,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 ModeArg::Normals => ShadeMode::Normals,
                 ModeArg::Status => ShadeMode::Status,
                 ModeArg::Backfaces => ShadeMode::Backfaces,
+                ModeArg::Water => ShadeMode::Water,
             },
         };
         let start = std::time::Instant::now();

@@ -7,15 +7,19 @@ pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
 /// The neighbour-mask pass, standalone, entry point `expand`.
 pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
 
-/// The trace pass: mls.wgsl + trace.wgsl, entry points `trace_initial` and `trace_refined`.
+/// The trace pass and the water pass, which traces secondary rays: mls.wgsl + trace.wgsl +
+/// light.wgsl + water.wgsl, entry points `trace_initial`, `trace_refined` and `water`.
 pub const TRACE_WGSL: &str = concat!(
     include_str!("../../../shaders/mls.wgsl"),
-    include_str!("../../../shaders/trace.wgsl")
+    include_str!("../../../shaders/trace.wgsl"),
+    include_str!("../../../shaders/light.wgsl"),
+    include_str!("../../../shaders/water.wgsl")
 );
 
-/// The shade pass: mls.wgsl + shade.wgsl, entry point `shade`.
+/// The shade pass: mls.wgsl + light.wgsl + shade.wgsl, entry point `shade`.
 pub const SHADE_WGSL: &str = concat!(
     include_str!("../../../shaders/mls.wgsl"),
+    include_str!("../../../shaders/light.wgsl"),
     include_str!("../../../shaders/shade.wgsl")
 );
 

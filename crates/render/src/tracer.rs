@@ -24,6 +24,9 @@ pub enum ShadeMode {
     Status,
     /// Back-facing hits (normal along the ray) in magenta.
     Backfaces,
+    /// Water over a checkerboard floor: Fresnel reflection and refraction by secondary
+    /// rays, and the floor shadowed under the key light (`shaders/water.wgsl`).
+    Water,
 }
 
 /// Tracing parameters, passed to the shaders as uniforms.
@@ -83,6 +86,8 @@ struct TraceVariant {
     /// More: candidates refined in the order of their initial hits, one pipeline per fit
     /// degree (1–3), built when first asked for.
     refined: [OnceLock<wgpu::ComputePipeline>; 3],
+    /// The water pass (secondary rays), in place of the shade pass.
+    water: OnceLock<wgpu::ComputePipeline>,
 }
 
 /// The compiled passes. Trace pipelines are built on first use, for the smallest stack in
@@ -303,15 +308,24 @@ impl Tracer {
         }
     }
 
-    /// The trace pipeline for `step`: one iteration, or refinement with fits of `degree`
-    /// (1–3).
-    fn trace_pipeline(
+    /// A pipeline of the trace module's `entry` with `constants`, validation errors caught.
+    fn build(
         &self,
         gpu: &Gpu,
-        step: &GpuStep,
-        iterations: u32,
-        degree: u8,
-    ) -> Result<&wgpu::ComputePipeline> {
+        module: &wgpu::ShaderModule,
+        entry: &str,
+        constants: &[(&str, f64)],
+    ) -> Result<wgpu::ComputePipeline> {
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipeline = compute_pipeline(&gpu.device, &self.layout, module, entry, constants);
+        match pollster::block_on(scope.pop()) {
+            Some(e) => Err(Error::Validation(e.to_string())),
+            None => Ok(pipeline),
+        }
+    }
+
+    /// The trace module for `step`'s BVH: the smallest stack that holds it.
+    fn variant(&self, gpu: &Gpu, step: &GpuStep) -> Result<&TraceVariant> {
         let needed = u32::try_from(step.bvh_depth + 1).unwrap_or(u32::MAX);
         let slot = TRACE_STACK_SIZES
             .iter()
@@ -322,33 +336,32 @@ impl Tracer {
                     step.bvh_depth
                 ))
             })?;
-        let build = |entry: &str, constants: &[(&str, f64)], module: &wgpu::ShaderModule| {
-            let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-            let pipeline = compute_pipeline(&gpu.device, &self.layout, module, entry, constants);
-            match pollster::block_on(scope.pop()) {
-                Some(e) => Err(Error::Validation(e.to_string())),
-                None => Ok(pipeline),
-            }
-        };
-        let variant = match self.traces[slot].get() {
-            Some(v) => v,
-            None => {
-                let module = gpu
-                    .device
-                    .create_shader_module(wgpu::ShaderModuleDescriptor {
-                        label: Some("trace"),
-                        source: wgpu::ShaderSource::Wgsl(
-                            trace_wgsl(TRACE_STACK_SIZES[slot]).into(),
-                        ),
-                    });
-                let initial = build("trace_initial", &[], &module)?;
-                self.traces[slot].get_or_init(|| TraceVariant {
-                    module,
-                    initial,
-                    refined: Default::default(),
-                })
-            }
-        };
+        if let Some(variant) = self.traces[slot].get() {
+            return Ok(variant);
+        }
+        let module = gpu
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("trace"),
+                source: wgpu::ShaderSource::Wgsl(trace_wgsl(TRACE_STACK_SIZES[slot]).into()),
+            });
+        let initial = self.build(gpu, &module, "trace_initial", &[])?;
+        Ok(self.traces[slot].get_or_init(|| TraceVariant {
+            module,
+            initial,
+            refined: Default::default(),
+            water: OnceLock::new(),
+        }))
+    }
+
+    /// The trace pipeline: one iteration, or refinement with fits of `degree` (1–3).
+    fn trace_pipeline<'a>(
+        &self,
+        gpu: &Gpu,
+        variant: &'a TraceVariant,
+        iterations: u32,
+        degree: u8,
+    ) -> Result<&'a wgpu::ComputePipeline> {
         if iterations <= 1 {
             return Ok(&variant.initial);
         }
@@ -357,23 +370,36 @@ impl Tracer {
         if let Some(pipeline) = refined.get() {
             return Ok(pipeline);
         }
-        let pipeline = build(
+        let pipeline = self.build(
+            gpu,
+            &variant.module,
             "trace_refined",
             &[("FIT_DEGREE", f64::from(degree))],
-            &variant.module,
         )?;
         Ok(refined.get_or_init(|| pipeline))
+    }
+
+    fn water_pipeline<'a>(
+        &self,
+        gpu: &Gpu,
+        variant: &'a TraceVariant,
+    ) -> Result<&'a wgpu::ComputePipeline> {
+        if let Some(pipeline) = variant.water.get() {
+            return Ok(pipeline);
+        }
+        let pipeline = self.build(gpu, &variant.module, "water", &[])?;
+        Ok(variant.water.get_or_init(|| pipeline))
     }
 
     /// Records the trace and shade passes (with timestamps where the targets have them).
     fn encode(
         &self,
         targets: &FrameTargets,
-        trace: &wgpu::ComputePipeline,
+        passes: [&wgpu::ComputePipeline; 2],
         encoder: &mut wgpu::CommandEncoder,
     ) {
         let groups = (targets.width.div_ceil(8), targets.height.div_ceil(8));
-        for (i, pipeline) in [trace, &self.shade].into_iter().enumerate() {
+        for (i, pipeline) in passes.into_iter().enumerate() {
             let timestamp_writes =
                 targets
                     .queries
@@ -416,14 +442,20 @@ impl Tracer {
             0,
             bytemuck::bytes_of(&settings(step, &camera, params)),
         );
-        let trace = self.trace_pipeline(gpu, step, params.iterations, params.degree)?;
+        let variant = self.variant(gpu, step)?;
+        let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
+        let shade = if params.mode == ShadeMode::Water {
+            self.water_pipeline(gpu, variant)?
+        } else {
+            &self.shade
+        };
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        self.encode(targets, trace, &mut encoder);
+        self.encode(targets, [trace, shade], &mut encoder);
         gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));

@@ -457,3 +457,152 @@ fn shaded_frame_matches_the_golden_image() {
     assert!(lit > 1500, "{lit} hit pixels");
     assert!(error <= 1.0, "mean pixel error {error:.3} > 1.0 of 255");
 }
+
+/// Linear value of an sRGB8 channel.
+fn linear(c: u8) -> f64 {
+    let v = f64::from(c) / 255.0;
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+#[test]
+fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
+    let Some(dev) = device() else { return };
+    let spec = SceneSpec::new(SceneKind::Sphere, 3000, 7);
+    let scene = Scene::new(spec.clone()).unwrap();
+    let slosh_scenes::Truth::Sphere { center, radius } = scene.truth(scene.time(1)) else {
+        panic!("the sphere scene's truth is a sphere")
+    };
+    let input = input_of(&spec);
+    let (file, _) = bake(&input, 2);
+    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+    let loaded = slosh_cache::LoadedStep::load(&file).unwrap();
+    // The stage as water.wgsl sets it: the floor 2 % of the extent under the BVH root box,
+    // squares of an eighth of the extent, the key light toward normalize(0.4, −0.3, 0.85).
+    let root = loaded.bvh.nodes[0];
+    let extent = (0..3)
+        .map(|a| f64::from(root.hi[a]) - f64::from(root.lo[a]))
+        .fold(1e-6, f64::max);
+    let floor_z = f64::from(root.lo[2]) - 0.02 * extent;
+    let square = extent / 8.0;
+    let key = {
+        let k = [0.4, -0.3, 0.85];
+        let l: f64 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
+        k.map(|c| c / l.sqrt())
+    };
+    // Straight down from above, wide enough to see the shadow beside the sphere.
+    const SIZE: u32 = 96;
+    const FOV: f64 = 32.0;
+    let camera = Camera {
+        eye: [center.x, center.y, center.z + 6.0 * radius],
+        target: [center.x, center.y, center.z],
+        up: [0.0, 1.0, 0.0],
+        fov_y: FOV,
+        width: SIZE,
+        height: SIZE,
+    };
+    let mut params = TraceParams::for_step(&step, 2);
+    params.mode = ShadeMode::Water;
+    let started = std::time::Instant::now();
+    let frame = dev
+        .tracer
+        .render(&dev.gpu, &step, &camera, &params)
+        .unwrap();
+    eprintln!(
+        "water frame in {:.1} s (pipelines included)",
+        started.elapsed().as_secs_f64()
+    );
+    let t = step.transform;
+    let c = t.to_local([center.x, center.y, center.z]);
+    let r = radius / t.scale;
+    let spacing = step.spacing / t.scale;
+    let eye = t.to_local(camera.eye);
+    // Linear floor values: checker square (light 0.8, dark 0.3) × lit (0.25 + 0.75 key.z) or
+    // shadowed (0.25), seen straight down.
+    let lit = 0.25 + 0.75 * key[2];
+    let (mut checked, mut agree, mut shadowed) = (0usize, 0usize, 0usize);
+    for (i, hit) in frame.hits.iter().enumerate() {
+        if hit.status != status::MISS {
+            continue;
+        }
+        let (_, dir) = camera.ray(i as u32 % SIZE, i as u32 / SIZE);
+        let s = (floor_z - eye[2]) / dir[2];
+        let p: [f64; 3] = std::array::from_fn(|a| eye[a] + dir[a] * s);
+        // Pixels near a square's edge or the shadow's edge could go either way.
+        let pixel = s * (FOV.to_radians() / 2.0).tan() * 2.0 / f64::from(SIZE);
+        let edge = |v: f64| {
+            let f = (v / square).rem_euclid(1.0);
+            f.min(1.0 - f) * square
+        };
+        if edge(p[0]) < 1.5 * pixel || edge(p[1]) < 1.5 * pixel {
+            continue;
+        }
+        // Distance from the sphere's centre to the ray from p toward the light.
+        let q: [f64; 3] = std::array::from_fn(|a| c[a] - p[a]);
+        let along = q[0] * key[0] + q[1] * key[1] + q[2] * key[2];
+        let d2 = q.iter().map(|v| v * v).sum::<f64>() - along * along;
+        let d = d2.max(0.0).sqrt();
+        if (d - r).abs() < 2.0 * spacing + 2.0 * pixel {
+            continue;
+        }
+        let in_shadow = along > 0.0 && d < r;
+        let light_square =
+            ((p[0] / square).floor() as i64 + (p[1] / square).floor() as i64).rem_euclid(2) == 1;
+        let expected = if light_square { 0.8 } else { 0.3 } * if in_shadow { 0.25 } else { lit };
+        let rgba = frame.rgba[i].to_le_bytes();
+        let got = linear(rgba[0]);
+        checked += 1;
+        shadowed += usize::from(in_shadow);
+        agree += usize::from((got - expected).abs() <= 0.02);
+    }
+    eprintln!(
+        "water floor: {agree} of {checked} floor pixels as the analytic checkerboard and shadow predict ({shadowed} in shadow)"
+    );
+    assert!(
+        checked > 1000 && shadowed > 40,
+        "too few floor pixels to judge"
+    );
+    assert!(agree * 100 >= checked * 99, "{agree} of {checked} agree");
+    // Looking straight down at the sphere's top: Fresnel reflection r0 = ((1 − 1.33)/2.33)²
+    // of the sky's zenith, and refraction straight through (normal incidence, no bending) to
+    // the floor under the centre, which the sphere shadows, tinted by 2 r of water; plus the
+    // key light's highlight.
+    let centre_pixel = (SIZE / 2) * SIZE + SIZE / 2;
+    // (The hit buffer is in the cache's local coordinates, as c is.)
+    assert_ne!(frame.hits[centre_pixel as usize].status, status::MISS);
+    let r0 = ((1.0f64 - 1.33) / 2.33).powi(2);
+    let zenith = [0.18, 0.32, 0.55];
+    let below_light =
+        ((c[0] / square).floor() as i64 + (c[1] / square).floor() as i64).rem_euclid(2) == 1;
+    let floor_value = if below_light { 0.8 } else { 0.3 } * 0.25;
+    let absorption = [0.9, 0.25, 0.12];
+    // The highlight with the true normal where the pixel's ray meets the sphere (half a pixel
+    // off the top, which tilts it by about a degree).
+    let top = frame.hits[centre_pixel as usize].position.map(f64::from);
+    let normal: [f64; 3] = {
+        let v: [f64; 3] = std::array::from_fn(|a| top[a] - c[a]);
+        let l = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        v.map(|x| x / l)
+    };
+    let (_, view_dir) = camera.ray(SIZE / 2, SIZE / 2);
+    let half = {
+        let h: [f64; 3] = std::array::from_fn(|a| key[a] - view_dir[a]);
+        let l = h.iter().map(|x| x * x).sum::<f64>().sqrt();
+        (0..3).map(|a| normal[a] * h[a] / l).sum::<f64>()
+    };
+    let highlight = 0.8 * half.powf(120.0);
+    let rgba = frame.rgba[centre_pixel as usize].to_le_bytes();
+    for channel in 0..3 {
+        let tint = (-absorption[channel] * 2.0 * r / extent).exp();
+        let expected = r0 * zenith[channel] + (1.0 - r0) * floor_value * tint + highlight;
+        let got = linear(rgba[channel]);
+        eprintln!("water, sphere top, channel {channel}: {got:.4} (expected {expected:.4})");
+        assert!(
+            (got - expected).abs() <= 0.005,
+            "channel {channel}: {got} against {expected}"
+        );
+    }
+}

@@ -1,0 +1,137 @@
+// The water pass (shade mode 4), the thesis's water shader (fig. 4.9) with secondary rays:
+// from each primary hit, a reflected and a refracted ray (Fresnel by Schlick, index 1.33),
+// the refracted one leaving the fluid where it next meets the surface; both end on a
+// checkerboard floor under the fluid or the sky, and the floor is shadowed where a ray
+// toward the key light meets the fluid. Secondary rays take each candidate's initial hit
+// (iteration 1): they only colour, so refining them would cost without showing. Appended to
+// mls.wgsl, trace.wgsl and light.wgsl.
+
+@group(1) @binding(1) var<storage, read_write> image: array<u32>;
+
+const WATER_IOR: f32 = 1.33;
+// Fraction of light absorbed per unit of path through the fluid, per channel, in scene
+// extents: water's red absorption, exaggerated to read at the scale of a tank.
+const ABSORPTION: vec3<f32> = vec3<f32>(0.9, 0.25, 0.12);
+
+// The floor and the scale of the scene, from the BVH's root box (everything it holds).
+struct Stage {
+    floor_z: f32,
+    extent: f32,
+    square: f32,
+}
+
+// The floor lies 2 % of the scene's extent below its lowest point; checker squares are an
+// eighth of the extent (slosh_render::WaterStage mirrors this).
+fn stage() -> Stage {
+    let root = bvh_nodes[0];
+    let size = root.hi - root.lo;
+    let extent = max(max(size.x, size.y), max(size.z, 1e-6));
+    return Stage(root.lo.z - 0.02 * extent, extent, extent / 8.0);
+}
+
+// Whether anything of the fluid lies along the ray (its first candidate, iteration 1).
+fn blocked(origin: vec3<f32>, dir: vec3<f32>) -> bool {
+    return next_candidate(Ray(origin, dir), -FAR, 0u).found;
+}
+
+// What a ray sees without the fluid: the checkerboard floor, shadowed where the key light
+// is blocked, or the sky.
+fn environment(origin: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec3<f32> {
+    if dir.z < 0.0 && origin.z > st.floor_z {
+        let t = (st.floor_z - origin.z) / dir.z;
+        let p = origin + dir * t;
+        let cell = vec2<i32>(floor(p.xy / st.square));
+        let light = select(0.8, 0.3, ((cell.x + cell.y) & 1) == 0);
+        // Grazing rays see a greyer floor, so the horizon does not alias.
+        let fade = clamp(-dir.z * 4.0, 0.0, 1.0);
+        var lit = 0.25 + 0.75 * KEY_LIGHT.z;
+        if blocked(p + vec3<f32>(0.0, 0.0, 1e-4 * st.extent), KEY_LIGHT) {
+            lit = 0.25;
+        }
+        return mix(vec3<f32>(0.45), vec3<f32>(light), fade) * lit;
+    }
+    let up = clamp(dir.z, 0.0, 1.0);
+    return mix(vec3<f32>(0.55, 0.62, 0.7), vec3<f32>(0.18, 0.32, 0.55), up);
+}
+
+// The surface along a ray from inside the fluid or from its surface: where it is met (t)
+// and its normal there, or t < 0 for none.
+struct Exit {
+    t: f32,
+    normal: vec3<f32>,
+}
+
+fn next_surface(origin: vec3<f32>, dir: vec3<f32>) -> Exit {
+    let ray = Ray(origin, dir);
+    let c = next_candidate(ray, -FAR, 0u);
+    if !c.found {
+        return Exit(-1.0, vec3<f32>(0.0));
+    }
+    return Exit(c.t, initial_outcome(ray, c).normal);
+}
+
+fn schlick(cos_i: f32) -> f32 {
+    let r0 = (1.0 - WATER_IOR) / (1.0 + WATER_IOR);
+    return r0 * r0 + (1.0 - r0 * r0) * pow(1.0 - cos_i, 5.0);
+}
+
+// The colour seen along `dir` from a point `p` on the fluid's surface with normal `n`
+// (either orientation), arriving from outside.
+fn water_colour(p: vec3<f32>, n_in: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec3<f32> {
+    let n = select(n_in, -n_in, dot(n_in, dir) > 0.0);
+    let eps = 1e-4 * st.extent;
+    let cos_i = clamp(-dot(dir, n), 0.0, 1.0);
+    var fresnel = schlick(cos_i);
+    // Reflection: the surface it meets (lit plainly) or the environment.
+    let r = reflect(dir, n);
+    let bounce = next_surface(p + r * eps, r);
+    var reflected = environment(p, r, st);
+    if bounce.t >= 0.0 {
+        reflected = blinn_phong(bounce.normal, r, vec3<f32>(0.16, 0.42, 0.72));
+    }
+    // Refraction into the fluid, out where the ray next meets the surface.
+    var refracted = vec3<f32>(0.0);
+    let into = refract(dir, n, 1.0 / WATER_IOR);
+    if dot(into, into) == 0.0 {
+        fresnel = 1.0;
+    } else {
+        let exit = next_surface(p + into * eps, into);
+        if exit.t < 0.0 {
+            // An open sheet: the ray goes on as it entered.
+            refracted = environment(p, into, st);
+        } else {
+            let q = p + into * (exit.t + eps);
+            // The exit normal faces the ray's way out.
+            let m = select(exit.normal, -exit.normal, dot(exit.normal, into) < 0.0);
+            var out = refract(into, -m, WATER_IOR);
+            if dot(out, out) == 0.0 {
+                out = reflect(into, -m);
+            }
+            let tint = exp(-ABSORPTION * (exit.t / st.extent));
+            refracted = environment(q, normalize(out), st) * tint;
+        }
+    }
+    let view = -dir;
+    let half_vector = normalize(KEY_LIGHT + view);
+    var spec = 0.8 * pow(max(dot(n, half_vector), 0.0), 120.0);
+    if blocked(p + n * eps, KEY_LIGHT) {
+        spec = 0.0;
+    }
+    return fresnel * reflected + (1.0 - fresnel) * refracted + vec3<f32>(spec);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn water(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= settings.width || gid.y >= settings.height {
+        return;
+    }
+    let index = gid.y * settings.width + gid.x;
+    let hit = hits[index];
+    let dir = camera_ray(gid.x, gid.y).dir;
+    let st = stage();
+    if hit.status == STATUS_MISS {
+        image[index] = pack(environment(settings.eye, dir, st));
+        return;
+    }
+    image[index] = pack(water_colour(hit.position, hit.normal, dir, st));
+}
