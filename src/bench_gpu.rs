@@ -474,6 +474,13 @@ fn write_report(
         }
         md.push('\n');
     }
+    // The frames, linked relative to docs/ when they were written to the default docs/img.
+    if args.images == Path::new("docs/img") {
+        let _ = writeln!(
+            md,
+            "## Frames\n\nThe bunny at 5 cubic iterations (800×800), the tank at 3 iterations (1600×800), and the tank in the water shader (1270×610):\n\n![bunny](img/bunny.png)\n\n![tank](img/tank.png)\n\n![tank, water shader](img/tank-water.png)\n"
+        );
+    }
     let _ = writeln!(
         md,
         "## Upload per step\n\nFrom a step in memory (as from the page cache): checksums, decompression, copies into `mapped_at_creation` staging buffers, `copy_buffer_to_buffer` into device-local storage, then the neighbour-mask pass (`shaders/expand.wgsl`), waited for. Median of 5.\n"

@@ -490,6 +490,46 @@ fn bake_then_inspect_and_render_a_tank() {
     assert!(values.iter().all(|v| v.is_finite()));
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
 
+    // Water needs secondary rays, which only the GPU traces.
+    let (ok, _, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--cpu",
+        "--mode",
+        "water",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("--mode water"), "{err}");
+    // The GPU renders a sequence in it (required when CI=true).
+    let pattern = dir.path().join("frames").join("{:05}.png");
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--steps",
+        "0..=1",
+        "--size",
+        "48x32",
+        "--iterations",
+        "2",
+        "--mode",
+        "water",
+        "--out",
+        pattern.to_str().unwrap(),
+    ]);
+    if ok {
+        for name in ["00000.png", "00001.png"] {
+            let frame = std::fs::read(dir.path().join("frames").join(name)).unwrap();
+            assert!(frame.starts_with(b"\x89PNG"), "{name}: {out}");
+        }
+    } else if in_ci() {
+        panic!("GPU render failed: {err}");
+    } else {
+        eprintln!("skipping the GPU render: {err}");
+    }
+
     // A flipped byte is caught by --verify, naming the file.
     let mut bytes = std::fs::read(&step1).unwrap();
     let mid = bytes.len() / 3;
