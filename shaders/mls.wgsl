@@ -1,5 +1,5 @@
 // The MLS surface maths of `crates/mls`, ported line for line (docs/algorithm.md is the
-// specification): weights, neighbour lists recovered from cluster candidates, the support
+// specification): weights, neighbour lists (visited through expand.wgsl's masks), the support
 // plane, the local frame, the scaled polynomial fit with degree degradation, and exact roots.
 // Shared by trace.wgsl and shade.wgsl, which are appended to this file.
 

@@ -1,8 +1,10 @@
 // The trace pass: one thread per pixel. Camera ray → the baked BVH2 (stack based, nearer
-// child first, pruned by the best hit) → each candidate ball's interval → its initial
-// polynomial → iterative refinement (mls.wgsl) → the nearest accepted hit, an exact tie going
-// to the lower item. Droplet spheres are items after the balls. Mirrors crates/mls/src/tracer.rs
-// and crates/cache/src/bvh.rs. Appended to mls.wgsl.
+// child first, pruned by the best hit) → the nearest initial hit (a ball's baked polynomial
+// inside its ball, or a droplet sphere; an exact tie goes to the lower item) → with more
+// iterations, refinement of that candidate (mls.wgsl), handing over to the next initial hit
+// when it leaves its ball. Droplet spheres are items after the balls. Mirrors
+// crates/mls/src/tracer.rs and crates/cache/src/bvh.rs. Appended to mls.wgsl; water.wgsl
+// reuses its walk for secondary rays.
 
 struct Sphere {
     centre: vec3<f32>,

@@ -1,7 +1,9 @@
-//! The GPU half of slosh: a cache step streamed into wgpu storage buffers, the MLS ray tracer
-//! (`shaders/trace.wgsl` over `shaders/mls.wgsl`) and the shade pass (`shaders/shade.wgsl`) as
-//! compute shaders, and frames read back for files or timed with GPU timestamps. The WGSL is
-//! a line-for-line port of `slosh_mls`; the tests hold it to the CPU f64 oracle.
+//! The GPU half of slosh: a cache step streamed into wgpu storage buffers (with its neighbour
+//! masks built by `shaders/expand.wgsl`), the MLS ray tracer (`shaders/trace.wgsl` over
+//! `shaders/mls.wgsl`), the shade pass (`shaders/shade.wgsl`) or the water pass with secondary
+//! rays (`shaders/water.wgsl`) as compute shaders, and frames read back for files or timed
+//! with GPU timestamps. The WGSL is a port of `slosh_mls`; the tests hold it to the CPU f64
+//! oracle.
 
 mod context;
 mod error;
