@@ -735,6 +735,15 @@ struct Ray {
     dir: vec3<f32>,
 }
 
+// The camera ray through the centre of pixel (x, y), y down (Camera::ray); shared by the
+// passes.
+fn camera_ray(x: u32, y: u32) -> Ray {
+    let sx = (f32(x) + 0.5) / f32(settings.width) * 2.0 - 1.0;
+    let sy = 1.0 - (f32(y) + 0.5) / f32(settings.height) * 2.0;
+    let d = settings.forward + sx * settings.right + sy * settings.up;
+    return Ray(settings.eye, d / sqrt(length_squared(d)));
+}
+
 struct Interval {
     ok: bool,
     t_in: f32,

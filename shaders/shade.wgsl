@@ -77,9 +77,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         image[index] = pack(background(gid.y));
         return;
     }
-    let sx = (f32(gid.x) + 0.5) / f32(settings.width) * 2.0 - 1.0;
-    let sy = 1.0 - (f32(gid.y) + 0.5) / f32(settings.height) * 2.0;
-    let dir = normalize(settings.forward + sx * settings.right + sy * settings.up);
+    let dir = camera_ray(gid.x, gid.y).dir;
     var colour: vec3<f32>;
     switch settings.mode {
         case 1u: {

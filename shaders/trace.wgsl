@@ -41,13 +41,6 @@ fn enter(node: BvhNode, origin: vec3<f32>, inv_dir: vec3<f32>, parallel: vec3<bo
     return select(-1.0, t0, t0 <= t1);
 }
 
-fn camera_ray(x: u32, y: u32) -> Ray {
-    let sx = (f32(x) + 0.5) / f32(settings.width) * 2.0 - 1.0;
-    let sy = 1.0 - (f32(y) + 0.5) / f32(settings.height) * 2.0;
-    let d = settings.forward + sx * settings.right + sy * settings.up;
-    return Ray(settings.eye, d / sqrt(length_squared(d)));
-}
-
 // Candidates refined per ray before it counts as a miss (tracer.rs: MAX_CANDIDATES).
 const MAX_CANDIDATES: u32 = 16u;
 

@@ -2,6 +2,7 @@
 //! per cluster candidate saying whether it is in the point's neighbour list, so the
 //! refinement loops visit the list itself instead of filtering every candidate each time.
 
+use crate::bindings::{bind_in_order, buffer_entry, storage_entry};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
@@ -28,23 +29,9 @@ pub(crate) struct ExpandInputs<'a> {
 
 impl Expander {
     pub(crate) fn new(device: &wgpu::Device) -> Expander {
-        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let read = wgpu::BufferBindingType::Storage { read_only: true };
-        let mut entries: Vec<_> = (0..5).map(|b| entry(b, read)).collect();
-        entries.push(entry(
-            5,
-            wgpu::BufferBindingType::Storage { read_only: false },
-        ));
-        entries.push(entry(6, wgpu::BufferBindingType::Uniform));
+        let mut entries: Vec<_> = (0..5).map(|b| storage_entry(b, true)).collect();
+        entries.push(storage_entry(5, false));
+        entries.push(buffer_entry(6, wgpu::BufferBindingType::Uniform));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("expand"),
             entries: &entries,
@@ -109,14 +96,7 @@ impl Expander {
             inputs.masks,
             &uniform,
         ];
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
+        let entries = bind_in_order(&buffers);
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("expand"),
             layout: &self.layout,

@@ -5,6 +5,7 @@
 //! with GPU timestamps. The WGSL is a port of `slosh_mls`; the tests hold it to the CPU f64
 //! oracle.
 
+mod bindings;
 mod context;
 mod error;
 mod expand;

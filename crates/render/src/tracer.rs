@@ -5,6 +5,7 @@ use std::sync::OnceLock;
 
 use slosh_mls::Camera;
 
+use crate::bindings::{bind_in_order, buffer_entry, storage_entry};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings};
@@ -114,19 +115,6 @@ pub struct FrameTargets {
     queries: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
 }
 
-fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 fn compute_pipeline(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
@@ -185,16 +173,7 @@ impl Tracer {
         let device = &gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut step_entries: Vec<_> = (0..10).map(|b| storage_entry(b, true)).collect();
-        step_entries.push(wgpu::BindGroupLayoutEntry {
-            binding: 10,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        });
+        step_entries.push(buffer_entry(10, wgpu::BufferBindingType::Uniform));
         let step_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("step"),
             entries: &step_entries,
@@ -251,20 +230,9 @@ impl Tracer {
             U::STORAGE | U::COPY_SRC,
         );
         let image = buffer("image", pixels * 4, U::STORAGE | U::COPY_SRC);
-        let mut entries: Vec<wgpu::BindGroupEntry> = step
-            .buffers
-            .in_binding_order()
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        entries.push(wgpu::BindGroupEntry {
-            binding: 10,
-            resource: settings.as_entire_binding(),
-        });
+        let mut step_buffers = step.buffers.in_binding_order().to_vec();
+        step_buffers.push(&settings);
+        let entries = bind_in_order(&step_buffers);
         let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("step"),
             layout: &self.step_layout,
@@ -273,16 +241,7 @@ impl Tracer {
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
             layout: &self.frame_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: hits.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: image.as_entire_binding(),
-                },
-            ],
+            entries: &bind_in_order(&[&hits, &image]),
         });
         let queries = gpu.timestamps.then(|| {
             let set = device.create_query_set(&wgpu::QuerySetDescriptor {

@@ -231,12 +231,17 @@ impl GpuStep {
             .iter()
             .position(|n| *n == names::CLUSTER_START)
             .unwrap_or_default();
-        let cluster_start: &[u8] = match (&entries[cluster_slot], &decoded[cluster_slot]) {
-            (_, Some(d)) => d,
-            (Some(e), None) => file.checked_stored(e)?,
-            (None, None) => &[],
-        };
-        let mask_words = mask_words(cluster_start);
+        // Each section's bytes, checksummed once: decoded, raw in place, or absent.
+        let section_bytes: Vec<&[u8]> = entries
+            .iter()
+            .zip(&decoded)
+            .map(|(entry, decoded)| match (entry, decoded) {
+                (_, Some(d)) => Ok(d.as_slice()),
+                (Some(e), None) => file.checked_stored(e),
+                (None, None) => Ok(&[][..]),
+            })
+            .collect::<std::result::Result<_, _>>()?;
+        let mask_words = mask_words(section_bytes[cluster_slot]);
         let mask_bytes = u64::from(point_count) * u64::from(mask_words) * 4;
         if mask_bytes > gpu.max_binding() {
             return Err(invalid(
@@ -256,12 +261,7 @@ impl GpuStep {
         let mut buffers = Vec::with_capacity(wanted.len());
         let mut stats = UploadStats::default();
         let mut field_range = None;
-        for ((name, entry), decoded) in wanted.iter().zip(&entries).zip(&decoded) {
-            let bytes: &[u8] = match (entry, decoded) {
-                (_, Some(d)) => d,
-                (Some(e), None) => file.checked_stored(e)?,
-                (None, None) => &[],
-            };
+        for ((name, entry), &bytes) in wanted.iter().zip(&entries).zip(&section_bytes) {
             if let Some(e) = entry {
                 stats.stored_bytes += e.stored;
             }
