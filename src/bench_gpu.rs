@@ -15,7 +15,7 @@ use slosh_mls::Camera;
 use slosh_render::{Gpu, GpuStep, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 
-use crate::cli::GpuBenchArgs;
+use crate::cli::{BenchTable, GpuBenchArgs};
 use crate::render::{framing_camera, write_frame_png};
 
 /// A baked step in memory, its analytic truth if it has one, and its world spacing.
@@ -188,13 +188,14 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
     let mut rows: Vec<Row> = Vec::new();
     let mut uploads: Vec<(String, usize, slosh_render::UploadStats)> = Vec::new();
     std::fs::create_dir_all(&args.images).ok();
+    let wanted = |table| args.tables.is_empty() || args.tables.contains(&table);
 
     // Table 4.1: the bunny.
     let bunny_path = args
         .bunny
         .clone()
         .or_else(|| std::env::var_os("SLOSH_DATA").map(|d| PathBuf::from(d).join("bunny.obj")));
-    let bunny = bunny_path.filter(|p| p.exists());
+    let bunny = bunny_path.filter(|p| p.exists() && wanted(BenchTable::Bunny));
     if let Some(path) = &bunny {
         let cloud = crate::import::read_point_cloud(path)?;
         let input = StepInput {
@@ -245,18 +246,38 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
                 );
             }
         }
-    } else {
+    } else if wanted(BenchTable::Bunny) {
         println!("  (no bunny.obj: give --bunny or set SLOSH_DATA; table 4.1 skipped)");
     }
 
     // Table 4.5: the tank, ~10k surface points, image sizes.
+    if wanted(BenchTable::Tank) || wanted(BenchTable::Water) {
+        tank_rows(args, &runner, &mut rows, wanted(BenchTable::Tank), wanted(BenchTable::Water))?;
+    }
+    if wanted(BenchTable::Points) {
+        points_rows(args, &gpu, &runner, &mut rows, &mut uploads)?;
+    }
+    write_report(args, &gpu, &rows, &uploads)
+}
+
+/// Table 4.5 (the tank at four image sizes) and the water row.
+fn tank_rows(
+    args: &GpuBenchArgs,
+    runner: &Runner,
+    rows: &mut Vec<Row>,
+    sizes_table: bool,
+    water: bool,
+) -> Result<()> {
+    let gpu = runner.gpu;
     let tank = scene(
         SceneKind::Tank,
         if args.quick { 60_000 } else { 250_000 },
         2,
     )?;
-    let tank_step = GpuStep::upload(&gpu, &tank.file, None)?;
-    let sizes: &[(u32, u32)] = if args.quick {
+    let tank_step = GpuStep::upload(gpu, &tank.file, None)?;
+    let sizes: &[(u32, u32)] = if !sizes_table {
+        &[]
+    } else if args.quick {
         &[(200, 100), (400, 200)]
     } else {
         &[(200, 100), (400, 200), (800, 400), (1600, 800)]
@@ -284,6 +305,9 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
             });
         }
     }
+    if !water {
+        return Ok(());
+    }
     // The thesis's water shader (fig. 4.9): the tank at 1270×610, 2 iterations, reflection and
     // refraction; 4.59 s per frame there.
     let (trace_ms, shade_ms, frame) =
@@ -301,9 +325,20 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
         thesis_fps: Some(1.0 / 4.59),
     });
     println!("  tank done");
+    Ok(())
+}
 
-    // Table 4.6: point counts at 1280×800, plus 1M points and 1920×1080.
-    let counts: &[usize] = if args.quick {
+/// Table 4.6: point counts at 1280×800, plus 1M points and 1920×1080, with upload times.
+fn points_rows(
+    args: &GpuBenchArgs,
+    gpu: &Gpu,
+    runner: &Runner,
+    rows: &mut Vec<Row>,
+    uploads: &mut Vec<(String, usize, slosh_render::UploadStats)>,
+) -> Result<()> {
+    let counts: &[usize] = if !args.points.is_empty() {
+        &args.points
+    } else if args.quick {
         &[2_500, 10_000]
     } else {
         &[2_500, 10_000, 100_000, 1_000_000]
@@ -348,7 +383,7 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
             }
         }
     }
-    write_report(args, &gpu, &rows, &uploads)
+    Ok(())
 }
 
 /// A speed goal: the row that measures it (table, image, degree, iterations) and its fps.

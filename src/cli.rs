@@ -67,6 +67,29 @@ pub struct GpuBenchArgs {
     /// GPU adapter whose name contains this.
     #[arg(long)]
     pub adapter: Option<String>,
+    /// Tables to measure (all by default); the water row needs the tank.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub tables: Vec<BenchTable>,
+    /// Point counts of table 4.6 (default 2500,10000,100000,1000000; --quick 2500,10000).
+    #[arg(long, value_delimiter = ',')]
+    pub points: Vec<usize>,
+}
+
+/// A table of `slosh bench gpu`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BenchTable {
+    /// Table 4.1: the bunny, iterations 1–5, quadratic and cubic.
+    #[value(name = "4.1")]
+    Bunny,
+    /// Table 4.5: the tank at four image sizes.
+    #[value(name = "4.5")]
+    Tank,
+    /// Figure 4.9: the water shader on the tank.
+    #[value(name = "water")]
+    Water,
+    /// Table 4.6: point counts at 1280×800 (and 1920×1080 from 100k points).
+    #[value(name = "4.6")]
+    Points,
 }
 
 #[derive(Debug, Args)]
