@@ -1,8 +1,13 @@
-// The neighbour masks of a step, run once after its upload: which of a point's cluster
+// The per-step passes, run once after its upload.
+//
+// `expand`: the neighbour masks: which of a point's cluster
 // candidates are its neighbours (clusters.rs: expand_one, the rule docs/algorithm.md gives):
 // within the point's reach, and not a point whose normal opposes the centre's (both valid).
 // One thread per (point, word): bit b of word w is candidate slot 32 w + b. The refinement
 // loops in mls.wgsl then visit only the set bits.
+//
+// `leaves`: each BVH item slot's sphere (a ball's centre and radius of trust, or a droplet),
+// so the trace walk reads a leaf's spheres beside its items instead of through them.
 
 struct Point {
     position: vec3<f32>,
@@ -20,11 +25,11 @@ struct ExpandSettings {
     cluster_size: u32,
     mask_words: u32,
     has_normals: u32,
-    // Threads per row of the 2D dispatch (a 1D one would exceed the workgroup count limit).
+    // Threads per row of the 2D dispatches (a 1D one would exceed the workgroup count limit).
     row_threads: u32,
+    sphere_count: u32,
+    item_count: u32,
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
 
 @group(0) @binding(0) var<storage, read> points: array<Point>;
@@ -34,6 +39,9 @@ struct ExpandSettings {
 @group(0) @binding(4) var<storage, read> cluster_ids: array<u32>;
 @group(0) @binding(5) var<storage, read_write> neighbour_masks: array<u32>;
 @group(0) @binding(6) var<uniform> expand_settings: ExpandSettings;
+@group(0) @binding(7) var<storage, read> bvh_items: array<u32>;
+@group(0) @binding(8) var<storage, read> spheres: array<Point>;
+@group(0) @binding(9) var<storage, read_write> leaf_spheres: array<vec4<f32>>;
 
 @compute @workgroup_size(64, 1, 1)
 fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -78,4 +86,24 @@ fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
         bits |= 1u << b;
     }
     neighbour_masks[slot] = bits;
+}
+
+// A slot whose item is neither a ball nor a droplet gets radius −1, which the walk skips.
+@compute @workgroup_size(64, 1, 1)
+fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let cfg = expand_settings;
+    let k = gid.y * cfg.row_threads + gid.x;
+    if k >= cfg.item_count {
+        return;
+    }
+    let item = bvh_items[k];
+    var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
+    if item < cfg.point_count {
+        let p = points[item];
+        sphere = vec4<f32>(p.position, p.radius);
+    } else if item - cfg.point_count < cfg.sphere_count {
+        let d = spheres[item - cfg.point_count];
+        sphere = vec4<f32>(d.position, d.radius);
+    }
+    leaf_spheres[k] = sphere;
 }

@@ -22,10 +22,23 @@ struct BvhNode {
 @group(0) @binding(6) var<storage, read> spheres: array<Sphere>;
 @group(0) @binding(7) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(0) @binding(8) var<storage, read> bvh_items: array<u32>;
+// Each item slot's sphere (centre, radius; radius < 0 for no item), from expand.wgsl's
+// `leaves` pass: the walk reads it beside the item instead of through it.
+@group(0) @binding(11) var<storage, read> leaf_spheres: array<vec4<f32>>;
 @group(1) @binding(0) var<storage, read_write> hits: array<Hit>;
 
 // Deeper trees are refused at upload (slosh_render::MAX_BVH_DEPTH).
 const STACK_SIZE: u32 = 64u;
+
+// A stacked node is its link: `first` in the low 28 bits and the leaf's item count (0 for an
+// inner node) above, so a pop needs no read of the node itself. The upload refuses trees that
+// do not fit (slosh_render::MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST).
+const LINK_COUNT_SHIFT: u32 = 28u;
+const LINK_FIRST: u32 = 0x0fffffffu;
+
+fn link(node: BvhNode) -> u32 {
+    return node.first | (node.count << LINK_COUNT_SHIFT);
+}
 
 // Entry parameter of the ray (t ≥ 0) into a node's box, or −1 when it misses. Branch free:
 // an axis the ray is parallel to admits everything or nothing, by whether the origin lies
@@ -71,13 +84,14 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     best.item = 0xffffffffu;
     let parallel = abs(ray.dir) < vec3<f32>(1e-30);
     let inv_dir = 1.0 / select(ray.dir, vec3<f32>(1.0), parallel);
-    var stack_node: array<u32, STACK_SIZE>;
+    var stack_link: array<u32, STACK_SIZE>;
     var stack_t: array<f32, STACK_SIZE>;
     var sp = 0u;
     if arrayLength(&bvh_nodes) > 0u && settings.point_count + settings.sphere_count > 0u {
-        let t_root = enter(bvh_nodes[0], ray.origin, inv_dir, parallel);
+        let root = bvh_nodes[0];
+        let t_root = enter(root, ray.origin, inv_dir, parallel);
         if t_root >= 0.0 {
-            stack_node[0] = 0u;
+            stack_link[0] = link(root);
             stack_t[0] = t_root;
             sp = 1u;
         }
@@ -89,20 +103,18 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
         if stack_t[sp] > best.t {
             continue;
         }
-        let node = bvh_nodes[stack_node[sp]];
-        if node.count > 0u {
-            let end = min(node.first + node.count, arrayLength(&bvh_items));
-            for (var k = node.first; k < end; k++) {
+        let first = stack_link[sp] & LINK_FIRST;
+        let count = stack_link[sp] >> LINK_COUNT_SHIFT;
+        if count > 0u {
+            let end = min(first + count, arrayLength(&bvh_items));
+            for (var k = first; k < end; k++) {
                 let item = bvh_items[k];
+                let sphere = leaf_spheres[k];
+                let iv = ray_ball(ray, sphere.xyz, sphere.w);
+                if !iv.ok || sphere.w < 0.0 {
+                    continue;
+                }
                 if item >= n {
-                    if item - n >= settings.sphere_count {
-                        continue;
-                    }
-                    let sphere = spheres[item - n];
-                    let iv = ray_ball(ray, sphere.centre, sphere.radius);
-                    if !iv.ok {
-                        continue;
-                    }
                     // From inside a droplet the ray sees its far wall.
                     let t = select(iv.t_out, iv.t_in, iv.t_in >= 0.0);
                     if !(t >= 0.0) || !key_before(after_t, after_item, t, item)
@@ -115,16 +127,14 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
                     best.t = t;
                     continue;
                 }
-                // The ball (64 bytes) is read only once the ray is known to cross its sphere.
-                let point = points[item];
-                let iv = ray_ball(ray, point.position, point.radius);
-                if !iv.ok || iv.t_in > best.t || iv.t_out < after_t {
+                if iv.t_in > best.t || iv.t_out < after_t {
                     continue;
                 }
                 let t_lo = max(iv.t_in, 0.0);
                 if t_lo > iv.t_out {
                     continue;
                 }
+                // The ball (64 bytes) is read only once the ray is known to cross its sphere.
                 let ball = balls[item];
                 // Unfitted balls and droplet members are never candidates.
                 if (ball.state & 3u) >= 2u {
@@ -133,7 +143,7 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
                 var initial: Poly;
                 initial.degree = min(ball.degree, 3u);
                 initial.c = ball.coeffs;
-                let hit = intersect_poly(ray, point.position, frame_from_normal(ball.normal), initial, ball.h, t_lo, iv.t_out);
+                let hit = intersect_poly(ray, sphere.xyz, frame_from_normal(ball.normal), initial, ball.h, t_lo, iv.t_out);
                 if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
                     && key_before(hit.t, item, best.t, best.item) {
                     best.found = true;
@@ -148,31 +158,23 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
             }
             continue;
         }
-        let a = node.first;
-        let b = node.first + 1u;
-        let ta = enter(bvh_nodes[a], ray.origin, inv_dir, parallel);
-        let tb = enter(bvh_nodes[b], ray.origin, inv_dir, parallel);
+        // The two children are adjacent: one 64-byte read.
+        let node_a = bvh_nodes[first];
+        let node_b = bvh_nodes[first + 1u];
+        let ta = enter(node_a, ray.origin, inv_dir, parallel);
+        let tb = enter(node_b, ray.origin, inv_dir, parallel);
         // Push the farther child first so the nearer one is walked first.
         if ta >= 0.0 && tb >= 0.0 {
-            if ta <= tb {
-                stack_node[sp] = b;
-                stack_t[sp] = tb;
-                stack_node[sp + 1u] = a;
-                stack_t[sp + 1u] = ta;
-            } else {
-                stack_node[sp] = a;
-                stack_t[sp] = ta;
-                stack_node[sp + 1u] = b;
-                stack_t[sp + 1u] = tb;
-            }
+            let a_first = ta <= tb;
+            stack_link[sp] = select(link(node_a), link(node_b), a_first);
+            stack_t[sp] = select(ta, tb, a_first);
+            stack_link[sp + 1u] = select(link(node_b), link(node_a), a_first);
+            stack_t[sp + 1u] = select(tb, ta, a_first);
             sp += 2u;
-        } else if ta >= 0.0 {
-            stack_node[sp] = a;
-            stack_t[sp] = ta;
-            sp += 1u;
-        } else if tb >= 0.0 {
-            stack_node[sp] = b;
-            stack_t[sp] = tb;
+        } else if ta >= 0.0 || tb >= 0.0 {
+            let a_hit = ta >= 0.0;
+            stack_link[sp] = select(link(node_b), link(node_a), a_hit);
+            stack_t[sp] = select(tb, ta, a_hit);
             sp += 1u;
         }
     }

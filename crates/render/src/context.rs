@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use crate::expand::Expander;
 
 /// Storage buffers bound per shader stage by the step and frame bind groups.
-pub const STORAGE_BUFFERS_NEEDED: u32 = 12;
+pub const STORAGE_BUFFERS_NEEDED: u32 = 13;
 
 /// A GPU device ready for slosh's passes.
 #[derive(Debug)]

@@ -1,6 +1,7 @@
-//! The neighbour-mask pass (`shaders/expand.wgsl`), run once per step inside its upload: a bit
-//! per cluster candidate saying whether it is in the point's neighbour list, so the
-//! refinement loops visit the list itself instead of filtering every candidate each time.
+//! The per-step passes of `shaders/expand.wgsl`, run once inside each upload: the neighbour
+//! masks (a bit per cluster candidate saying whether it is in the point's neighbour list, so
+//! the refinement loops visit the list itself instead of filtering every candidate each time)
+//! and the leaf spheres (each BVH item slot's sphere, read by the walk beside its item).
 
 use crate::bindings::{bind_in_order, buffer_entry, storage_entry};
 use crate::context::Gpu;
@@ -10,14 +11,15 @@ use crate::shaders::EXPAND_WGSL;
 
 const WORKGROUP: u32 = 64;
 
-/// The compiled pass, built once per device.
+/// The compiled passes, built once per device.
 #[derive(Debug)]
 pub(crate) struct Expander {
-    pipeline: wgpu::ComputePipeline,
+    masks: wgpu::ComputePipeline,
+    leaves: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
 }
 
-/// The buffers the pass reads and the one it writes.
+/// The buffers the passes read and the two they write (`masks`, `leaf_spheres`).
 pub(crate) struct ExpandInputs<'a> {
     pub points: &'a wgpu::Buffer,
     pub normals: &'a wgpu::Buffer,
@@ -25,6 +27,9 @@ pub(crate) struct ExpandInputs<'a> {
     pub cluster_start: &'a wgpu::Buffer,
     pub cluster_ids: &'a wgpu::Buffer,
     pub masks: &'a wgpu::Buffer,
+    pub bvh_items: &'a wgpu::Buffer,
+    pub spheres: &'a wgpu::Buffer,
+    pub leaf_spheres: &'a wgpu::Buffer,
 }
 
 impl Expander {
@@ -32,6 +37,8 @@ impl Expander {
         let mut entries: Vec<_> = (0..5).map(|b| storage_entry(b, true)).collect();
         entries.push(storage_entry(5, false));
         entries.push(buffer_entry(6, wgpu::BufferBindingType::Uniform));
+        entries.extend([storage_entry(7, true), storage_entry(8, true)]);
+        entries.push(storage_entry(9, false));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("expand"),
             entries: &entries,
@@ -45,18 +52,25 @@ impl Expander {
             label: Some("expand"),
             source: wgpu::ShaderSource::Wgsl(EXPAND_WGSL.into()),
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("expand"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("expand"),
-            compilation_options: wgpu::PipelineCompilationOptions::default(),
-            cache: None,
-        });
-        Expander { pipeline, layout }
+        let pipeline = |entry| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                cache: None,
+            })
+        };
+        Expander {
+            masks: pipeline("expand"),
+            leaves: pipeline("leaves"),
+            layout,
+        }
     }
 
-    /// Records the pass that fills `inputs.masks` (`mask_words` u32s per point).
+    /// Records the passes that fill `inputs.masks` (`mask_words` u32s per point) and
+    /// `inputs.leaf_spheres` (one per BVH item).
     pub(crate) fn encode(
         &self,
         gpu: &Gpu,
@@ -64,15 +78,10 @@ impl Expander {
         settings: ExpandSettings,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<()> {
-        let threads = settings.point_count * settings.mask_words;
-        if threads == 0 {
-            return Ok(());
-        }
         let max_groups = gpu.device.limits().max_compute_workgroups_per_dimension;
-        let groups = threads.div_ceil(WORKGROUP);
-        let (groups_x, groups_y) = (groups.min(max_groups), groups.div_ceil(max_groups));
+        // Rows are full width whenever a dispatch needs more than one.
         let settings = ExpandSettings {
-            row_threads: groups_x * WORKGROUP,
+            row_threads: max_groups * WORKGROUP,
             ..settings
         };
         let uniform = gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -95,6 +104,9 @@ impl Expander {
             inputs.cluster_ids,
             inputs.masks,
             &uniform,
+            inputs.bvh_items,
+            inputs.spheres,
+            inputs.leaf_spheres,
         ];
         let entries = bind_in_order(&buffers);
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -102,13 +114,23 @@ impl Expander {
             layout: &self.layout,
             entries: &entries,
         });
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("expand"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &group, &[]);
-        pass.dispatch_workgroups(groups_x, groups_y, 1);
+        let passes = [
+            (&self.masks, settings.point_count * settings.mask_words),
+            (&self.leaves, settings.item_count),
+        ];
+        for (pipeline, threads) in passes {
+            if threads == 0 {
+                continue;
+            }
+            let groups = threads.div_ceil(WORKGROUP);
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("per-step"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(groups.min(max_groups), groups.div_ceil(max_groups), 1);
+        }
         Ok(())
     }
 }

@@ -35,7 +35,8 @@ pub struct GpuSettings {
     pub mask_words: u32,
 }
 
-/// `struct ExpandSettings` in expand.wgsl: the neighbour-mask pass's uniforms.
+/// `struct ExpandSettings` in expand.wgsl: the uniforms of the per-step passes (neighbour
+/// masks and leaf spheres).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct ExpandSettings {
@@ -43,11 +44,12 @@ pub struct ExpandSettings {
     pub cluster_size: u32,
     pub mask_words: u32,
     pub has_normals: u32,
-    /// Threads per row of the 2D dispatch.
+    /// Threads per row of the 2D dispatches.
     pub row_threads: u32,
+    pub sphere_count: u32,
+    /// Entries of the BVH's item list.
+    pub item_count: u32,
     pub pad0: u32,
-    pub pad1: u32,
-    pub pad2: u32,
 }
 
 /// `struct Hit` in trace.wgsl: one pixel of the hit buffer, in the cache's local coordinates.

@@ -18,4 +18,6 @@ pub use context::{Gpu, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
 pub use tracer::{Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings};
-pub use upload::{GpuStep, MAX_BVH_DEPTH, StepBuffers, UploadStats};
+pub use upload::{
+    GpuStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, StepBuffers, UploadStats,
+};

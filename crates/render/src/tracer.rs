@@ -174,6 +174,7 @@ impl Tracer {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut step_entries: Vec<_> = (0..10).map(|b| storage_entry(b, true)).collect();
         step_entries.push(buffer_entry(10, wgpu::BufferBindingType::Uniform));
+        step_entries.push(storage_entry(11, true));
         let step_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("step"),
             entries: &step_entries,
@@ -231,7 +232,7 @@ impl Tracer {
         );
         let image = buffer("image", pixels * 4, U::STORAGE | U::COPY_SRC);
         let mut step_buffers = step.buffers.in_binding_order().to_vec();
-        step_buffers.push(&settings);
+        step_buffers.extend([&settings, &step.buffers.leaf_spheres]);
         let entries = bind_in_order(&step_buffers);
         let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("step"),

@@ -18,6 +18,28 @@ use crate::layout::ExpandSettings;
 /// The deepest BVH the trace shader's largest traversal stack (64 entries) holds.
 pub const MAX_BVH_DEPTH: u64 = 62;
 
+/// The traversal stack packs a node as `first | count << 28` (trace.wgsl: `link`), so a
+/// leaf holds at most this many items and `first` stays below 2^28.
+pub const MAX_LEAF_LINK_COUNT: u32 = 15;
+pub const MAX_LINK_FIRST: u32 = (1 << 28) - 1;
+
+/// Checks that every node of the `bvh_nodes` section packs into a stack link.
+fn check_links(nodes: &[u8]) -> std::result::Result<(), String> {
+    let word = |c: &[u8], at: usize| u32::from_le_bytes([c[at], c[at + 1], c[at + 2], c[at + 3]]);
+    for (i, node) in nodes.chunks_exact(32).enumerate() {
+        let (count, first) = (word(node, 12), word(node, 28));
+        if count > MAX_LEAF_LINK_COUNT || first > MAX_LINK_FIRST {
+            return Err(format!(
+                "BVH node {i} (byte {} of section '{}') has count {count} and first {first}; the tracer takes leaves of at most {MAX_LEAF_LINK_COUNT} items and indices below {}",
+                i * 32,
+                names::BVH_NODES,
+                MAX_LINK_FIRST + 1
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The storage buffers of one step.
 #[derive(Debug)]
 pub struct StepBuffers {
@@ -34,6 +56,8 @@ pub struct StepBuffers {
     pub bvh_nodes: wgpu::Buffer,
     pub bvh_items: wgpu::Buffer,
     pub field: wgpu::Buffer,
+    /// Written by the leaf-sphere pass at upload: each BVH item's sphere, 16 bytes.
+    pub leaf_spheres: wgpu::Buffer,
 }
 
 impl StepBuffers {
@@ -241,6 +265,11 @@ impl GpuStep {
                 (None, None) => Ok(&[][..]),
             })
             .collect::<std::result::Result<_, _>>()?;
+        let nodes_slot = SECTIONS
+            .iter()
+            .position(|n| *n == names::BVH_NODES)
+            .unwrap_or_default();
+        check_links(section_bytes[nodes_slot]).map_err(|problem| invalid(file, problem))?;
         let mask_words = mask_words(section_bytes[cluster_slot]);
         let mask_bytes = u64::from(point_count) * u64::from(mask_words) * 4;
         if mask_bytes > gpu.max_binding() {
@@ -303,6 +332,7 @@ impl GpuStep {
                 mapped_at_creation: false,
             }));
         }
+        let count = |name: &str| file.section(name).map_or(0, |e| e.count);
         let mut it = buffers.into_iter();
         let mut next = || {
             it.next()
@@ -310,14 +340,24 @@ impl GpuStep {
         };
         let (points, normals, reach) = (next()?, next()?, next()?);
         let (cluster_start, cluster_ids) = (next()?, next()?);
+        let (balls, spheres, bvh_nodes, bvh_items, field_values) =
+            (next()?, next()?, next()?, next()?, next()?);
         let masks = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("neighbour masks"),
             size: mask_bytes.max(EMPTY_BINDING),
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
+        let item_count = count(names::BVH_ITEMS) as u32;
+        let leaf_spheres = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("leaf spheres"),
+            size: (u64::from(item_count) * 16).max(EMPTY_BINDING),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         let has_normals = file.section(names::NORMALS).is_some();
         let cluster_size = header.neighbour_cluster.max(1);
+        let sphere_count = count(names::SPHERES) as u32;
         gpu.expander().encode(
             gpu,
             &ExpandInputs {
@@ -327,12 +367,17 @@ impl GpuStep {
                 cluster_start: &cluster_start,
                 cluster_ids: &cluster_ids,
                 masks: &masks,
+                bvh_items: &bvh_items,
+                spheres: &spheres,
+                leaf_spheres: &leaf_spheres,
             },
             ExpandSettings {
                 point_count,
                 cluster_size,
                 mask_words,
                 has_normals: u32::from(has_normals),
+                sphere_count,
+                item_count,
                 ..ExpandSettings::zeroed()
             },
             &mut encoder,
@@ -354,17 +399,17 @@ impl GpuStep {
             masks,
             cluster_start,
             cluster_ids,
-            balls: next()?,
-            spheres: next()?,
-            bvh_nodes: next()?,
-            bvh_items: next()?,
-            field: next()?,
+            balls,
+            spheres,
+            bvh_nodes,
+            bvh_items,
+            field: field_values,
+            leaf_spheres,
         };
-        let count = |name: &str| file.section(name).map_or(0, |e| e.count);
         Ok(GpuStep {
             buffers,
             point_count,
-            sphere_count: count(names::SPHERES) as u32,
+            sphere_count,
             cluster_size,
             bvh_depth: header.stats.bvh_depth,
             mask_words,

@@ -390,9 +390,9 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             mask_words,
             has_normals,
             row_threads,
-            pad0,
-            pad1,
-            pad2
+            sphere_count,
+            item_count,
+            pad0
         ]
     );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);
