@@ -5,7 +5,6 @@
 
 @group(0) @binding(5) var<storage, read> balls: array<Ball>;
 @group(0) @binding(9) var<storage, read> field: array<f32>;
-@group(1) @binding(0) var<storage, read_write> hits: array<Hit>;
 @group(1) @binding(1) var<storage, read_write> image: array<u32>;
 
 const MODE_SHADE: u32 = 0u;
@@ -72,7 +71,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let index = gid.y * settings.width + gid.x;
-    let hit = hits[index];
+    let hit = read_hit(index);
     if hit.status == STATUS_MISS {
         image[index] = pack(background(gid.y));
         return;

@@ -20,12 +20,14 @@ struct BvhNode {
 
 @group(0) @binding(5) var<storage, read> balls: array<Ball>;
 @group(0) @binding(6) var<storage, read> spheres: array<Sphere>;
+// The step's nodes after one blank node (the upload puts it there), so that every pair of
+// siblings, slots 2k + 1 and 2k + 2 of the section, shares one 64-byte-aligned line: read
+// node i as bvh_nodes[i + 1] through `node`.
 @group(0) @binding(7) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(0) @binding(8) var<storage, read> bvh_items: array<u32>;
 // Each item slot's sphere (centre, radius; radius < 0 for no item), from expand.wgsl's
 // `leaves` pass: the walk reads it beside the item instead of through it.
 @group(0) @binding(11) var<storage, read> leaf_spheres: array<vec4<f32>>;
-@group(1) @binding(0) var<storage, read_write> hits: array<Hit>;
 
 // Deeper trees are refused at upload (slosh_render::MAX_BVH_DEPTH).
 const STACK_SIZE: u32 = 64u;
@@ -38,6 +40,14 @@ const LINK_FIRST: u32 = 0x0fffffffu;
 
 fn link(node: BvhNode) -> u32 {
     return node.first | (node.count << LINK_COUNT_SHIFT);
+}
+
+fn node(i: u32) -> BvhNode {
+    return bvh_nodes[i + 1u];
+}
+
+fn has_nodes() -> bool {
+    return arrayLength(&bvh_nodes) > 1u;
 }
 
 // Entry parameter of the ray (t ≥ 0) into a node's box, or −1 when it misses. Branch free:
@@ -53,6 +63,10 @@ fn enter(node: BvhNode, origin: vec3<f32>, inv_dir: vec3<f32>, parallel: vec3<bo
     let t1 = min(min(far.x, far.y), min(far.z, FAR));
     return select(-1.0, t0, t0 <= t1);
 }
+
+// The step's baked degree (no ball's polynomial is higher), fixed per pipeline: at 2 the
+// compiler drops the cubic root finder from the initial intersection.
+override BALL_DEGREE: u32 = 3u;
 
 // Candidates refined per ray before it counts as a miss (tracer.rs: MAX_CANDIDATES).
 const MAX_CANDIDATES: u32 = 16u;
@@ -87,8 +101,8 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     var stack_link: array<u32, STACK_SIZE>;
     var stack_t: array<f32, STACK_SIZE>;
     var sp = 0u;
-    if arrayLength(&bvh_nodes) > 0u && settings.point_count + settings.sphere_count > 0u {
-        let root = bvh_nodes[0];
+    if has_nodes() && settings.point_count + settings.sphere_count > 0u {
+        let root = node(0u);
         let t_root = enter(root, ray.origin, inv_dir, parallel);
         if t_root >= 0.0 {
             stack_link[0] = link(root);
@@ -141,7 +155,7 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
                     continue;
                 }
                 var initial: Poly;
-                initial.degree = min(ball.degree, 3u);
+                initial.degree = min(ball.degree, BALL_DEGREE);
                 initial.c = ball.coeffs;
                 let hit = intersect_poly(ray, sphere.xyz, frame_from_normal(ball.normal), initial, ball.h, t_lo, iv.t_out);
                 if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
@@ -159,8 +173,8 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
             continue;
         }
         // The two children are adjacent: one 64-byte read.
-        let node_a = bvh_nodes[first];
-        let node_b = bvh_nodes[first + 1u];
+        let node_a = node(first);
+        let node_b = node(first + 1u);
         let ta = enter(node_a, ray.origin, inv_dir, parallel);
         let tb = enter(node_b, ray.origin, inv_dir, parallel);
         // Push the farther child first so the nearer one is walked first.
@@ -198,7 +212,7 @@ fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
     }
     let ball = balls[c.item];
     var initial: Poly;
-    initial.degree = min(ball.degree, 3u);
+    initial.degree = min(ball.degree, BALL_DEGREE);
     initial.c = ball.coeffs;
     out.status = STATUS_ITERATION_LIMIT;
     out.normal = hit_normal(frame_from_normal(ball.normal), initial, c.x, c.y);
@@ -231,7 +245,7 @@ fn store(gid: vec3<u32>, ray: Ray, item: u32, out: Outcome) {
         hit.degree = 0u;
         hit.degraded = 0u;
     }
-    hits[gid.y * settings.width + gid.x] = hit;
+    write_hit(gid.y * settings.width + gid.x, hit);
 }
 
 fn missed() -> Outcome {

@@ -23,7 +23,7 @@ struct Stage {
 // The floor lies 2 % of the scene's extent below its lowest point; checker squares are an
 // eighth of the extent (slosh_render::WaterStage mirrors this).
 fn stage() -> Stage {
-    let root = bvh_nodes[0];
+    let root = node(0u);
     let size = root.hi - root.lo;
     let extent = max(max(size.x, size.y), max(size.z, 1e-6));
     return Stage(root.lo.z - 0.02 * extent, extent, extent / 8.0);
@@ -126,7 +126,7 @@ fn water(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let index = gid.y * settings.width + gid.x;
-    let hit = hits[index];
+    let hit = read_hit(index);
     let dir = camera_ray(gid.x, gid.y).dir;
     let st = stage();
     if hit.status == STATUS_MISS {

@@ -78,17 +78,18 @@ pub struct PassTimes {
     pub shade_ms: f64,
 }
 
-/// The trace pass built for one traversal stack size.
+/// The trace pass built for one traversal stack size. Pipelines are built when first asked
+/// for, per baked degree (1–3, the `BALL_DEGREE` override) and, for refinement, per fit
+/// degree (1–3, `FIT_DEGREE`).
 #[derive(Debug)]
 struct TraceVariant {
     module: wgpu::ShaderModule,
     /// One iteration: the nearest initial hit, a lean kernel.
-    initial: wgpu::ComputePipeline,
-    /// More: candidates refined in the order of their initial hits, one pipeline per fit
-    /// degree (1–3), built when first asked for.
-    refined: [OnceLock<wgpu::ComputePipeline>; 3],
+    initial: [OnceLock<wgpu::ComputePipeline>; 3],
+    /// More: candidates refined in the order of their initial hits, by [baked][fit] degree.
+    refined: [[OnceLock<wgpu::ComputePipeline>; 3]; 3],
     /// The water pass (secondary rays), in place of the shade pass.
-    water: OnceLock<wgpu::ComputePipeline>,
+    water: [OnceLock<wgpu::ComputePipeline>; 3],
 }
 
 /// The compiled passes. Trace pipelines are built on first use, for the smallest stack in
@@ -303,52 +304,63 @@ impl Tracer {
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("trace"),
-                source: wgpu::ShaderSource::Wgsl(trace_wgsl(TRACE_STACK_SIZES[slot]).into()),
+                source: wgpu::ShaderSource::Wgsl(experiment(trace_wgsl(TRACE_STACK_SIZES[slot])).into()),
             });
-        let initial = self.build(gpu, &module, "trace_initial", &[])?;
         Ok(self.traces[slot].get_or_init(|| TraceVariant {
             module,
-            initial,
+            initial: Default::default(),
             refined: Default::default(),
-            water: OnceLock::new(),
+            water: Default::default(),
         }))
     }
 
-    /// The trace pipeline: one iteration, or refinement with fits of `degree` (1–3).
+    /// `slot`'s pipeline of the variant's `entry` with `constants`, built on first use.
+    fn cached<'a>(
+        &self,
+        gpu: &Gpu,
+        variant: &TraceVariant,
+        slot: &'a OnceLock<wgpu::ComputePipeline>,
+        entry: &str,
+        constants: &[(&str, f64)],
+    ) -> Result<&'a wgpu::ComputePipeline> {
+        if let Some(pipeline) = slot.get() {
+            return Ok(pipeline);
+        }
+        let pipeline = self.build(gpu, &variant.module, entry, constants)?;
+        Ok(slot.get_or_init(|| pipeline))
+    }
+
+    /// The trace pipeline for a step baked at `baked` degree: one iteration, or refinement
+    /// with fits of `degree`.
     fn trace_pipeline<'a>(
         &self,
         gpu: &Gpu,
         variant: &'a TraceVariant,
+        baked: u8,
         iterations: u32,
         degree: u8,
     ) -> Result<&'a wgpu::ComputePipeline> {
+        let baked = baked.clamp(1, 3);
+        let ball = ("BALL_DEGREE", f64::from(baked));
+        let b = usize::from(baked) - 1;
         if iterations <= 1 {
-            return Ok(&variant.initial);
+            return self.cached(gpu, variant, &variant.initial[b], "trace_initial", &[ball]);
         }
         let degree = degree.clamp(1, 3);
-        let refined = &variant.refined[usize::from(degree) - 1];
-        if let Some(pipeline) = refined.get() {
-            return Ok(pipeline);
-        }
-        let pipeline = self.build(
-            gpu,
-            &variant.module,
-            "trace_refined",
-            &[("FIT_DEGREE", f64::from(degree))],
-        )?;
-        Ok(refined.get_or_init(|| pipeline))
+        let fit = ("FIT_DEGREE", f64::from(degree));
+        let slot = &variant.refined[b][usize::from(degree) - 1];
+        self.cached(gpu, variant, slot, "trace_refined", &[ball, fit])
     }
 
     fn water_pipeline<'a>(
         &self,
         gpu: &Gpu,
         variant: &'a TraceVariant,
+        baked: u8,
     ) -> Result<&'a wgpu::ComputePipeline> {
-        if let Some(pipeline) = variant.water.get() {
-            return Ok(pipeline);
-        }
-        let pipeline = self.build(gpu, &variant.module, "water", &[])?;
-        Ok(variant.water.get_or_init(|| pipeline))
+        let baked = baked.clamp(1, 3);
+        let slot = &variant.water[usize::from(baked) - 1];
+        self.cached(gpu, variant, slot, "water", &[("BALL_DEGREE", f64::from(baked))])
     }
 
     /// Records the trace and shade passes (with timestamps where the targets have them).
@@ -403,9 +415,10 @@ impl Tracer {
             bytemuck::bytes_of(&settings(step, &camera, params)),
         );
         let variant = self.variant(gpu, step)?;
-        let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
+        let trace =
+            self.trace_pipeline(gpu, variant, step.degree, params.iterations, params.degree)?;
         let shade = if params.mode == ShadeMode::Water {
-            self.water_pipeline(gpu, variant)?
+            self.water_pipeline(gpu, variant, step.degree)?
         } else {
             &self.shade
         };
@@ -489,4 +502,17 @@ fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
     };
     buffer.unmap();
     Ok(out)
+}
+
+fn experiment(mut s: String) -> String {
+    let Ok(path) = std::env::var("SLOSH_WGSL_PATCH") else { return s };
+    let text = std::fs::read_to_string(path).unwrap();
+    for block in text.split("\n>>>\n") {
+        let Some(rest) = block.trim_start_matches('\n').strip_prefix("<<<\n") else { continue };
+        let (old, new) = rest.split_once("\n===\n").unwrap();
+        assert!(s.contains(old), "patch not found: {old}");
+        s = s.replace(old, new);
+    }
+    eprintln!("patched trace");
+    s
 }

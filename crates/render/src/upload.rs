@@ -141,6 +141,9 @@ const SECTIONS: [&str; 9] = [
 /// wgpu refuses zero-sized bindings; absent or empty sections bind this many zero bytes.
 const EMPTY_BINDING: u64 = 16;
 
+/// Bytes of the blank node before a step's BVH nodes on the GPU (one `GpuBvhNode`).
+const NODE_LEAD: u64 = 32;
+
 fn invalid(file: &CacheFile, problem: String) -> Error {
     Error::Step {
         path: file.path().to_path_buf(),
@@ -298,9 +301,15 @@ impl GpuStep {
                 field_range = Some(finite_range(bytes));
             }
             let size = (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4);
+            // trace.wgsl reads the nodes after one blank node, which aligns sibling pairs.
+            let lead = if *name == names::BVH_NODES {
+                NODE_LEAD
+            } else {
+                0
+            };
             let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(name),
-                size,
+                size: lead + size,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
@@ -319,7 +328,7 @@ impl GpuStep {
                     view.slice(..bytes.len()).copy_from_slice(bytes);
                 }
                 staging.unmap();
-                encoder.copy_buffer_to_buffer(&staging, 0, &target, 0, size);
+                encoder.copy_buffer_to_buffer(&staging, 0, &target, lead, size);
                 stats.bytes += bytes.len() as u64;
             }
             buffers.push(target);
