@@ -64,10 +64,6 @@ fn enter(node: BvhNode, origin: vec3<f32>, inv_dir: vec3<f32>, parallel: vec3<bo
     return select(-1.0, t0, t0 <= t1);
 }
 
-// The step's baked degree (no ball's polynomial is higher), fixed per pipeline: at 2 the
-// compiler drops the cubic root finder from the initial intersection.
-override BALL_DEGREE: u32 = 3u;
-
 // Candidates refined per ray before it counts as a miss (tracer.rs: MAX_CANDIDATES).
 const MAX_CANDIDATES: u32 = 16u;
 
@@ -89,8 +85,64 @@ fn key_before(t: f32, item: u32, other_t: f32, other_item: u32) -> bool {
     return t < other_t || (t == other_t && item < other_item);
 }
 
+// Tests leaf `first .. first + count`'s items against `best`: the nearest initial hit whose key
+// comes after (after_t, after_item).
+fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, best: ptr<function, Candidate>) {
+    let n = settings.point_count;
+    let end = min(first + count, arrayLength(&bvh_items));
+    for (var k = first; k < end; k++) {
+        let sphere = leaf_spheres[k];
+        let iv = ray_ball(ray, sphere.xyz, sphere.w);
+        if !iv.ok || sphere.w < 0.0 {
+            continue;
+        }
+        // Most spheres of a leaf are missed: the item is read only for those crossed.
+        let item = bvh_items[k];
+        if item >= n {
+            // From inside a droplet the ray sees its far wall.
+            let t = select(iv.t_out, iv.t_in, iv.t_in >= 0.0);
+            if t >= 0.0 && key_before(after_t, after_item, t, item)
+                && key_before(t, item, (*best).t, (*best).item) {
+                (*best).found = true;
+                (*best).droplet = true;
+                (*best).item = item;
+                (*best).t = t;
+            }
+            continue;
+        }
+        let t_lo = max(iv.t_in, 0.0);
+        if iv.t_in > (*best).t || iv.t_out < after_t || t_lo > iv.t_out {
+            continue;
+        }
+        // The ball (64 bytes) is read only once the ray is known to cross its sphere.
+        let ball = balls[item];
+        // Unfitted balls and droplet members are never candidates.
+        if (ball.state & 3u) >= 2u {
+            continue;
+        }
+        var initial: Poly;
+        initial.degree = min(ball.degree, 3u);
+        initial.c = ball.coeffs;
+        let hit = intersect_poly(ray, sphere.xyz, frame_from_normal(ball.normal), initial, ball.h, t_lo, iv.t_out);
+        if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
+            && key_before(hit.t, item, (*best).t, (*best).item) {
+            (*best).found = true;
+            (*best).droplet = false;
+            (*best).item = item;
+            (*best).t = hit.t;
+            (*best).t_lo = t_lo;
+            (*best).t_out = iv.t_out;
+            (*best).x = hit.x;
+            (*best).y = hit.y;
+        }
+    }
+}
+
 // The nearest initial hit whose key comes after (after_t, after_item), through the BVH
-// (tracer.rs: next_candidate).
+// (tracer.rs: next_candidate). The node in hand stays in registers: the walk descends
+// through inner nodes to a leaf, nearer child first, the farther one stacked; then the leaf
+// is tested, and the next node comes off the stack. Nodes entered after the best hit are
+// skipped (equal is kept: a tie goes to the lower item, which may lie there).
 fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     var best: Candidate;
     best.found = false;
@@ -101,95 +153,52 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     var stack_link: array<u32, STACK_SIZE>;
     var stack_t: array<f32, STACK_SIZE>;
     var sp = 0u;
+    var current = 0u;
+    var live = false;
     if has_nodes() && settings.point_count + settings.sphere_count > 0u {
         let root = node(0u);
         let t_root = enter(root, ray.origin, inv_dir, parallel);
-        if t_root >= 0.0 {
-            stack_link[0] = link(root);
-            stack_t[0] = t_root;
-            sp = 1u;
-        }
+        current = link(root);
+        live = t_root >= 0.0;
     }
-    let n = settings.point_count;
-    while sp > 0u {
-        sp--;
-        // Equal is not pruned: a tie goes to the lower item, which may lie here.
-        if stack_t[sp] > best.t {
-            continue;
-        }
-        let first = stack_link[sp] & LINK_FIRST;
-        let count = stack_link[sp] >> LINK_COUNT_SHIFT;
-        if count > 0u {
-            let end = min(first + count, arrayLength(&bvh_items));
-            for (var k = first; k < end; k++) {
-                let item = bvh_items[k];
-                let sphere = leaf_spheres[k];
-                let iv = ray_ball(ray, sphere.xyz, sphere.w);
-                if !iv.ok || sphere.w < 0.0 {
-                    continue;
-                }
-                if item >= n {
-                    // From inside a droplet the ray sees its far wall.
-                    let t = select(iv.t_out, iv.t_in, iv.t_in >= 0.0);
-                    if !(t >= 0.0) || !key_before(after_t, after_item, t, item)
-                        || !key_before(t, item, best.t, best.item) {
-                        continue;
-                    }
-                    best.found = true;
-                    best.droplet = true;
-                    best.item = item;
-                    best.t = t;
-                    continue;
-                }
-                if iv.t_in > best.t || iv.t_out < after_t {
-                    continue;
-                }
-                let t_lo = max(iv.t_in, 0.0);
-                if t_lo > iv.t_out {
-                    continue;
-                }
-                // The ball (64 bytes) is read only once the ray is known to cross its sphere.
-                let ball = balls[item];
-                // Unfitted balls and droplet members are never candidates.
-                if (ball.state & 3u) >= 2u {
-                    continue;
-                }
-                var initial: Poly;
-                initial.degree = min(ball.degree, BALL_DEGREE);
-                initial.c = ball.coeffs;
-                let hit = intersect_poly(ray, sphere.xyz, frame_from_normal(ball.normal), initial, ball.h, t_lo, iv.t_out);
-                if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
-                    && key_before(hit.t, item, best.t, best.item) {
-                    best.found = true;
-                    best.droplet = false;
-                    best.item = item;
-                    best.t = hit.t;
-                    best.t_lo = t_lo;
-                    best.t_out = iv.t_out;
-                    best.x = hit.x;
-                    best.y = hit.y;
-                }
+    loop {
+        // Down through inner nodes until the node in hand is a leaf, or nothing below it is
+        // entered.
+        while live && (current >> LINK_COUNT_SHIFT) == 0u {
+            let first = current & LINK_FIRST;
+            // The two children are adjacent: one 64-byte line.
+            let node_a = node(first);
+            let node_b = node(first + 1u);
+            let ta = enter(node_a, ray.origin, inv_dir, parallel);
+            let tb = enter(node_b, ray.origin, inv_dir, parallel);
+            let a_in = ta >= 0.0 && ta <= best.t;
+            let b_in = tb >= 0.0 && tb <= best.t;
+            if a_in && b_in {
+                let a_first = ta <= tb;
+                current = select(link(node_b), link(node_a), a_first);
+                stack_link[sp] = select(link(node_a), link(node_b), a_first);
+                stack_t[sp] = select(ta, tb, a_first);
+                sp++;
+            } else if a_in || b_in {
+                current = select(link(node_b), link(node_a), a_in);
+            } else {
+                live = false;
             }
-            continue;
         }
-        // The two children are adjacent: one 64-byte read.
-        let node_a = node(first);
-        let node_b = node(first + 1u);
-        let ta = enter(node_a, ray.origin, inv_dir, parallel);
-        let tb = enter(node_b, ray.origin, inv_dir, parallel);
-        // Push the farther child first so the nearer one is walked first.
-        if ta >= 0.0 && tb >= 0.0 {
-            let a_first = ta <= tb;
-            stack_link[sp] = select(link(node_a), link(node_b), a_first);
-            stack_t[sp] = select(ta, tb, a_first);
-            stack_link[sp + 1u] = select(link(node_b), link(node_a), a_first);
-            stack_t[sp + 1u] = select(tb, ta, a_first);
-            sp += 2u;
-        } else if ta >= 0.0 || tb >= 0.0 {
-            let a_hit = ta >= 0.0;
-            stack_link[sp] = select(link(node_b), link(node_a), a_hit);
-            stack_t[sp] = select(tb, ta, a_hit);
-            sp += 1u;
+        if live {
+            visit_leaf(ray, current & LINK_FIRST, current >> LINK_COUNT_SHIFT, after_t, after_item, &best);
+        }
+        live = false;
+        while sp > 0u {
+            sp--;
+            if stack_t[sp] <= best.t {
+                current = stack_link[sp];
+                live = true;
+                break;
+            }
+        }
+        if !live {
+            break;
         }
     }
     return best;
@@ -212,7 +221,7 @@ fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
     }
     let ball = balls[c.item];
     var initial: Poly;
-    initial.degree = min(ball.degree, BALL_DEGREE);
+    initial.degree = min(ball.degree, 3u);
     initial.c = ball.coeffs;
     out.status = STATUS_ITERATION_LIMIT;
     out.normal = hit_normal(frame_from_normal(ball.normal), initial, c.x, c.y);

@@ -78,18 +78,18 @@ pub struct PassTimes {
     pub shade_ms: f64,
 }
 
-/// The trace pass built for one traversal stack size. Pipelines are built when first asked
-/// for, per baked degree (1–3, the `BALL_DEGREE` override) and, for refinement, per fit
-/// degree (1–3, `FIT_DEGREE`).
+/// The trace pass built for one traversal stack size; pipelines are built when first asked
+/// for.
 #[derive(Debug)]
 struct TraceVariant {
     module: wgpu::ShaderModule,
     /// One iteration: the nearest initial hit, a lean kernel.
-    initial: [OnceLock<wgpu::ComputePipeline>; 3],
-    /// More: candidates refined in the order of their initial hits, by [baked][fit] degree.
-    refined: [[OnceLock<wgpu::ComputePipeline>; 3]; 3],
+    initial: OnceLock<wgpu::ComputePipeline>,
+    /// More: candidates refined in the order of their initial hits, one pipeline per fit
+    /// degree (1–3, the `FIT_DEGREE` override).
+    refined: [OnceLock<wgpu::ComputePipeline>; 3],
     /// The water pass (secondary rays), in place of the shade pass.
-    water: [OnceLock<wgpu::ComputePipeline>; 3],
+    water: OnceLock<wgpu::ComputePipeline>,
 }
 
 /// The compiled passes. Trace pipelines are built on first use, for the smallest stack in
@@ -308,9 +308,9 @@ impl Tracer {
             });
         Ok(self.traces[slot].get_or_init(|| TraceVariant {
             module,
-            initial: Default::default(),
+            initial: OnceLock::new(),
             refined: Default::default(),
-            water: Default::default(),
+            water: OnceLock::new(),
         }))
     }
 
@@ -330,37 +330,21 @@ impl Tracer {
         Ok(slot.get_or_init(|| pipeline))
     }
 
-    /// The trace pipeline for a step baked at `baked` degree: one iteration, or refinement
-    /// with fits of `degree`.
+    /// The trace pipeline: one iteration, or refinement with fits of `degree` (1–3).
     fn trace_pipeline<'a>(
         &self,
         gpu: &Gpu,
         variant: &'a TraceVariant,
-        baked: u8,
         iterations: u32,
         degree: u8,
     ) -> Result<&'a wgpu::ComputePipeline> {
-        let baked = baked.clamp(1, 3);
-        let ball = ("BALL_DEGREE", f64::from(baked));
-        let b = usize::from(baked) - 1;
         if iterations <= 1 {
-            return self.cached(gpu, variant, &variant.initial[b], "trace_initial", &[ball]);
+            return self.cached(gpu, variant, &variant.initial, "trace_initial", &[]);
         }
         let degree = degree.clamp(1, 3);
+        let slot = &variant.refined[usize::from(degree) - 1];
         let fit = ("FIT_DEGREE", f64::from(degree));
-        let slot = &variant.refined[b][usize::from(degree) - 1];
-        self.cached(gpu, variant, slot, "trace_refined", &[ball, fit])
-    }
-
-    fn water_pipeline<'a>(
-        &self,
-        gpu: &Gpu,
-        variant: &'a TraceVariant,
-        baked: u8,
-    ) -> Result<&'a wgpu::ComputePipeline> {
-        let baked = baked.clamp(1, 3);
-        let slot = &variant.water[usize::from(baked) - 1];
-        self.cached(gpu, variant, slot, "water", &[("BALL_DEGREE", f64::from(baked))])
+        self.cached(gpu, variant, slot, "trace_refined", &[fit])
     }
 
     /// Records the trace and shade passes (with timestamps where the targets have them).
@@ -415,10 +399,9 @@ impl Tracer {
             bytemuck::bytes_of(&settings(step, &camera, params)),
         );
         let variant = self.variant(gpu, step)?;
-        let trace =
-            self.trace_pipeline(gpu, variant, step.degree, params.iterations, params.degree)?;
+        let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
         let shade = if params.mode == ShadeMode::Water {
-            self.water_pipeline(gpu, variant, step.degree)?
+            self.cached(gpu, variant, &variant.water, "water", &[])?
         } else {
             &self.shade
         };
