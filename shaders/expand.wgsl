@@ -29,19 +29,14 @@ struct ExpandSettings {
     row_threads: u32,
     sphere_count: u32,
     item_count: u32,
-    pad0: u32,
+    // Entries of cluster_ids.
+    cluster_id_count: u32,
 }
 
-@group(0) @binding(0) var<storage, read> points: array<Point>;
-@group(0) @binding(1) var<storage, read> normals: array<Normal>;
-@group(0) @binding(2) var<storage, read> reach: array<f32>;
-@group(0) @binding(3) var<storage, read> cluster_start: array<u32>;
-@group(0) @binding(4) var<storage, read> cluster_ids: array<u32>;
-@group(0) @binding(5) var<storage, read_write> neighbour_masks: array<u32>;
-@group(0) @binding(6) var<uniform> expand_settings: ExpandSettings;
-@group(0) @binding(7) var<storage, read> bvh_items: array<u32>;
-@group(0) @binding(8) var<storage, read> spheres: array<Point>;
-@group(0) @binding(9) var<storage, read_write> leaf_spheres: array<vec4<f32>>;
+// The arrays (points, normals, reach, cluster_start, cluster_ids, neighbour_masks,
+// bvh_items, spheres, leaf_spheres) are read and written through accessors that
+// crates/render's shaders.rs generates over the ranges they are bound in.
+@group(0) @binding(100) var<uniform> expand_settings: ExpandSettings;
 
 @compute @workgroup_size(64, 1, 1)
 fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -53,14 +48,14 @@ fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
     let centre = slot / cfg.mask_words;
     let word = slot % cfg.mask_words;
     let c = centre / max(cfg.cluster_size, 1u);
-    let first = cluster_start[c] + word * 32u;
-    let last = min(cluster_start[c + 1u], arrayLength(&cluster_ids));
-    let position = points[centre].position;
-    let r = reach[centre];
+    let first = cluster_start_at(c) + word * 32u;
+    let last = min(cluster_start_at(c + 1u), cfg.cluster_id_count);
+    let position = points_at(centre).position;
+    let r = reach_at(centre);
     let reach2 = r * r;
     var own_normal = vec3<f32>(0.0);
     if cfg.has_normals != 0u {
-        own_normal = normals[centre].normal;
+        own_normal = normals_at(centre).normal;
     }
     let check_normals = dot(own_normal, own_normal) > 0.0;
     var bits = 0u;
@@ -69,23 +64,23 @@ fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
         if k >= last {
             break;
         }
-        let j = cluster_ids[k];
+        let j = cluster_ids_at(k);
         if j >= cfg.point_count {
             continue;
         }
-        let d = points[j].position - position;
+        let d = points_at(j).position - position;
         if !(d.x * d.x + d.y * d.y + d.z * d.z <= reach2) {
             continue;
         }
         if check_normals {
-            let n = normals[j].normal;
+            let n = normals_at(j).normal;
             if dot(n, n) > 0.0 && dot(own_normal, n) < 0.0 {
                 continue;
             }
         }
         bits |= 1u << b;
     }
-    neighbour_masks[slot] = bits;
+    neighbour_masks_set(slot, bits);
 }
 
 // A slot whose item is neither a ball nor a droplet gets radius −1, which the walk skips.
@@ -96,14 +91,14 @@ fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
     if k >= cfg.item_count {
         return;
     }
-    let item = bvh_items[k];
+    let item = bvh_items_at(k);
     var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
     if item < cfg.point_count {
-        let p = points[item];
+        let p = points_at(item);
         sphere = vec4<f32>(p.position, p.radius);
     } else if item - cfg.point_count < cfg.sphere_count {
-        let d = spheres[item - cfg.point_count];
+        let d = spheres_at(item - cfg.point_count);
         sphere = vec4<f32>(d.position, d.radius);
     }
-    leaf_spheres[k] = sphere;
+    leaf_spheres_set(k, sphere);
 }

@@ -14,6 +14,19 @@ struct Normal {
     pad: f32,
 }
 
+// A droplet sphere and a BVH node (mirror `slosh_cache::GpuSphere` and `GpuBvhNode`).
+struct Sphere {
+    centre: vec3<f32>,
+    radius: f32,
+}
+
+struct BvhNode {
+    lo: vec3<f32>,
+    count: u32,
+    hi: vec3<f32>,
+    first: u32,
+}
+
 // A ball's initial support normal and polynomial (mirrors `slosh_cache::GpuBall`).
 struct Ball {
     normal: vec3<f32>,
@@ -63,32 +76,33 @@ struct Settings {
     has_field: u32,
     // Words of neighbour_masks per point.
     mask_words: u32,
+    // Entries of bvh_nodes (the blank lead node included) and of bvh_items.
+    node_count: u32,
+    item_count: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
-@group(0) @binding(0) var<storage, read> points: array<Point>;
-@group(0) @binding(1) var<storage, read> normals: array<Normal>;
-// Bit masks over each point's cluster candidates, written per step by expand.wgsl.
-@group(0) @binding(2) var<storage, read> neighbour_masks: array<u32>;
-@group(0) @binding(3) var<storage, read> cluster_start: array<u32>;
-@group(0) @binding(4) var<storage, read> cluster_ids: array<u32>;
-@group(0) @binding(10) var<uniform> settings: Settings;
-// The frame's hits, three 16-byte words per pixel in `Hit`'s layout: whole-word stores keep
-// the trace pass's writes coalesced (a struct store became twelve 4-byte ones, which cost
-// as much as a fifth of a 1-iteration frame).
-@group(1) @binding(0) var<storage, read_write> hits: array<vec4<u32>>;
+// The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's
+// shaders.rs generates over the ranges they are bound in. Among them: neighbour_masks, bit
+// masks over each point's cluster candidates, written per step by expand.wgsl.
+@group(0) @binding(100) var<uniform> settings: Settings;
+// The frame's hits (`hits_at`), three 16-byte words per pixel in `Hit`'s layout: whole-word
+// stores keep the trace pass's writes coalesced (a struct store became twelve 4-byte ones,
+// which cost as much as a fifth of a 1-iteration frame).
 
 fn write_hit(pixel: u32, hit: Hit) {
     let at = 3u * pixel;
-    hits[at] = vec4<u32>(bitcast<vec3<u32>>(hit.position), bitcast<u32>(hit.t));
-    hits[at + 1u] = vec4<u32>(bitcast<vec3<u32>>(hit.normal), hit.status);
-    hits[at + 2u] = vec4<u32>(hit.item, hit.iterations, hit.degree, hit.degraded);
+    hits_set(at, vec4<u32>(bitcast<vec3<u32>>(hit.position), bitcast<u32>(hit.t)));
+    hits_set(at + 1u, vec4<u32>(bitcast<vec3<u32>>(hit.normal), hit.status));
+    hits_set(at + 2u, vec4<u32>(hit.item, hit.iterations, hit.degree, hit.degraded));
 }
 
 fn read_hit(pixel: u32) -> Hit {
     let at = 3u * pixel;
-    let a = hits[at];
-    let b = hits[at + 1u];
-    let c = hits[at + 2u];
+    let a = hits_at(at);
+    let b = hits_at(at + 1u);
+    let c = hits_at(at + 2u);
     return Hit(bitcast<vec3<f32>>(a.xyz), bitcast<f32>(a.w), bitcast<vec3<f32>>(b.xyz), b.w, c.x, c.y, c.z, c.w);
 }
 
@@ -152,7 +166,7 @@ struct Neighbourhood {
 
 fn neighbourhood(centre: u32) -> Neighbourhood {
     let c = centre / max(settings.cluster_size, 1u);
-    return Neighbourhood(cluster_start[c], centre * settings.mask_words, settings.mask_words);
+    return Neighbourhood(cluster_start_at(c), centre * settings.mask_words, settings.mask_words);
 }
 
 // Where a walk over a neighbourhood stands: the current word and its unvisited bits.
@@ -164,7 +178,7 @@ struct Cursor {
 const NO_NEIGHBOUR: u32 = 0xffffffffu;
 
 fn first_neighbours(nb: Neighbourhood) -> Cursor {
-    return Cursor(0u, select(0u, neighbour_masks[nb.mask], nb.words > 0u));
+    return Cursor(0u, select(0u, neighbour_masks_at(nb.mask), nb.words > 0u));
 }
 
 // The next neighbour's point index, or NO_NEIGHBOUR after the last.
@@ -174,11 +188,11 @@ fn next_neighbour(nb: Neighbourhood, cursor: ptr<function, Cursor>) -> u32 {
         if (*cursor).word >= nb.words {
             return NO_NEIGHBOUR;
         }
-        (*cursor).bits = neighbour_masks[nb.mask + (*cursor).word];
+        (*cursor).bits = neighbour_masks_at(nb.mask + (*cursor).word);
     }
     let bits = (*cursor).bits;
     (*cursor).bits = bits & (bits - 1u);
-    return cluster_ids[nb.first + (*cursor).word * 32u + firstTrailingBit(bits)];
+    return cluster_ids_at(nb.first + (*cursor).word * 32u + firstTrailingBit(bits));
 }
 
 // ---- Local frame (frame.rs) -----------------------------------------------------------------
@@ -291,7 +305,7 @@ fn covariance_normal(r: vec3<f32>, nb: Neighbourhood, h2: f32, weight_sum: f32) 
         if j == NO_NEIGHBOUR {
             break;
         }
-        let q = points[j].position - r;
+        let q = points_at(j).position - r;
         let w = weight(length_squared(q), h2) * scale;
         b00 += w * q.x * q.x;
         b01 += w * q.x * q.y;
@@ -330,10 +344,10 @@ fn support_normal(r: vec3<f32>, nb: Neighbourhood, h: f32, toward: vec3<f32>) ->
         if j == NO_NEIGHBOUR {
             break;
         }
-        let w = weight(length_squared(points[j].position - r), h2);
+        let w = weight(length_squared(points_at(j).position - r), h2);
         weight_sum += w;
         if use_normals {
-            let n = normalized(normals[j].normal);
+            let n = normalized(normals_at(j).normal);
             if n.ok {
                 mean += n.v * w;
                 magnitude += w;
@@ -359,9 +373,9 @@ fn support_normal(r: vec3<f32>, nb: Neighbourhood, h: f32, toward: vec3<f32>) ->
             if j == NO_NEIGHBOUR {
                 break;
             }
-            let n = normalized(normals[j].normal);
+            let n = normalized(normals_at(j).normal);
             if n.ok {
-                let w = weight(length_squared(points[j].position - r), h2);
+                let w = weight(length_squared(points_at(j).position - r), h2);
                 vote += w * signum(dot(n.v, normal));
             }
         }
@@ -505,7 +519,7 @@ fn fit(r: vec3<f32>, frame: Frame, nb: Neighbourhood, h: f32) -> Fit {
         if j == NO_NEIGHBOUR {
             break;
         }
-        let q = points[j].position - r;
+        let q = points_at(j).position - r;
         let w = weight(length_squared(q), h2);
         if !(w > 0.0) {
             continue;

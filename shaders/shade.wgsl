@@ -3,9 +3,6 @@
 // coloured by a scalar field when one is bound), 1 normals, 2 status and iteration heat map,
 // 3 back faces flagged. Appended to mls.wgsl and light.wgsl.
 
-@group(0) @binding(5) var<storage, read> balls: array<Ball>;
-@group(0) @binding(9) var<storage, read> field: array<f32>;
-@group(1) @binding(1) var<storage, read_write> image: array<u32>;
 
 const MODE_SHADE: u32 = 0u;
 const MODE_NORMALS: u32 = 1u;
@@ -27,9 +24,9 @@ fn viridis(t_in: f32) -> vec3<f32> {
 
 // The field at a hit: the MLS-weighted mean over the hit ball's neighbours (θ with the ball's
 // h), or the ball's own value where no weight reaches.
-fn field_at(hit: Hit) -> f32 {
+fn field_value_at(hit: Hit) -> f32 {
     let nb = neighbourhood(hit.item);
-    let h = balls[hit.item].h * settings.h_factor;
+    let h = balls_at(hit.item).h * settings.h_factor;
     let h2 = h * h;
     var sum = 0.0;
     var wsum = 0.0;
@@ -39,11 +36,11 @@ fn field_at(hit: Hit) -> f32 {
         if j == NO_NEIGHBOUR {
             break;
         }
-        let w = weight(length_squared(points[j].position - hit.position), h2);
-        sum += w * field[j];
+        let w = weight(length_squared(points_at(j).position - hit.position), h2);
+        sum += w * field_at(j);
         wsum += w;
     }
-    return select(field[hit.item], sum / wsum, wsum > MIN_WEIGHT);
+    return select(field_at(hit.item), sum / wsum, wsum > MIN_WEIGHT);
 }
 
 fn status_colour(hit: Hit) -> vec3<f32> {
@@ -73,7 +70,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     let index = gid.y * settings.width + gid.x;
     let hit = read_hit(index);
     if hit.status == STATUS_MISS {
-        image[index] = pack(background(gid.y));
+        image_set(index, pack(background(gid.y)));
         return;
     }
     let dir = camera_ray(gid.x, gid.y).dir;
@@ -95,11 +92,11 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             var base = vec3<f32>(0.16, 0.42, 0.72);
             if settings.has_field != 0u && hit.item < settings.point_count {
                 let span = settings.field_max - settings.field_min;
-                let v = field_at(hit);
+                let v = field_value_at(hit);
                 base = viridis(select(0.5, (v - settings.field_min) / span, span > 0.0));
             }
             colour = blinn_phong(hit.normal, dir, base);
         }
     }
-    image[index] = pack(colour);
+    image_set(index, pack(colour));
 }

@@ -6,28 +6,11 @@
 // crates/mls/src/tracer.rs and crates/cache/src/bvh.rs. Appended to mls.wgsl; water.wgsl
 // reuses its walk for secondary rays.
 
-struct Sphere {
-    centre: vec3<f32>,
-    radius: f32,
-}
-
-struct BvhNode {
-    lo: vec3<f32>,
-    count: u32,
-    hi: vec3<f32>,
-    first: u32,
-}
-
-@group(0) @binding(5) var<storage, read> balls: array<Ball>;
-@group(0) @binding(6) var<storage, read> spheres: array<Sphere>;
-// The step's nodes after one blank node (the upload puts it there), so that every pair of
-// siblings, slots 2k + 1 and 2k + 2 of the section, shares one 64-byte-aligned line: read
-// node i as bvh_nodes[i + 1] through `node`.
-@group(0) @binding(7) var<storage, read> bvh_nodes: array<BvhNode>;
-@group(0) @binding(8) var<storage, read> bvh_items: array<u32>;
-// Each item slot's sphere (centre, radius; radius < 0 for no item), from expand.wgsl's
-// `leaves` pass: the walk reads it beside the item instead of through it.
-@group(0) @binding(11) var<storage, read> leaf_spheres: array<vec4<f32>>;
+// bvh_nodes holds the step's nodes after one blank node (the upload puts it there), so that
+// every pair of siblings, slots 2k + 1 and 2k + 2 of the section, shares one 64-byte-aligned
+// line: node i is bvh_nodes_at(i + 1), read through `node`. leaf_spheres holds each item
+// slot's sphere (centre, radius; radius < 0 for no item), from expand.wgsl's `leaves` pass:
+// the walk reads it beside the item instead of through it.
 
 // Deeper trees are refused at upload (slosh_render::MAX_BVH_DEPTH).
 const STACK_SIZE: u32 = 64u;
@@ -43,11 +26,11 @@ fn link(node: BvhNode) -> u32 {
 }
 
 fn node(i: u32) -> BvhNode {
-    return bvh_nodes[i + 1u];
+    return bvh_nodes_at(i + 1u);
 }
 
 fn has_nodes() -> bool {
-    return arrayLength(&bvh_nodes) > 1u;
+    return settings.node_count > 1u;
 }
 
 // Entry parameter of the ray (t ≥ 0) into a node's box, or −1 when it misses. Branch free:
@@ -89,15 +72,15 @@ fn key_before(t: f32, item: u32, other_t: f32, other_item: u32) -> bool {
 // comes after (after_t, after_item).
 fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, best: ptr<function, Candidate>) {
     let n = settings.point_count;
-    let end = min(first + count, arrayLength(&bvh_items));
+    let end = min(first + count, settings.item_count);
     for (var k = first; k < end; k++) {
-        let sphere = leaf_spheres[k];
+        let sphere = leaf_spheres_at(k);
         let iv = ray_ball(ray, sphere.xyz, sphere.w);
         if !iv.ok || sphere.w < 0.0 {
             continue;
         }
         // Most spheres of a leaf are missed: the item is read only for those crossed.
-        let item = bvh_items[k];
+        let item = bvh_items_at(k);
         if item >= n {
             // From inside a droplet the ray sees its far wall.
             let t = select(iv.t_out, iv.t_in, iv.t_in >= 0.0);
@@ -115,7 +98,7 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
             continue;
         }
         // The ball (64 bytes) is read only once the ray is known to cross its sphere.
-        let ball = balls[item];
+        let ball = balls_at(item);
         // Unfitted balls and droplet members are never candidates.
         if (ball.state & 3u) >= 2u {
             continue;
@@ -214,12 +197,12 @@ fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
     out.degraded = false;
     let p = ray.origin + ray.dir * c.t;
     if c.droplet {
-        let nrm = normalized(p - spheres[c.item - settings.point_count].centre);
+        let nrm = normalized(p - spheres_at(c.item - settings.point_count).centre);
         out.status = STATUS_DROPLET;
         out.normal = select(vec3<f32>(0.0, 0.0, 1.0), nrm.v, nrm.ok);
         return out;
     }
-    let ball = balls[c.item];
+    let ball = balls_at(c.item);
     var initial: Poly;
     initial.degree = min(ball.degree, 3u);
     initial.c = ball.coeffs;
@@ -298,7 +281,7 @@ fn trace_refined(@builtin(global_invocation_id) gid: vec3<u32>) {
             store(gid, ray, c.item, start);
             return;
         }
-        let out = refine(ray, c.item, balls[c.item].h, start, c.t_lo, c.t_out);
+        let out = refine(ray, c.item, balls_at(c.item).h, start, c.t_lo, c.t_out);
         if out.status != STATUS_MISS && finite(out.t) {
             store(gid, ray, c.item, out);
             return;

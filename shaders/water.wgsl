@@ -6,7 +6,6 @@
 // (iteration 1): they only colour, so refining them would cost without showing. Appended to
 // mls.wgsl, trace.wgsl and light.wgsl.
 
-@group(1) @binding(1) var<storage, read_write> image: array<u32>;
 
 const WATER_IOR: f32 = 1.33;
 // Fraction of light absorbed per unit of path through the fluid, per channel, in scene
@@ -130,8 +129,8 @@ fn water(@builtin(global_invocation_id) gid: vec3<u32>) {
     let dir = camera_ray(gid.x, gid.y).dir;
     let st = stage();
     if hit.status == STATUS_MISS {
-        image[index] = pack(environment(settings.eye, dir, st));
+        image_set(index, pack(environment(settings.eye, dir, st)));
         return;
     }
-    image[index] = pack(water_colour(hit.position, hit.normal, dir, st));
+    image_set(index, pack(water_colour(hit.position, hit.normal, dir, st)));
 }

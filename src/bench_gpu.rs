@@ -122,7 +122,7 @@ impl Runner<'_> {
         let mut params = TraceParams::for_step(step, iterations);
         params.degree = degree;
         params.mode = mode;
-        let targets = self.tracer.targets(self.gpu, step, w, h);
+        let targets = self.tracer.targets(self.gpu, step, w, h)?;
         let mut trace = Vec::new();
         let mut shade = Vec::new();
         // Warm-up: 10 frames and at least half a second, so that the GPU's clocks have risen
@@ -252,7 +252,13 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
 
     // Table 4.5: the tank, ~10k surface points, image sizes.
     if wanted(BenchTable::Tank) || wanted(BenchTable::Water) {
-        tank_rows(args, &runner, &mut rows, wanted(BenchTable::Tank), wanted(BenchTable::Water))?;
+        tank_rows(
+            args,
+            &runner,
+            &mut rows,
+            wanted(BenchTable::Tank),
+            wanted(BenchTable::Water),
+        )?;
     }
     if wanted(BenchTable::Points) {
         points_rows(args, &gpu, &runner, &mut rows, &mut uploads)?;
@@ -350,11 +356,11 @@ fn points_rows(
             "  sphere {points}: baked in {:.1} s",
             start.elapsed().as_secs_f64()
         );
-        let step = GpuStep::upload(&gpu, &bench.file, None)?;
+        let step = GpuStep::upload(gpu, &bench.file, None)?;
         // Upload: the median of 5 uploads of the same in-memory step.
         let mut best = Vec::new();
         for _ in 0..5 {
-            best.push(GpuStep::upload(&gpu, &bench.file, None)?.upload);
+            best.push(GpuStep::upload(gpu, &bench.file, None)?.upload);
         }
         best.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
         uploads.push((bench.label.clone(), bench.points, best[2]));

@@ -4,9 +4,14 @@ use std::sync::OnceLock;
 
 use crate::error::{Error, Result};
 use crate::expand::Expander;
+use crate::shaders::{FRAME_ARRAYS, RANGES, STEP_ARRAYS};
 
-/// Storage buffers bound per shader stage by the step and frame bind groups.
-pub const STORAGE_BUFFERS_NEEDED: u32 = 13;
+/// Storage buffers bound per shader stage by the step and frame bind groups: every array in
+/// `RANGES` bindings.
+pub const STORAGE_BUFFERS_NEEDED: u32 = (STEP_ARRAYS.len() + FRAME_ARRAYS.len()) as u32 * RANGES;
+
+/// The smallest binding limit [`Gpu::limit_bindings`] takes (ranges stay aligned above it).
+pub const MIN_BINDING_LIMIT: u64 = 1 << 16;
 
 /// A GPU device ready for slosh's passes.
 #[derive(Debug)]
@@ -17,8 +22,11 @@ pub struct Gpu {
     pub info: wgpu::AdapterInfo,
     /// Whether compute passes can write GPU timestamps (frame times in `slosh bench gpu`).
     pub timestamps: bool,
-    /// The neighbour-mask pass every upload runs, compiled on first use.
+    /// The per-step passes every upload runs, compiled on first use.
     pub(crate) expander: OnceLock<Expander>,
+    /// The largest storage binding used, in bytes: the adapter's, or lower
+    /// ([`Gpu::limit_bindings`]).
+    binding_limit: u64,
 }
 
 /// The adapters wgpu can see, Vulkan first.
@@ -72,17 +80,24 @@ impl Gpu {
     fn open(adapter: wgpu::Adapter) -> Result<Gpu> {
         let info = adapter.get_info();
         let available = adapter.limits();
-        if available.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED {
+        if available.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED
+            || available.max_buffers_and_acceleration_structures_per_shader_stage
+                < STORAGE_BUFFERS_NEEDED + 1
+        {
             return Err(Error::Limits {
                 adapter: describe(&info),
                 problem: format!(
-                    "allows {} storage buffers per shader stage; the tracer binds {STORAGE_BUFFERS_NEEDED}",
-                    available.max_storage_buffers_per_shader_stage
+                    "allows {} storage buffers and {} buffers in all per shader stage; the tracer binds {STORAGE_BUFFERS_NEEDED} and a uniform block",
+                    available.max_storage_buffers_per_shader_stage,
+                    available.max_buffers_and_acceleration_structures_per_shader_stage
                 ),
             });
         }
         let limits = wgpu::Limits {
             max_storage_buffers_per_shader_stage: STORAGE_BUFFERS_NEEDED,
+            // The uniform blocks count here too.
+            max_buffers_and_acceleration_structures_per_shader_stage: available
+                .max_buffers_and_acceleration_structures_per_shader_stage,
             max_storage_buffer_binding_size: available.max_storage_buffer_binding_size,
             max_buffer_size: available.max_buffer_size,
             max_compute_workgroups_per_dimension: available.max_compute_workgroups_per_dimension,
@@ -106,6 +121,7 @@ impl Gpu {
             adapter: describe(&info),
             source,
         })?;
+        let binding_limit = device.limits().max_storage_buffer_binding_size;
         Ok(Gpu {
             adapter,
             device,
@@ -113,6 +129,7 @@ impl Gpu {
             info,
             timestamps,
             expander: OnceLock::new(),
+            binding_limit,
         })
     }
 
@@ -125,9 +142,19 @@ impl Gpu {
         self.expander.get_or_init(|| Expander::new(&self.device))
     }
 
-    /// The largest storage binding, in bytes.
+    /// The largest storage binding used, in bytes; arrays span up to `RANGES` of them.
     pub fn max_binding(&self) -> u64 {
-        self.device.limits().max_storage_buffer_binding_size
+        self.binding_limit
+    }
+
+    /// Binds storage in slices of at most `bytes` (at least [`MIN_BINDING_LIMIT`], at most
+    /// the adapter's limit): how the splitting of large arrays is tested on small scenes.
+    /// Applies to steps uploaded and tracers built afterwards.
+    pub fn limit_bindings(&mut self, bytes: u64) {
+        let adapter = self.device.limits().max_storage_buffer_binding_size;
+        self.binding_limit = bytes.clamp(MIN_BINDING_LIMIT.min(adapter), adapter);
+        // The per-step passes are compiled for the limit.
+        self.expander = OnceLock::new();
     }
 
     /// Blocks until the GPU has finished all submitted work.

@@ -3,23 +3,33 @@
 //! the refinement loops visit the list itself instead of filtering every candidate each time)
 //! and the leaf spheres (each BVH item slot's sphere, read by the walk beside its item).
 
-use crate::bindings::{bind_in_order, buffer_entry, storage_entry};
+use std::sync::OnceLock;
+
+use crate::bindings::{bind_entries, layout_entries};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
-use crate::shaders::EXPAND_WGSL;
+use crate::shaders::{EXPAND_ARRAYS, expand_wgsl};
 
 const WORKGROUP: u32 = 64;
 
-/// The compiled passes, built once per device.
+/// The passes' pipelines for one module (arrays split in ranges or not).
 #[derive(Debug)]
-pub(crate) struct Expander {
+struct Passes {
     masks: wgpu::ComputePipeline,
     leaves: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
 }
 
-/// The buffers the passes read and the two they write (`masks`, `leaf_spheres`).
+/// The compiled passes, built once per device, per split, on first use.
+#[derive(Debug)]
+pub(crate) struct Expander {
+    layout: wgpu::BindGroupLayout,
+    pipeline_layout: wgpu::PipelineLayout,
+    passes: [OnceLock<Passes>; 2],
+}
+
+/// The buffers the passes read and the two they write (`masks`, `leaf_spheres`), in the
+/// order of `EXPAND_ARRAYS`.
 pub(crate) struct ExpandInputs<'a> {
     pub points: &'a wgpu::Buffer,
     pub normals: &'a wgpu::Buffer,
@@ -34,48 +44,56 @@ pub(crate) struct ExpandInputs<'a> {
 
 impl Expander {
     pub(crate) fn new(device: &wgpu::Device) -> Expander {
-        let mut entries: Vec<_> = (0..5).map(|b| storage_entry(b, true)).collect();
-        entries.push(storage_entry(5, false));
-        entries.push(buffer_entry(6, wgpu::BufferBindingType::Uniform));
-        entries.extend([storage_entry(7, true), storage_entry(8, true)]);
-        entries.push(storage_entry(9, false));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("expand"),
-            entries: &entries,
+            entries: &layout_entries(&EXPAND_ARRAYS, true),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("expand"),
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("expand"),
-            source: wgpu::ShaderSource::Wgsl(EXPAND_WGSL.into()),
-        });
-        let pipeline = |entry| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                cache: None,
-            })
-        };
         Expander {
-            masks: pipeline("expand"),
-            leaves: pipeline("leaves"),
             layout,
+            pipeline_layout,
+            passes: Default::default(),
         }
     }
 
+    fn passes(&self, gpu: &Gpu, split: bool) -> &Passes {
+        self.passes[usize::from(split)].get_or_init(|| {
+            let module = gpu
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("expand"),
+                    source: wgpu::ShaderSource::Wgsl(expand_wgsl(gpu.max_binding(), split).into()),
+                });
+            let pipeline = |entry| {
+                gpu.device
+                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: Some(&self.pipeline_layout),
+                        module: &module,
+                        entry_point: Some(entry),
+                        compilation_options: wgpu::PipelineCompilationOptions::default(),
+                        cache: None,
+                    })
+            };
+            Passes {
+                masks: pipeline("expand"),
+                leaves: pipeline("leaves"),
+            }
+        })
+    }
+
     /// Records the passes that fill `inputs.masks` (`mask_words` u32s per point) and
-    /// `inputs.leaf_spheres` (one per BVH item).
+    /// `inputs.leaf_spheres` (one per BVH item); `split` when an array spans several ranges.
     pub(crate) fn encode(
         &self,
         gpu: &Gpu,
         inputs: &ExpandInputs,
         settings: ExpandSettings,
+        split: bool,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<()> {
         let max_groups = gpu.device.limits().max_compute_workgroups_per_dimension;
@@ -103,22 +121,22 @@ impl Expander {
             inputs.cluster_start,
             inputs.cluster_ids,
             inputs.masks,
-            &uniform,
             inputs.bvh_items,
             inputs.spheres,
             inputs.leaf_spheres,
         ];
-        let entries = bind_in_order(&buffers);
+        let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), gpu.max_binding());
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("expand"),
             layout: &self.layout,
             entries: &entries,
         });
-        let passes = [
-            (&self.masks, settings.point_count * settings.mask_words),
-            (&self.leaves, settings.item_count),
+        let passes = self.passes(gpu, split);
+        let dispatches = [
+            (&passes.masks, settings.point_count * settings.mask_words),
+            (&passes.leaves, settings.item_count),
         ];
-        for (pipeline, threads) in passes {
+        for (pipeline, threads) in dispatches {
             if threads == 0 {
                 continue;
             }

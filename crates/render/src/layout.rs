@@ -33,6 +33,11 @@ pub struct GpuSettings {
     pub has_field: u32,
     /// Words of the neighbour masks per point.
     pub mask_words: u32,
+    /// Entries of bvh_nodes on the GPU (the blank lead node included) and of bvh_items.
+    pub node_count: u32,
+    pub item_count: u32,
+    pub pad0: u32,
+    pub pad1: u32,
 }
 
 /// `struct ExpandSettings` in expand.wgsl: the uniforms of the per-step passes (neighbour
@@ -49,7 +54,8 @@ pub struct ExpandSettings {
     pub sphere_count: u32,
     /// Entries of the BVH's item list.
     pub item_count: u32,
-    pub pad0: u32,
+    /// Entries of cluster_ids.
+    pub cluster_id_count: u32,
 }
 
 /// `struct Hit` in trace.wgsl: one pixel of the hit buffer, in the cache's local coordinates.

@@ -14,7 +14,7 @@ pub mod shaders;
 mod tracer;
 mod upload;
 
-pub use context::{Gpu, STORAGE_BUFFERS_NEEDED, adapters};
+pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
 pub use tracer::{Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings};

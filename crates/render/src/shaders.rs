@@ -1,10 +1,16 @@
-//! The WGSL sources, compiled into the binary. mls.wgsl holds the shared MLS maths and the
-//! step bindings; each pass is appended to it (WGSL has no includes).
+//! The WGSL sources, compiled into the binary, and the modules assembled from them. mls.wgsl
+//! holds the shared MLS maths; each pass is appended to it (WGSL has no includes).
+//!
+//! Storage arrays are bound in ranges: an adapter caps each storage binding (lavapipe at
+//! 128 MiB, which a 2M-point step's balls reach), so every array has [`RANGES`] bindings over
+//! consecutive slices of its buffer, and the shaders read it through a generated accessor,
+//! `NAME_at(i)` (`NAME_set(i, v)` to write). A module built with `split` picks the range from
+//! the index's high bits; one built without reads range 0 alone, as a plain array.
 
-/// The shared MLS maths alone (validated on its own in the tests).
+/// The shared MLS maths alone.
 pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
 
-/// The neighbour-mask pass, standalone, entry point `expand`.
+/// The per-step passes, entry points `expand` (neighbour masks) and `leaves` (leaf spheres).
 pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
 
 /// The trace pass and the water pass, which traces secondary rays: mls.wgsl + trace.wgsl +
@@ -28,10 +34,164 @@ pub const SHADE_WGSL: &str = concat!(
 /// (about 6 % of the frame time on an H100 going from 64 to 32 entries).
 pub const TRACE_STACK_SIZES: [u32; 2] = [32, 64];
 
-/// The trace pass with a traversal stack of `entries` (TRACE_WGSL has 64).
-pub fn trace_wgsl(entries: u32) -> String {
-    TRACE_WGSL.replace(
+/// Bindings per storage array: an array may span this many of the adapter's largest
+/// bindings (3 × 128 MiB on lavapipe: the balls of 6M points). The 13 arrays then take 39
+/// storage bindings per stage, within lavapipe's 48.
+pub const RANGES: u32 = 3;
+
+/// The binding of a pass's uniform block, after every array's ranges.
+pub const UNIFORM_BINDING: u32 = 100;
+
+/// A storage array of a pass: bound at `slot × RANGES + r` for range r of group `group`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RangedArray {
+    pub name: &'static str,
+    /// The WGSL element type.
+    pub element: &'static str,
+    /// Its size in bytes (the array stride).
+    pub element_size: u64,
+    pub group: u32,
+    pub slot: u32,
+    pub writable: bool,
+}
+
+const fn array(
+    name: &'static str,
+    element: &'static str,
+    element_size: u64,
+    group: u32,
+    slot: u32,
+    writable: bool,
+) -> RangedArray {
+    RangedArray {
+        name,
+        element,
+        element_size,
+        group,
+        slot,
+        writable,
+    }
+}
+
+/// The step's arrays as the trace, water and shade passes bind them (group 0).
+pub const STEP_ARRAYS: [RangedArray; 11] = [
+    array("points", "Point", 16, 0, 0, false),
+    array("normals", "Normal", 16, 0, 1, false),
+    array("neighbour_masks", "u32", 4, 0, 2, false),
+    array("cluster_start", "u32", 4, 0, 3, false),
+    array("cluster_ids", "u32", 4, 0, 4, false),
+    array("balls", "Ball", 64, 0, 5, false),
+    array("spheres", "Sphere", 16, 0, 6, false),
+    array("bvh_nodes", "BvhNode", 32, 0, 7, false),
+    array("bvh_items", "u32", 4, 0, 8, false),
+    array("field", "f32", 4, 0, 9, false),
+    array("leaf_spheres", "vec4<f32>", 16, 0, 10, false),
+];
+
+/// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.
+pub const FRAME_ARRAYS: [RangedArray; 2] = [
+    array("hits", "vec4<u32>", 16, 1, 0, true),
+    array("image", "u32", 4, 1, 1, true),
+];
+
+/// The per-step passes' arrays (expand.wgsl, group 0).
+pub const EXPAND_ARRAYS: [RangedArray; 9] = [
+    array("points", "Point", 16, 0, 0, false),
+    array("normals", "Normal", 16, 0, 1, false),
+    array("reach", "f32", 4, 0, 2, false),
+    array("cluster_start", "u32", 4, 0, 3, false),
+    array("cluster_ids", "u32", 4, 0, 4, false),
+    array("neighbour_masks", "u32", 4, 0, 5, true),
+    array("bvh_items", "u32", 4, 0, 6, false),
+    array("spheres", "Point", 16, 0, 7, false),
+    array("leaf_spheres", "vec4<f32>", 16, 0, 8, true),
+];
+
+/// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:
+/// the largest power of two that fits (a shift and a mask pick the range in the shader).
+pub fn elements_per_range(limit: u64, element_size: u64) -> u64 {
+    let fit = (limit / element_size.max(1)).max(1);
+    (1u64 << fit.ilog2()).min(1 << 31)
+}
+
+/// Declarations and accessors of `arrays` for bindings of at most `limit` bytes.
+pub fn ranged_wgsl(arrays: &[RangedArray], limit: u64, split: bool) -> String {
+    let mut out = String::new();
+    for a in arrays {
+        let access = if a.writable { "read_write" } else { "read" };
+        let ranges = if split { RANGES } else { 1 };
+        for r in 0..ranges {
+            out += &format!(
+                "@group({}) @binding({}) var<storage, {access}> {}_{r}: array<{}>;\n",
+                a.group,
+                a.slot * RANGES + r,
+                a.name,
+                a.element
+            );
+        }
+        let (name, ty) = (a.name, a.element);
+        if !split {
+            out += &format!("fn {name}_at(i: u32) -> {ty} {{\n    return {name}_0[i];\n}}\n");
+            if a.writable {
+                out += &format!("fn {name}_set(i: u32, v: {ty}) {{\n    {name}_0[i] = v;\n}}\n");
+            }
+            continue;
+        }
+        let shift = elements_per_range(limit, a.element_size).ilog2();
+        let pick = |body: &dyn Fn(u32) -> String| {
+            let mut s = format!(
+                "    let j = i & {}u;\n    switch i >> {shift}u {{\n",
+                (1u64 << shift) - 1
+            );
+            for r in 0..RANGES {
+                let label = if r + 1 == RANGES {
+                    "default".to_string()
+                } else {
+                    format!("case {r}u")
+                };
+                s += &format!("        {label}: {{\n            {}\n        }}\n", body(r));
+            }
+            s + "    }\n"
+        };
+        out += &format!(
+            "fn {name}_at(i: u32) -> {ty} {{\n{}}}\n",
+            pick(&|r| format!("return {name}_{r}[j];"))
+        );
+        if a.writable {
+            out += &format!(
+                "fn {name}_set(i: u32, v: {ty}) {{\n{}}}\n",
+                pick(&|r| format!("{name}_{r}[j] = v;"))
+            );
+        }
+    }
+    out
+}
+
+/// The trace module (trace, water) with a traversal stack of `entries`.
+pub fn trace_wgsl(entries: u32, limit: u64, split: bool) -> String {
+    let source = TRACE_WGSL.replace(
         "const STACK_SIZE: u32 = 64u;",
         &format!("const STACK_SIZE: u32 = {entries}u;"),
-    )
+    );
+    frame_module(&source, limit, split)
+}
+
+/// The shade module.
+pub fn shade_wgsl(limit: u64, split: bool) -> String {
+    frame_module(SHADE_WGSL, limit, split)
+}
+
+/// mls.wgsl alone, with the bindings it reads.
+pub fn mls_wgsl(limit: u64, split: bool) -> String {
+    frame_module(MLS_WGSL, limit, split)
+}
+
+/// The per-step passes' module.
+pub fn expand_wgsl(limit: u64, split: bool) -> String {
+    ranged_wgsl(&EXPAND_ARRAYS, limit, split) + EXPAND_WGSL
+}
+
+fn frame_module(source: &str, limit: u64, split: bool) -> String {
+    let arrays: Vec<RangedArray> = STEP_ARRAYS.iter().chain(&FRAME_ARRAYS).copied().collect();
+    ranged_wgsl(&arrays, limit, split) + source
 }

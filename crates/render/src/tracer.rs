@@ -5,11 +5,13 @@ use std::sync::OnceLock;
 
 use slosh_mls::Camera;
 
-use crate::bindings::{bind_in_order, buffer_entry, storage_entry};
+use crate::bindings::{bind_entries, layout_entries, ranges_needed};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings};
-use crate::shaders::{SHADE_WGSL, TRACE_STACK_SIZES, trace_wgsl};
+use crate::shaders::{
+    FRAME_ARRAYS, RANGES, STEP_ARRAYS, TRACE_STACK_SIZES, shade_wgsl, trace_wgsl,
+};
 use crate::upload::GpuStep;
 
 /// What the shade pass draws.
@@ -93,14 +95,19 @@ struct TraceVariant {
 }
 
 /// The compiled passes. Trace pipelines are built on first use, for the smallest stack in
-/// `TRACE_STACK_SIZES` that holds the step's BVH.
+/// `TRACE_STACK_SIZES` that holds the step's BVH, and with arrays read from one binding or,
+/// where one spans several, from `RANGES` (`split`).
 #[derive(Debug)]
 pub struct Tracer {
-    traces: [OnceLock<TraceVariant>; TRACE_STACK_SIZES.len()],
+    traces: [[OnceLock<TraceVariant>; 2]; TRACE_STACK_SIZES.len()],
     layout: wgpu::PipelineLayout,
-    shade: wgpu::ComputePipeline,
+    /// The shade pass, by split.
+    shade: [OnceLock<wgpu::ComputePipeline>; 2],
     step_layout: wgpu::BindGroupLayout,
     frame_layout: wgpu::BindGroupLayout,
+    /// The binding limit the modules and bind groups are made for (`Gpu::max_binding` when
+    /// the tracer was built).
+    limit: u64,
 }
 
 /// One frame's GPU buffers and bind groups for a given step.
@@ -111,6 +118,8 @@ pub struct FrameTargets {
     settings: wgpu::Buffer,
     hits: wgpu::Buffer,
     image: wgpu::Buffer,
+    /// Whether an array of the frame or its step spans several bindings.
+    split: bool,
     step_group: wgpu::BindGroup,
     frame_group: wgpu::BindGroup,
     queries: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
@@ -134,6 +143,21 @@ fn compute_pipeline(
         },
         cache: None,
     })
+}
+
+/// A WGSL module, validation errors caught.
+fn shader_module(gpu: &Gpu, label: &str, source: String) -> Result<wgpu::ShaderModule> {
+    let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let module = gpu
+        .device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+    match pollster::block_on(scope.pop()) {
+        Some(e) => Err(Error::Validation(e.to_string())),
+        None => Ok(module),
+    }
 }
 
 fn to_f32(a: [f64; 3]) -> [f32; 3] {
@@ -166,6 +190,10 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         field_max,
         has_field: u32::from(step.field.is_some()),
         mask_words: step.mask_words,
+        node_count: step.node_count,
+        item_count: step.item_count,
+        pad0: 0,
+        pad1: 0,
     }
 }
 
@@ -173,45 +201,68 @@ impl Tracer {
     pub fn new(gpu: &Gpu) -> Result<Tracer> {
         let device = &gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let mut step_entries: Vec<_> = (0..10).map(|b| storage_entry(b, true)).collect();
-        step_entries.push(buffer_entry(10, wgpu::BufferBindingType::Uniform));
-        step_entries.push(storage_entry(11, true));
         let step_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("step"),
-            entries: &step_entries,
+            entries: &layout_entries(&STEP_ARRAYS, true),
         });
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
-            entries: &[storage_entry(0, false), storage_entry(1, false)],
+            entries: &layout_entries(&FRAME_ARRAYS, false),
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("slosh"),
             bind_group_layouts: &[Some(&step_layout), Some(&frame_layout)],
             immediate_size: 0,
         });
-        let module = |source: &str, label: &str| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            })
-        };
-        let shade = compute_pipeline(device, &layout, &module(SHADE_WGSL, "shade"), "shade", &[]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
-        Ok(Tracer {
+        let tracer = Tracer {
             traces: Default::default(),
             layout,
-            shade,
+            shade: Default::default(),
             step_layout,
             frame_layout,
-        })
+            limit: gpu.max_binding(),
+        };
+        // The shade pass is built now: a device that cannot take the layout fails here.
+        tracer.shade_pipeline(gpu, false)?;
+        Ok(tracer)
     }
 
-    /// Buffers and bind groups for `width` × `height` frames of `step`.
-    pub fn targets(&self, gpu: &Gpu, step: &GpuStep, width: u32, height: u32) -> FrameTargets {
+    fn shade_pipeline(&self, gpu: &Gpu, split: bool) -> Result<&wgpu::ComputePipeline> {
+        let slot = &self.shade[usize::from(split)];
+        if let Some(pipeline) = slot.get() {
+            return Ok(pipeline);
+        }
+        let module = shader_module(gpu, "shade", shade_wgsl(self.limit, split))?;
+        let pipeline = self.build(gpu, &module, "shade", &[])?;
+        Ok(slot.get_or_init(|| pipeline))
+    }
+
+    /// Buffers and bind groups for `width` × `height` frames of `step`; an error where the
+    /// frame's hits exceed `RANGES` bindings.
+    pub fn targets(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        width: u32,
+        height: u32,
+    ) -> Result<FrameTargets> {
         let device = &gpu.device;
         let pixels = u64::from(width) * u64::from(height);
+        // The hits take 48 bytes a pixel: the frame's largest array.
+        let hit_bytes = pixels * size_of::<GpuHit>() as u64;
+        let needed = ranges_needed(&FRAME_ARRAYS[0], hit_bytes, self.limit);
+        if needed > u64::from(RANGES) || hit_bytes > device.limits().max_buffer_size {
+            return Err(Error::Validation(format!(
+                "a {width}×{height} frame's hits take {hit_bytes} bytes, more than {} binds ({RANGES} ranges of at most {} bytes, buffers of at most {} bytes)",
+                gpu.describe(),
+                self.limit,
+                device.limits().max_buffer_size
+            )));
+        }
+        let frame_split = needed > 1 || ranges_needed(&FRAME_ARRAYS[1], pixels * 4, self.limit) > 1;
         let buffer = |label, size: u64, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -226,24 +277,20 @@ impl Tracer {
             size_of::<GpuSettings>() as u64,
             U::UNIFORM | U::COPY_DST,
         );
-        let hits = buffer(
-            "hits",
-            pixels * size_of::<GpuHit>() as u64,
-            U::STORAGE | U::COPY_SRC,
-        );
+        let hits = buffer("hits", hit_bytes, U::STORAGE | U::COPY_SRC);
         let image = buffer("image", pixels * 4, U::STORAGE | U::COPY_SRC);
-        let mut step_buffers = step.buffers.in_binding_order().to_vec();
-        step_buffers.extend([&settings, &step.buffers.leaf_spheres]);
-        let entries = bind_in_order(&step_buffers);
+        let step_buffers = step.buffers.in_binding_order();
+        let entries = bind_entries(&STEP_ARRAYS, &step_buffers, Some(&settings), self.limit);
         let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("step"),
             layout: &self.step_layout,
             entries: &entries,
         });
+        let frame_buffers = [&hits, &image];
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
             layout: &self.frame_layout,
-            entries: &bind_in_order(&[&hits, &image]),
+            entries: &bind_entries(&FRAME_ARRAYS, &frame_buffers, None, self.limit),
         });
         let queries = gpu.timestamps.then(|| {
             let set = device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -257,16 +304,17 @@ impl Tracer {
                 buffer("timestamps readback", 32, U::MAP_READ | U::COPY_DST),
             )
         });
-        FrameTargets {
+        Ok(FrameTargets {
             width,
             height,
             settings,
             hits,
             image,
+            split: step.split || frame_split,
             step_group,
             frame_group,
             queries,
-        }
+        })
     }
 
     /// A pipeline of the trace module's `entry` with `constants`, validation errors caught.
@@ -286,7 +334,7 @@ impl Tracer {
     }
 
     /// The trace module for `step`'s BVH: the smallest stack that holds it.
-    fn variant(&self, gpu: &Gpu, step: &GpuStep) -> Result<&TraceVariant> {
+    fn variant(&self, gpu: &Gpu, step: &GpuStep, split: bool) -> Result<&TraceVariant> {
         let needed = u32::try_from(step.bvh_depth + 1).unwrap_or(u32::MAX);
         let slot = TRACE_STACK_SIZES
             .iter()
@@ -297,16 +345,13 @@ impl Tracer {
                     step.bvh_depth
                 ))
             })?;
-        if let Some(variant) = self.traces[slot].get() {
+        let cell = &self.traces[slot][usize::from(split)];
+        if let Some(variant) = cell.get() {
             return Ok(variant);
         }
-        let module = gpu
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("trace"),
-                source: wgpu::ShaderSource::Wgsl(experiment(trace_wgsl(TRACE_STACK_SIZES[slot])).into()),
-            });
-        Ok(self.traces[slot].get_or_init(|| TraceVariant {
+        let source = trace_wgsl(TRACE_STACK_SIZES[slot], self.limit, split);
+        let module = shader_module(gpu, "trace", source)?;
+        Ok(cell.get_or_init(|| TraceVariant {
             module,
             initial: OnceLock::new(),
             refined: Default::default(),
@@ -398,12 +443,12 @@ impl Tracer {
             0,
             bytemuck::bytes_of(&settings(step, &camera, params)),
         );
-        let variant = self.variant(gpu, step)?;
+        let variant = self.variant(gpu, step, targets.split)?;
         let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
         let shade = if params.mode == ShadeMode::Water {
             self.cached(gpu, variant, &variant.water, "water", &[])?
         } else {
-            &self.shade
+            self.shade_pipeline(gpu, targets.split)?
         };
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = gpu
@@ -437,7 +482,7 @@ impl Tracer {
         camera: &Camera,
         params: &TraceParams,
     ) -> Result<Frame> {
-        let targets = self.targets(gpu, step, camera.width, camera.height);
+        let targets = self.targets(gpu, step, camera.width, camera.height)?;
         self.run(gpu, step, &targets, camera, params)?;
         let copy = |source: &wgpu::Buffer| -> Result<wgpu::Buffer> {
             let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -485,17 +530,4 @@ fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
     };
     buffer.unmap();
     Ok(out)
-}
-
-fn experiment(mut s: String) -> String {
-    let Ok(path) = std::env::var("SLOSH_WGSL_PATCH") else { return s };
-    let text = std::fs::read_to_string(path).unwrap();
-    for block in text.split("\n>>>\n") {
-        let Some(rest) = block.trim_start_matches('\n').strip_prefix("<<<\n") else { continue };
-        let (old, new) = rest.split_once("\n===\n").unwrap();
-        assert!(s.contains(old), "patch not found: {old}");
-        s = s.replace(old, new);
-    }
-    eprintln!("patched trace");
-    s
 }

@@ -10,10 +10,12 @@ use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
 
 use bytemuck::Zeroable;
 
+use crate::bindings::ranges_needed;
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::expand::ExpandInputs;
 use crate::layout::ExpandSettings;
+use crate::shaders::{EXPAND_ARRAYS, RANGES, RangedArray, STEP_ARRAYS, elements_per_range};
 
 /// The deepest BVH the trace shader's largest traversal stack (64 entries) holds.
 pub const MAX_BVH_DEPTH: u64 = 62;
@@ -61,8 +63,8 @@ pub struct StepBuffers {
 }
 
 impl StepBuffers {
-    /// The buffers of bindings 0–9 of the trace and shade passes' step bind group.
-    pub fn in_binding_order(&self) -> [&wgpu::Buffer; 10] {
+    /// The buffers of the trace and shade passes' step bind group, in `STEP_ARRAYS`' order.
+    pub fn in_binding_order(&self) -> [&wgpu::Buffer; STEP_ARRAYS.len()] {
         [
             &self.points,
             &self.normals,
@@ -74,6 +76,7 @@ impl StepBuffers {
             &self.bvh_nodes,
             &self.bvh_items,
             &self.field,
+            &self.leaf_spheres,
         ]
     }
 }
@@ -110,6 +113,11 @@ pub struct GpuStep {
     pub cluster_size: u32,
     /// Depth of the step's BVH (the traversal stack needs one entry more).
     pub bvh_depth: u64,
+    /// Entries of the BVH's node buffer (the blank lead node included) and item list.
+    pub node_count: u32,
+    pub item_count: u32,
+    /// Whether an array spans more than one storage binding (see shaders.rs).
+    pub split: bool,
     /// Words of neighbour mask per point: the most candidates of any cluster, over 32.
     pub mask_words: u32,
     pub has_normals: bool,
@@ -143,6 +151,41 @@ const EMPTY_BINDING: u64 = 16;
 
 /// Bytes of the blank node before a step's BVH nodes on the GPU (one `GpuBvhNode`).
 const NODE_LEAD: u64 = 32;
+
+/// How the passes bind each section of `SECTIONS` (and the field).
+fn array_of(name: &str) -> &'static RangedArray {
+    match name {
+        names::POINTS => &STEP_ARRAYS[0],
+        names::NORMALS => &STEP_ARRAYS[1],
+        names::REACH => &EXPAND_ARRAYS[2],
+        names::CLUSTER_START => &STEP_ARRAYS[3],
+        names::CLUSTER_NEIGHBOURS => &STEP_ARRAYS[4],
+        names::BALLS => &STEP_ARRAYS[5],
+        names::SPHERES => &STEP_ARRAYS[6],
+        names::BVH_NODES => &STEP_ARRAYS[7],
+        names::BVH_ITEMS => &STEP_ARRAYS[8],
+        _ => &STEP_ARRAYS[9],
+    }
+}
+
+/// Whether an array of `bytes` needs more than one binding; an error naming it where it
+/// needs more than `RANGES` or exceeds the device's largest buffer.
+fn fits(gpu: &Gpu, file: &CacheFile, what: &str, array: &RangedArray, bytes: u64) -> Result<bool> {
+    let limit = gpu.max_binding();
+    let needed = ranges_needed(array, bytes, limit);
+    let max_buffer = gpu.device.limits().max_buffer_size;
+    if needed > u64::from(RANGES) || bytes > max_buffer {
+        return Err(invalid(
+            file,
+            format!(
+                "'{what}' takes {bytes} bytes on the GPU; {} binds at most {RANGES} ranges of {} bytes per array, in buffers of at most {max_buffer} bytes",
+                gpu.describe(),
+                elements_per_range(limit, array.element_size) * array.element_size
+            ),
+        ));
+    }
+    Ok(needed > 1)
+}
 
 fn invalid(file: &CacheFile, problem: String) -> Error {
     Error::Step {
@@ -224,17 +267,6 @@ impl GpuStep {
                 None if *name != names::NORMALS => {
                     return Err(invalid(file, format!("no section '{name}'")));
                 }
-                Some(e) if e.raw > gpu.max_binding() => {
-                    return Err(invalid(
-                        file,
-                        format!(
-                            "section '{name}' is {} bytes, over this adapter's {}-byte storage binding limit ({})",
-                            e.raw,
-                            gpu.max_binding(),
-                            gpu.describe()
-                        ),
-                    ));
-                }
                 _ => {}
             }
         }
@@ -275,16 +307,21 @@ impl GpuStep {
         check_links(section_bytes[nodes_slot]).map_err(|problem| invalid(file, problem))?;
         let mask_words = mask_words(section_bytes[cluster_slot]);
         let mask_bytes = u64::from(point_count) * u64::from(mask_words) * 4;
-        if mask_bytes > gpu.max_binding() {
-            return Err(invalid(
-                file,
-                format!(
-                    "the neighbour masks take {mask_bytes} bytes ({mask_words} words per point), over this adapter's {}-byte storage binding limit ({})",
-                    gpu.max_binding(),
-                    gpu.describe()
-                ),
-            ));
+        let count = |name: &str| file.section(name).map_or(0, |e| e.count);
+        let item_count = count(names::BVH_ITEMS) as u32;
+        // Every array, sections and the two the upload derives, within RANGES bindings.
+        let mut split = false;
+        for (name, bytes) in wanted.iter().zip(&section_bytes) {
+            let lead = if *name == names::BVH_NODES {
+                NODE_LEAD
+            } else {
+                0
+            };
+            split |= fits(gpu, file, name, array_of(name), lead + bytes.len() as u64)?;
         }
+        split |= fits(gpu, file, "neighbour masks", &STEP_ARRAYS[2], mask_bytes)?;
+        let leaf_bytes = u64::from(item_count) * 16;
+        split |= fits(gpu, file, "leaf spheres", &STEP_ARRAYS[10], leaf_bytes)?;
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -341,7 +378,6 @@ impl GpuStep {
                 mapped_at_creation: false,
             }));
         }
-        let count = |name: &str| file.section(name).map_or(0, |e| e.count);
         let mut it = buffers.into_iter();
         let mut next = || {
             it.next()
@@ -357,10 +393,9 @@ impl GpuStep {
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
-        let item_count = count(names::BVH_ITEMS) as u32;
         let leaf_spheres = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("leaf spheres"),
-            size: (u64::from(item_count) * 16).max(EMPTY_BINDING),
+            size: leaf_bytes.max(EMPTY_BINDING),
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
@@ -387,8 +422,10 @@ impl GpuStep {
                 has_normals: u32::from(has_normals),
                 sphere_count,
                 item_count,
+                cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
                 ..ExpandSettings::zeroed()
             },
+            split,
             &mut encoder,
         )?;
         stats.host_seconds = start.elapsed().as_secs_f64();
@@ -419,6 +456,9 @@ impl GpuStep {
             buffers,
             point_count,
             sphere_count,
+            node_count: count(names::BVH_NODES) as u32 + 1,
+            item_count,
+            split,
             cluster_size,
             bvh_depth: header.stats.bvh_depth,
             mask_words,

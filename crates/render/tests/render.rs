@@ -2,9 +2,7 @@
 //! The GPU tracer against the CPU f64 oracle, the WGSL against naga, the Pod mirrors against
 //! naga's layouts, and a golden image.
 
-use slosh_render::shaders::{
-    EXPAND_WGSL, MLS_WGSL, SHADE_WGSL, TRACE_STACK_SIZES, TRACE_WGSL, trace_wgsl,
-};
+use slosh_render::shaders::{TRACE_STACK_SIZES, expand_wgsl, mls_wgsl, shade_wgsl, trace_wgsl};
 
 fn validate(name: &str, source: &str) -> naga::Module {
     let module = naga::front::wgsl::parse_str(source)
@@ -18,16 +16,26 @@ fn validate(name: &str, source: &str) -> naga::Module {
     module
 }
 
+/// A binding limit as lavapipe's (128 MiB) and the smallest `Gpu::limit_bindings` takes.
+const LIMITS: [u64; 2] = [128 << 20, slosh_render::MIN_BINDING_LIMIT];
+
 #[test]
 fn every_wgsl_file_validates_with_naga() {
-    validate("mls.wgsl", MLS_WGSL);
-    validate("mls.wgsl + trace.wgsl", TRACE_WGSL);
-    validate("mls.wgsl + shade.wgsl", SHADE_WGSL);
-    validate("expand.wgsl", EXPAND_WGSL);
-    for entries in TRACE_STACK_SIZES {
-        let source = trace_wgsl(entries);
-        assert!(source.contains(&format!("const STACK_SIZE: u32 = {entries}u;")));
-        validate(&format!("trace with a {entries}-entry stack"), &source);
+    for limit in LIMITS {
+        for split in [false, true] {
+            let how = format!("(limit {limit}, split {split})");
+            validate(&format!("mls.wgsl {how}"), &mls_wgsl(limit, split));
+            validate(&format!("mls + shade {how}"), &shade_wgsl(limit, split));
+            validate(&format!("expand.wgsl {how}"), &expand_wgsl(limit, split));
+            for entries in TRACE_STACK_SIZES {
+                let source = trace_wgsl(entries, limit, split);
+                assert!(source.contains(&format!("const STACK_SIZE: u32 = {entries}u;")));
+                validate(
+                    &format!("mls + trace, {entries}-entry stack {how}"),
+                    &source,
+                );
+            }
+        }
     }
 }
 
@@ -335,8 +343,8 @@ macro_rules! check_layout {
 fn pod_structs_mirror_the_wgsl_layouts() {
     use slosh_cache::{GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
     use slosh_render::GpuSettings;
-    let trace = validate("trace", TRACE_WGSL);
-    let shade = validate("shade", SHADE_WGSL);
+    let trace = validate("trace", &trace_wgsl(32, LIMITS[0], true));
+    let shade = validate("shade", &shade_wgsl(LIMITS[0], true));
     for module in [&trace, &shade] {
         check_layout!(module, "Point", GpuPoint, [position, radius]);
         check_layout!(module, "Normal", GpuNormal, [normal, pad]);
@@ -373,11 +381,15 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 field_min,
                 field_max,
                 has_field,
-                mask_words
+                mask_words,
+                node_count,
+                item_count,
+                pad0,
+                pad1
             ]
         );
     }
-    let expand = validate("expand", EXPAND_WGSL);
+    let expand = validate("expand", &expand_wgsl(LIMITS[0], true));
     check_layout!(&expand, "Point", GpuPoint, [position, radius]);
     check_layout!(&expand, "Normal", GpuNormal, [normal, pad]);
     check_layout!(
@@ -392,7 +404,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             row_threads,
             sphere_count,
             item_count,
-            pad0
+            cluster_id_count
         ]
     );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);
@@ -605,4 +617,61 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
             "channel {channel}: {got} against {expected}"
         );
     }
+}
+
+/// Arrays past the binding limit are bound in ranges: with bindings capped at 64 KiB, a
+/// 3000-point sphere's balls (192 KB), neighbour data and a 64×48 frame's hits span several
+/// ranges, and the frames (1 and 3 iterations, shaded and water) equal the unsplit ones bit
+/// for bit. An array beyond `RANGES` ranges is refused with a message naming it.
+#[test]
+fn arrays_over_the_binding_limit_are_bound_in_ranges() {
+    let Some(dev) = device() else { return };
+    let mut capped = Gpu::new(std::env::var("SLOSH_ADAPTER").ok().as_deref()).unwrap();
+    capped.limit_bindings(slosh_render::MIN_BINDING_LIMIT);
+    let capped_tracer = Tracer::new(&capped).unwrap();
+    let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 5));
+    let (file, _) = bake(&input, 2);
+    let whole = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+    let split = GpuStep::upload(&capped, &file, None).unwrap();
+    assert!(!whole.split, "the unsplit device split the step");
+    assert!(
+        split.split,
+        "a 64 KiB limit left the step in single bindings"
+    );
+    let mut camera = camera_for(&input.positions, 64);
+    camera.height = 48;
+    for (iterations, mode) in [
+        (1, ShadeMode::Shade),
+        (3, ShadeMode::Shade),
+        (2, ShadeMode::Water),
+    ] {
+        let mut params = TraceParams::for_step(&whole, iterations);
+        params.mode = mode;
+        let a = dev
+            .tracer
+            .render(&dev.gpu, &whole, &camera, &params)
+            .unwrap();
+        let b = capped_tracer
+            .render(&capped, &split, &camera, &params)
+            .unwrap();
+        let hit_count = a.hits.iter().filter(|h| h.status != status::MISS).count();
+        let same_hits = a.hits == b.hits;
+        let same_pixels = a.rgba == b.rgba;
+        eprintln!(
+            "split bindings, {iterations} iterations, {mode:?}: {hit_count} hits; hits equal {same_hits}, pixels equal {same_pixels}"
+        );
+        assert!(hit_count > 500, "{hit_count} hit pixels");
+        assert!(same_hits && same_pixels);
+    }
+    // 5000 points: 320 KB of balls (and more neighbour ids), past 3 ranges of 64 KiB.
+    let big = input_of(&SceneSpec::new(SceneKind::Sphere, 5000, 5));
+    let (file, _) = bake(&big, 2);
+    let message = GpuStep::upload(&capped, &file, None)
+        .unwrap_err()
+        .to_string();
+    eprintln!("refused: {message}");
+    assert!(
+        message.contains("memory.slc") && message.contains("binds at most 3 ranges of 65536 bytes"),
+        "{message}"
+    );
 }
