@@ -98,6 +98,16 @@ fn write_hit(pixel: u32, hit: Hit) {
     hits_set(at + 2u, vec4<u32>(hit.item, hit.iterations, hit.degree, hit.degraded));
 }
 
+// A miss writes its status word alone (a third of the bytes; most pixels miss): the other
+// words keep whatever they held, and the host zeroes them on readback (Tracer::render).
+fn write_miss(pixel: u32) {
+    hits_set(3u * pixel + 1u, vec4<u32>(0u, 0u, 0u, STATUS_MISS));
+}
+
+fn read_status(pixel: u32) -> u32 {
+    return hits_at(3u * pixel + 1u).w;
+}
+
 fn read_hit(pixel: u32) -> Hit {
     let at = 3u * pixel;
     let a = hits_at(at);

@@ -68,11 +68,11 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let index = gid.y * settings.width + gid.x;
-    let hit = read_hit(index);
-    if hit.status == STATUS_MISS {
+    if read_status(index) == STATUS_MISS {
         image_set(index, pack(background(gid.y)));
         return;
     }
+    let hit = read_hit(index);
     let dir = camera_ray(gid.x, gid.y).dir;
     var colour: vec3<f32>;
     switch settings.mode {

@@ -33,17 +33,29 @@ fn has_nodes() -> bool {
     return settings.node_count > 1u;
 }
 
-// Entry parameter of the ray (t ≥ 0) into a node's box, or −1 when it misses. Branch free:
-// an axis the ray is parallel to admits everything or nothing, by whether the origin lies
-// within the box's slab.
-fn enter(node: BvhNode, origin: vec3<f32>, inv_dir: vec3<f32>, parallel: vec3<bool>) -> f32 {
-    let ta = (node.lo - origin) * inv_dir;
-    let tb = (node.hi - origin) * inv_dir;
-    let inside = (origin >= node.lo) & (origin <= node.hi);
-    let near = select(min(ta, tb), select(vec3<f32>(FAR), vec3<f32>(-FAR), inside), parallel);
-    let far = select(max(ta, tb), select(vec3<f32>(-FAR), vec3<f32>(FAR), inside), parallel);
+// The ray as the slab tests take it: t = p / d − o / d per axis, one fused multiply-add. A
+// direction component below 1e-20 becomes ±1e-20: the axis then admits the box at a huge or
+// never at a positive t, which can only let a box in (its items are tested exactly), never
+// shut one out that the ray crosses.
+struct Slab {
+    inv_dir: vec3<f32>,
+    scaled_origin: vec3<f32>,
+}
+
+fn slab(ray: Ray) -> Slab {
+    let tiny = select(vec3<f32>(1e-20), vec3<f32>(-1e-20), ray.dir < vec3<f32>(0.0));
+    let inv_dir = 1.0 / select(ray.dir, tiny, abs(ray.dir) < vec3<f32>(1e-20));
+    return Slab(inv_dir, ray.origin * inv_dir);
+}
+
+// Entry parameter of the ray (t ≥ 0) into a node's box if it enters by `t_max`, else −1.
+fn enter(node: BvhNode, s: Slab, t_max: f32) -> f32 {
+    let ta = fma(node.lo, s.inv_dir, -s.scaled_origin);
+    let tb = fma(node.hi, s.inv_dir, -s.scaled_origin);
+    let near = min(ta, tb);
+    let far = max(ta, tb);
     let t0 = max(max(near.x, near.y), max(near.z, 0.0));
-    let t1 = min(min(far.x, far.y), min(far.z, FAR));
+    let t1 = min(min(far.x, far.y), min(far.z, t_max));
     return select(-1.0, t0, t0 <= t1);
 }
 
@@ -131,8 +143,7 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     best.found = false;
     best.t = FAR;
     best.item = 0xffffffffu;
-    let parallel = abs(ray.dir) < vec3<f32>(1e-30);
-    let inv_dir = 1.0 / select(ray.dir, vec3<f32>(1.0), parallel);
+    let ray_slab = slab(ray);
     var stack_link: array<u32, STACK_SIZE>;
     var stack_t: array<f32, STACK_SIZE>;
     var sp = 0u;
@@ -140,7 +151,7 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     var live = false;
     if has_nodes() && settings.point_count + settings.sphere_count > 0u {
         let root = node(0u);
-        let t_root = enter(root, ray.origin, inv_dir, parallel);
+        let t_root = enter(root, ray_slab, FAR);
         current = link(root);
         live = t_root >= 0.0;
     }
@@ -152,10 +163,10 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
             // The two children are adjacent: one 64-byte line.
             let node_a = node(first);
             let node_b = node(first + 1u);
-            let ta = enter(node_a, ray.origin, inv_dir, parallel);
-            let tb = enter(node_b, ray.origin, inv_dir, parallel);
-            let a_in = ta >= 0.0 && ta <= best.t;
-            let b_in = tb >= 0.0 && tb <= best.t;
+            let ta = enter(node_a, ray_slab, best.t);
+            let tb = enter(node_b, ray_slab, best.t);
+            let a_in = ta >= 0.0;
+            let b_in = tb >= 0.0;
             if a_in && b_in {
                 let a_first = ta <= tb;
                 current = select(link(node_b), link(node_a), a_first);
@@ -228,16 +239,12 @@ fn store(gid: vec3<u32>, ray: Ray, item: u32, out: Outcome) {
     if hit.status != STATUS_MISS && !(finite(hit.t) && finite3(hit.position) && finite3(hit.normal)) {
         hit.status = STATUS_MISS;
     }
+    let pixel = gid.y * settings.width + gid.x;
     if hit.status == STATUS_MISS {
-        hit.position = vec3<f32>(0.0);
-        hit.t = 0.0;
-        hit.normal = vec3<f32>(0.0);
-        hit.item = 0xffffffffu;
-        hit.iterations = 0u;
-        hit.degree = 0u;
-        hit.degraded = 0u;
+        write_miss(pixel);
+        return;
     }
-    write_hit(gid.y * settings.width + gid.x, hit);
+    write_hit(pixel, hit);
 }
 
 fn missed() -> Outcome {

@@ -125,12 +125,12 @@ fn water(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let index = gid.y * settings.width + gid.x;
-    let hit = read_hit(index);
     let dir = camera_ray(gid.x, gid.y).dir;
     let st = stage();
-    if hit.status == STATUS_MISS {
+    if read_status(index) == STATUS_MISS {
         image_set(index, pack(environment(settings.eye, dir, st)));
         return;
     }
+    let hit = read_hit(index);
     image_set(index, pack(water_colour(hit.position, hit.normal, dir, st)));
 }

@@ -8,11 +8,12 @@ use slosh_mls::Camera;
 use crate::bindings::{bind_entries, layout_entries, ranges_needed};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
-use crate::layout::{GpuHit, GpuSettings};
+use crate::layout::{GpuHit, GpuSettings, status};
 use crate::shaders::{
     FRAME_ARRAYS, RANGES, STEP_ARRAYS, TRACE_STACK_SIZES, shade_wgsl, trace_wgsl,
 };
 use crate::upload::GpuStep;
+use bytemuck::Zeroable;
 
 /// What the shade pass draws.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -145,15 +146,32 @@ fn compute_pipeline(
     })
 }
 
-/// A WGSL module, validation errors caught.
-fn shader_module(gpu: &Gpu, label: &str, source: String) -> Result<wgpu::ShaderModule> {
+/// A WGSL module, validation errors caught. `trusted_loops` drops wgpu's loop guards (a
+/// 64-bit counter checked on every iteration of every loop, 4 % of a 1-iteration frame on an
+/// H100): only for the trace module, whose loops all end: the walk's because the upload
+/// checks that children follow their parents (`check_tree`), the rest by constant or
+/// uniform bounds. Bounds checks stay on.
+fn shader_module(
+    gpu: &Gpu,
+    label: &str,
+    source: String,
+    trusted_loops: bool,
+) -> Result<wgpu::ShaderModule> {
     let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = gpu
-        .device
-        .create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
+    let desc = wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    };
+    let module = if trusted_loops {
+        let checks = wgpu::ShaderRuntimeChecks {
+            force_loop_bounding: false,
+            ..wgpu::ShaderRuntimeChecks::checked()
+        };
+        // SAFETY: every loop of the trace module terminates (above); bounds checks are kept.
+        unsafe { gpu.device.create_shader_module_trusted(desc, checks) }
+    } else {
+        gpu.device.create_shader_module(desc)
+    };
     match pollster::block_on(scope.pop()) {
         Some(e) => Err(Error::Validation(e.to_string())),
         None => Ok(module),
@@ -235,7 +253,7 @@ impl Tracer {
         if let Some(pipeline) = slot.get() {
             return Ok(pipeline);
         }
-        let module = shader_module(gpu, "shade", shade_wgsl(self.limit, split))?;
+        let module = shader_module(gpu, "shade", shade_wgsl(self.limit, split), false)?;
         let pipeline = self.build(gpu, &module, "shade", &[])?;
         Ok(slot.get_or_init(|| pipeline))
     }
@@ -350,7 +368,7 @@ impl Tracer {
             return Ok(variant);
         }
         let source = trace_wgsl(TRACE_STACK_SIZES[slot], self.limit, split);
-        let module = shader_module(gpu, "trace", source)?;
+        let module = shader_module(gpu, "trace", source, true)?;
         Ok(cell.get_or_init(|| TraceVariant {
             module,
             initial: OnceLock::new(),
@@ -500,7 +518,14 @@ impl Tracer {
             gpu.queue.submit([encoder.finish()]);
             Ok(staging)
         };
-        let hits = read(gpu, &copy(&targets.hits)?)?;
+        let mut hits: Vec<GpuHit> = read(gpu, &copy(&targets.hits)?)?;
+        // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
+        for hit in hits.iter_mut().filter(|h| h.status == status::MISS) {
+            *hit = GpuHit {
+                item: u32::MAX,
+                ..GpuHit::zeroed()
+            };
+        }
         let rgba = read(gpu, &copy(&targets.image)?)?;
         Ok(Frame {
             width: targets.width,

@@ -25,19 +25,39 @@ pub const MAX_BVH_DEPTH: u64 = 62;
 pub const MAX_LEAF_LINK_COUNT: u32 = 15;
 pub const MAX_LINK_FIRST: u32 = (1 << 28) - 1;
 
-/// Checks that every node of the `bvh_nodes` section packs into a stack link.
-fn check_links(nodes: &[u8]) -> std::result::Result<(), String> {
+/// Checks that the `bvh_nodes` section is a tree the trace pass can walk: every node packs
+/// into a stack link, a leaf's items lie in the item list, and an inner node's children come
+/// after it (so every descent ends: trace.wgsl is compiled without loop guards,
+/// `Tracer`'s `trace_module`).
+fn check_tree(nodes: &[u8], items: u64) -> std::result::Result<(), String> {
     let word = |c: &[u8], at: usize| u32::from_le_bytes([c[at], c[at + 1], c[at + 2], c[at + 3]]);
+    let node_count = (nodes.len() / 32) as u64;
     for (i, node) in nodes.chunks_exact(32).enumerate() {
         let (count, first) = (word(node, 12), word(node, 28));
-        if count > MAX_LEAF_LINK_COUNT || first > MAX_LINK_FIRST {
-            return Err(format!(
-                "BVH node {i} (byte {} of section '{}') has count {count} and first {first}; the tracer takes leaves of at most {MAX_LEAF_LINK_COUNT} items and indices below {}",
-                i * 32,
-                names::BVH_NODES,
+        let (wide, first64) = (u64::from(count), u64::from(first));
+        let problem = if count > MAX_LEAF_LINK_COUNT || first > MAX_LINK_FIRST {
+            format!(
+                "has count {count} and first {first}; the tracer takes leaves of at most {MAX_LEAF_LINK_COUNT} items and indices below {}",
                 MAX_LINK_FIRST + 1
-            ));
-        }
+            )
+        } else if count > 0 && first64 + wide > items {
+            format!(
+                "holds items {first}..{} of a list of {items}",
+                first64 + wide
+            )
+        } else if count == 0 && (first64 <= i as u64 || first64 + 1 >= node_count) {
+            format!(
+                "has children {first} and {} in a tree of {node_count} nodes (children must follow their parent)",
+                first64 + 1
+            )
+        } else {
+            continue;
+        };
+        return Err(format!(
+            "BVH node {i} (byte {} of section '{}') {problem}",
+            i * 32,
+            names::BVH_NODES
+        ));
     }
     Ok(())
 }
@@ -304,7 +324,8 @@ impl GpuStep {
             .iter()
             .position(|n| *n == names::BVH_NODES)
             .unwrap_or_default();
-        check_links(section_bytes[nodes_slot]).map_err(|problem| invalid(file, problem))?;
+        let items = file.section(names::BVH_ITEMS).map_or(0, |e| e.count);
+        check_tree(section_bytes[nodes_slot], items).map_err(|problem| invalid(file, problem))?;
         let mask_words = mask_words(section_bytes[cluster_slot]);
         let mask_bytes = u64::from(point_count) * u64::from(mask_words) * 4;
         let count = |name: &str| file.section(name).map_or(0, |e| e.count);
@@ -473,5 +494,47 @@ impl GpuStep {
                 .map(|(n, (lo, hi))| (n.to_string(), lo, hi)),
             upload: stats,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_tree;
+
+    /// A node as the `bvh_nodes` section stores it: lo, count, hi, first.
+    fn node(count: u32, first: u32) -> Vec<u8> {
+        let mut out = Vec::new();
+        for v in [0.0f32, 0.0, 0.0] {
+            out.extend(v.to_le_bytes());
+        }
+        out.extend(count.to_le_bytes());
+        for v in [1.0f32, 1.0, 1.0] {
+            out.extend(v.to_le_bytes());
+        }
+        out.extend(first.to_le_bytes());
+        out
+    }
+
+    #[test]
+    fn trees_the_walk_could_not_finish_are_refused() {
+        let tree = |nodes: &[(u32, u32)]| -> Vec<u8> {
+            nodes.iter().flat_map(|&(c, f)| node(c, f)).collect()
+        };
+        // Root with two leaves of 3 and 2 items.
+        assert_eq!(check_tree(&tree(&[(0, 1), (3, 0), (2, 3)]), 5), Ok(()));
+        let cycle = check_tree(&tree(&[(0, 1), (0, 0), (2, 3)]), 5).unwrap_err();
+        assert!(
+            cycle.contains("BVH node 1 (byte 32") && cycle.contains("follow"),
+            "{cycle}"
+        );
+        let outside = check_tree(&tree(&[(0, 1), (3, 0), (2, 4)]), 5).unwrap_err();
+        assert!(outside.contains("items 4..6 of a list of 5"), "{outside}");
+        let wide = check_tree(&tree(&[(16, 0)]), 16).unwrap_err();
+        assert!(wide.contains("at most 15 items"), "{wide}");
+        let dangling = check_tree(&tree(&[(0, 1), (3, 0)]), 5).unwrap_err();
+        assert!(
+            dangling.contains("children 1 and 2 in a tree of 2 nodes"),
+            "{dangling}"
+        );
     }
 }
