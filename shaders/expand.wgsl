@@ -6,6 +6,8 @@
 // One thread per (point, word): bit b of word w is candidate slot 32 w + b. The refinement
 // loops in mls.wgsl then visit only the set bits.
 //
+// `widen`: the 4-wide tree the trace walk descends (`Wide` above).
+//
 // `leaves`: each BVH item slot's sphere (a ball's centre and radius of trust, or a droplet),
 // so the trace walk reads a leaf's spheres beside its items instead of through them.
 
@@ -17,6 +19,28 @@ struct Point {
 struct Normal {
     normal: vec3<f32>,
     pad: f32,
+}
+
+struct BvhNode {
+    lo: vec3<f32>,
+    count: u32,
+    hi: vec3<f32>,
+    first: u32,
+}
+
+// A node of the 4-wide tree the walk descends, built per step by expand.wgsl's `widen` from
+// the baked BVH2: slot i of entry k holds a grandchild of BVH2 node k (or a child that is a
+// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot has
+// an empty box (lo > hi).
+struct Wide {
+    lo_x: vec4<f32>,
+    hi_x: vec4<f32>,
+    lo_y: vec4<f32>,
+    hi_y: vec4<f32>,
+    lo_z: vec4<f32>,
+    hi_z: vec4<f32>,
+    links: vec4<u32>,
+    pad: vec4<u32>,
 }
 
 // Mirrors `slosh_render::ExpandSettings`.
@@ -31,6 +55,11 @@ struct ExpandSettings {
     item_count: u32,
     // Entries of cluster_ids.
     cluster_id_count: u32,
+    // Nodes of the baked BVH2 (bvh_nodes holds them after one blank node).
+    node_count: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // The arrays (points, normals, reach, cluster_start, cluster_ids, neighbour_masks,
@@ -101,4 +130,56 @@ fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
         sphere = vec4<f32>(d.position, d.radius);
     }
     leaf_spheres_set(k, sphere);
+}
+
+// Link of a node as the walk stacks it (trace.wgsl: `link`): an inner node by its own index
+// (its entry of wide_nodes), a leaf by its first item and count.
+fn wide_link(index: u32, n: BvhNode) -> u32 {
+    return select(index, n.first | (n.count << 28u), n.count > 0u);
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn widen(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let cfg = expand_settings;
+    let k = gid.y * cfg.row_threads + gid.x;
+    if k >= cfg.node_count {
+        return;
+    }
+    let parent = bvh_nodes_at(k + 1u);
+    if parent.count > 0u || parent.first + 1u >= cfg.node_count {
+        return;
+    }
+    var w: Wide;
+    w.lo_x = vec4<f32>(1.0);
+    w.hi_x = vec4<f32>(-1.0);
+    w.lo_y = vec4<f32>(1.0);
+    w.hi_y = vec4<f32>(-1.0);
+    w.lo_z = vec4<f32>(1.0);
+    w.hi_z = vec4<f32>(-1.0);
+    var slot = 0u;
+    for (var c = 0u; c < 2u; c++) {
+        let ci = parent.first + c;
+        let child = bvh_nodes_at(ci + 1u);
+        var count = 1u;
+        if child.count == 0u && child.first + 1u < cfg.node_count {
+            count = 2u;
+        }
+        for (var g = 0u; g < count; g++) {
+            var index = ci;
+            var n = child;
+            if count == 2u {
+                index = child.first + g;
+                n = bvh_nodes_at(index + 1u);
+            }
+            w.lo_x[slot] = n.lo.x;
+            w.hi_x[slot] = n.hi.x;
+            w.lo_y[slot] = n.lo.y;
+            w.hi_y[slot] = n.hi.y;
+            w.lo_z[slot] = n.lo.z;
+            w.hi_z[slot] = n.hi.z;
+            w.links[slot] = wide_link(index, n);
+            slot++;
+        }
+    }
+    wide_nodes_set(k, w);
 }

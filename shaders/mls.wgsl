@@ -27,6 +27,21 @@ struct BvhNode {
     first: u32,
 }
 
+// A node of the 4-wide tree the walk descends, built per step by expand.wgsl's `widen` from
+// the baked BVH2: slot i of entry k holds a grandchild of BVH2 node k (or a child that is a
+// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot has
+// an empty box (lo > hi).
+struct Wide {
+    lo_x: vec4<f32>,
+    hi_x: vec4<f32>,
+    lo_y: vec4<f32>,
+    hi_y: vec4<f32>,
+    lo_z: vec4<f32>,
+    hi_z: vec4<f32>,
+    links: vec4<u32>,
+    pad: vec4<u32>,
+}
+
 // A ball's initial support normal and polynomial (mirrors `slosh_cache::GpuBall`).
 struct Ball {
     normal: vec3<f32>,

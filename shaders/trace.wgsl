@@ -1,10 +1,11 @@
-// The trace pass: one thread per pixel. Camera ray → the baked BVH2 (stack based, nearer
-// child first, pruned by the best hit) → the nearest initial hit (a ball's baked polynomial
-// inside its ball, or a droplet sphere; an exact tie goes to the lower item) → with more
-// iterations, refinement of that candidate (mls.wgsl), handing over to the next initial hit
-// when it leaves its ball. Droplet spheres are items after the balls. Mirrors
-// crates/mls/src/tracer.rs and crates/cache/src/bvh.rs. Appended to mls.wgsl; water.wgsl
-// reuses its walk for secondary rays.
+// The trace pass: one thread per pixel. Camera ray → the baked BVH2, walked as the 4-wide
+// tree expand.wgsl widens it into (stack based, nearest slot in hand, pruned by the best hit)
+// → the nearest initial hit (a ball's baked polynomial inside its ball, or a droplet sphere;
+// an exact tie goes to the lower item) → with more iterations, refinement of that candidate
+// (mls.wgsl), handing over to the next initial hit when it leaves its ball. Droplet spheres
+// are items after the balls. Mirrors crates/mls/src/tracer.rs and crates/cache/src/bvh.rs
+// (the order of the walk differs; the nearest key does not). Appended to mls.wgsl;
+// water.wgsl reuses its walk for secondary rays.
 
 // bvh_nodes holds the step's nodes after one blank node (the upload puts it there), so that
 // every pair of siblings, slots 2k + 1 and 2k + 2 of the section, shares one 64-byte-aligned
@@ -57,6 +58,34 @@ fn enter(node: BvhNode, s: Slab, t_max: f32) -> f32 {
     let t0 = max(max(near.x, near.y), max(near.z, 0.0));
     let t1 = min(min(far.x, far.y), min(far.z, t_max));
     return select(-1.0, t0, t0 <= t1);
+}
+
+// Entry parameters of the ray into a wide node's four boxes, each if it enters by `t_max`,
+// else FAR (empty slots never enter).
+fn enter_wide(w: Wide, s: Slab, t_max: f32) -> vec4<f32> {
+    let ax = fma(w.lo_x, vec4<f32>(s.inv_dir.x), vec4<f32>(-s.scaled_origin.x));
+    let bx = fma(w.hi_x, vec4<f32>(s.inv_dir.x), vec4<f32>(-s.scaled_origin.x));
+    let ay = fma(w.lo_y, vec4<f32>(s.inv_dir.y), vec4<f32>(-s.scaled_origin.y));
+    let by = fma(w.hi_y, vec4<f32>(s.inv_dir.y), vec4<f32>(-s.scaled_origin.y));
+    let az = fma(w.lo_z, vec4<f32>(s.inv_dir.z), vec4<f32>(-s.scaled_origin.z));
+    let bz = fma(w.hi_z, vec4<f32>(s.inv_dir.z), vec4<f32>(-s.scaled_origin.z));
+    let near = max(max(min(ax, bx), min(ay, by)), max(min(az, bz), vec4<f32>(0.0)));
+    let far = min(min(max(ax, bx), max(ay, by)), min(max(az, bz), vec4<f32>(t_max)));
+    let empty = (w.lo_x > w.hi_x) | (w.lo_y > w.hi_y) | (w.lo_z > w.hi_z);
+    return select(vec4<f32>(FAR), near, (near <= far) & !empty);
+}
+
+// Two (entry, link) pairs in ascending entry.
+struct Ordered {
+    t_lo: f32,
+    l_lo: u32,
+    t_hi: f32,
+    l_hi: u32,
+}
+
+fn ordered(ta: f32, la: u32, tb: f32, lb: u32) -> Ordered {
+    let swap = tb < ta;
+    return Ordered(select(ta, tb, swap), select(la, lb, swap), select(tb, ta, swap), select(lb, la, swap));
 }
 
 // Candidates refined per ray before it counts as a miss (tracer.rs: MAX_CANDIDATES).
@@ -150,34 +179,40 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     var current = 0u;
     var live = false;
     if has_nodes() && settings.point_count + settings.sphere_count > 0u {
+        // An inner root is entry 0 of the wide tree; a leaf root is its own link.
         let root = node(0u);
         let t_root = enter(root, ray_slab, FAR);
-        current = link(root);
+        current = select(0u, link(root), root.count > 0u);
         live = t_root >= 0.0;
     }
     loop {
-        // Down through inner nodes until the node in hand is a leaf, or nothing below it is
-        // entered.
+        // Down the 4-wide tree until the node in hand is a leaf, or nothing below it is
+        // entered: the nearest entered slot is taken in hand, the others stacked.
         while live && (current >> LINK_COUNT_SHIFT) == 0u {
-            let first = current & LINK_FIRST;
-            // The two children are adjacent: one 64-byte line.
-            let node_a = node(first);
-            let node_b = node(first + 1u);
-            let ta = enter(node_a, ray_slab, best.t);
-            let tb = enter(node_b, ray_slab, best.t);
-            let a_in = ta >= 0.0;
-            let b_in = tb >= 0.0;
-            if a_in && b_in {
-                let a_first = ta <= tb;
-                current = select(link(node_b), link(node_a), a_first);
-                stack_link[sp] = select(link(node_a), link(node_b), a_first);
-                stack_t[sp] = select(ta, tb, a_first);
-                sp++;
-            } else if a_in || b_in {
-                current = select(link(node_b), link(node_a), a_in);
-            } else {
+            let w = wide_nodes_at(current);
+            let t = enter_wide(w, ray_slab, best.t);
+            // The four (entry, link) pairs in ascending entry: a five-comparator network.
+            let a = ordered(t.x, w.links.x, t.y, w.links.y);
+            let b = ordered(t.z, w.links.z, t.w, w.links.w);
+            let c = ordered(a.t_lo, a.l_lo, b.t_lo, b.l_lo);
+            let d = ordered(a.t_hi, a.l_hi, b.t_hi, b.l_hi);
+            let e = ordered(c.t_hi, c.l_hi, d.t_lo, d.l_lo);
+            if c.t_lo >= FAR {
                 live = false;
+                break;
             }
+            current = c.l_lo;
+            // Farthest first, so the nearer come off the stack first; a slot not entered
+            // is written and not kept.
+            stack_link[sp] = d.l_hi;
+            stack_t[sp] = d.t_hi;
+            sp += select(0u, 1u, d.t_hi < FAR);
+            stack_link[sp] = e.l_hi;
+            stack_t[sp] = e.t_hi;
+            sp += select(0u, 1u, e.t_hi < FAR);
+            stack_link[sp] = e.l_lo;
+            stack_t[sp] = e.t_lo;
+            sp += select(0u, 1u, e.t_lo < FAR);
         }
         if live {
             visit_leaf(ray, current & LINK_FIRST, current >> LINK_COUNT_SHIFT, after_t, after_item, &best);

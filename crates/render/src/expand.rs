@@ -18,6 +18,7 @@ const WORKGROUP: u32 = 64;
 struct Passes {
     masks: wgpu::ComputePipeline,
     leaves: wgpu::ComputePipeline,
+    widen: wgpu::ComputePipeline,
 }
 
 /// The compiled passes, built once per device, per split, on first use.
@@ -40,6 +41,8 @@ pub(crate) struct ExpandInputs<'a> {
     pub bvh_items: &'a wgpu::Buffer,
     pub spheres: &'a wgpu::Buffer,
     pub leaf_spheres: &'a wgpu::Buffer,
+    pub bvh_nodes: &'a wgpu::Buffer,
+    pub wide_nodes: &'a wgpu::Buffer,
 }
 
 impl Expander {
@@ -82,12 +85,14 @@ impl Expander {
             Passes {
                 masks: pipeline("expand"),
                 leaves: pipeline("leaves"),
+                widen: pipeline("widen"),
             }
         })
     }
 
-    /// Records the passes that fill `inputs.masks` (`mask_words` u32s per point) and
-    /// `inputs.leaf_spheres` (one per BVH item); `split` when an array spans several ranges.
+    /// Records the passes that fill `inputs.masks` (`mask_words` u32s per point),
+    /// `inputs.leaf_spheres` (one per BVH item) and `inputs.wide_nodes` (one per BVH2 node);
+    /// `split` when an array spans several ranges.
     pub(crate) fn encode(
         &self,
         gpu: &Gpu,
@@ -124,6 +129,8 @@ impl Expander {
             inputs.bvh_items,
             inputs.spheres,
             inputs.leaf_spheres,
+            inputs.bvh_nodes,
+            inputs.wide_nodes,
         ];
         let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), gpu.max_binding());
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -135,6 +142,7 @@ impl Expander {
         let dispatches = [
             (&passes.masks, settings.point_count * settings.mask_words),
             (&passes.leaves, settings.item_count),
+            (&passes.widen, settings.node_count),
         ];
         for (pipeline, threads) in dispatches {
             if threads == 0 {

@@ -56,6 +56,11 @@ pub struct ExpandSettings {
     pub item_count: u32,
     /// Entries of cluster_ids.
     pub cluster_id_count: u32,
+    /// Nodes of the baked BVH2.
+    pub node_count: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// `struct Hit` in trace.wgsl: one pixel of the hit buffer, in the cache's local coordinates.

@@ -32,10 +32,10 @@ pub const SHADE_WGSL: &str = concat!(
 /// Traversal stack sizes the trace pass is built with. WGSL sizes private arrays by constants
 /// only, so each size is a separate module; a smaller stack costs less per-thread memory
 /// (about 6 % of the frame time on an H100 going from 64 to 32 entries).
-pub const TRACE_STACK_SIZES: [u32; 2] = [32, 64];
+pub const TRACE_STACK_SIZES: [u32; 3] = [32, 64, 96];
 
 /// Bindings per storage array: an array may span this many of the adapter's largest
-/// bindings (3 × 128 MiB on lavapipe: the balls of 6M points). The 13 arrays then take 39
+/// bindings (3 × 128 MiB on lavapipe: the balls of 6M points). The 14 arrays then take 42
 /// storage bindings per stage, within lavapipe's 48.
 pub const RANGES: u32 = 3;
 
@@ -74,7 +74,7 @@ const fn array(
 }
 
 /// The step's arrays as the trace, water and shade passes bind them (group 0).
-pub const STEP_ARRAYS: [RangedArray; 11] = [
+pub const STEP_ARRAYS: [RangedArray; 12] = [
     array("points", "Point", 16, 0, 0, false),
     array("normals", "Normal", 16, 0, 1, false),
     array("neighbour_masks", "u32", 4, 0, 2, false),
@@ -86,6 +86,7 @@ pub const STEP_ARRAYS: [RangedArray; 11] = [
     array("bvh_items", "u32", 4, 0, 8, false),
     array("field", "f32", 4, 0, 9, false),
     array("leaf_spheres", "vec4<f32>", 16, 0, 10, false),
+    array("wide_nodes", "Wide", 128, 0, 11, false),
 ];
 
 /// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.
@@ -95,7 +96,7 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
 ];
 
 /// The per-step passes' arrays (expand.wgsl, group 0).
-pub const EXPAND_ARRAYS: [RangedArray; 9] = [
+pub const EXPAND_ARRAYS: [RangedArray; 11] = [
     array("points", "Point", 16, 0, 0, false),
     array("normals", "Normal", 16, 0, 1, false),
     array("reach", "f32", 4, 0, 2, false),
@@ -105,6 +106,8 @@ pub const EXPAND_ARRAYS: [RangedArray; 9] = [
     array("bvh_items", "u32", 4, 0, 6, false),
     array("spheres", "Point", 16, 0, 7, false),
     array("leaf_spheres", "vec4<f32>", 16, 0, 8, true),
+    array("bvh_nodes", "BvhNode", 32, 0, 9, false),
+    array("wide_nodes", "Wide", 128, 0, 10, true),
 ];
 
 /// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:

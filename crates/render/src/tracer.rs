@@ -353,7 +353,8 @@ impl Tracer {
 
     /// The trace module for `step`'s BVH: the smallest stack that holds it.
     fn variant(&self, gpu: &Gpu, step: &GpuStep, split: bool) -> Result<&TraceVariant> {
-        let needed = u32::try_from(step.bvh_depth + 1).unwrap_or(u32::MAX);
+        // The wide tree has half the levels, each stacking up to three slots.
+        let needed = u32::try_from(3 * step.bvh_depth.div_ceil(2) + 2).unwrap_or(u32::MAX);
         let slot = TRACE_STACK_SIZES
             .iter()
             .position(|&size| size >= needed)

@@ -17,7 +17,8 @@ use crate::expand::ExpandInputs;
 use crate::layout::ExpandSettings;
 use crate::shaders::{EXPAND_ARRAYS, RANGES, RangedArray, STEP_ARRAYS, elements_per_range};
 
-/// The deepest BVH the trace shader's largest traversal stack (64 entries) holds.
+/// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
+/// tree has 31 levels, each stacking up to three slots.
 pub const MAX_BVH_DEPTH: u64 = 62;
 
 /// The traversal stack packs a node as `first | count << 28` (trace.wgsl: `link`), so a
@@ -80,6 +81,9 @@ pub struct StepBuffers {
     pub field: wgpu::Buffer,
     /// Written by the leaf-sphere pass at upload: each BVH item's sphere, 16 bytes.
     pub leaf_spheres: wgpu::Buffer,
+    /// Written by the widening pass at upload: the 4-wide tree the walk descends, one
+    /// `WIDE_NODE_BYTES` entry per BVH2 node (a leaf's unused).
+    pub wide_nodes: wgpu::Buffer,
 }
 
 impl StepBuffers {
@@ -97,6 +101,7 @@ impl StepBuffers {
             &self.bvh_items,
             &self.field,
             &self.leaf_spheres,
+            &self.wide_nodes,
         ]
     }
 }
@@ -168,6 +173,9 @@ const SECTIONS: [&str; 9] = [
 
 /// wgpu refuses zero-sized bindings; absent or empty sections bind this many zero bytes.
 const EMPTY_BINDING: u64 = 16;
+
+/// Bytes of an entry of the 4-wide tree (`struct Wide` in mls.wgsl).
+const WIDE_NODE_BYTES: u64 = 128;
 
 /// Bytes of the blank node before a step's BVH nodes on the GPU (one `GpuBvhNode`).
 const NODE_LEAD: u64 = 32;
@@ -343,6 +351,9 @@ impl GpuStep {
         split |= fits(gpu, file, "neighbour masks", &STEP_ARRAYS[2], mask_bytes)?;
         let leaf_bytes = u64::from(item_count) * 16;
         split |= fits(gpu, file, "leaf spheres", &STEP_ARRAYS[10], leaf_bytes)?;
+        let node_count = count(names::BVH_NODES) as u32;
+        let wide_bytes = u64::from(node_count) * WIDE_NODE_BYTES;
+        split |= fits(gpu, file, "wide nodes", &STEP_ARRAYS[11], wide_bytes)?;
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -420,6 +431,12 @@ impl GpuStep {
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
+        let wide_nodes = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("wide nodes"),
+            size: wide_bytes.max(WIDE_NODE_BYTES),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         let has_normals = file.section(names::NORMALS).is_some();
         let cluster_size = header.neighbour_cluster.max(1);
         let sphere_count = count(names::SPHERES) as u32;
@@ -435,6 +452,8 @@ impl GpuStep {
                 bvh_items: &bvh_items,
                 spheres: &spheres,
                 leaf_spheres: &leaf_spheres,
+                bvh_nodes: &bvh_nodes,
+                wide_nodes: &wide_nodes,
             },
             ExpandSettings {
                 point_count,
@@ -444,6 +463,7 @@ impl GpuStep {
                 sphere_count,
                 item_count,
                 cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
+                node_count,
                 ..ExpandSettings::zeroed()
             },
             split,
@@ -472,12 +492,13 @@ impl GpuStep {
             bvh_items,
             field: field_values,
             leaf_spheres,
+            wide_nodes,
         };
         Ok(GpuStep {
             buffers,
             point_count,
             sphere_count,
-            node_count: count(names::BVH_NODES) as u32 + 1,
+            node_count: node_count + 1,
             item_count,
             split,
             cluster_size,

@@ -404,7 +404,11 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             row_threads,
             sphere_count,
             item_count,
-            cluster_id_count
+            cluster_id_count,
+            node_count,
+            pad0,
+            pad1,
+            pad2
         ]
     );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);
