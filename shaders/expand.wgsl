@@ -132,6 +132,8 @@ fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
     leaf_spheres_set(k, sphere);
 }
 
+const EMPTY_SLOT: f32 = 1e30;
+
 // Link of a node as the walk stacks it (trace.wgsl: `link`): an inner node by its own index
 // (its entry of wide_nodes), a leaf by its first item and count.
 fn wide_link(index: u32, n: BvhNode) -> u32 {
@@ -150,12 +152,14 @@ fn widen(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     var w: Wide;
-    w.lo_x = vec4<f32>(1.0);
-    w.hi_x = vec4<f32>(-1.0);
-    w.lo_y = vec4<f32>(1.0);
-    w.hi_y = vec4<f32>(-1.0);
-    w.lo_z = vec4<f32>(1.0);
-    w.hi_z = vec4<f32>(-1.0);
+    // An empty slot is the point (1e30, 1e30, 1e30): a unit ray (|1 / d| ≥ 1 per axis) would
+    // enter it beyond any t the walk accepts, or behind its origin.
+    w.lo_x = vec4<f32>(EMPTY_SLOT);
+    w.hi_x = vec4<f32>(EMPTY_SLOT);
+    w.lo_y = vec4<f32>(EMPTY_SLOT);
+    w.hi_y = vec4<f32>(EMPTY_SLOT);
+    w.lo_z = vec4<f32>(EMPTY_SLOT);
+    w.hi_z = vec4<f32>(EMPTY_SLOT);
     var slot = 0u;
     for (var c = 0u; c < 2u; c++) {
         let ci = parent.first + c;

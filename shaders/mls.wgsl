@@ -29,8 +29,8 @@ struct BvhNode {
 
 // A node of the 4-wide tree the walk descends, built per step by expand.wgsl's `widen` from
 // the baked BVH2: slot i of entry k holds a grandchild of BVH2 node k (or a child that is a
-// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot has
-// an empty box (lo > hi).
+// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot is
+// the point (1e30, 1e30, 1e30), which no ray enters in time.
 struct Wide {
     lo_x: vec4<f32>,
     hi_x: vec4<f32>,

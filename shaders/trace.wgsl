@@ -61,7 +61,7 @@ fn enter(node: BvhNode, s: Slab, t_max: f32) -> f32 {
 }
 
 // Entry parameters of the ray into a wide node's four boxes, each if it enters by `t_max`,
-// else FAR (empty slots never enter).
+// else FAR (empty slots, far points, never enter).
 fn enter_wide(w: Wide, s: Slab, t_max: f32) -> vec4<f32> {
     let ax = fma(w.lo_x, vec4<f32>(s.inv_dir.x), vec4<f32>(-s.scaled_origin.x));
     let bx = fma(w.hi_x, vec4<f32>(s.inv_dir.x), vec4<f32>(-s.scaled_origin.x));
@@ -71,8 +71,7 @@ fn enter_wide(w: Wide, s: Slab, t_max: f32) -> vec4<f32> {
     let bz = fma(w.hi_z, vec4<f32>(s.inv_dir.z), vec4<f32>(-s.scaled_origin.z));
     let near = max(max(min(ax, bx), min(ay, by)), max(min(az, bz), vec4<f32>(0.0)));
     let far = min(min(max(ax, bx), max(ay, by)), min(max(az, bz), vec4<f32>(t_max)));
-    let empty = (w.lo_x > w.hi_x) | (w.lo_y > w.hi_y) | (w.lo_z > w.hi_z);
-    return select(vec4<f32>(FAR), near, (near <= far) & !empty);
+    return select(vec4<f32>(FAR), near, near <= far);
 }
 
 // Two (entry, link) pairs in ascending entry.

@@ -524,11 +524,11 @@ fn write_report(
     }
     let _ = writeln!(
         md,
-        "## Upload per step\n\nFrom a step in memory (as from the page cache): checksums, decompression, copies into `mapped_at_creation` staging buffers, `copy_buffer_to_buffer` into device-local storage, then the neighbour-mask pass (`shaders/expand.wgsl`), waited for. Median of 5.\n"
+        "## Upload per step\n\nFrom a step in memory (as from the page cache): checksums, decompression, copies into `mapped_at_creation` staging buffers, `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
     );
     let _ = writeln!(
         md,
-        "| step | bytes on the GPU | bytes stored | host ms | GPU copy + masks ms | total ms | GB/s |"
+        "| step | bytes on the GPU | bytes stored | host ms | GPU copy + passes ms | total ms | GB/s |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|");
     for (label, _, u) in uploads {
