@@ -6,42 +6,10 @@
 // One thread per (point, word): bit b of word w is candidate slot 32 w + b. The refinement
 // loops in mls.wgsl then visit only the set bits.
 //
-// `widen`: the 4-wide tree the trace walk descends (`Wide` above).
+// `widen`: the 4-wide tree the trace walk descends (`Wide` in step.wgsl).
 //
 // `leaves`: each BVH item slot's sphere (a ball's centre and radius of trust, or a droplet),
 // so the trace walk reads a leaf's spheres beside its items instead of through them.
-
-struct Point {
-    position: vec3<f32>,
-    radius: f32,
-}
-
-struct Normal {
-    normal: vec3<f32>,
-    pad: f32,
-}
-
-struct BvhNode {
-    lo: vec3<f32>,
-    count: u32,
-    hi: vec3<f32>,
-    first: u32,
-}
-
-// A node of the 4-wide tree the walk descends, built per step by expand.wgsl's `widen` from
-// the baked BVH2: slot i of entry k holds a grandchild of BVH2 node k (or a child that is a
-// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot has
-// an empty box (lo > hi).
-struct Wide {
-    lo_x: vec4<f32>,
-    hi_x: vec4<f32>,
-    lo_y: vec4<f32>,
-    hi_y: vec4<f32>,
-    lo_z: vec4<f32>,
-    hi_z: vec4<f32>,
-    links: vec4<u32>,
-    pad: vec4<u32>,
-}
 
 // Mirrors `slosh_render::ExpandSettings`.
 struct ExpandSettings {
@@ -62,15 +30,19 @@ struct ExpandSettings {
     pad2: u32,
 }
 
-// The arrays (points, normals, reach, cluster_start, cluster_ids, neighbour_masks,
-// bvh_items, spheres, leaf_spheres) are read and written through accessors that
+// The arrays (shaders.rs: EXPAND_ARRAYS) are read and written through accessors that
 // crates/render's shaders.rs generates over the ranges they are bound in.
 @group(0) @binding(100) var<uniform> expand_settings: ExpandSettings;
+
+// The thread's index in a 2D dispatch of full rows.
+fn thread(gid: vec3<u32>) -> u32 {
+    return gid.y * expand_settings.row_threads + gid.x;
+}
 
 @compute @workgroup_size(64, 1, 1)
 fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cfg = expand_settings;
-    let slot = gid.y * cfg.row_threads + gid.x;
+    let slot = thread(gid);
     if cfg.mask_words == 0u || slot >= cfg.point_count * cfg.mask_words {
         return;
     }
@@ -116,7 +88,7 @@ fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(64, 1, 1)
 fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cfg = expand_settings;
-    let k = gid.y * cfg.row_threads + gid.x;
+    let k = thread(gid);
     if k >= cfg.item_count {
         return;
     }
@@ -127,23 +99,23 @@ fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
         sphere = vec4<f32>(p.position, p.radius);
     } else if item - cfg.point_count < cfg.sphere_count {
         let d = spheres_at(item - cfg.point_count);
-        sphere = vec4<f32>(d.position, d.radius);
+        sphere = vec4<f32>(d.centre, d.radius);
     }
     leaf_spheres_set(k, sphere);
 }
 
 const EMPTY_SLOT: f32 = 1e30;
 
-// Link of a node as the walk stacks it (trace.wgsl: `link`): an inner node by its own index
-// (its entry of wide_nodes), a leaf by its first item and count.
+// Link of a slot: an inner node by its own index (its entry of wide_nodes), a leaf by its
+// `link`.
 fn wide_link(index: u32, n: BvhNode) -> u32 {
-    return select(index, n.first | (n.count << 28u), n.count > 0u);
+    return select(index, link(n), n.count > 0u);
 }
 
 @compute @workgroup_size(64, 1, 1)
 fn widen(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cfg = expand_settings;
-    let k = gid.y * cfg.row_threads + gid.x;
+    let k = thread(gid);
     if k >= cfg.node_count {
         return;
     }

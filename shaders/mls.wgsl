@@ -3,45 +3,6 @@
 // plane, the local frame, the scaled polynomial fit with degree degradation, and exact roots.
 // Shared by trace.wgsl and shade.wgsl, which are appended to this file.
 
-// Step data, bound from the cache's sections byte for byte (crates/cache/src/layout.rs).
-struct Point {
-    position: vec3<f32>,
-    radius: f32,
-}
-
-struct Normal {
-    normal: vec3<f32>,
-    pad: f32,
-}
-
-// A droplet sphere and a BVH node (mirror `slosh_cache::GpuSphere` and `GpuBvhNode`).
-struct Sphere {
-    centre: vec3<f32>,
-    radius: f32,
-}
-
-struct BvhNode {
-    lo: vec3<f32>,
-    count: u32,
-    hi: vec3<f32>,
-    first: u32,
-}
-
-// A node of the 4-wide tree the walk descends, built per step by expand.wgsl's `widen` from
-// the baked BVH2: slot i of entry k holds a grandchild of BVH2 node k (or a child that is a
-// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot is
-// the point (1e30, 1e30, 1e30), which no ray enters in time.
-struct Wide {
-    lo_x: vec4<f32>,
-    hi_x: vec4<f32>,
-    lo_y: vec4<f32>,
-    hi_y: vec4<f32>,
-    lo_z: vec4<f32>,
-    hi_z: vec4<f32>,
-    links: vec4<u32>,
-    pad: vec4<u32>,
-}
-
 // A ball's initial support normal and polynomial (mirrors `slosh_cache::GpuBall`).
 struct Ball {
     normal: vec3<f32>,

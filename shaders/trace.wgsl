@@ -16,16 +16,6 @@
 // Deeper trees are refused at upload (slosh_render::MAX_BVH_DEPTH).
 const STACK_SIZE: u32 = 64u;
 
-// A stacked node is its link: `first` in the low 28 bits and the leaf's item count (0 for an
-// inner node) above, so a pop needs no read of the node itself. The upload refuses trees that
-// do not fit (slosh_render::MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST).
-const LINK_COUNT_SHIFT: u32 = 28u;
-const LINK_FIRST: u32 = 0x0fffffffu;
-
-fn link(node: BvhNode) -> u32 {
-    return node.first | (node.count << LINK_COUNT_SHIFT);
-}
-
 fn node(i: u32) -> BvhNode {
     return bvh_nodes_at(i + 1u);
 }

@@ -261,7 +261,7 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
         )?;
     }
     if wanted(BenchTable::Points) {
-        points_rows(args, &gpu, &runner, &mut rows, &mut uploads)?;
+        points_rows(args, &runner, &mut rows, &mut uploads)?;
     }
     write_report(args, &gpu, &rows, &uploads)
 }
@@ -337,7 +337,6 @@ fn tank_rows(
 /// Table 4.6: point counts at 1280×800, plus 1M points and 1920×1080, with upload times.
 fn points_rows(
     args: &GpuBenchArgs,
-    gpu: &Gpu,
     runner: &Runner,
     rows: &mut Vec<Row>,
     uploads: &mut Vec<(String, usize, slosh_render::UploadStats)>,
@@ -356,11 +355,11 @@ fn points_rows(
             "  sphere {points}: baked in {:.1} s",
             start.elapsed().as_secs_f64()
         );
-        let step = GpuStep::upload(gpu, &bench.file, None)?;
+        let step = GpuStep::upload(runner.gpu, &bench.file, None)?;
         // Upload: the median of 5 uploads of the same in-memory step.
         let mut best = Vec::new();
         for _ in 0..5 {
-            best.push(GpuStep::upload(gpu, &bench.file, None)?.upload);
+            best.push(GpuStep::upload(runner.gpu, &bench.file, None)?.upload);
         }
         best.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
         uploads.push((bench.label.clone(), bench.points, best[2]));

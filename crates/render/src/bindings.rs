@@ -2,6 +2,7 @@
 //! each storage array bound in `RANGES` consecutive slices of its buffer (shaders.rs), and one
 //! uniform block.
 
+use crate::context::Gpu;
 use crate::shaders::{RANGES, RangedArray, UNIFORM_BINDING, elements_per_range};
 
 /// A compute-visible buffer binding of `ty` at `binding`.
@@ -59,9 +60,30 @@ pub(crate) fn ranges(array: &RangedArray, size: u64, limit: u64) -> Vec<(u64, u6
 }
 
 /// Ranges an array of `size` bytes needs under `limit` (at least 1).
-pub(crate) fn ranges_needed(array: &RangedArray, size: u64, limit: u64) -> u64 {
+fn ranges_needed(array: &RangedArray, size: u64, limit: u64) -> u64 {
     let span = elements_per_range(limit, array.element_size) * array.element_size;
     size.div_ceil(span).max(1)
+}
+
+/// Whether `what`, an array of `bytes`, spans more than one binding under `limit`; why it
+/// cannot be bound where it needs more than `RANGES` or exceeds the device's largest buffer.
+pub(crate) fn needs_split(
+    gpu: &Gpu,
+    limit: u64,
+    array: &RangedArray,
+    what: &str,
+    bytes: u64,
+) -> Result<bool, String> {
+    let needed = ranges_needed(array, bytes, limit);
+    let max_buffer = gpu.device.limits().max_buffer_size;
+    if needed > u64::from(RANGES) || bytes > max_buffer {
+        return Err(format!(
+            "'{what}' takes {bytes} bytes on the GPU; {} binds at most {RANGES} ranges of {} bytes per array, in buffers of at most {max_buffer} bytes",
+            gpu.describe(),
+            elements_per_range(limit, array.element_size) * array.element_size
+        ));
+    }
+    Ok(needed > 1)
 }
 
 /// Entries binding `buffers` (one per array, in `arrays`' order) and the uniform block.

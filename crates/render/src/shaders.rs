@@ -1,11 +1,16 @@
 //! The WGSL sources, compiled into the binary, and the modules assembled from them. mls.wgsl
-//! holds the shared MLS maths; each pass is appended to it (WGSL has no includes).
+//! holds the shared MLS maths; each pass is appended to it, and every module begins with
+//! step.wgsl's types and the generated bindings (WGSL has no includes).
 //!
 //! Storage arrays are bound in ranges: an adapter caps each storage binding (lavapipe at
 //! 128 MiB, which a 2M-point step's balls reach), so every array has [`RANGES`] bindings over
 //! consecutive slices of its buffer, and the shaders read it through a generated accessor,
 //! `NAME_at(i)` (`NAME_set(i, v)` to write). A module built with `split` picks the range from
 //! the index's high bits; one built without reads range 0 alone, as a plain array.
+
+/// The step data types (Point, Normal, Sphere, BvhNode, Wide, stack links) every module
+/// begins with.
+pub const STEP_WGSL: &str = include_str!("../../../shaders/step.wgsl");
 
 /// The shared MLS maths alone.
 pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
@@ -104,7 +109,7 @@ pub const EXPAND_ARRAYS: [RangedArray; 11] = [
     array("cluster_ids", "u32", 4, 0, 4, false),
     array("neighbour_masks", "u32", 4, 0, 5, true),
     array("bvh_items", "u32", 4, 0, 6, false),
-    array("spheres", "Point", 16, 0, 7, false),
+    array("spheres", "Sphere", 16, 0, 7, false),
     array("leaf_spheres", "vec4<f32>", 16, 0, 8, true),
     array("bvh_nodes", "BvhNode", 32, 0, 9, false),
     array("wide_nodes", "Wide", 128, 0, 10, true),
@@ -191,10 +196,13 @@ pub fn mls_wgsl(limit: u64, split: bool) -> String {
 
 /// The per-step passes' module.
 pub fn expand_wgsl(limit: u64, split: bool) -> String {
-    ranged_wgsl(&EXPAND_ARRAYS, limit, split) + EXPAND_WGSL
+    format!(
+        "{STEP_WGSL}{}{EXPAND_WGSL}",
+        ranged_wgsl(&EXPAND_ARRAYS, limit, split)
+    )
 }
 
 fn frame_module(source: &str, limit: u64, split: bool) -> String {
     let arrays: Vec<RangedArray> = STEP_ARRAYS.iter().chain(&FRAME_ARRAYS).copied().collect();
-    ranged_wgsl(&arrays, limit, split) + source
+    format!("{STEP_WGSL}{}{source}", ranged_wgsl(&arrays, limit, split))
 }

@@ -5,13 +5,11 @@ use std::sync::OnceLock;
 
 use slosh_mls::Camera;
 
-use crate::bindings::{bind_entries, layout_entries, ranges_needed};
+use crate::bindings::{bind_entries, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings, status};
-use crate::shaders::{
-    FRAME_ARRAYS, RANGES, STEP_ARRAYS, TRACE_STACK_SIZES, shade_wgsl, trace_wgsl,
-};
+use crate::shaders::{FRAME_ARRAYS, STEP_ARRAYS, TRACE_STACK_SIZES, shade_wgsl, trace_wgsl};
 use crate::upload::GpuStep;
 use bytemuck::Zeroable;
 
@@ -269,18 +267,12 @@ impl Tracer {
     ) -> Result<FrameTargets> {
         let device = &gpu.device;
         let pixels = u64::from(width) * u64::from(height);
-        // The hits take 48 bytes a pixel: the frame's largest array.
         let hit_bytes = pixels * size_of::<GpuHit>() as u64;
-        let needed = ranges_needed(&FRAME_ARRAYS[0], hit_bytes, self.limit);
-        if needed > u64::from(RANGES) || hit_bytes > device.limits().max_buffer_size {
-            return Err(Error::Validation(format!(
-                "a {width}×{height} frame's hits take {hit_bytes} bytes, more than {} binds ({RANGES} ranges of at most {} bytes, buffers of at most {} bytes)",
-                gpu.describe(),
-                self.limit,
-                device.limits().max_buffer_size
-            )));
-        }
-        let frame_split = needed > 1 || ranges_needed(&FRAME_ARRAYS[1], pixels * 4, self.limit) > 1;
+        let hits_what = format!("hits of a {width}×{height} frame");
+        let hits_split = needs_split(gpu, self.limit, &FRAME_ARRAYS[0], &hits_what, hit_bytes);
+        let image_split = needs_split(gpu, self.limit, &FRAME_ARRAYS[1], "image", pixels * 4);
+        let frame_split =
+            hits_split.map_err(Error::Validation)? || image_split.map_err(Error::Validation)?;
         let buffer = |label, size: u64, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),

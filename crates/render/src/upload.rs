@@ -10,12 +10,12 @@ use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
 
 use bytemuck::Zeroable;
 
-use crate::bindings::ranges_needed;
+use crate::bindings::needs_split;
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::expand::ExpandInputs;
 use crate::layout::ExpandSettings;
-use crate::shaders::{EXPAND_ARRAYS, RANGES, RangedArray, STEP_ARRAYS, elements_per_range};
+use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS};
 
 /// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
 /// tree has 31 levels, each stacking up to three slots.
@@ -197,22 +197,20 @@ fn array_of(name: &str) -> &'static RangedArray {
 }
 
 /// Whether an array of `bytes` needs more than one binding; an error naming it where it
-/// needs more than `RANGES` or exceeds the device's largest buffer.
+/// cannot be bound.
 fn fits(gpu: &Gpu, file: &CacheFile, what: &str, array: &RangedArray, bytes: u64) -> Result<bool> {
-    let limit = gpu.max_binding();
-    let needed = ranges_needed(array, bytes, limit);
-    let max_buffer = gpu.device.limits().max_buffer_size;
-    if needed > u64::from(RANGES) || bytes > max_buffer {
-        return Err(invalid(
-            file,
-            format!(
-                "'{what}' takes {bytes} bytes on the GPU; {} binds at most {RANGES} ranges of {} bytes per array, in buffers of at most {max_buffer} bytes",
-                gpu.describe(),
-                elements_per_range(limit, array.element_size) * array.element_size
-            ),
-        ));
+    needs_split(gpu, gpu.max_binding(), array, what, bytes)
+        .map_err(|problem| invalid(file, problem))
+}
+
+/// Bytes before a section's data in its GPU buffer: trace.wgsl reads the nodes after one
+/// blank node, which aligns sibling pairs.
+fn lead(name: &str) -> u64 {
+    if name == names::BVH_NODES {
+        NODE_LEAD
+    } else {
+        0
     }
-    Ok(needed > 1)
 }
 
 fn invalid(file: &CacheFile, problem: String) -> Error {
@@ -341,12 +339,13 @@ impl GpuStep {
         // Every array, sections and the two the upload derives, within RANGES bindings.
         let mut split = false;
         for (name, bytes) in wanted.iter().zip(&section_bytes) {
-            let lead = if *name == names::BVH_NODES {
-                NODE_LEAD
-            } else {
-                0
-            };
-            split |= fits(gpu, file, name, array_of(name), lead + bytes.len() as u64)?;
+            split |= fits(
+                gpu,
+                file,
+                name,
+                array_of(name),
+                lead(name) + bytes.len() as u64,
+            )?;
         }
         split |= fits(gpu, file, "neighbour masks", &STEP_ARRAYS[2], mask_bytes)?;
         let leaf_bytes = u64::from(item_count) * 16;
@@ -370,12 +369,7 @@ impl GpuStep {
                 field_range = Some(finite_range(bytes));
             }
             let size = (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4);
-            // trace.wgsl reads the nodes after one blank node, which aligns sibling pairs.
-            let lead = if *name == names::BVH_NODES {
-                NODE_LEAD
-            } else {
-                0
-            };
+            let lead = lead(name);
             let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(name),
                 size: lead + size,

@@ -1,0 +1,53 @@
+// The step data types every module shares, bound from the cache's sections byte for byte or
+// built by expand.wgsl; prepended to each module by crates/render's shaders.rs.
+
+// Mirrors crates/cache/src/layout.rs.
+struct Point {
+    position: vec3<f32>,
+    radius: f32,
+}
+
+struct Normal {
+    normal: vec3<f32>,
+    pad: f32,
+}
+
+// A droplet sphere and a BVH node (mirror `slosh_cache::GpuSphere` and `GpuBvhNode`).
+struct Sphere {
+    centre: vec3<f32>,
+    radius: f32,
+}
+
+struct BvhNode {
+    lo: vec3<f32>,
+    count: u32,
+    hi: vec3<f32>,
+    first: u32,
+}
+
+// A node of the 4-wide tree the walk descends, built per step by expand.wgsl's `widen` from
+// the baked BVH2: slot i of entry k holds a grandchild of BVH2 node k (or a child that is a
+// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot is
+// the point (1e30, 1e30, 1e30), which no ray enters in time.
+struct Wide {
+    lo_x: vec4<f32>,
+    hi_x: vec4<f32>,
+    lo_y: vec4<f32>,
+    hi_y: vec4<f32>,
+    lo_z: vec4<f32>,
+    hi_z: vec4<f32>,
+    links: vec4<u32>,
+    pad: vec4<u32>,
+}
+
+// A node as the trace walk stacks it and the wide tree links it: `first` in the low 28 bits
+// and the leaf's item count (0 for an inner node) above, so a pop needs no read of the node
+// itself. The upload refuses trees that do not fit (slosh_render::MAX_LEAF_LINK_COUNT,
+// MAX_LINK_FIRST).
+const LINK_COUNT_SHIFT: u32 = 28u;
+const LINK_FIRST: u32 = 0x0fffffffu;
+
+fn link(node: BvhNode) -> u32 {
+    return node.first | (node.count << LINK_COUNT_SHIFT);
+}
+
