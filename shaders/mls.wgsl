@@ -62,7 +62,9 @@ struct Settings {
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's
 // shaders.rs generates over the ranges they are bound in. Among them: neighbour_masks, bit
 // masks over each point's cluster candidates, written per step by expand.wgsl.
-@group(0) @binding(100) var<uniform> settings: Settings;
+// The uniforms belong to the frame (group 1), so a step's bind group (group 0) is made once
+// per step and serves any frame.
+@group(1) @binding(100) var<uniform> settings: Settings;
 // The frame's hits (`hits_at`), three 16-byte words per pixel in `Hit`'s layout: whole-word
 // stores keep the trace pass's writes coalesced (a struct store became twelve 4-byte ones,
 // which cost as much as a fifth of a 1-iteration frame).

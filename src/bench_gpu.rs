@@ -71,11 +71,11 @@ fn error(
         if h.status == status::MISS || h.status == status::DROPLET {
             continue;
         }
-        let p = step.transform.to_world(h.position.map(f64::from));
+        let p = step.info.transform.to_world(h.position.map(f64::from));
         if let Some(truth) = &bench.truth {
-            d.push(truth.signed_distance(p.into()).abs() / step.spacing);
+            d.push(truth.signed_distance(p.into()).abs() / step.info.spacing);
         } else if let Some(r) = reference.and_then(|r| r.get(i)).filter(|r| r.status != 0) {
-            d.push(f64::from((r.t - h.t).abs()) * step.transform.scale / step.spacing);
+            d.push(f64::from((r.t - h.t).abs()) * step.info.transform.scale / step.info.spacing);
         }
     }
     if d.is_empty() {
@@ -122,7 +122,7 @@ impl Runner<'_> {
         let mut params = TraceParams::for_step(step, iterations);
         params.degree = degree;
         params.mode = mode;
-        let targets = self.tracer.targets(self.gpu, step, w, h)?;
+        let targets = self.tracer.targets(self.gpu, w, h)?;
         let mut trace = Vec::new();
         let mut shade = Vec::new();
         // Warm-up: 10 frames and at least half a second, so that the GPU's clocks have risen
@@ -523,20 +523,21 @@ fn write_report(
     }
     let _ = writeln!(
         md,
-        "## Upload per step\n\nFrom a step in memory (as from the page cache): checksums, decompression, copies into `mapped_at_creation` staging buffers, `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
+        "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, decompression, the tree check), the recording (buffers created, copies into `mapped_at_creation` staging buffers), `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
     );
     let _ = writeln!(
         md,
-        "| step | bytes on the GPU | bytes stored | host ms | GPU copy + passes ms | total ms | GB/s |"
+        "| step | bytes on the GPU | bytes stored | host ms | record ms | GPU copy + passes ms | total ms | GB/s |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
     for (label, _, u) in uploads {
         let _ = writeln!(
             md,
-            "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
             u.bytes,
             u.stored_bytes,
             u.host_seconds * 1e3,
+            u.record_seconds * 1e3,
             u.gpu_seconds * 1e3,
             u.total_seconds * 1e3,
             u.gigabytes_per_second()

@@ -330,8 +330,8 @@ fn gpu_hit_buffer(step: &GpuStep, hits: &[GpuHit]) -> Vec<f32> {
         if h.status == slosh_render::status::MISS {
             continue;
         }
-        let p = step.transform.to_world(h.position.map(f64::from));
-        let t = f64::from(h.t) * step.transform.scale;
+        let p = step.info.transform.to_world(h.position.map(f64::from));
+        let t = f64::from(h.t) * step.info.transform.scale;
         let v = [p[0], p[1], p[2]];
         for (o, x) in px.iter_mut().zip(v) {
             *o = x as f32;

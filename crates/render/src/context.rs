@@ -2,6 +2,7 @@
 
 use std::sync::OnceLock;
 
+use crate::bindings::layout_entries;
 use crate::error::{Error, Result};
 use crate::expand::Expander;
 use crate::shaders::{FRAME_ARRAYS, RANGES, STEP_ARRAYS};
@@ -24,6 +25,9 @@ pub struct Gpu {
     pub timestamps: bool,
     /// The per-step passes every upload runs, compiled on first use.
     pub(crate) expander: OnceLock<Expander>,
+    /// The trace and shade passes' step bind group layout (group 0), shared by every step's
+    /// bind group and the tracer's pipelines.
+    step_layout: OnceLock<wgpu::BindGroupLayout>,
     /// The largest storage binding used, in bytes: the adapter's, or lower
     /// ([`Gpu::limit_bindings`]).
     binding_limit: u64,
@@ -79,39 +83,10 @@ impl Gpu {
 
     fn open(adapter: wgpu::Adapter) -> Result<Gpu> {
         let info = adapter.get_info();
-        let available = adapter.limits();
-        if available.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED
-            || available.max_buffers_and_acceleration_structures_per_shader_stage
-                < STORAGE_BUFFERS_NEEDED + 1
-        {
-            return Err(Error::Limits {
-                adapter: describe(&info),
-                problem: format!(
-                    "allows {} storage buffers and {} buffers in all per shader stage; the tracer binds {STORAGE_BUFFERS_NEEDED} and a uniform block",
-                    available.max_storage_buffers_per_shader_stage,
-                    available.max_buffers_and_acceleration_structures_per_shader_stage
-                ),
-            });
-        }
-        let limits = wgpu::Limits {
-            max_storage_buffers_per_shader_stage: STORAGE_BUFFERS_NEEDED,
-            // The uniform blocks count here too.
-            max_buffers_and_acceleration_structures_per_shader_stage: available
-                .max_buffers_and_acceleration_structures_per_shader_stage,
-            max_storage_buffer_binding_size: available.max_storage_buffer_binding_size,
-            max_buffer_size: available.max_buffer_size,
-            max_compute_workgroups_per_dimension: available.max_compute_workgroups_per_dimension,
-            ..wgpu::Limits::default()
-        };
-        let wanted = wgpu::Features::TIMESTAMP_QUERY;
-        let timestamps = adapter.features().contains(wanted);
+        let limits = Gpu::required_limits(&adapter)?;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("slosh"),
-            required_features: if timestamps {
-                wanted
-            } else {
-                wgpu::Features::empty()
-            },
+            required_features: Gpu::wanted_features(&adapter),
             required_limits: limits,
             experimental_features: wgpu::ExperimentalFeatures::default(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -121,7 +96,66 @@ impl Gpu {
             adapter: describe(&info),
             source,
         })?;
-        let binding_limit = device.limits().max_storage_buffer_binding_size;
+        Gpu::from_parts(adapter, device, queue)
+    }
+
+    /// The limits to ask `adapter` for when creating a device for slosh elsewhere (eframe's
+    /// egui-wgpu, say): the storage buffers the passes bind, and the adapter's largest
+    /// bindings, buffers and dispatches. An error where the adapter cannot bind enough.
+    pub fn required_limits(adapter: &wgpu::Adapter) -> Result<wgpu::Limits> {
+        let available = adapter.limits();
+        if available.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED
+            || available.max_buffers_and_acceleration_structures_per_shader_stage
+                < STORAGE_BUFFERS_NEEDED + 1
+        {
+            return Err(Error::Limits {
+                adapter: describe(&adapter.get_info()),
+                problem: format!(
+                    "allows {} storage buffers and {} buffers in all per shader stage; the tracer binds {STORAGE_BUFFERS_NEEDED} and a uniform block",
+                    available.max_storage_buffers_per_shader_stage,
+                    available.max_buffers_and_acceleration_structures_per_shader_stage
+                ),
+            });
+        }
+        Ok(wgpu::Limits {
+            max_storage_buffers_per_shader_stage: STORAGE_BUFFERS_NEEDED,
+            // The uniform blocks count here too.
+            max_buffers_and_acceleration_structures_per_shader_stage: available
+                .max_buffers_and_acceleration_structures_per_shader_stage,
+            max_storage_buffer_binding_size: available.max_storage_buffer_binding_size,
+            max_buffer_size: available.max_buffer_size,
+            max_compute_workgroups_per_dimension: available.max_compute_workgroups_per_dimension,
+            ..wgpu::Limits::default()
+        })
+    }
+
+    /// The optional features slosh uses where `adapter` has them: timestamp queries (frame
+    /// times). A device created elsewhere may ask for them too.
+    pub fn wanted_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+        adapter.features() & wgpu::Features::TIMESTAMP_QUERY
+    }
+
+    /// A `Gpu` over a device and queue someone else created (eframe's egui-wgpu, say), which
+    /// should have asked for [`Gpu::required_limits`] and [`Gpu::wanted_features`]; an error
+    /// naming the shortfall where the device cannot run the passes.
+    pub fn from_parts(
+        adapter: wgpu::Adapter,
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+    ) -> Result<Gpu> {
+        let info = adapter.get_info();
+        let limits = device.limits();
+        if limits.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED {
+            return Err(Error::Limits {
+                adapter: describe(&info),
+                problem: format!(
+                    "the device was created with {} storage buffers per shader stage; the tracer binds {STORAGE_BUFFERS_NEEDED} (create it with Gpu::required_limits)",
+                    limits.max_storage_buffers_per_shader_stage
+                ),
+            });
+        }
+        let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let binding_limit = limits.max_storage_buffer_binding_size;
         Ok(Gpu {
             adapter,
             device,
@@ -129,6 +163,7 @@ impl Gpu {
             info,
             timestamps,
             expander: OnceLock::new(),
+            step_layout: OnceLock::new(),
             binding_limit,
         })
     }
@@ -140,6 +175,17 @@ impl Gpu {
 
     pub(crate) fn expander(&self) -> &Expander {
         self.expander.get_or_init(|| Expander::new(&self.device))
+    }
+
+    /// The step bind group layout (group 0 of the trace and shade passes).
+    pub fn step_layout(&self) -> &wgpu::BindGroupLayout {
+        self.step_layout.get_or_init(|| {
+            self.device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("step"),
+                    entries: &layout_entries(&STEP_ARRAYS, false),
+                })
+        })
     }
 
     /// The largest storage binding used, in bytes; arrays span up to `RANGES` of them.

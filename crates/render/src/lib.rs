@@ -17,7 +17,11 @@ mod upload;
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
-pub use tracer::{Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings};
+pub use tracer::{
+    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer,
+    settings,
+};
 pub use upload::{
-    GpuStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, StepBuffers, UploadStats,
+    GpuStep, HostField, HostStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST,
+    StepBuffers, StepInfo, UploadStats,
 };

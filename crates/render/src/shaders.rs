@@ -34,6 +34,12 @@ pub const SHADE_WGSL: &str = concat!(
     include_str!("../../../shaders/shade.wgsl")
 );
 
+/// The present pass: the shaded image into an Rgba8Unorm texture, entry point `present`.
+pub const PRESENT_WGSL: &str = include_str!("../../../shaders/present.wgsl");
+
+/// The binding of the present pass's texture.
+pub const TEXTURE_BINDING: u32 = 101;
+
 /// Traversal stack sizes the trace pass is built with. WGSL sizes private arrays by constants
 /// only, so each size is a separate module; a smaller stack costs less per-thread memory
 /// (about 6 % of the frame time on an H100 going from 64 to 32 entries).
@@ -99,6 +105,9 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
     array("hits", "vec4<u32>", 16, 1, 0, true),
     array("image", "u32", 4, 1, 1, true),
 ];
+
+/// The present pass's array (present.wgsl, group 0): the shaded image.
+pub const PRESENT_ARRAYS: [RangedArray; 1] = [array("image", "u32", 4, 0, 0, false)];
 
 /// The per-step passes' arrays (expand.wgsl, group 0).
 pub const EXPAND_ARRAYS: [RangedArray; 11] = [
@@ -200,6 +209,11 @@ pub fn expand_wgsl(limit: u64, split: bool) -> String {
         "{STEP_WGSL}{}{EXPAND_WGSL}",
         ranged_wgsl(&EXPAND_ARRAYS, limit, split)
     )
+}
+
+/// The present pass's module.
+pub fn present_wgsl(limit: u64, split: bool) -> String {
+    format!("{}{PRESENT_WGSL}", ranged_wgsl(&PRESENT_ARRAYS, limit, split))
 }
 
 fn frame_module(source: &str, limit: u64, split: bool) -> String {

@@ -9,7 +9,13 @@ use crate::bindings::{bind_entries, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings, status};
-use crate::shaders::{FRAME_ARRAYS, STEP_ARRAYS, TRACE_STACK_SIZES, shade_wgsl, trace_wgsl};
+use crate::shaders::{
+    FRAME_ARRAYS, PRESENT_ARRAYS, TEXTURE_BINDING, TRACE_STACK_SIZES, present_wgsl, shade_wgsl,
+    trace_wgsl,
+};
+
+/// The format of a frame's texture: the shaded pixels' bytes as they are (sRGB-encoded).
+pub const FRAME_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 use crate::upload::GpuStep;
 use bytemuck::Zeroable;
 
@@ -52,9 +58,9 @@ impl TraceParams {
     pub fn for_step(step: &GpuStep, iterations: u32) -> TraceParams {
         TraceParams {
             iterations,
-            degree: step.degree,
+            degree: step.info.degree,
             h_factor: 1.0,
-            covariance: step.covariance,
+            covariance: step.info.covariance,
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
         }
@@ -102,14 +108,17 @@ pub struct Tracer {
     layout: wgpu::PipelineLayout,
     /// The shade pass, by split.
     shade: [OnceLock<wgpu::ComputePipeline>; 2],
-    step_layout: wgpu::BindGroupLayout,
+    /// The present pass (image into the frame's texture), by split.
+    present: [OnceLock<wgpu::ComputePipeline>; 2],
+    present_layout: wgpu::BindGroupLayout,
+    present_pipeline_layout: wgpu::PipelineLayout,
     frame_layout: wgpu::BindGroupLayout,
     /// The binding limit the modules and bind groups are made for (`Gpu::max_binding` when
     /// the tracer was built).
     limit: u64,
 }
 
-/// One frame's GPU buffers and bind groups for a given step.
+/// One frame size's GPU buffers, texture and bind groups; any step can be traced into them.
 #[derive(Debug)]
 pub struct FrameTargets {
     width: u32,
@@ -117,11 +126,36 @@ pub struct FrameTargets {
     settings: wgpu::Buffer,
     hits: wgpu::Buffer,
     image: wgpu::Buffer,
-    /// Whether an array of the frame or its step spans several bindings.
+    /// The shaded image as an `Rgba8Unorm` texture (sRGB-encoded bytes, as in `image`), for
+    /// a window toolkit to draw.
+    texture: wgpu::Texture,
+    /// Whether an array of the frame spans several bindings.
     split: bool,
-    step_group: wgpu::BindGroup,
     frame_group: wgpu::BindGroup,
+    present_group: wgpu::BindGroup,
     queries: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+}
+
+impl FrameTargets {
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// The shaded image of the last frame recorded into these targets: `Rgba8Unorm`, usable
+    /// as a texture binding, a storage binding and a copy source.
+    pub fn texture(&self) -> &wgpu::Texture {
+        &self.texture
+    }
+
+    /// The per-pixel hits buffer (three 16-byte words per pixel, `GpuHit`'s layout).
+    pub fn hits(&self) -> &wgpu::Buffer {
+        &self.hits
+    }
+
+    /// The shaded image as packed RGBA8 words, row-major.
+    pub fn image(&self) -> &wgpu::Buffer {
+        &self.image
+    }
 }
 
 fn compute_pipeline(
@@ -183,7 +217,8 @@ fn to_f32(a: [f64; 3]) -> [f32; 3] {
 /// The uniforms of a frame: the camera moved into the step's local coordinates.
 pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSettings {
     let basis = camera.basis();
-    let eye = step.transform.to_local(camera.eye);
+    let info = &step.info;
+    let eye = info.transform.to_local(camera.eye);
     let (field_min, field_max) = step.field.as_ref().map_or((0.0, 0.0), |f| (f.1, f.2));
     GpuSettings {
         eye: to_f32(eye),
@@ -196,18 +231,18 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         degree: u32::from(params.degree.min(3)),
         epsilon: params.epsilon,
         h_factor: params.h_factor,
-        normals_mode: u32::from(params.covariance || !step.has_normals),
-        has_normals: u32::from(step.has_normals),
-        point_count: step.point_count,
-        sphere_count: step.sphere_count,
-        cluster_size: step.cluster_size,
+        normals_mode: u32::from(params.covariance || !info.has_normals),
+        has_normals: u32::from(info.has_normals),
+        point_count: info.point_count,
+        sphere_count: info.sphere_count,
+        cluster_size: info.cluster_size,
         mode: params.mode as u32,
         field_min,
         field_max,
         has_field: u32::from(step.field.is_some()),
-        mask_words: step.mask_words,
-        node_count: step.node_count,
-        item_count: step.item_count,
+        mask_words: info.mask_words,
+        node_count: info.node_count,
+        item_count: info.item_count,
         pad0: 0,
         pad1: 0,
     }
@@ -217,19 +252,37 @@ impl Tracer {
     pub fn new(gpu: &Gpu) -> Result<Tracer> {
         let device = &gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let step_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("step"),
-            entries: &layout_entries(&STEP_ARRAYS, true),
-        });
+        let step_layout = gpu.step_layout();
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
-            entries: &layout_entries(&FRAME_ARRAYS, false),
+            entries: &layout_entries(&FRAME_ARRAYS, true),
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("slosh"),
-            bind_group_layouts: &[Some(&step_layout), Some(&frame_layout)],
+            bind_group_layouts: &[Some(step_layout), Some(&frame_layout)],
             immediate_size: 0,
         });
+        let mut present_entries = layout_entries(&PRESENT_ARRAYS, false);
+        present_entries.push(wgpu::BindGroupLayoutEntry {
+            binding: TEXTURE_BINDING,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: FRAME_TEXTURE_FORMAT,
+                view_dimension: wgpu::TextureViewDimension::D2,
+            },
+            count: None,
+        });
+        let present_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("present"),
+            entries: &present_entries,
+        });
+        let present_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("present"),
+                bind_group_layouts: &[Some(&present_layout)],
+                immediate_size: 0,
+            });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
@@ -237,13 +290,36 @@ impl Tracer {
             traces: Default::default(),
             layout,
             shade: Default::default(),
-            step_layout,
+            present: Default::default(),
+            present_layout,
+            present_pipeline_layout,
             frame_layout,
             limit: gpu.max_binding(),
         };
         // The shade pass is built now: a device that cannot take the layout fails here.
         tracer.shade_pipeline(gpu, false)?;
+        tracer.present_pipeline(gpu, false)?;
         Ok(tracer)
+    }
+
+    fn present_pipeline(&self, gpu: &Gpu, split: bool) -> Result<&wgpu::ComputePipeline> {
+        let slot = &self.present[usize::from(split)];
+        if let Some(pipeline) = slot.get() {
+            return Ok(pipeline);
+        }
+        let module = shader_module(gpu, "present", present_wgsl(self.limit, split), false)?;
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipeline = compute_pipeline(
+            &gpu.device,
+            &self.present_pipeline_layout,
+            &module,
+            "present",
+            &[],
+        );
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
+        }
+        Ok(slot.get_or_init(|| pipeline))
     }
 
     fn shade_pipeline(&self, gpu: &Gpu, split: bool) -> Result<&wgpu::ComputePipeline> {
@@ -256,23 +332,25 @@ impl Tracer {
         Ok(slot.get_or_init(|| pipeline))
     }
 
-    /// Buffers and bind groups for `width` × `height` frames of `step`; an error where the
-    /// frame's hits exceed `RANGES` bindings.
-    pub fn targets(
-        &self,
-        gpu: &Gpu,
-        step: &GpuStep,
-        width: u32,
-        height: u32,
-    ) -> Result<FrameTargets> {
+    /// Buffers, texture and bind groups for `width` × `height` frames of any step; an error
+    /// where the frame's hits exceed `RANGES` bindings.
+    pub fn targets(&self, gpu: &Gpu, width: u32, height: u32) -> Result<FrameTargets> {
         let device = &gpu.device;
+        let (width, height) = (width.max(1), height.max(1));
         let pixels = u64::from(width) * u64::from(height);
         let hit_bytes = pixels * size_of::<GpuHit>() as u64;
         let hits_what = format!("hits of a {width}×{height} frame");
         let hits_split = needs_split(gpu, self.limit, &FRAME_ARRAYS[0], &hits_what, hit_bytes);
         let image_split = needs_split(gpu, self.limit, &FRAME_ARRAYS[1], "image", pixels * 4);
-        let frame_split =
+        let split =
             hits_split.map_err(Error::Validation)? || image_split.map_err(Error::Validation)?;
+        let max_side = device.limits().max_texture_dimension_2d;
+        if width > max_side || height > max_side {
+            return Err(Error::Validation(format!(
+                "a {width}×{height} frame exceeds {}'s largest texture ({max_side} pixels a side)",
+                gpu.describe()
+            )));
+        }
         let buffer = |label, size: u64, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -289,18 +367,38 @@ impl Tracer {
         );
         let hits = buffer("hits", hit_bytes, U::STORAGE | U::COPY_SRC);
         let image = buffer("image", pixels * 4, U::STORAGE | U::COPY_SRC);
-        let step_buffers = step.buffers.in_binding_order();
-        let entries = bind_entries(&STEP_ARRAYS, &step_buffers, Some(&settings), self.limit);
-        let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("step"),
-            layout: &self.step_layout,
-            entries: &entries,
-        });
         let frame_buffers = [&hits, &image];
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
             layout: &self.frame_layout,
-            entries: &bind_entries(&FRAME_ARRAYS, &frame_buffers, None, self.limit),
+            entries: &bind_entries(&FRAME_ARRAYS, &frame_buffers, Some(&settings), self.limit),
+        });
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("frame texture"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: FRAME_TEXTURE_FORMAT,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let mut present_entries = bind_entries(&PRESENT_ARRAYS, &[&image], None, self.limit);
+        present_entries.push(wgpu::BindGroupEntry {
+            binding: TEXTURE_BINDING,
+            resource: wgpu::BindingResource::TextureView(&view),
+        });
+        let present_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("present"),
+            layout: &self.present_layout,
+            entries: &present_entries,
         });
         let queries = gpu.timestamps.then(|| {
             let set = device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -320,9 +418,10 @@ impl Tracer {
             settings,
             hits,
             image,
-            split: step.split || frame_split,
-            step_group,
+            texture,
+            split,
             frame_group,
+            present_group,
             queries,
         })
     }
@@ -346,14 +445,14 @@ impl Tracer {
     /// The trace module for `step`'s BVH: the smallest stack that holds it.
     fn variant(&self, gpu: &Gpu, step: &GpuStep, split: bool) -> Result<&TraceVariant> {
         // The wide tree has half the levels, each stacking up to three slots.
-        let needed = u32::try_from(3 * step.bvh_depth.div_ceil(2) + 2).unwrap_or(u32::MAX);
+        let needed = u32::try_from(3 * step.info.bvh_depth.div_ceil(2) + 2).unwrap_or(u32::MAX);
         let slot = TRACE_STACK_SIZES
             .iter()
             .position(|&size| size >= needed)
             .ok_or_else(|| {
                 Error::Validation(format!(
                     "BVH depth {} exceeds the trace stack",
-                    step.bvh_depth
+                    step.info.bvh_depth
                 ))
             })?;
         let cell = &self.traces[slot][usize::from(split)];
@@ -403,15 +502,18 @@ impl Tracer {
         self.cached(gpu, variant, slot, "trace_refined", &[fit])
     }
 
-    /// Records the trace and shade passes (with timestamps where the targets have them).
+    /// Records the trace, shade and present passes (trace and shade timed where the targets
+    /// have timestamp queries).
     fn encode(
         &self,
+        step: &GpuStep,
         targets: &FrameTargets,
-        passes: [&wgpu::ComputePipeline; 2],
+        passes: [&wgpu::ComputePipeline; 3],
         encoder: &mut wgpu::CommandEncoder,
     ) {
         let groups = (targets.width.div_ceil(8), targets.height.div_ceil(8));
-        for (i, pipeline) in passes.into_iter().enumerate() {
+        let [trace, shade, present] = passes;
+        for (i, pipeline) in [trace, shade].into_iter().enumerate() {
             let timestamp_writes =
                 targets
                     .queries
@@ -426,14 +528,79 @@ impl Tracer {
                 timestamp_writes,
             });
             pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &targets.step_group, &[]);
+            pass.set_bind_group(0, step.bind_group(), &[]);
             pass.set_bind_group(1, &targets.frame_group, &[]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        }
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("present"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(present);
+            pass.set_bind_group(0, &targets.present_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         if let Some((set, resolve, readback)) = &targets.queries {
             encoder.resolve_query_set(set, 0..4, resolve, 0);
             encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 32);
         }
+    }
+
+    /// Records one frame of `step` into `encoder` (trace, shade, and the image into the
+    /// targets' texture) without submitting or waiting: the way an app embeds the tracer.
+    /// The frame's uniforms go through `queue.write_buffer`, so they are in place for the
+    /// next submission; one frame per targets per submission.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        targets: &FrameTargets,
+        camera: &Camera,
+        params: &TraceParams,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<()> {
+        if step.binding_limit() != self.limit {
+            return Err(Error::Validation(format!(
+                "the step was uploaded for bindings of {} bytes, the tracer built for {}",
+                step.binding_limit(),
+                self.limit
+            )));
+        }
+        let mut camera = *camera;
+        camera.width = targets.width;
+        camera.height = targets.height;
+        gpu.queue.write_buffer(
+            &targets.settings,
+            0,
+            bytemuck::bytes_of(&settings(step, &camera, params)),
+        );
+        let split = step.split || targets.split;
+        let variant = self.variant(gpu, step, split)?;
+        let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
+        let shade = if params.mode == ShadeMode::Water {
+            self.cached(gpu, variant, &variant.water, "water", &[])?
+        } else {
+            self.shade_pipeline(gpu, split)?
+        };
+        let present = self.present_pipeline(gpu, targets.split)?;
+        self.encode(step, targets, [trace, shade, present], encoder);
+        Ok(())
+    }
+
+    /// The pass times of the last frame submitted into `targets`, once the GPU has finished
+    /// it (waits); `None` where the adapter has no timestamp queries.
+    pub fn pass_times(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Option<PassTimes>> {
+        let Some((_, _, readback)) = &targets.queries else {
+            return Ok(None);
+        };
+        let stamps: Vec<u64> = read(gpu, readback)?;
+        let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
+        let ms = |a: usize, b: usize| stamps[b].saturating_sub(stamps[a]) as f64 * period;
+        Ok(Some(PassTimes {
+            trace_ms: ms(0, 1),
+            shade_ms: ms(2, 3),
+        }))
     }
 
     /// Traces and shades one frame on the GPU and waits for it; the pass times when the
@@ -446,43 +613,21 @@ impl Tracer {
         camera: &Camera,
         params: &TraceParams,
     ) -> Result<Option<PassTimes>> {
-        let mut camera = *camera;
-        camera.width = targets.width;
-        camera.height = targets.height;
-        gpu.queue.write_buffer(
-            &targets.settings,
-            0,
-            bytemuck::bytes_of(&settings(step, &camera, params)),
-        );
-        let variant = self.variant(gpu, step, targets.split)?;
-        let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
-        let shade = if params.mode == ShadeMode::Water {
-            self.cached(gpu, variant, &variant.water, "water", &[])?
-        } else {
-            self.shade_pipeline(gpu, targets.split)?
-        };
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        self.encode(targets, [trace, shade], &mut encoder);
+        self.record(gpu, step, targets, camera, params, &mut encoder)?;
         gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
-        let Some((_, _, readback)) = &targets.queries else {
+        if targets.queries.is_none() {
             gpu.wait()?;
-            return Ok(None);
-        };
-        let stamps: Vec<u64> = read(gpu, readback)?;
-        let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
-        let ms = |a: usize, b: usize| stamps[b].saturating_sub(stamps[a]) as f64 * period;
-        Ok(Some(PassTimes {
-            trace_ms: ms(0, 1),
-            shade_ms: ms(2, 3),
-        }))
+        }
+        self.pass_times(gpu, targets)
     }
 
     /// Renders one frame and reads its hits and pixels back.
@@ -493,8 +638,13 @@ impl Tracer {
         camera: &Camera,
         params: &TraceParams,
     ) -> Result<Frame> {
-        let targets = self.targets(gpu, step, camera.width, camera.height)?;
+        let targets = self.targets(gpu, camera.width, camera.height)?;
         self.run(gpu, step, &targets, camera, params)?;
+        self.read_frame(gpu, &targets)
+    }
+
+    /// Reads the hits and pixels of the last frame submitted into `targets` (waits).
+    pub fn read_frame(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Frame> {
         let copy = |source: &wgpu::Buffer| -> Result<wgpu::Buffer> {
             let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("readback"),

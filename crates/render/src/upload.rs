@@ -1,8 +1,12 @@
-//! A cache step streamed into GPU storage buffers: each section's bytes go, unconverted, into
-//! a `mapped_at_creation` staging buffer (raw sections straight from the mapped file,
-//! compressed ones through a reused decode buffer, since wgpu's mapped views are write-only),
-//! then `copy_buffer_to_buffer` into device-local storage.
+//! A cache step streamed into GPU storage buffers, in two halves. The host half
+//! ([`HostStep`]) opens and checks the file, decodes its compressed sections in parallel and
+//! checks the tree; it needs no device and runs on any thread. The GPU half
+//! ([`GpuStep::create`]) creates the buffers, puts each section's bytes, unconverted, into a
+//! `mapped_at_creation` staging buffer (raw sections straight from the mapped file), and
+//! records the copies and the per-step passes into the caller's encoder without waiting.
+//! The colour field has its own buffer, so switching fields uploads only the field.
 
+use std::path::Path;
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -10,7 +14,7 @@ use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
 
 use bytemuck::Zeroable;
 
-use crate::bindings::needs_split;
+use crate::bindings::{bind_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::expand::ExpandInputs;
@@ -104,6 +108,15 @@ impl StepBuffers {
             &self.wide_nodes,
         ]
     }
+
+    /// Every byte the step holds on the GPU: sections, field and derived buffers.
+    pub fn bytes(&self) -> u64 {
+        self.in_binding_order()
+            .iter()
+            .map(|b| b.size())
+            .sum::<u64>()
+            + self.reach.size()
+    }
 }
 
 /// Where the time of an upload went.
@@ -113,10 +126,13 @@ pub struct UploadStats {
     pub bytes: u64,
     /// Bytes read from the file (compressed where the section is).
     pub stored_bytes: u64,
-    /// Checksums, decompression and copies into the mapped staging buffers.
+    /// The host half: checksums, decompression and the tree check.
     pub host_seconds: f64,
-    /// Staging to device-local copies and the neighbour-mask pass, from submit to
-    /// completion.
+    /// The GPU half's recording: buffers created, bytes copied into the mapped staging
+    /// buffers, passes recorded.
+    pub record_seconds: f64,
+    /// Staging to device-local copies and the per-step passes, from submit to completion
+    /// (zero where the caller submits).
     pub gpu_seconds: f64,
     /// Open to ready, everything included.
     pub total_seconds: f64,
@@ -129,10 +145,9 @@ impl UploadStats {
     }
 }
 
-/// A step on the GPU, with what the passes need to know about it.
-#[derive(Debug)]
-pub struct GpuStep {
-    pub buffers: StepBuffers,
+/// What the passes need to know about a step, read from its header and sections.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepInfo {
     pub point_count: u32,
     pub sphere_count: u32,
     pub cluster_size: u32,
@@ -141,8 +156,8 @@ pub struct GpuStep {
     /// Entries of the BVH's node buffer (the blank lead node included) and item list.
     pub node_count: u32,
     pub item_count: u32,
-    /// Whether an array spans more than one storage binding (see shaders.rs).
-    pub split: bool,
+    /// Entries of the cluster candidate list.
+    pub cluster_id_count: u32,
     /// Words of neighbour mask per point: the most candidates of any cluster, over 32.
     pub mask_words: u32,
     pub has_normals: bool,
@@ -154,9 +169,249 @@ pub struct GpuStep {
     pub bounds: [[f64; 3]; 2],
     /// Mean nearest-neighbour spacing in world units.
     pub spacing: f64,
+}
+
+impl StepInfo {
+    /// Bytes of the neighbour masks, leaf spheres and wide nodes the per-step passes derive.
+    pub fn derived_bytes(&self) -> [u64; 3] {
+        let masks = u64::from(self.point_count) * u64::from(self.mask_words) * 4;
+        let leaves = u64::from(self.item_count) * 16;
+        let wide = u64::from(self.node_count - 1) * WIDE_NODE_BYTES;
+        [
+            masks.max(EMPTY_BINDING),
+            leaves.max(EMPTY_BINDING),
+            wide.max(WIDE_NODE_BYTES),
+        ]
+    }
+}
+
+/// A scalar field's values, ready for the GPU, with their finite range.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostField {
+    pub name: String,
+    /// Little-endian f32s, one per point.
+    pub bytes: Vec<u8>,
+    pub min: f32,
+    pub max: f32,
+}
+
+impl HostField {
+    /// Decodes field `name` of `file`; an error listing the baked fields where it has none.
+    pub fn read(file: &CacheFile, name: &str) -> Result<HostField> {
+        let section = format!("{}{name}", names::FIELD_PREFIX);
+        let Some(entry) = file.section(&section) else {
+            let available: Vec<&str> = file
+                .header()
+                .sections
+                .iter()
+                .filter_map(|s| s.name.strip_prefix(names::FIELD_PREFIX))
+                .collect();
+            return Err(invalid(
+                file,
+                format!(
+                    "no field '{name}' in this cache; baked fields: {}",
+                    if available.is_empty() {
+                        "none (bake with --fields NAME)".to_string()
+                    } else {
+                        available.join(", ")
+                    }
+                ),
+            ));
+        };
+        let points = file.header().points;
+        if entry.raw != points * 4 {
+            return Err(invalid(
+                file,
+                format!(
+                    "field '{name}' holds {} bytes for {points} points (4 bytes each expected)",
+                    entry.raw
+                ),
+            ));
+        }
+        let mut bytes = vec![0u8; entry.raw as usize];
+        file.decode_into(entry, &mut bytes, &mut Vec::new())?;
+        let (min, max) = finite_range(&bytes);
+        Ok(HostField {
+            name: name.to_string(),
+            bytes,
+            min,
+            max,
+        })
+    }
+}
+
+/// The cache file a host step reads its raw sections from: owned (a prefetched step) or
+/// borrowed (a caller that keeps the file).
+#[derive(Debug)]
+enum HeldFile<'a> {
+    Owned(CacheFile),
+    Borrowed(&'a CacheFile),
+}
+
+impl HeldFile<'_> {
+    fn get(&self) -> &CacheFile {
+        match self {
+            HeldFile::Owned(f) => f,
+            HeldFile::Borrowed(f) => f,
+        }
+    }
+}
+
+/// The host half of an upload: the file checked, its compressed sections decoded, its raw
+/// sections checksummed in place, the tree checked. Needs no device.
+#[derive(Debug)]
+pub struct HostStep<'a> {
+    file: HeldFile<'a>,
+    /// Decoded bytes of the compressed sections, by `SECTIONS` slot (`None`: raw or absent).
+    decoded: Vec<Option<Vec<u8>>>,
+    pub field: Option<HostField>,
+    pub info: StepInfo,
+    pub host_seconds: f64,
+    pub stored_bytes: u64,
+}
+
+impl HostStep<'static> {
+    /// Opens `path` and runs the host half on it.
+    pub fn open(path: &Path, field: Option<&str>) -> Result<HostStep<'static>> {
+        let start = Instant::now();
+        let mut step = HostStep::prepare(HeldFile::Owned(CacheFile::open(path)?), field)?;
+        step.host_seconds = start.elapsed().as_secs_f64();
+        Ok(step)
+    }
+}
+
+impl<'a> HostStep<'a> {
+    /// The host half over a file the caller keeps.
+    pub fn read(file: &'a CacheFile, field: Option<&str>) -> Result<HostStep<'a>> {
+        HostStep::prepare(HeldFile::Borrowed(file), field)
+    }
+
+    pub fn file(&self) -> &CacheFile {
+        self.file.get()
+    }
+
+    /// The bytes of `SECTIONS[slot]` (empty where the section is absent).
+    fn section_bytes(&self, slot: usize) -> &[u8] {
+        match (&self.decoded[slot], self.file.get().section(SECTIONS[slot])) {
+            (Some(d), _) => d,
+            (None, Some(e)) => self.file.get().stored(e),
+            (None, None) => &[],
+        }
+    }
+
+    /// Every byte the step will hold on the GPU (what [`StepBuffers::bytes`] reports once it
+    /// is there), known before the upload.
+    pub fn gpu_bytes(&self) -> u64 {
+        let sections: u64 = (0..SECTIONS.len())
+            .map(|slot| {
+                lead(SECTIONS[slot])
+                    + (self.section_bytes(slot).len() as u64)
+                        .max(EMPTY_BINDING)
+                        .next_multiple_of(4)
+            })
+            .sum();
+        let field = self
+            .field
+            .as_ref()
+            .map_or(EMPTY_BINDING, |f| field_buffer_size(&f.bytes));
+        sections + field + self.info.derived_bytes().iter().sum::<u64>()
+    }
+
+    fn prepare(file: HeldFile<'a>, field: Option<&str>) -> Result<HostStep<'a>> {
+        let start = Instant::now();
+        let f = file.get();
+        let header = f.header();
+        if header.stats.bvh_depth > MAX_BVH_DEPTH {
+            return Err(invalid(
+                f,
+                format!(
+                    "BVH depth {} exceeds the tracer's stack ({MAX_BVH_DEPTH})",
+                    header.stats.bvh_depth
+                ),
+            ));
+        }
+        let entries: Vec<Option<&SectionEntry>> = SECTIONS.iter().map(|n| f.section(n)).collect();
+        for (name, entry) in SECTIONS.iter().zip(&entries) {
+            if entry.is_none() && *name != names::NORMALS {
+                return Err(invalid(f, format!("no section '{name}'")));
+            }
+        }
+        let point_count = u32::try_from(header.points)
+            .map_err(|_| invalid(f, format!("{} points exceed u32", header.points)))?;
+        // Compressed sections are decoded and raw ones checksummed in place, all in parallel;
+        // the field alongside.
+        let (decoded, field) = rayon::join(
+            || {
+                entries
+                    .par_iter()
+                    .map(|entry| -> Result<Option<Vec<u8>>> {
+                        match entry {
+                            Some(e) if e.encoding != Encoding::Raw => {
+                                let mut out = vec![0u8; e.raw as usize];
+                                f.decode_into(e, &mut out, &mut Vec::new())?;
+                                Ok(Some(out))
+                            }
+                            Some(e) => f.checked_stored(e).map(|_| None).map_err(Error::from),
+                            None => Ok(None),
+                        }
+                    })
+                    .collect::<Result<Vec<_>>>()
+            },
+            || field.map(|name| HostField::read(f, name)).transpose(),
+        );
+        let (decoded, field) = (decoded?, field?);
+        let count = |name: &str| f.section(name).map_or(0, |e| e.count);
+        let info = StepInfo {
+            point_count,
+            sphere_count: count(names::SPHERES) as u32,
+            cluster_size: header.neighbour_cluster.max(1),
+            bvh_depth: header.stats.bvh_depth,
+            node_count: count(names::BVH_NODES) as u32 + 1,
+            item_count: count(names::BVH_ITEMS) as u32,
+            cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
+            mask_words: 0,
+            has_normals: f.section(names::NORMALS).is_some(),
+            degree: header.mls.degree,
+            covariance: header.mls.normals == "covariance",
+            transform: header.transform,
+            bounds: header.bounds,
+            spacing: header.spacing * header.transform.scale,
+        };
+        let stored_bytes = entries.iter().flatten().map(|e| e.stored).sum::<u64>()
+            + field
+                .as_ref()
+                .and_then(|fd| f.section(&format!("{}{}", names::FIELD_PREFIX, fd.name)))
+                .map_or(0, |e| e.stored);
+        let mut step = HostStep {
+            file,
+            decoded,
+            field,
+            info,
+            host_seconds: 0.0,
+            stored_bytes,
+        };
+        let items = u64::from(step.info.item_count);
+        check_tree(step.section_bytes(slot_of(names::BVH_NODES)), items)
+            .map_err(|problem| invalid(step.file(), problem))?;
+        step.info.mask_words = mask_words(step.section_bytes(slot_of(names::CLUSTER_START)));
+        step.host_seconds = start.elapsed().as_secs_f64();
+        Ok(step)
+    }
+}
+
+/// A step on the GPU, with what the passes need to know about it and its bind group.
+#[derive(Debug)]
+pub struct GpuStep {
+    pub buffers: StepBuffers,
+    pub info: StepInfo,
+    /// Whether an array spans more than one storage binding (see shaders.rs).
+    pub split: bool,
     /// The shaded field's name and its finite range.
     pub field: Option<(String, f32, f32)>,
     pub upload: UploadStats,
+    /// The trace and shade passes' group 0, made for `binding_limit`.
+    bind_group: wgpu::BindGroup,
+    binding_limit: u64,
 }
 
 const SECTIONS: [&str; 9] = [
@@ -170,6 +425,10 @@ const SECTIONS: [&str; 9] = [
     names::BVH_NODES,
     names::BVH_ITEMS,
 ];
+
+fn slot_of(name: &str) -> usize {
+    SECTIONS.iter().position(|n| *n == name).unwrap_or_default()
+}
 
 /// wgpu refuses zero-sized bindings; absent or empty sections bind this many zero bytes.
 const EMPTY_BINDING: u64 = 16;
@@ -213,6 +472,10 @@ fn lead(name: &str) -> u64 {
     }
 }
 
+fn field_buffer_size(bytes: &[u8]) -> u64 {
+    (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4)
+}
+
 fn invalid(file: &CacheFile, problem: String) -> Error {
     Error::Step {
         path: file.path().to_path_buf(),
@@ -246,194 +509,129 @@ fn finite_range(bytes: &[u8]) -> (f32, f32) {
     if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
 }
 
+/// A device-local storage buffer of `bytes` after `lead` blank bytes, filled through a mapped
+/// staging buffer whose copy is recorded into `encoder`.
+fn storage_with(
+    gpu: &Gpu,
+    label: &str,
+    bytes: &[u8],
+    lead: u64,
+    encoder: &mut wgpu::CommandEncoder,
+) -> Result<wgpu::Buffer> {
+    let size = (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4);
+    let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: lead + size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    if !bytes.is_empty() {
+        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("staging"),
+            size,
+            usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: true,
+        });
+        {
+            let mut view = staging
+                .slice(..)
+                .get_mapped_range_mut()
+                .map_err(|e| Error::Readback(e.to_string()))?;
+            view.slice(..bytes.len()).copy_from_slice(bytes);
+        }
+        staging.unmap();
+        encoder.copy_buffer_to_buffer(&staging, 0, &target, lead, size);
+    }
+    Ok(target)
+}
+
+/// A storage buffer a per-step pass writes.
+fn derived(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    })
+}
+
 impl GpuStep {
-    /// Uploads `file`'s GPU sections (and `field`'s values, if named).
+    /// Opens, uploads and waits: both halves in one call, `file`'s GPU sections and `field`'s
+    /// values, if named.
     pub fn upload(gpu: &Gpu, file: &CacheFile, field: Option<&str>) -> Result<GpuStep> {
         let start = Instant::now();
-        let header = file.header();
-        if header.stats.bvh_depth > MAX_BVH_DEPTH {
-            return Err(invalid(
-                file,
-                format!(
-                    "BVH depth {} exceeds the tracer's stack ({MAX_BVH_DEPTH})",
-                    header.stats.bvh_depth
-                ),
-            ));
-        }
-        let field_name = field.map(|f| format!("{}{f}", names::FIELD_PREFIX));
-        if let Some(name) = &field_name
-            && file.section(name).is_none()
-        {
-            let available: Vec<&str> = header
-                .sections
-                .iter()
-                .filter_map(|s| s.name.strip_prefix(names::FIELD_PREFIX))
-                .collect();
-            return Err(invalid(
-                file,
-                format!(
-                    "no field '{}' in this cache; baked fields: {}",
-                    field.unwrap_or_default(),
-                    if available.is_empty() {
-                        "none (bake with --fields NAME)".to_string()
-                    } else {
-                        available.join(", ")
-                    }
-                ),
-            ));
-        }
-        let wanted: Vec<&str> = SECTIONS
-            .iter()
-            .copied()
-            .chain(field_name.as_deref())
-            .collect();
-        let entries: Vec<Option<&SectionEntry>> = wanted.iter().map(|n| file.section(n)).collect();
-        for (name, entry) in wanted.iter().zip(&entries) {
-            match entry {
-                None if *name != names::NORMALS => {
-                    return Err(invalid(file, format!("no section '{name}'")));
-                }
-                _ => {}
-            }
-        }
-        // Compressed sections are decoded in parallel; raw ones are used in place.
-        let decoded: Vec<Option<Vec<u8>>> = entries
-            .par_iter()
-            .map(|entry| -> Result<Option<Vec<u8>>> {
-                match entry {
-                    Some(e) if e.encoding != Encoding::Raw => {
-                        let mut out = vec![0u8; e.raw as usize];
-                        file.decode_into(e, &mut out, &mut Vec::new())?;
-                        Ok(Some(out))
-                    }
-                    _ => Ok(None),
-                }
-            })
-            .collect::<Result<_>>()?;
-        let point_count = u32::try_from(header.points)
-            .map_err(|_| invalid(file, format!("{} points exceed u32", header.points)))?;
-        let cluster_slot = SECTIONS
-            .iter()
-            .position(|n| *n == names::CLUSTER_START)
-            .unwrap_or_default();
-        // Each section's bytes, checksummed once: decoded, raw in place, or absent.
-        let section_bytes: Vec<&[u8]> = entries
-            .iter()
-            .zip(&decoded)
-            .map(|(entry, decoded)| match (entry, decoded) {
-                (_, Some(d)) => Ok(d.as_slice()),
-                (Some(e), None) => file.checked_stored(e),
-                (None, None) => Ok(&[][..]),
-            })
-            .collect::<std::result::Result<_, _>>()?;
-        let nodes_slot = SECTIONS
-            .iter()
-            .position(|n| *n == names::BVH_NODES)
-            .unwrap_or_default();
-        let items = file.section(names::BVH_ITEMS).map_or(0, |e| e.count);
-        check_tree(section_bytes[nodes_slot], items).map_err(|problem| invalid(file, problem))?;
-        let mask_words = mask_words(section_bytes[cluster_slot]);
-        let mask_bytes = u64::from(point_count) * u64::from(mask_words) * 4;
-        let count = |name: &str| file.section(name).map_or(0, |e| e.count);
-        let item_count = count(names::BVH_ITEMS) as u32;
-        // Every array, sections and the two the upload derives, within RANGES bindings.
-        let mut split = false;
-        for (name, bytes) in wanted.iter().zip(&section_bytes) {
-            split |= fits(
-                gpu,
-                file,
-                name,
-                array_of(name),
-                lead(name) + bytes.len() as u64,
-            )?;
-        }
-        split |= fits(gpu, file, "neighbour masks", &STEP_ARRAYS[2], mask_bytes)?;
-        let leaf_bytes = u64::from(item_count) * 16;
-        split |= fits(gpu, file, "leaf spheres", &STEP_ARRAYS[10], leaf_bytes)?;
-        let node_count = count(names::BVH_NODES) as u32;
-        let wide_bytes = u64::from(node_count) * WIDE_NODE_BYTES;
-        split |= fits(gpu, file, "wide nodes", &STEP_ARRAYS[11], wide_bytes)?;
+        let host = HostStep::read(file, field)?;
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("upload"),
             });
-        let mut buffers = Vec::with_capacity(wanted.len());
-        let mut stats = UploadStats::default();
-        let mut field_range = None;
-        for ((name, entry), &bytes) in wanted.iter().zip(&entries).zip(&section_bytes) {
-            if let Some(e) = entry {
-                stats.stored_bytes += e.stored;
-            }
-            if Some(*name) == field_name.as_deref() {
-                field_range = Some(finite_range(bytes));
-            }
-            let size = (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4);
-            let lead = lead(name);
-            let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(name),
-                size: lead + size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            if !bytes.is_empty() {
-                let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("staging"),
-                    size,
-                    usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: true,
-                });
-                {
-                    let mut view = staging
-                        .slice(..)
-                        .get_mapped_range_mut()
-                        .map_err(|e| Error::Readback(e.to_string()))?;
-                    view.slice(..bytes.len()).copy_from_slice(bytes);
-                }
-                staging.unmap();
-                encoder.copy_buffer_to_buffer(&staging, 0, &target, lead, size);
-                stats.bytes += bytes.len() as u64;
-            }
-            buffers.push(target);
+        let mut step = GpuStep::create(gpu, &host, &mut encoder)?;
+        let submitted = Instant::now();
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        gpu.queue.submit([encoder.finish()]);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
         }
-        if field_name.is_none() {
-            buffers.push(gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("no field"),
-                size: EMPTY_BINDING,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
-            }));
+        gpu.wait()?;
+        step.upload.gpu_seconds = submitted.elapsed().as_secs_f64();
+        step.upload.total_seconds = start.elapsed().as_secs_f64();
+        Ok(step)
+    }
+
+    /// The GPU half: buffers created and filled through staging, the copies and the per-step
+    /// passes recorded into `encoder`. Nothing is submitted or waited for; the step is ready
+    /// for frames recorded after it in the same or a later submission.
+    pub fn create(
+        gpu: &Gpu,
+        host: &HostStep<'_>,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<GpuStep> {
+        let start = Instant::now();
+        let file = host.file();
+        let info = host.info.clone();
+        // Every array, sections and the three the passes derive, within RANGES bindings.
+        let mut split = false;
+        for (slot, name) in SECTIONS.iter().enumerate() {
+            let bytes = lead(name) + host.section_bytes(slot).len() as u64;
+            split |= fits(gpu, file, name, array_of(name), bytes)?;
         }
-        let mut it = buffers.into_iter();
+        if let Some(field) = &host.field {
+            split |= fits(gpu, file, "field", &STEP_ARRAYS[9], field.bytes.len() as u64)?;
+        }
+        let [mask_bytes, leaf_bytes, wide_bytes] = info.derived_bytes();
+        split |= fits(gpu, file, "neighbour masks", &STEP_ARRAYS[2], mask_bytes)?;
+        split |= fits(gpu, file, "leaf spheres", &STEP_ARRAYS[10], leaf_bytes)?;
+        split |= fits(gpu, file, "wide nodes", &STEP_ARRAYS[11], wide_bytes)?;
+        let mut stats = UploadStats {
+            stored_bytes: host.stored_bytes,
+            host_seconds: host.host_seconds,
+            ..UploadStats::default()
+        };
+        let mut sections = Vec::with_capacity(SECTIONS.len());
+        for (slot, name) in SECTIONS.iter().enumerate() {
+            let bytes = host.section_bytes(slot);
+            sections.push(storage_with(gpu, name, bytes, lead(name), encoder)?);
+            stats.bytes += bytes.len() as u64;
+        }
+        let field_values = match &host.field {
+            Some(f) => {
+                stats.bytes += f.bytes.len() as u64;
+                storage_with(gpu, "field", &f.bytes, 0, encoder)?
+            }
+            None => derived(gpu, "no field", EMPTY_BINDING),
+        };
+        let mut it = sections.into_iter();
         let mut next = || {
             it.next()
                 .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))
         };
         let (points, normals, reach) = (next()?, next()?, next()?);
         let (cluster_start, cluster_ids) = (next()?, next()?);
-        let (balls, spheres, bvh_nodes, bvh_items, field_values) =
-            (next()?, next()?, next()?, next()?, next()?);
-        let masks = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("neighbour masks"),
-            size: mask_bytes.max(EMPTY_BINDING),
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
-        let leaf_spheres = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("leaf spheres"),
-            size: leaf_bytes.max(EMPTY_BINDING),
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
-        let wide_nodes = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("wide nodes"),
-            size: wide_bytes.max(WIDE_NODE_BYTES),
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
-        let has_normals = file.section(names::NORMALS).is_some();
-        let cluster_size = header.neighbour_cluster.max(1);
-        let sphere_count = count(names::SPHERES) as u32;
+        let (balls, spheres, bvh_nodes, bvh_items) = (next()?, next()?, next()?, next()?);
+        let masks = derived(gpu, "neighbour masks", mask_bytes);
+        let leaf_spheres = derived(gpu, "leaf spheres", leaf_bytes);
+        let wide_nodes = derived(gpu, "wide nodes", wide_bytes);
         gpu.expander().encode(
             gpu,
             &ExpandInputs {
@@ -450,29 +648,19 @@ impl GpuStep {
                 wide_nodes: &wide_nodes,
             },
             ExpandSettings {
-                point_count,
-                cluster_size,
-                mask_words,
-                has_normals: u32::from(has_normals),
-                sphere_count,
-                item_count,
-                cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
-                node_count,
+                point_count: info.point_count,
+                cluster_size: info.cluster_size,
+                mask_words: info.mask_words,
+                has_normals: u32::from(info.has_normals),
+                sphere_count: info.sphere_count,
+                item_count: info.item_count,
+                cluster_id_count: info.cluster_id_count,
+                node_count: info.node_count - 1,
                 ..ExpandSettings::zeroed()
             },
             split,
-            &mut encoder,
+            encoder,
         )?;
-        stats.host_seconds = start.elapsed().as_secs_f64();
-        let submitted = Instant::now();
-        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        gpu.queue.submit([encoder.finish()]);
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(Error::Validation(e.to_string()));
-        }
-        gpu.wait()?;
-        stats.gpu_seconds = submitted.elapsed().as_secs_f64();
-        stats.total_seconds = start.elapsed().as_secs_f64();
         let buffers = StepBuffers {
             points,
             normals,
@@ -488,28 +676,83 @@ impl GpuStep {
             leaf_spheres,
             wide_nodes,
         };
+        let binding_limit = gpu.max_binding();
+        let bind_group = step_group(gpu, &buffers, binding_limit);
+        stats.record_seconds = start.elapsed().as_secs_f64();
+        stats.total_seconds = stats.host_seconds + stats.record_seconds;
         Ok(GpuStep {
             buffers,
-            point_count,
-            sphere_count,
-            node_count: node_count + 1,
-            item_count,
+            info,
             split,
-            cluster_size,
-            bvh_depth: header.stats.bvh_depth,
-            mask_words,
-            has_normals,
-            degree: header.mls.degree,
-            covariance: header.mls.normals == "covariance",
-            transform: header.transform,
-            bounds: header.bounds,
-            spacing: header.spacing * header.transform.scale,
-            field: field
-                .zip(field_range)
-                .map(|(n, (lo, hi))| (n.to_string(), lo, hi)),
+            field: host
+                .field
+                .as_ref()
+                .map(|f| (f.name.clone(), f.min, f.max)),
             upload: stats,
+            bind_group,
+            binding_limit,
         })
     }
+
+    /// Replaces the colour field (or drops it with `None`): only the field's buffer is
+    /// uploaded (through `queue.write_buffer`, ordered before the next submission) and the
+    /// bind group remade.
+    pub fn set_field(&mut self, gpu: &Gpu, field: Option<&HostField>) -> Result<()> {
+        let buffer = match field {
+            Some(f) => {
+                if f.bytes.len() as u64 != u64::from(self.info.point_count) * 4 {
+                    return Err(Error::Validation(format!(
+                        "field '{}' has {} bytes for a step of {} points",
+                        f.name,
+                        f.bytes.len(),
+                        self.info.point_count
+                    )));
+                }
+                needs_split(gpu, self.binding_limit, &STEP_ARRAYS[9], "field", {
+                    f.bytes.len() as u64
+                })
+                .map_err(Error::Validation)?;
+                let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("field"),
+                    size: field_buffer_size(&f.bytes),
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                gpu.queue.write_buffer(&buffer, 0, &f.bytes);
+                buffer
+            }
+            None => derived(gpu, "no field", EMPTY_BINDING),
+        };
+        self.buffers.field = buffer;
+        self.field = field.map(|f| (f.name.clone(), f.min, f.max));
+        self.bind_group = step_group(gpu, &self.buffers, self.binding_limit);
+        Ok(())
+    }
+
+    /// The trace and shade passes' group 0 for this step.
+    pub fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+
+    /// The binding limit the step's bind group was made for.
+    pub fn binding_limit(&self) -> u64 {
+        self.binding_limit
+    }
+
+    /// Every byte the step holds on the GPU.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.buffers.bytes()
+    }
+}
+
+/// The step bind group of `buffers`, under the device's shared layout.
+fn step_group(gpu: &Gpu, buffers: &StepBuffers, limit: u64) -> wgpu::BindGroup {
+    let entries = bind_entries(&STEP_ARRAYS, &buffers.in_binding_order(), None, limit);
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("step"),
+        layout: gpu.step_layout(),
+        entries: &entries,
+    })
 }
 
 #[cfg(test)]

@@ -2,7 +2,9 @@
 //! The GPU tracer against the CPU f64 oracle, the WGSL against naga, the Pod mirrors against
 //! naga's layouts, and a golden image.
 
-use slosh_render::shaders::{TRACE_STACK_SIZES, expand_wgsl, mls_wgsl, shade_wgsl, trace_wgsl};
+use slosh_render::shaders::{
+    TRACE_STACK_SIZES, expand_wgsl, mls_wgsl, present_wgsl, shade_wgsl, trace_wgsl,
+};
 
 fn validate(name: &str, source: &str) -> naga::Module {
     let module = naga::front::wgsl::parse_str(source)
@@ -27,6 +29,7 @@ fn every_wgsl_file_validates_with_naga() {
             validate(&format!("mls.wgsl {how}"), &mls_wgsl(limit, split));
             validate(&format!("mls + shade {how}"), &shade_wgsl(limit, split));
             validate(&format!("expand.wgsl {how}"), &expand_wgsl(limit, split));
+            validate(&format!("present.wgsl {how}"), &present_wgsl(limit, split));
             for entries in TRACE_STACK_SIZES {
                 let source = trace_wgsl(entries, limit, split);
                 assert!(source.contains(&format!("const STACK_SIZE: u32 = {entries}u;")));
@@ -181,7 +184,7 @@ fn silhouette(depth: &[Option<f64>], w: usize, i: usize) -> bool {
 
 /// The GPU hit in world units: (t, status).
 fn world_hit(step: &GpuStep, hit: &GpuHit) -> Option<(f64, u32)> {
-    (hit.status != status::MISS).then(|| (f64::from(hit.t) * step.transform.scale, hit.status))
+    (hit.status != status::MISS).then(|| (f64::from(hit.t) * step.info.transform.scale, hit.status))
 }
 
 struct Agreement {
@@ -270,7 +273,7 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
                     )
                     .unwrap();
                 let gpu: Vec<_> = frame.hits.iter().map(|h| world_hit(&step, h)).collect();
-                let a = compare(&reference, &gpu, SIZE as usize, step.spacing);
+                let a = compare(&reference, &gpu, SIZE as usize, step.info.spacing);
                 eprintln!(
                     "{} degree {degree} {iterations} it: hit/miss {} of {} pixels agree ({:.3} %), |Δt| ≤ 1e-3 spacing on {} of {} shared hits ({:.3} %) and on {} of {} settled ones, worst {:.2e} spacing",
                     case.name,
@@ -531,10 +534,10 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
         "water frame in {:.1} s (pipelines included)",
         started.elapsed().as_secs_f64()
     );
-    let t = step.transform;
+    let t = step.info.transform;
     let c = t.to_local([center.x, center.y, center.z]);
     let r = radius / t.scale;
-    let spacing = step.spacing / t.scale;
+    let spacing = step.info.spacing / t.scale;
     let eye = t.to_local(camera.eye);
     // Linear floor values: checker square (light 0.8, dark 0.3) × lit (0.25 + 0.75 key.z) or
     // shadowed (0.25), seen straight down.
