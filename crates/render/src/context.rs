@@ -177,6 +177,26 @@ impl Gpu {
         self.expander.get_or_init(|| Expander::new(&self.device))
     }
 
+    /// Bytes of device-local memory, where the adapter is a Vulkan one (the sum of its
+    /// device-local heaps; wgpu itself does not report memory). A software rasteriser's
+    /// "device-local" heap is system memory.
+    pub fn device_memory(&self) -> Option<u64> {
+        // SAFETY: the hal adapter is only read (its physical device's memory properties), while
+        // `self.adapter` keeps it alive.
+        let hal = unsafe { self.adapter.as_hal::<wgpu::hal::api::Vulkan>() }?;
+        let instance = hal.shared_instance().raw_instance();
+        // SAFETY: the physical device belongs to this instance.
+        let properties =
+            unsafe { instance.get_physical_device_memory_properties(hal.raw_physical_device()) };
+        let heaps = &properties.memory_heaps[..properties.memory_heap_count as usize];
+        let local: u64 = heaps
+            .iter()
+            .filter(|h| h.flags.contains(ash::vk::MemoryHeapFlags::DEVICE_LOCAL))
+            .map(|h| h.size)
+            .sum();
+        (local > 0).then_some(local)
+    }
+
     /// The step bind group layout (group 0 of the trace and shade passes).
     pub fn step_layout(&self) -> &wgpu::BindGroupLayout {
         self.step_layout.get_or_init(|| {

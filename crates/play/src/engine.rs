@@ -1,0 +1,573 @@
+//! The streaming engine: a cache series on a timeline, steps prepared ahead by loader threads
+//! (host half and GPU half both off the frame thread), a GPU-resident pool under a byte
+//! budget, and frames recorded into the caller's encoder with progressive refinement. It
+//! holds no widget state: an app or a benchmark drives it one frame at a time.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, PoisonError};
+
+use slosh_mls::Camera;
+use slosh_render::{FrameTargets, Gpu, GpuStep, HostField, HostStep, TraceParams, Tracer};
+
+use crate::error::{Error, Result};
+use crate::pool::{Admission, StepPool};
+use crate::prefetch::{Prefetcher, StepSource};
+use crate::refine::{Progress, Refinement, ViewKey};
+use crate::series::Series;
+use crate::timeline::{Direction, Looping, Timeline};
+
+/// How the engine streams.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EngineOptions {
+    /// Bytes of GPU memory the resident steps may hold; `None`: [`default_budget`].
+    pub budget: Option<u64>,
+    /// Loader threads.
+    pub loaders: usize,
+    /// Seconds of playback or scrubbing to keep loaded ahead, at the rate seen.
+    pub lookahead_seconds: f64,
+    /// Fewest and most steps requested ahead of the current one.
+    pub min_ahead: usize,
+    pub max_ahead: usize,
+    /// The field to colour by, if any.
+    pub field: Option<String>,
+}
+
+impl Default for EngineOptions {
+    fn default() -> EngineOptions {
+        EngineOptions {
+            budget: None,
+            loaders: 4,
+            lookahead_seconds: 0.5,
+            min_ahead: 2,
+            max_ahead: 64,
+            field: None,
+        }
+    }
+}
+
+/// The default budget: half the adapter's device-local memory where it can be read (the
+/// rest for the frame, other apps and the driver), else 2 GiB.
+pub fn default_budget(gpu: &Gpu) -> u64 {
+    gpu.device_memory().map_or(2 << 30, |bytes| bytes / 2)
+}
+
+/// A step a loader prepared: its buffers on the GPU, and the commands (copies and per-step
+/// passes) that fill them, to be submitted before any frame that reads it.
+#[derive(Debug)]
+pub struct Prepared {
+    pub step: GpuStep,
+    pub commands: wgpu::CommandBuffer,
+    /// The field the step was loaded with.
+    pub field: Option<String>,
+}
+
+/// The loaders' view of the series: paths by bake index, and the field to load.
+#[derive(Debug)]
+pub struct GpuSource {
+    gpu: Arc<Gpu>,
+    paths: Mutex<HashMap<usize, PathBuf>>,
+    field: Mutex<Option<String>>,
+}
+
+impl GpuSource {
+    fn path(&self, index: usize) -> Option<PathBuf> {
+        let paths = self.paths.lock().unwrap_or_else(PoisonError::into_inner);
+        paths.get(&index).cloned()
+    }
+
+    fn field(&self) -> Option<String> {
+        self.field
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+}
+
+impl StepSource for GpuSource {
+    type Step = Prepared;
+
+    fn load(&self, index: usize) -> std::result::Result<Prepared, String> {
+        let path = self
+            .path(index)
+            .ok_or_else(|| format!("step {index} is not in the series"))?;
+        let field = self.field();
+        let host = HostStep::open(&path, field.as_deref()).map_err(|e| e.to_string())?;
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("step upload"),
+            });
+        let step =
+            GpuStep::create(&self.gpu, &host, &mut encoder).map_err(|e| e.to_string())?;
+        Ok(Prepared {
+            step,
+            commands: encoder.finish(),
+            field,
+        })
+    }
+}
+
+/// What a frame asks for.
+#[derive(Debug, Clone)]
+pub struct FrameRequest {
+    /// Seconds since the last frame (drives playback).
+    pub seconds: f64,
+    pub camera: Camera,
+    /// `iterations` is the refinement target once still.
+    pub params: TraceParams,
+    /// Whether the camera is being moved (refinement restarts at one iteration).
+    pub camera_moving: bool,
+}
+
+/// What a frame did.
+#[derive(Debug, Default)]
+pub struct FrameReport {
+    /// The series position asked for.
+    pub wanted: usize,
+    /// The position drawn (or still on screen): the one asked for, or the nearest resident
+    /// stand-in; `None` until any step is resident.
+    pub shown: Option<usize>,
+    pub stand_in: bool,
+    /// Iterations drawn this frame; `None` when the targets already hold this view.
+    pub drawn: Option<u32>,
+    pub progress: Option<Progress>,
+    /// Commands that fill steps made resident this frame: submit them before the frame.
+    pub uploads: Vec<wgpu::CommandBuffer>,
+    /// Steps made resident this frame, by position.
+    pub uploaded: Vec<usize>,
+    /// Steps that failed this frame, by position, with why.
+    pub failures: Vec<(usize, String)>,
+    /// Host ms of the steps uploaded this frame (decode and checks) and their recording ms.
+    pub upload_host_ms: f64,
+    pub upload_record_ms: f64,
+}
+
+/// The streaming engine over one cache directory.
+#[derive(Debug)]
+pub struct Engine {
+    gpu: Arc<Gpu>,
+    tracer: Tracer,
+    series: Series,
+    source: Arc<GpuSource>,
+    timeline: Timeline,
+    pool: StepPool<GpuStep>,
+    prefetch: Prefetcher<Prepared>,
+    targets: Option<FrameTargets>,
+    refinement: Refinement,
+    options: EngineOptions,
+    /// Failed steps by bake index, with why.
+    failed: BTreeMap<usize, String>,
+    /// The field each resident step holds, by bake index.
+    step_fields: HashMap<usize, Option<String>>,
+    field: Option<String>,
+    revision: u64,
+    /// Steps per second the current position has been moving at (smoothed).
+    rate: f64,
+    last_position: usize,
+    scrub_direction: Direction,
+    /// The bake index drawn last.
+    shown: Option<usize>,
+    /// Mean bytes of a resident step, for how many fit.
+    step_bytes: u64,
+}
+
+impl Engine {
+    /// An engine over the cache directory `dir`, on `gpu` (made here or from a device
+    /// someone else created, [`Gpu::from_parts`]).
+    pub fn open(gpu: Arc<Gpu>, dir: &Path, options: EngineOptions) -> Result<Engine> {
+        let series = Series::open(dir)?;
+        let tracer = Tracer::new(&gpu)?;
+        let budget = options.budget.unwrap_or_else(|| default_budget(&gpu));
+        let source = Arc::new(GpuSource {
+            gpu: gpu.clone(),
+            paths: Mutex::new(HashMap::new()),
+            field: Mutex::new(options.field.clone()),
+        });
+        let prefetch = Prefetcher::new(source.clone(), options.loaders);
+        let mut engine = Engine {
+            gpu,
+            tracer,
+            timeline: Timeline::new(Vec::new()),
+            series,
+            source,
+            pool: StepPool::new(budget),
+            prefetch,
+            targets: None,
+            refinement: Refinement::default(),
+            field: options.field.clone(),
+            options,
+            failed: BTreeMap::new(),
+            step_fields: HashMap::new(),
+            revision: 0,
+            rate: 0.0,
+            last_position: 0,
+            scrub_direction: Direction::Forward,
+            shown: None,
+            step_bytes: 0,
+        };
+        engine.adopt_series();
+        Ok(engine)
+    }
+
+    fn adopt_series(&mut self) {
+        let current = self.bake_index(self.timeline.current());
+        let mut paths = self
+            .source
+            .paths
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        paths.clear();
+        paths.extend(self.series.steps().iter().map(|s| (s.index, s.path.clone())));
+        drop(paths);
+        self.timeline.set_times(self.series.times());
+        // The step shown stays shown where the series grew before it.
+        if let Some(index) = current
+            && let Some(position) = self.position(index)
+        {
+            self.timeline.set_current(position);
+        }
+        self.last_position = self.timeline.current();
+    }
+
+    /// Looks for steps a running bake added; returns whether there are new ones.
+    pub fn refresh_series(&mut self) -> Result<bool> {
+        let added = self.series.refresh()?;
+        if added {
+            self.adopt_series();
+        }
+        Ok(added)
+    }
+
+    pub fn gpu(&self) -> &Arc<Gpu> {
+        &self.gpu
+    }
+
+    pub fn tracer(&self) -> &Tracer {
+        &self.tracer
+    }
+
+    pub fn series(&self) -> &Series {
+        &self.series
+    }
+
+    pub fn timeline(&self) -> &Timeline {
+        &self.timeline
+    }
+
+    /// The timeline, for a widget or key handler to move.
+    pub fn timeline_mut(&mut self) -> &mut Timeline {
+        &mut self.timeline
+    }
+
+    pub fn budget(&self) -> u64 {
+        self.pool.budget()
+    }
+
+    pub fn used_bytes(&self) -> u64 {
+        self.pool.used()
+    }
+
+    /// Series positions resident on the GPU.
+    pub fn resident(&self) -> Vec<usize> {
+        let mut v: Vec<usize> = self
+            .pool
+            .indices()
+            .filter_map(|i| self.position(i))
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Series positions being loaded or queued.
+    pub fn prefetching(&self) -> Vec<usize> {
+        let mut v: Vec<usize> = self
+            .prefetch
+            .in_flight()
+            .into_iter()
+            .chain(self.prefetch.queued())
+            .filter_map(|i| self.position(i))
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// Failed steps by series position, with why.
+    pub fn failures(&self) -> Vec<(usize, String)> {
+        self.failed
+            .iter()
+            .filter_map(|(i, why)| self.position(*i).map(|p| (p, why.clone())))
+            .collect()
+    }
+
+    pub fn field(&self) -> Option<&str> {
+        self.field.as_deref()
+    }
+
+    /// The frame targets of the last frame (its texture holds the picture).
+    pub fn targets(&self) -> Option<&FrameTargets> {
+        self.targets.as_ref()
+    }
+
+    /// The step drawn last, if any (series position, and the step itself).
+    pub fn shown_step(&self) -> Option<(usize, &GpuStep)> {
+        let index = self.shown?;
+        let position = self.position(index)?;
+        // Looked up without marking it used: reading is not displaying.
+        self.pool_peek(index).map(|s| (position, s))
+    }
+
+    fn pool_peek(&self, index: usize) -> Option<&GpuStep> {
+        // StepPool::get marks use; a shared peek goes through a read-only path.
+        self.pool.peek(index)
+    }
+
+    /// Colours by `field` from now on: loaders load it, resident steps switch when shown.
+    pub fn set_field(&mut self, field: Option<String>) {
+        if field == self.field {
+            return;
+        }
+        self.field = field.clone();
+        *self
+            .source
+            .field
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = field;
+        self.revision += 1;
+    }
+
+    fn bake_index(&self, position: usize) -> Option<usize> {
+        self.series.steps().get(position).map(|s| s.index)
+    }
+
+    fn position(&self, index: usize) -> Option<usize> {
+        self.series
+            .steps()
+            .binary_search_by_key(&index, |s| s.index)
+            .ok()
+    }
+
+    /// Positions to have resident, most urgent first: the current one, then ahead in the
+    /// direction of motion (as many as the rate and the budget allow), then one behind.
+    fn window(&self) -> Vec<usize> {
+        let len = self.timeline.len();
+        if len == 0 {
+            return Vec::new();
+        }
+        let current = self.timeline.current();
+        let direction = if self.timeline.is_playing() {
+            self.timeline.direction()
+        } else {
+            self.scrub_direction
+        };
+        let rate = if self.timeline.is_playing() {
+            self.timeline.speed().max(self.rate)
+        } else {
+            self.rate
+        };
+        let mut ahead = ((rate * self.options.lookahead_seconds).ceil() as usize)
+            .clamp(self.options.min_ahead, self.options.max_ahead.max(1));
+        if self.step_bytes > 0 {
+            let fit = (self.pool.budget() / self.step_bytes) as usize;
+            ahead = ahead.min(fit.saturating_sub(2));
+        }
+        let wraps = self.timeline.is_playing() && self.timeline.looping() != Looping::Off;
+        let (first, last) = self.timeline.bounds();
+        let mut out = vec![current];
+        let mut at = current as i64;
+        for _ in 0..ahead {
+            at += direction.sign();
+            if at < first as i64 || at > last as i64 {
+                if !wraps {
+                    break;
+                }
+                at = if at < first as i64 { last } else { first } as i64;
+            }
+            out.push(at as usize);
+        }
+        let behind = current as i64 - direction.sign();
+        if (0..len as i64).contains(&behind) {
+            out.push(behind as usize);
+        }
+        out.dedup();
+        out
+    }
+
+    /// Prepared steps that arrived, made resident (window steps may evict, background fill
+    /// only takes free room).
+    fn admit(&mut self, window: &[usize], report: &mut FrameReport) {
+        let keep = self.shown;
+        for loaded in self.prefetch.poll() {
+            let Some(position) = self.position(loaded.index) else {
+                continue;
+            };
+            match loaded.result {
+                Err(why) => {
+                    report.failures.push((position, why.clone()));
+                    self.failed.insert(loaded.index, why);
+                }
+                Ok(prepared) => {
+                    let bytes = prepared.step.gpu_bytes();
+                    let urgent = window.contains(&position);
+                    let free = self.pool.used() + bytes <= self.pool.budget();
+                    if !urgent && !free {
+                        continue;
+                    }
+                    let upload = prepared.step.upload;
+                    self.failed.remove(&loaded.index);
+                    if let Admission::Stored { evicted } =
+                        self.pool.insert(loaded.index, prepared.step, keep)
+                    {
+                        for gone in evicted {
+                            self.step_fields.remove(&gone);
+                        }
+                        self.step_fields.insert(loaded.index, prepared.field);
+                        report.uploads.push(prepared.commands);
+                        report.uploaded.push(position);
+                        report.upload_host_ms += upload.host_seconds * 1e3;
+                        report.upload_record_ms += upload.record_seconds * 1e3;
+                        let n = self.pool.len() as u64;
+                        self.step_bytes = (self.step_bytes * (n - 1) + bytes) / n.max(1);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Asks the loaders for the window's missing steps, then, while the pool has room, the
+    /// rest of the series nearest first (a series that fits ends up wholly resident).
+    fn request(&mut self, window: &[usize]) {
+        let missing = |p: &usize| {
+            self.bake_index(*p)
+                .is_some_and(|i| !self.pool.contains(i) && !self.failed.contains_key(&i))
+        };
+        let mut wanted: Vec<usize> = window.iter().copied().filter(missing).collect();
+        if wanted.is_empty() && self.step_bytes > 0 {
+            let room = self.pool.budget().saturating_sub(self.pool.used()) / self.step_bytes;
+            let room = (room as usize).min(self.options.loaders * 2);
+            if room > 0 {
+                let current = self.timeline.current();
+                let mut rest: Vec<usize> = (0..self.timeline.len()).filter(missing).collect();
+                rest.sort_by_key(|&p| p.abs_diff(current));
+                wanted.extend(rest.into_iter().take(room));
+            }
+        }
+        let indices: Vec<usize> = wanted
+            .into_iter()
+            .filter_map(|p| self.bake_index(p))
+            .collect();
+        self.prefetch.request(indices);
+    }
+
+    /// Plays the timeline on, takes in prepared steps, asks for the next ones, and records
+    /// the frame into `encoder` (unless the targets already hold this view). Never waits on
+    /// disk: a step not yet resident is drawn by its nearest resident stand-in.
+    pub fn frame(
+        &mut self,
+        request: &FrameRequest,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<FrameReport> {
+        let before = self.timeline.current();
+        let time_moved = self.timeline.advance(request.seconds);
+        let position = self.timeline.current();
+        // How fast the position moves, by play or by scrub.
+        let moved = position.abs_diff(self.last_position) as f64;
+        if position != self.last_position {
+            self.scrub_direction = if position > self.last_position {
+                Direction::Forward
+            } else {
+                Direction::Backward
+            };
+        }
+        let instant_rate = moved / request.seconds.max(1e-3);
+        self.rate = 0.8 * self.rate + 0.2 * instant_rate;
+        let scrubbed = position != self.last_position || before != position;
+        self.last_position = position;
+        let window = self.window();
+        let mut report = FrameReport {
+            wanted: position,
+            ..FrameReport::default()
+        };
+        self.admit(&window, &mut report);
+        self.request(&window);
+        let wanted_index = self.bake_index(position);
+        let shown_index = match wanted_index {
+            Some(i) if self.pool.contains(i) => Some(i),
+            Some(_) => self
+                .pool
+                .nearest_by(|i| self.position(i).map_or(usize::MAX, |p| p.abs_diff(position))),
+            None => None,
+        };
+        let Some(shown_index) = shown_index else {
+            return Ok(report);
+        };
+        report.shown = self.position(shown_index);
+        report.stand_in = Some(shown_index) != wanted_index;
+        self.shown = Some(shown_index);
+        self.ensure_field(shown_index)?;
+        let (width, height) = (request.camera.width.max(1), request.camera.height.max(1));
+        if self.targets.as_ref().map(FrameTargets::size) != Some((width, height)) {
+            self.targets = Some(self.tracer.targets(&self.gpu, width, height)?);
+            self.refinement.invalidate();
+        }
+        let key = ViewKey::new(
+            report.shown.unwrap_or(position),
+            request.camera,
+            &request.params,
+            self.field.clone(),
+            self.revision,
+        );
+        let moving = request.camera_moving
+            || time_moved
+            || scrubbed
+            || report.stand_in
+            || self.timeline.is_playing();
+        let target = request.params.iterations.max(1);
+        report.drawn = self.refinement.next(key, moving, target);
+        report.progress = Some(self.refinement.progress(target));
+        if let Some(iterations) = report.drawn {
+            let params = TraceParams {
+                iterations,
+                ..request.params
+            };
+            let step = self.pool.get(shown_index).ok_or_else(|| Error::Series {
+                path: self.series.dir().to_path_buf(),
+                problem: "the shown step left the pool".into(),
+            })?;
+            let targets = self.targets.as_ref().ok_or_else(|| Error::Series {
+                path: self.series.dir().to_path_buf(),
+                problem: "no frame targets".into(),
+            })?;
+            self.tracer
+                .record(&self.gpu, step, targets, &request.camera, &params, encoder)?;
+        } else {
+            self.pool.get(shown_index);
+        }
+        Ok(report)
+    }
+
+    /// Switches the shown step to the engine's field where it holds another one.
+    fn ensure_field(&mut self, index: usize) -> Result<()> {
+        if self.step_fields.get(&index) == Some(&self.field) {
+            return Ok(());
+        }
+        let field = match &self.field {
+            Some(name) => {
+                let path = self.source.path(index).ok_or_else(|| Error::Series {
+                    path: self.series.dir().to_path_buf(),
+                    problem: format!("step {index} is not in the series"),
+                })?;
+                let file = slosh_cache::CacheFile::open(&path)?;
+                Some(HostField::read(&file, name)?)
+            }
+            None => None,
+        };
+        if let Some(step) = self.pool.get_mut(index) {
+            step.set_field(&self.gpu, field.as_ref())?;
+        }
+        self.pool.refresh_bytes(index);
+        self.step_fields.insert(index, self.field.clone());
+        Ok(())
+    }
+}

@@ -1,0 +1,240 @@
+//! Background threads that run the host half of an upload for the steps the frame loop asks
+//! for. A new request replaces the queue (a jump cancels what is stale); the frame loop
+//! collects finished steps with [`Prefetcher::poll`], which never waits.
+
+use std::collections::{HashSet, VecDeque};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
+use std::time::Instant;
+
+/// Where steps come from: a cache directory, or an instrumented stand-in in tests.
+pub trait StepSource: Send + Sync + 'static {
+    type Step: Send + 'static;
+    /// Loads step `index`; the error names the file and what is wrong with it.
+    fn load(&self, index: usize) -> Result<Self::Step, String>;
+}
+
+/// A finished load.
+#[derive(Debug)]
+pub struct Loaded<T> {
+    pub index: usize,
+    /// The request generation it was queued under ([`Prefetcher::generation`]).
+    pub generation: u64,
+    pub result: Result<T, String>,
+    pub seconds: f64,
+}
+
+#[derive(Debug, Default)]
+struct Queue {
+    waiting: VecDeque<usize>,
+    in_flight: HashSet<usize>,
+    generation: u64,
+    shutdown: bool,
+}
+
+#[derive(Debug, Default)]
+struct Shared {
+    queue: Mutex<Queue>,
+    wake: Condvar,
+}
+
+impl Shared {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Queue> {
+        self.queue.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// Loader threads over a [`StepSource`].
+#[derive(Debug)]
+pub struct Prefetcher<T> {
+    shared: Arc<Shared>,
+    results: Receiver<Loaded<T>>,
+}
+
+impl<T: Send + 'static> Prefetcher<T> {
+    /// `threads` loader threads (at least one) over `source`.
+    pub fn new<S: StepSource<Step = T>>(source: Arc<S>, threads: usize) -> Prefetcher<T> {
+        let shared = Arc::new(Shared::default());
+        let (tx, results) = channel();
+        for n in 0..threads.max(1) {
+            let (shared, source, tx) = (shared.clone(), source.clone(), tx.clone());
+            // A thread that cannot start leaves the others; with none, poll() stays empty and
+            // the engine reports steps as not yet loaded.
+            let _ = std::thread::Builder::new()
+                .name(format!("slosh-prefetch-{n}"))
+                .spawn(move || worker(&*shared, &*source, &tx));
+        }
+        Prefetcher { shared, results }
+    }
+
+    /// Replaces the queue with `wanted`, in order of priority, skipping steps being loaded
+    /// now. Returns the new generation; loads queued before it are dropped unstarted.
+    pub fn request(&self, wanted: impl IntoIterator<Item = usize>) -> u64 {
+        let mut q = self.shared.lock();
+        let mut seen = HashSet::new();
+        let waiting: VecDeque<usize> = wanted
+            .into_iter()
+            .filter(|i| !q.in_flight.contains(i) && seen.insert(*i))
+            .collect();
+        if waiting != q.waiting {
+            q.generation += 1;
+            q.waiting = waiting;
+            self.shared.wake.notify_all();
+        }
+        q.generation
+    }
+
+    /// The current request generation.
+    pub fn generation(&self) -> u64 {
+        self.shared.lock().generation
+    }
+
+    /// Whether step `index` is queued or being loaded.
+    pub fn pending(&self, index: usize) -> bool {
+        let q = self.shared.lock();
+        q.in_flight.contains(&index) || q.waiting.contains(&index)
+    }
+
+    /// Steps being loaded now.
+    pub fn in_flight(&self) -> Vec<usize> {
+        self.shared.lock().in_flight.iter().copied().collect()
+    }
+
+    /// Steps queued, in order.
+    pub fn queued(&self) -> Vec<usize> {
+        self.shared.lock().waiting.iter().copied().collect()
+    }
+
+    /// The loads finished since the last call; never waits.
+    pub fn poll(&self) -> Vec<Loaded<T>> {
+        self.results.try_iter().collect()
+    }
+
+    /// Waits for the next finished load (benchmarks and tests; the frame loop uses `poll`).
+    pub fn wait(&self) -> Option<Loaded<T>> {
+        self.results.recv().ok()
+    }
+}
+
+impl<T> Drop for Prefetcher<T> {
+    fn drop(&mut self) {
+        // Threads end after the load in hand; nobody waits for a slow one.
+        self.shared.lock().shutdown = true;
+        self.shared.wake.notify_all();
+    }
+}
+
+fn worker<S: StepSource>(shared: &Shared, source: &S, tx: &Sender<Loaded<S::Step>>) {
+    loop {
+        let (index, generation) = {
+            let mut q = shared.lock();
+            loop {
+                if q.shutdown {
+                    return;
+                }
+                if let Some(index) = q.waiting.pop_front() {
+                    q.in_flight.insert(index);
+                    break (index, q.generation);
+                }
+                q = shared.wake.wait(q).unwrap_or_else(PoisonError::into_inner);
+            }
+        };
+        let start = Instant::now();
+        let result = source.load(index);
+        let loaded = Loaded {
+            index,
+            generation,
+            result,
+            seconds: start.elapsed().as_secs_f64(),
+        };
+        // The result is sent before the step leaves `in_flight`, so a step is always either
+        // pending or in the channel until polled.
+        let gone = tx.send(loaded).is_err();
+        shared.lock().in_flight.remove(&index);
+        if gone {
+            return;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::mpsc::SyncSender;
+
+    /// Records every load; each waits for a go from the test.
+    struct Gated {
+        loads: Mutex<Vec<usize>>,
+        started: Mutex<SyncSender<usize>>,
+        go: Mutex<Receiver<()>>,
+    }
+
+    impl StepSource for Gated {
+        type Step = usize;
+        fn load(&self, index: usize) -> Result<usize, String> {
+            self.loads.lock().unwrap_or_else(PoisonError::into_inner).push(index);
+            let _ = self.started.lock().unwrap_or_else(PoisonError::into_inner).send(index);
+            let _ = self.go.lock().unwrap_or_else(PoisonError::into_inner).recv();
+            if index == 13 {
+                Err("step 13 is unlucky".into())
+            } else {
+                Ok(index * 10)
+            }
+        }
+    }
+
+    fn gated() -> (Arc<Gated>, Receiver<usize>, Sender<()>) {
+        let (started_tx, started) = std::sync::mpsc::sync_channel(100);
+        let (go, go_rx) = channel();
+        let source = Arc::new(Gated {
+            loads: Mutex::new(Vec::new()),
+            started: Mutex::new(started_tx),
+            go: Mutex::new(go_rx),
+        });
+        (source, started, go)
+    }
+
+    #[test]
+    fn a_slow_source_never_blocks_poll_and_a_jump_cancels_stale_work() {
+        let (source, started, go) = gated();
+        let prefetch = Prefetcher::new(source.clone(), 1);
+        prefetch.request(0..10);
+        // The one thread is inside load(0), held there.
+        assert_eq!(started.recv().ok(), Some(0));
+        // The frame loop polls while the source is stuck: it gets nothing, at once.
+        assert!(prefetch.poll().is_empty());
+        assert!(prefetch.pending(0));
+        // A jump to 50: the queued 1..10 are dropped unstarted.
+        let generation = prefetch.request(50..53);
+        assert_eq!(prefetch.queued(), vec![50, 51, 52]);
+        for _ in 0..4 {
+            go.send(()).ok();
+        }
+        let mut got = Vec::new();
+        while got.len() < 4 {
+            let loaded = prefetch.wait().expect("the loader answers");
+            got.push((loaded.index, loaded.generation >= generation));
+        }
+        assert_eq!(got, vec![(0, false), (50, true), (51, true), (52, true)]);
+        let loads = source.loads.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        assert_eq!(loads, vec![0, 50, 51, 52], "stale requests never loaded");
+    }
+
+    #[test]
+    fn failures_come_back_as_results() {
+        let (source, _started, go) = gated();
+        let prefetch = Prefetcher::new(source, 2);
+        prefetch.request([12, 13]);
+        go.send(()).ok();
+        go.send(()).ok();
+        let mut results: Vec<(usize, Result<usize, String>)> = (0..2)
+            .filter_map(|_| prefetch.wait())
+            .map(|l| (l.index, l.result))
+            .collect();
+        results.sort_by_key(|r| r.0);
+        assert_eq!(results[0], (12, Ok(120)));
+        assert_eq!(results[1], (13, Err("step 13 is unlucky".into())));
+        // Requests for steps already in flight are not queued twice.
+        assert!(!prefetch.pending(12));
+    }
+}
