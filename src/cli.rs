@@ -42,6 +42,51 @@ pub enum BenchCommand {
     /// GPU frame times (timestamp queries) against the thesis's tables, with upload times and
     /// the error of each setting.
     Gpu(GpuBenchArgs),
+    /// Streaming: sequential playback and random jumps through a series on the player's
+    /// engine, beside the floors (file reads, raw buffer writes).
+    Scrub(ScrubBenchArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ScrubBenchArgs {
+    /// Markdown report to write.
+    #[arg(long, default_value = "docs/results-scrub.md")]
+    pub out: PathBuf,
+    /// Points per step of each series measured (default 100000,1000000; --quick 2000).
+    #[arg(long, value_delimiter = ',')]
+    pub points: Vec<usize>,
+    /// Steps per series.
+    #[arg(long, default_value_t = 64)]
+    pub steps: usize,
+    /// Distinct baked shapes per series (the moving sphere at that many instants, cycled
+    /// over the steps; default: every step up to 200k points, 8 above).
+    #[arg(long)]
+    pub distinct: Option<usize>,
+    /// Frame size.
+    #[arg(long, default_value = "1280x800")]
+    pub size: String,
+    /// Random jumps measured, in the pool and from the page cache each.
+    #[arg(long, default_value_t = 100)]
+    pub jumps: usize,
+    /// Seed of the jumps.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Loader threads of the engine.
+    #[arg(long, default_value_t = 4)]
+    pub loaders: usize,
+    /// Pool size in steps for sequential playback and page-cache jumps (so that steps stream
+    /// rather than stay resident).
+    #[arg(long, default_value_t = 16)]
+    pub pool_steps: u64,
+    /// Where the series are written (reused when already there with the same shape).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+    /// A tiny series and frame (checks the harness; lavapipe-friendly).
+    #[arg(long)]
+    pub quick: bool,
+    /// GPU adapter whose name contains this.
+    #[arg(long)]
+    pub adapter: Option<String>,
 }
 
 #[derive(Debug, Args)]

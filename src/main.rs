@@ -5,6 +5,7 @@ mod accuracy;
 mod bake;
 mod bench_bake;
 mod bench_gpu;
+mod bench_scrub;
 mod cli;
 mod config;
 mod generate;
@@ -35,6 +36,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
         Command::Bench(cli::BenchCommand::Bake(args)) => bench_bake::run(&args),
         Command::Bench(cli::BenchCommand::Gpu(args)) => bench_gpu::run(&args),
+        Command::Bench(cli::BenchCommand::Scrub(args)) => bench_scrub::run(&args),
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
         Command::Inspect(args) => inspect::run(&args),

@@ -99,8 +99,7 @@ impl StepSource for GpuSource {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("step upload"),
             });
-        let step =
-            GpuStep::create(&self.gpu, &host, &mut encoder).map_err(|e| e.to_string())?;
+        let step = GpuStep::create(&self.gpu, &host, &mut encoder).map_err(|e| e.to_string())?;
         Ok(Prepared {
             step,
             commands: encoder.finish(),
@@ -219,7 +218,12 @@ impl Engine {
             .lock()
             .unwrap_or_else(PoisonError::into_inner);
         paths.clear();
-        paths.extend(self.series.steps().iter().map(|s| (s.index, s.path.clone())));
+        paths.extend(
+            self.series
+                .steps()
+                .iter()
+                .map(|s| (s.index, s.path.clone())),
+        );
         drop(paths);
         self.timeline.set_times(self.series.times());
         // The step shown stays shown where the series grew before it.
@@ -494,9 +498,10 @@ impl Engine {
         let wanted_index = self.bake_index(position);
         let shown_index = match wanted_index {
             Some(i) if self.pool.contains(i) => Some(i),
-            Some(_) => self
-                .pool
-                .nearest_by(|i| self.position(i).map_or(usize::MAX, |p| p.abs_diff(position))),
+            Some(_) => self.pool.nearest_by(|i| {
+                self.position(i)
+                    .map_or(usize::MAX, |p| p.abs_diff(position))
+            }),
             None => None,
         };
         let Some(shown_index) = shown_index else {

@@ -221,7 +221,9 @@ mod tests {
         // Two steps go for one large one.
         assert_eq!(
             pool.insert(6, Fake(200), Some(2)),
-            Admission::Stored { evicted: vec![3, 4] }
+            Admission::Stored {
+                evicted: vec![3, 4]
+            }
         );
         assert_eq!(pool.used(), 300);
         let mut held: Vec<usize> = pool.indices().collect();

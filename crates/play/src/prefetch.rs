@@ -172,9 +172,20 @@ mod tests {
     impl StepSource for Gated {
         type Step = usize;
         fn load(&self, index: usize) -> Result<usize, String> {
-            self.loads.lock().unwrap_or_else(PoisonError::into_inner).push(index);
-            let _ = self.started.lock().unwrap_or_else(PoisonError::into_inner).send(index);
-            let _ = self.go.lock().unwrap_or_else(PoisonError::into_inner).recv();
+            self.loads
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(index);
+            let _ = self
+                .started
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .send(index);
+            let _ = self
+                .go
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .recv();
             if index == 13 {
                 Err("step 13 is unlucky".into())
             } else {
@@ -216,7 +227,11 @@ mod tests {
             got.push((loaded.index, loaded.generation >= generation));
         }
         assert_eq!(got, vec![(0, false), (50, true), (51, true), (52, true)]);
-        let loads = source.loads.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        let loads = source
+            .loads
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
         assert_eq!(loads, vec![0, 50, 51, 52], "stale requests never loaded");
     }
 

@@ -150,7 +150,11 @@ impl Timeline {
     }
 
     pub fn toggle_play(&mut self) {
-        if self.playing { self.pause() } else { self.play() }
+        if self.playing {
+            self.pause()
+        } else {
+            self.play()
+        }
     }
 
     pub fn set_direction(&mut self, direction: Direction) {
@@ -290,7 +294,11 @@ mod tests {
         t.set_direction(Direction::Backward);
         t.pause();
         t.play();
-        assert_eq!(t.current(), 9, "play backwards at the start restarts at the end");
+        assert_eq!(
+            t.current(),
+            9,
+            "play backwards at the start restarts at the end"
+        );
     }
 
     #[test]

@@ -18,10 +18,9 @@ pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
 pub use tracer::{
-    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer,
-    settings,
+    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings,
 };
 pub use upload::{
-    GpuStep, HostField, HostStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST,
-    StepBuffers, StepInfo, UploadStats,
+    GpuStep, HostField, HostStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, StepBuffers,
+    StepInfo, UploadStats,
 };

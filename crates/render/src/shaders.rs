@@ -213,7 +213,10 @@ pub fn expand_wgsl(limit: u64, split: bool) -> String {
 
 /// The present pass's module.
 pub fn present_wgsl(limit: u64, split: bool) -> String {
-    format!("{}{PRESENT_WGSL}", ranged_wgsl(&PRESENT_ARRAYS, limit, split))
+    format!(
+        "{}{PRESENT_WGSL}",
+        ranged_wgsl(&PRESENT_ARRAYS, limit, split)
+    )
 }
 
 fn frame_module(source: &str, limit: u64, split: bool) -> String {

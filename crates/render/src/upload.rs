@@ -597,7 +597,13 @@ impl GpuStep {
             split |= fits(gpu, file, name, array_of(name), bytes)?;
         }
         if let Some(field) = &host.field {
-            split |= fits(gpu, file, "field", &STEP_ARRAYS[9], field.bytes.len() as u64)?;
+            split |= fits(
+                gpu,
+                file,
+                "field",
+                &STEP_ARRAYS[9],
+                field.bytes.len() as u64,
+            )?;
         }
         let [mask_bytes, leaf_bytes, wide_bytes] = info.derived_bytes();
         split |= fits(gpu, file, "neighbour masks", &STEP_ARRAYS[2], mask_bytes)?;
@@ -684,10 +690,7 @@ impl GpuStep {
             buffers,
             info,
             split,
-            field: host
-                .field
-                .as_ref()
-                .map(|f| (f.name.clone(), f.min, f.max)),
+            field: host.field.as_ref().map(|f| (f.name.clone(), f.min, f.max)),
             upload: stats,
             bind_group,
             binding_limit,

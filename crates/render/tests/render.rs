@@ -682,3 +682,130 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
         "{message}"
     );
 }
+
+/// Copies `texture` (Rgba8Unorm, width a multiple of 64) back as RGBA8 words.
+fn read_texture(gpu: &Gpu, texture: &wgpu::Texture) -> Vec<u32> {
+    let (w, h) = (texture.width(), texture.height());
+    assert_eq!(w % 64, 0, "rows must be 256-byte aligned for the copy");
+    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("texture readback"),
+        size: u64::from(w * h * 4),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(w * 4),
+                rows_per_image: Some(h),
+            },
+        },
+        texture.size(),
+    );
+    gpu.queue.submit([encoder.finish()]);
+    let slice = buffer.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |r| r.unwrap());
+    gpu.wait().unwrap();
+    let words = bytemuck::pod_collect_to_vec(&slice.get_mapped_range().unwrap());
+    buffer.unmap();
+    words
+}
+
+/// The embeddable path: the host half on another thread, the GPU half and the frame recorded
+/// into one caller-owned encoder, one submit. Hits and pixels are bit-identical to the
+/// blocking upload and `Tracer::render` (shade and water), and the frame's Rgba8Unorm texture
+/// holds exactly the image's pixels.
+#[test]
+fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
+    let Some(dev) = device() else { return };
+    let mut input = input_of(&SceneSpec::new(SceneKind::Tank, 6000, 7));
+    let pressure: Vec<f32> = input.positions.iter().map(|p| p[2] as f32).collect();
+    let height: Vec<f32> = input.positions.iter().map(|p| p[0] as f32).collect();
+    input.fields = vec![
+        (
+            "pressure".into(),
+            slosh_ensight::FieldValues::Scalar(pressure),
+        ),
+        ("x".into(), slosh_ensight::FieldValues::Scalar(height)),
+    ];
+    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    params.fields = vec!["pressure".into(), "x".into()];
+    let baked = bake_step(&input, &params).unwrap();
+    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
+    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
+    let mut camera = camera_for(&input.positions, 64);
+    camera.height = 48;
+    for mode in [ShadeMode::Shade, ShadeMode::Water] {
+        let reference_step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();
+        let mut trace = TraceParams::for_step(&reference_step, 3);
+        trace.mode = mode;
+        let reference = dev
+            .tracer
+            .render(&dev.gpu, &reference_step, &camera, &trace)
+            .unwrap();
+        // Host half elsewhere, GPU half and frame in the caller's encoder.
+        let host = std::thread::scope(|s| {
+            s.spawn(|| slosh_render::HostStep::read(&file, Some("pressure")).unwrap())
+                .join()
+                .unwrap()
+        });
+        assert_eq!(host.gpu_bytes(), reference_step.gpu_bytes());
+        let targets = dev.tracer.targets(&dev.gpu, 64, 48).unwrap();
+        let mut encoder = dev
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let step = GpuStep::create(&dev.gpu, &host, &mut encoder).unwrap();
+        dev.tracer
+            .record(&dev.gpu, &step, &targets, &camera, &trace, &mut encoder)
+            .unwrap();
+        dev.gpu.queue.submit([encoder.finish()]);
+        let frame = dev.tracer.read_frame(&dev.gpu, &targets).unwrap();
+        let lit = reference
+            .hits
+            .iter()
+            .filter(|h| h.status != status::MISS)
+            .count();
+        assert!(lit > 300, "{mode:?}: only {lit} hit pixels");
+        assert!(reference.hits == frame.hits, "{mode:?}: hits differ");
+        assert!(reference.rgba == frame.rgba, "{mode:?}: pixels differ");
+        assert!(
+            read_texture(&dev.gpu, targets.texture()) == frame.rgba,
+            "{mode:?}: the texture differs from the image"
+        );
+    }
+    // Switching the field uploads the field alone and draws what a step uploaded with that
+    // field draws.
+    let mut step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();
+    let x = slosh_render::HostField::read(&file, "x").unwrap();
+    step.set_field(&dev.gpu, Some(&x)).unwrap();
+    let direct = GpuStep::upload(&dev.gpu, &file, Some("x")).unwrap();
+    assert_eq!(step.field, direct.field);
+    let trace = TraceParams::for_step(&step, 2);
+    let switched = dev.tracer.render(&dev.gpu, &step, &camera, &trace).unwrap();
+    let uploaded = dev
+        .tracer
+        .render(&dev.gpu, &direct, &camera, &trace)
+        .unwrap();
+    assert!(
+        switched.rgba == uploaded.rgba,
+        "field switch changes the picture"
+    );
+    let before = dev.tracer.render(
+        &dev.gpu,
+        &GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap(),
+        &camera,
+        &trace,
+    );
+    assert!(before.unwrap().rgba != switched.rgba, "the field shows");
+    let missing = slosh_render::HostField::read(&file, "nope")
+        .unwrap_err()
+        .to_string();
+    assert!(missing.contains("baked fields: pressure, x"), "{missing}");
+}

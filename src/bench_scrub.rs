@@ -1,0 +1,486 @@
+//! `slosh bench scrub`: the player's engine driven headless through a series of cache files
+//! from the page cache: sequential playback (steps per second, request-to-frame latency),
+//! random jumps to steps in the GPU pool and to steps only in the page cache, the cost of a
+//! step (bytes on the GPU, host ms, GPU upload and passes ms), and, in the same run, the
+//! floors: `std::fs::read` of the same files and a raw `Queue::write_buffer` of as many bytes.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use rand::{Rng, SeedableRng};
+use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
+use slosh_cache::{Manifest, step_file_name, write_step};
+use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest};
+use slosh_render::{Gpu, GpuStep, HostStep, ShadeMode, TraceParams};
+use slosh_scenes::{Scene, SceneKind, SceneSpec};
+
+use crate::cli::ScrubBenchArgs;
+use crate::render::{framing_camera, parse_size};
+
+/// Percentiles of a sample, in the sample's unit.
+#[derive(Debug, Clone, Copy, Default)]
+struct Spread {
+    p50: f64,
+    p90: f64,
+    p99: f64,
+    max: f64,
+    count: usize,
+}
+
+fn spread(mut v: Vec<f64>) -> Spread {
+    if v.is_empty() {
+        return Spread::default();
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    Spread {
+        p50: at(0.5),
+        p90: at(0.9),
+        p99: at(0.99),
+        max: v[v.len() - 1],
+        count: v.len(),
+    }
+}
+
+fn median(v: Vec<f64>) -> f64 {
+    spread(v).p50
+}
+
+/// A series of `steps` cache files of a moving sphere of `points` surface points: `distinct`
+/// instants baked, cycled over the steps (each step its own file, time values increasing).
+/// Reused when `dir` already holds that series.
+fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Result<()> {
+    if let Ok(m) = Manifest::read(dir)
+        && m.steps.len() == steps
+        && m.steps.iter().all(|s| s.points == points as u64)
+        && m.bake.get("scrub_distinct").and_then(|v| v.as_u64()) == Some(distinct as u64)
+    {
+        println!("  reusing the series in {}", dir.display());
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))?;
+    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    let start = Instant::now();
+    let mut baked = Vec::with_capacity(distinct);
+    for d in 0..distinct {
+        // The instants spread over the scene's motion.
+        let instant = d * 4;
+        let (positions, normals) = scene.particles(instant).surface_arrays();
+        let input = StepInput {
+            index: d,
+            time: scene.time(instant),
+            source: format!("sphere {points}"),
+            positions,
+            normals: Some(normals),
+            ..StepInput::default()
+        };
+        baked.push(bake_step(&input, &params)?);
+    }
+    println!(
+        "  baked {distinct} distinct steps of {points} points in {:.1} s",
+        start.elapsed().as_secs_f64()
+    );
+    for step in 0..steps {
+        let source = &baked[step % distinct];
+        let mut header = source.header.clone();
+        header.source.step = step;
+        header.source.time = step as f64 * 0.01;
+        if let Some(bake) = header.bake.as_object_mut() {
+            bake.insert("scrub_distinct".into(), distinct.into());
+        }
+        write_step(
+            &dir.join(step_file_name(step)),
+            header,
+            &source.sections,
+            params.compression,
+        )?;
+    }
+    let (manifest, failed) = Manifest::rebuild(dir)?;
+    if let Some((path, e)) = failed.first() {
+        bail!("{}: {e}", path.display());
+    }
+    manifest.write(dir)?;
+    println!(
+        "  wrote {steps} step files to {} in {:.1} s",
+        dir.display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// One frame of the engine submitted and finished.
+fn frame(engine: &mut Engine, request: &FrameRequest) -> Result<FrameReport> {
+    let gpu = engine.gpu().clone();
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("scrub frame"),
+        });
+    let mut report = engine.frame(request, &mut encoder)?;
+    let uploads = std::mem::take(&mut report.uploads);
+    gpu.queue
+        .submit(uploads.into_iter().chain([encoder.finish()]));
+    gpu.wait()?;
+    Ok(report)
+}
+
+/// Frames until `position` is drawn (not a stand-in); the seconds from the request.
+fn show(engine: &mut Engine, request: &mut FrameRequest, position: usize) -> Result<f64> {
+    let start = Instant::now();
+    engine.timeline_mut().set_current(position);
+    let mut last = Instant::now();
+    loop {
+        request.seconds = last.elapsed().as_secs_f64();
+        last = Instant::now();
+        let report = frame(engine, request)?;
+        if let Some((p, why)) = report.failures.iter().find(|(p, _)| *p == position) {
+            bail!("step {p} failed: {why}");
+        }
+        if report.shown == Some(position) && !report.stand_in {
+            return Ok(start.elapsed().as_secs_f64());
+        }
+        if start.elapsed().as_secs_f64() > 60.0 {
+            bail!("step {position} was not shown within 60 s");
+        }
+    }
+}
+
+struct SeriesReport {
+    label: String,
+    steps: usize,
+    step_gpu_bytes: u64,
+    section_bytes: u64,
+    stored_bytes: u64,
+    host_ms: f64,
+    record_ms: f64,
+    gpu_ms: f64,
+    read_ms: f64,
+    read_gbps: f64,
+    write_buffer_ms: f64,
+    trace_ms: f64,
+    sequential_steps_per_s: f64,
+    sequential: Spread,
+    jumps_pool: Spread,
+    jumps_page_cache: Spread,
+}
+
+fn measure(
+    gpu: &Arc<Gpu>,
+    dir: &Path,
+    label: String,
+    size: (u32, u32),
+    args: &ScrubBenchArgs,
+) -> Result<SeriesReport> {
+    let manifest = Manifest::read(dir)?;
+    let paths: Vec<PathBuf> = manifest.steps.iter().map(|s| dir.join(&s.file)).collect();
+    let steps = paths.len();
+    if steps < 2 {
+        bail!(
+            "{}: a series of {steps} steps cannot be scrubbed",
+            dir.display()
+        );
+    }
+    // Floors. First a read of every file, so that all come from the page cache.
+    for p in &paths {
+        std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+    }
+    let mut read_ms = Vec::new();
+    let mut read_bytes = 0u64;
+    let read_start = Instant::now();
+    for p in &paths {
+        let t = Instant::now();
+        read_bytes += std::fs::read(p)?.len() as u64;
+        read_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let read_gbps = read_bytes as f64 / read_start.elapsed().as_secs_f64() / 1e9;
+    // The cost of a step, both halves, on a few steps (median).
+    let sample: Vec<&PathBuf> = paths.iter().take(8).collect();
+    let (mut host_ms, mut record_ms, mut gpu_ms) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut step_gpu_bytes, mut section_bytes, mut stored_bytes) = (0, 0, 0);
+    for p in &sample {
+        let host = HostStep::open(p, None)?;
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let step = GpuStep::create(gpu, &host, &mut encoder)?;
+        let t = Instant::now();
+        gpu.queue.submit([encoder.finish()]);
+        gpu.wait()?;
+        gpu_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        host_ms.push(step.upload.host_seconds * 1e3);
+        record_ms.push(step.upload.record_seconds * 1e3);
+        step_gpu_bytes = step.gpu_bytes();
+        section_bytes = step.upload.bytes;
+        stored_bytes = step.upload.stored_bytes;
+    }
+    // A raw write_buffer of as many bytes as a step holds on the GPU.
+    let raw = vec![0x5au8; step_gpu_bytes as usize];
+    let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("raw write floor"),
+        size: step_gpu_bytes.next_multiple_of(4),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut write_ms = Vec::new();
+    for _ in 0..8 {
+        let t = Instant::now();
+        gpu.queue.write_buffer(&target, 0, &raw[..raw.len() & !3]);
+        gpu.queue.submit([]);
+        gpu.wait()?;
+        write_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    drop((raw, target));
+
+    let bounds = manifest.bounds;
+    let camera = framing_camera(&bounds, 40.0, size.0, size.1);
+    let params = TraceParams {
+        iterations: 1,
+        degree: 2,
+        h_factor: 1.0,
+        covariance: false,
+        epsilon: 1e-4,
+        mode: ShadeMode::Shade,
+    };
+    let mut request = FrameRequest {
+        seconds: 0.0,
+        camera,
+        params,
+        camera_moving: false,
+    };
+    let streaming_budget = step_gpu_bytes * args.pool_steps.max(3);
+    let options = |budget| EngineOptions {
+        budget: Some(budget),
+        loaders: args.loaders,
+        ..EngineOptions::default()
+    };
+    // Sequential playback, streaming through a pool smaller than the series.
+    let mut engine = Engine::open(gpu.clone(), dir, options(streaming_budget))?;
+    show(&mut engine, &mut request, 0)?;
+    let mut sequential = Vec::new();
+    let start = Instant::now();
+    for position in 1..steps {
+        sequential.push(show(&mut engine, &mut request, position)? * 1e3);
+    }
+    let sequential_steps_per_s = (steps - 1) as f64 / start.elapsed().as_secs_f64();
+    // Trace time alone: the same view drawn again (camera marked moving, so it is redrawn).
+    let mut trace = Vec::new();
+    request.camera_moving = true;
+    for _ in 0..20 {
+        let t = Instant::now();
+        frame(&mut engine, &request)?;
+        trace.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    request.camera_moving = false;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
+    // Jumps to steps only in the page cache: a pool of a few steps.
+    drop(engine);
+    let mut engine = Engine::open(gpu.clone(), dir, options(step_gpu_bytes * 3))?;
+    show(&mut engine, &mut request, 0)?;
+    let mut page_cache = Vec::new();
+    while page_cache.len() < args.jumps {
+        let target = rng.random_range(0..steps);
+        if engine.resident().contains(&target) || engine.prefetching().contains(&target) {
+            continue;
+        }
+        page_cache.push(show(&mut engine, &mut request, target)? * 1e3);
+    }
+    // Jumps to resident steps: a pool that holds the series, filled first.
+    drop(engine);
+    let mut engine = Engine::open(
+        gpu.clone(),
+        dir,
+        options(step_gpu_bytes * (steps as u64 + 2)),
+    )?;
+    for position in 0..steps {
+        show(&mut engine, &mut request, position)?;
+    }
+    if engine.resident().len() != steps {
+        bail!(
+            "the pool holds {} of {steps} steps after a pass",
+            engine.resident().len()
+        );
+    }
+    let mut pool = Vec::new();
+    let mut at = engine.timeline().current();
+    while pool.len() < args.jumps {
+        let target = rng.random_range(0..steps);
+        if target == at {
+            continue;
+        }
+        pool.push(show(&mut engine, &mut request, target)? * 1e3);
+        at = target;
+    }
+    Ok(SeriesReport {
+        label,
+        steps,
+        step_gpu_bytes,
+        section_bytes,
+        stored_bytes,
+        host_ms: median(host_ms),
+        record_ms: median(record_ms),
+        gpu_ms: median(gpu_ms),
+        read_ms: median(read_ms),
+        read_gbps,
+        write_buffer_ms: median(write_ms),
+        trace_ms: median(trace),
+        sequential_steps_per_s,
+        sequential: spread(sequential),
+        jumps_pool: spread(pool),
+        jumps_page_cache: spread(page_cache),
+    })
+}
+
+pub fn run(args: &ScrubBenchArgs) -> Result<()> {
+    let size = if args.quick {
+        (160, 100)
+    } else {
+        parse_size(&args.size)?
+    };
+    let counts: Vec<usize> = match (&args.points[..], args.quick) {
+        ([], true) => vec![2_000],
+        ([], false) => vec![100_000, 1_000_000],
+        (given, _) => given.to_vec(),
+    };
+    let steps = if args.quick {
+        args.steps.min(12)
+    } else {
+        args.steps
+    };
+    if steps < 2 || args.jumps == 0 {
+        bail!("--steps must be at least 2 and --jumps at least 1");
+    }
+    let jumps_args = ScrubBenchArgs {
+        jumps: if args.quick {
+            args.jumps.min(10)
+        } else {
+            args.jumps
+        },
+        out: args.out.clone(),
+        points: Vec::new(),
+        steps,
+        distinct: args.distinct,
+        size: args.size.clone(),
+        seed: args.seed,
+        loaders: args.loaders,
+        pool_steps: args.pool_steps,
+        dir: args.dir.clone(),
+        quick: args.quick,
+        adapter: args.adapter.clone(),
+    };
+    let gpu = Arc::new(Gpu::new(args.adapter.as_deref())?);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    println!("scrub benchmark on {} ({cores} cores)", gpu.describe());
+    let root = args
+        .dir
+        .clone()
+        .unwrap_or_else(|| std::env::temp_dir().join("slosh-scrub"));
+    let mut reports = Vec::new();
+    for points in counts {
+        let distinct = args
+            .distinct
+            .unwrap_or(if points <= 200_000 { steps } else { 8 })
+            .clamp(1, steps);
+        let dir = root.join(format!("sphere-{points}-{steps}"));
+        println!("series: {points} points, {steps} steps ({distinct} distinct)");
+        ensure_series(&dir, points, steps, distinct)?;
+        let label = format!("{points} points, {steps} steps ({distinct} distinct shapes)");
+        let report = measure(&gpu, &dir, label, size, &jumps_args)?;
+        println!(
+            "  sequential {:.1} steps/s; jumps p99: pool {:.2} ms, page cache {:.2} ms",
+            report.sequential_steps_per_s, report.jumps_pool.p99, report.jumps_page_cache.p99
+        );
+        reports.push(report);
+    }
+    let md = markdown(&gpu, cores, size, args, &reports);
+    slosh_fileio::atomic_write(&args.out, md.as_bytes())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    print!("{md}");
+    Ok(())
+}
+
+fn markdown(
+    gpu: &Gpu,
+    cores: usize,
+    size: (u32, u32),
+    args: &ScrubBenchArgs,
+    reports: &[SeriesReport],
+) -> String {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "# Scrubbing: the streaming engine\n\nWritten by `slosh bench scrub{}` on {} ({cores} host cores). Frames of {}×{} at 1 iteration (the baked polynomial), shaded; every file read from the page cache. {} loader threads; sequential playback and page-cache jumps stream through a pool of {} steps, pool jumps use a pool that holds the whole series. Latency is from the request (the timeline set to the step) to the frame that shows it finished on the GPU; frames run back to back meanwhile, each submitted and waited for.\n",
+        if args.quick { " --quick" } else { "" },
+        gpu.describe(),
+        size.0,
+        size.1,
+        args.loaders,
+        args.pool_steps.max(3)
+    );
+    let _ = writeln!(md, "## Throughput and latency\n");
+    let _ = writeln!(
+        md,
+        "| series | sequential steps/s | sequential latency p50 / p90 / p99 / max ms | jump in pool p50 / p99 ms | jump from page cache p50 / p99 / max ms | frame (trace + shade) ms |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|");
+    for r in reports {
+        let _ = writeln!(
+            md,
+            "| {} | {:.1} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} / {:.2} | {:.2} |",
+            r.label,
+            r.sequential_steps_per_s,
+            r.sequential.p50,
+            r.sequential.p90,
+            r.sequential.p99,
+            r.sequential.max,
+            r.jumps_pool.p50,
+            r.jumps_pool.p99,
+            r.jumps_page_cache.p50,
+            r.jumps_page_cache.p99,
+            r.jumps_page_cache.max,
+            r.trace_ms
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nJumps: {} in the pool and {} from the page cache per series (seed {}).\n",
+        reports.first().map_or(0, |r| r.jumps_pool.count),
+        reports.first().map_or(0, |r| r.jumps_page_cache.count),
+        args.seed
+    );
+    let _ = writeln!(md, "## A step, and the floors\n");
+    let _ = writeln!(
+        md,
+        "Host: `HostStep::open` (map, checks, decode of compressed sections in parallel, tree check). Record: `GpuStep::create` (buffers, copies into mapped staging, passes recorded). GPU: those commands submitted and waited for (copies and the per-step passes). Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | GPU copy + passes ms | fs::read ms (GB/s) | write_buffer ms |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    for r in reports {
+        let _ = writeln!(
+            md,
+            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} | {:.2} ({:.1}) | {:.2} |",
+            r.label,
+            r.section_bytes,
+            r.step_gpu_bytes,
+            r.stored_bytes,
+            r.host_ms,
+            r.record_ms,
+            r.gpu_ms,
+            r.read_ms,
+            r.read_gbps,
+            r.write_buffer_ms
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nSteps per series: {}.",
+        reports.first().map_or(0, |r| r.steps)
+    );
+    md
+}
