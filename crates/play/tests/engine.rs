@@ -1,0 +1,290 @@
+#![allow(clippy::unwrap_used)]
+//! The engine on a real Vulkan adapter (lavapipe in CI) over a baked series: streaming under a
+//! tiny budget, stand-ins, the whole series resident when it fits, progressive refinement
+//! against a direct render, failures, and a series that grows while a bake runs.
+
+use std::path::Path;
+use std::sync::{Arc, OnceLock};
+
+use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
+use slosh_cache::{Manifest, step_file_name, write_step};
+use slosh_mls::Camera;
+use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest};
+use slosh_render::{Gpu, GpuStep, HostStep, ShadeMode, TraceParams};
+use slosh_scenes::{Scene, SceneKind, SceneSpec};
+
+fn gpu() -> Option<Arc<Gpu>> {
+    static GPU: OnceLock<Option<Arc<Gpu>>> = OnceLock::new();
+    GPU.get_or_init(
+        || match Gpu::new(std::env::var("SLOSH_ADAPTER").ok().as_deref()) {
+            Ok(gpu) => Some(Arc::new(gpu)),
+            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+                panic!("CI=true requires a GPU adapter: {e}")
+            }
+            Err(e) => {
+                eprintln!("skipping GPU test: {e}");
+                None
+            }
+        },
+    )
+    .clone()
+}
+
+/// Steps `steps` of a moving 1500-point sphere baked into `dir`, and the manifest.
+fn bake_series(dir: &Path, steps: std::ops::Range<usize>, manifest: bool) {
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 1500, 3)).unwrap();
+    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    for step in steps {
+        let (positions, normals) = scene.particles(step).surface_arrays();
+        let input = StepInput {
+            index: step,
+            time: scene.time(step),
+            source: "sphere".into(),
+            positions,
+            normals: Some(normals),
+            ..StepInput::default()
+        };
+        let baked = bake_step(&input, &params).unwrap();
+        let path = dir.join(step_file_name(step));
+        write_step(&path, baked.header, &baked.sections, params.compression).unwrap();
+    }
+    if manifest {
+        let (m, failed) = Manifest::rebuild(dir).unwrap();
+        assert!(failed.is_empty());
+        m.write(dir).unwrap();
+    }
+}
+
+fn camera() -> Camera {
+    Camera {
+        eye: [0.5, -4.0, 1.5],
+        target: [0.0, 0.0, 0.0],
+        up: [0.0, 0.0, 1.0],
+        fov_y: 45.0,
+        width: 64,
+        height: 48,
+    }
+}
+
+fn request(iterations: u32) -> FrameRequest {
+    FrameRequest {
+        seconds: 0.0,
+        camera: camera(),
+        params: TraceParams {
+            iterations,
+            degree: 2,
+            h_factor: 1.0,
+            covariance: false,
+            epsilon: 1e-4,
+            mode: ShadeMode::Shade,
+        },
+        camera_moving: false,
+    }
+}
+
+fn frame(engine: &mut Engine, request: &FrameRequest) -> FrameReport {
+    let gpu = engine.gpu().clone();
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    let mut report = engine.frame(request, &mut encoder).unwrap();
+    let uploads = std::mem::take(&mut report.uploads);
+    gpu.queue
+        .submit(uploads.into_iter().chain([encoder.finish()]));
+    gpu.wait().unwrap();
+    report
+}
+
+/// Frames until `position` is shown; the reports on the way.
+fn show(engine: &mut Engine, request: &FrameRequest, position: usize) -> Vec<FrameReport> {
+    show_checking(engine, request, position, |_, _| {})
+}
+
+/// `show`, with `check` called after every frame.
+fn show_checking(
+    engine: &mut Engine,
+    request: &FrameRequest,
+    position: usize,
+    mut check: impl FnMut(&Engine, &FrameReport),
+) -> Vec<FrameReport> {
+    engine.timeline_mut().set_current(position);
+    let mut reports = Vec::new();
+    for _ in 0..20_000 {
+        let report = frame(engine, request);
+        check(engine, &report);
+        let done = report.shown == Some(position) && !report.stand_in;
+        reports.push(report);
+        if done {
+            return reports;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    panic!("step {position} never shown");
+}
+
+/// Bytes step `index` holds on the GPU, predicted by its host half and checked against the
+/// buffers it gets.
+fn step_bytes(dir: &Path, gpu: &Gpu, index: usize) -> u64 {
+    let host = HostStep::open(&dir.join(step_file_name(index)), None).unwrap();
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    let step = GpuStep::create(gpu, &host, &mut encoder).unwrap();
+    assert_eq!(step.gpu_bytes(), host.gpu_bytes(), "predicted bytes differ");
+    step.gpu_bytes()
+}
+
+#[test]
+fn streams_under_a_tiny_budget_with_stand_ins_and_never_evicts_the_shown_step() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    bake_series(dir.path(), 0..10, true);
+    let bytes: Vec<u64> = (0..10).map(|i| step_bytes(dir.path(), &gpu, i)).collect();
+    let largest = bytes.iter().copied().max().unwrap();
+    // Room for two steps and a half: every new step evicts one.
+    let budget = largest * 5 / 2;
+    let options = EngineOptions {
+        budget: Some(budget),
+        loaders: 2,
+        ..EngineOptions::default()
+    };
+    let mut engine = Engine::open(gpu.clone(), dir.path(), options).unwrap();
+    assert_eq!(engine.timeline().len(), 10);
+    let request = request(1);
+    let first = show(&mut engine, &request, 0);
+    assert!(
+        first[0].shown.is_none(),
+        "nothing is resident at the first frame"
+    );
+    let since = first.iter().position(|r| r.shown.is_some()).unwrap();
+    assert!(
+        first[since..].iter().all(|r| r.shown.is_some()),
+        "once a step is shown the frame is never blank"
+    );
+    for target in [7, 2, 9, 0, 5, 6, 1] {
+        let reports = show_checking(&mut engine, &request, target, |engine, r| {
+            let shown = r.shown.expect("a step is always shown once one was");
+            assert!(
+                engine.resident().contains(&shown),
+                "shown step {shown} was evicted"
+            );
+            assert_eq!(r.stand_in, shown != target);
+            assert!(engine.used_bytes() <= budget);
+            let held: u64 = engine.resident().iter().map(|&i| bytes[i]).sum();
+            assert_eq!(
+                engine.used_bytes(),
+                held,
+                "bytes counted differ from the buffers'"
+            );
+        });
+        assert!(
+            reports.len() == 1 || reports[0].stand_in,
+            "a step not yet resident is drawn by a stand-in first"
+        );
+        assert!(engine.resident().contains(&target));
+        assert!(engine.resident().len() <= 2);
+    }
+    assert!(engine.failures().is_empty());
+}
+
+#[test]
+fn a_series_that_fits_ends_up_wholly_resident() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    bake_series(dir.path(), 0..8, true);
+    let bytes: Vec<u64> = (0..8).map(|i| step_bytes(dir.path(), &gpu, i)).collect();
+    let options = EngineOptions {
+        budget: Some(bytes.iter().sum::<u64>() * 2),
+        loaders: 2,
+        ..EngineOptions::default()
+    };
+    let mut engine = Engine::open(gpu, dir.path(), options).unwrap();
+    let request = request(1);
+    show(&mut engine, &request, 3);
+    for _ in 0..2000 {
+        if engine.resident().len() == 8 {
+            break;
+        }
+        frame(&mut engine, &request);
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    assert_eq!(engine.resident(), (0..8).collect::<Vec<_>>());
+    assert_eq!(engine.used_bytes(), bytes.iter().sum::<u64>());
+}
+
+#[test]
+fn finished_refinement_equals_a_direct_render() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    bake_series(dir.path(), 0..2, true);
+    let mut engine = Engine::open(gpu.clone(), dir.path(), EngineOptions::default()).unwrap();
+    let request = request(3);
+    let reports = show(&mut engine, &request, 1);
+    assert_eq!(reports.last().unwrap().drawn, Some(1));
+    let drawn: Vec<Option<u32>> = (0..4).map(|_| frame(&mut engine, &request).drawn).collect();
+    assert_eq!(drawn, vec![Some(2), Some(3), None, None]);
+    assert!(frame(&mut engine, &request).progress.unwrap().finished());
+    let targets = engine.targets().unwrap();
+    let refined = engine.tracer().read_frame(&gpu, targets).unwrap();
+    let file = slosh_cache::CacheFile::open(&dir.path().join(step_file_name(1))).unwrap();
+    let step = GpuStep::upload(&gpu, &file, None).unwrap();
+    let mut params = request.params;
+    params.iterations = 3;
+    let direct = engine
+        .tracer()
+        .render(&gpu, &step, &request.camera, &params)
+        .unwrap();
+    let lit = direct.hits.iter().filter(|h| h.status != 0).count();
+    assert!(lit > 200, "{lit} hit pixels");
+    assert!(refined.hits == direct.hits, "hits differ");
+    assert!(refined.rgba == direct.rgba, "pixels differ");
+    // Moving the camera starts over at one iteration.
+    let mut moving = request.clone();
+    moving.camera_moving = true;
+    moving.camera.eye[0] += 0.1;
+    assert_eq!(frame(&mut engine, &moving).drawn, Some(1));
+}
+
+#[test]
+fn bad_steps_are_marked_and_a_growing_series_is_picked_up() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // A bake in progress: two steps, no manifest yet.
+    bake_series(dir.path(), 0..2, false);
+    let mut engine = Engine::open(gpu, dir.path(), EngineOptions::default()).unwrap();
+    assert_eq!(engine.timeline().len(), 2);
+    let request = request(1);
+    show(&mut engine, &request, 1);
+    bake_series(dir.path(), 2..4, false);
+    // A step whose bytes were damaged after it landed.
+    let bad = dir.path().join(step_file_name(4));
+    std::fs::copy(dir.path().join(step_file_name(0)), &bad).unwrap();
+    let balls = slosh_cache::CacheFile::open(&bad)
+        .unwrap()
+        .section(slosh_cache::names::BALLS)
+        .unwrap()
+        .offset as usize;
+    let mut bytes = std::fs::read(&bad).unwrap();
+    bytes[balls + 10] ^= 0x40;
+    std::fs::write(&bad, bytes).unwrap();
+    assert!(engine.refresh_series().unwrap());
+    assert_eq!(engine.timeline().len(), 5);
+    assert_eq!(engine.timeline().current(), 1, "the shown step stays");
+    show(&mut engine, &request, 3);
+    engine.timeline_mut().set_current(4);
+    let mut failed = None;
+    for _ in 0..5000 {
+        let report = frame(&mut engine, &request);
+        assert!(report.shown.is_some(), "the app goes on showing a step");
+        if let Some(f) = engine.failures().into_iter().find(|(p, _)| *p == 4) {
+            failed = Some(f.1);
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let why = failed.expect("the damaged step is reported");
+    assert!(why.contains("step-00004.slc"), "{why}");
+    assert_eq!(engine.failures().len(), 1);
+    // The step before it still plays.
+    show(&mut engine, &request, 2);
+}
