@@ -9,8 +9,12 @@ pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
 /// Footer magic.
 pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files with a larger major version; minor versions only add.
-pub const MAJOR: u16 = 1;
+pub const MAJOR: u16 = 2;
 pub const MINOR: u16 = 0;
+/// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
+/// independently, so a section decodes on as many cores as it has chunks. A multiple of every
+/// element size.
+pub const CHUNK_RAW: u64 = 1 << 20;
 pub const PREAMBLE_LEN: usize = 32;
 pub const FOOTER_LEN: usize = 32;
 /// Sections start on this boundary, so raw sections can be used in place from the map.
@@ -121,6 +125,42 @@ pub struct SectionEntry {
     pub encoding: Encoding,
     /// xxh3-64 of the stored bytes, 16 lowercase hex digits.
     pub xxh3: String,
+    /// Raw bytes per chunk (format 2; absent in format 1, where a section is one run).
+    #[serde(default)]
+    pub chunk_raw: u64,
+    /// The chunks, in order: chunk k decodes to raw bytes `k·chunk_raw ..` (format 2).
+    #[serde(default)]
+    pub chunks: Vec<ChunkEntry>,
+}
+
+/// One independently decodable run of a section's stored bytes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChunkEntry {
+    /// Stored bytes of the chunk.
+    pub stored: u64,
+    /// xxh3-64 of those bytes, 16 lowercase hex digits.
+    pub xxh3: String,
+}
+
+impl SectionEntry {
+    /// Each chunk's stored byte range (relative to the section's offset) and raw byte range;
+    /// one run over the whole section where the table has no chunks (format 1).
+    pub fn chunk_spans(&self) -> Vec<(std::ops::Range<usize>, std::ops::Range<usize>)> {
+        if self.chunks.is_empty() {
+            return vec![(0..self.stored as usize, 0..self.raw as usize)];
+        }
+        let (mut stored, mut raw) = (0usize, 0usize);
+        self.chunks
+            .iter()
+            .map(|c| {
+                let s = stored..stored + c.stored as usize;
+                let r = raw..(raw + self.chunk_raw as usize).min(self.raw as usize);
+                stored = s.end;
+                raw = r.end;
+                (s, r)
+            })
+            .collect()
+    }
 }
 
 /// World coordinates of a stored (local) point: `origin + scale × local`.

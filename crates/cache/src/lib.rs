@@ -23,8 +23,8 @@ pub use bvh::Bvh;
 pub use codec::{DecodeError, decode_into as decode_bytes, encode as encode_bytes, shuffle4};
 pub use error::{Error, Result};
 pub use format::{
-    ALIGN, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings, PREAMBLE_LEN, SectionEntry,
-    Source, StepStats, Transform, hex64,
+    ALIGN, CHUNK_RAW, ChunkEntry, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings,
+    PREAMBLE_LEN, SectionEntry, Source, StepStats, Transform, hex64,
 };
 pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
 pub use manifest::{MANIFEST_NAME, Manifest, ManifestStep, parse_step_file_name, step_file_name};

@@ -28,6 +28,51 @@ pub struct CacheFile {
     skip_checksums: bool,
 }
 
+/// The chunk table of a section: none in format 1; in format 2, one chunk per `chunk_raw`
+/// raw bytes (a positive multiple of 4), their stored sizes adding up to the section's, each
+/// raw chunk stored as it is.
+fn check_chunks(s: &SectionEntry, major: u16) -> std::result::Result<(), String> {
+    if major < 2 {
+        return if s.chunks.is_empty() && s.chunk_raw == 0 {
+            Ok(())
+        } else {
+            Err("a format 1 file has a chunk table".into())
+        };
+    }
+    if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(4) {
+        return Err(format!(
+            "chunks of {} raw bytes (a positive multiple of 4 expected)",
+            s.chunk_raw
+        ));
+    }
+    let expected = s.raw.div_ceil(s.chunk_raw);
+    if s.chunks.len() as u64 != expected {
+        return Err(format!(
+            "{} chunks for {} raw bytes in chunks of {} ({expected} expected)",
+            s.chunks.len(),
+            s.raw,
+            s.chunk_raw
+        ));
+    }
+    let total = s
+        .chunks
+        .iter()
+        .try_fold(0u64, |sum, c| sum.checked_add(c.stored));
+    if total != Some(s.stored) {
+        return Err(format!(
+            "chunks store {} bytes, the section {}",
+            total.map_or("more than 2^64".into(), |t| t.to_string()),
+            s.stored
+        ));
+    }
+    if s.encoding == crate::format::Encoding::Raw
+        && let Some((k, _)) = s.chunk_spans().iter().enumerate().find(|(_, (st, r))| st.len() != r.len())
+    {
+        return Err(format!("raw chunk {k} is not stored as it is"));
+    }
+    Ok(())
+}
+
 impl CacheFile {
     pub fn open(path: &Path) -> Result<CacheFile> {
         CacheFile::from_bytes(FileBytes::open(path)?)
@@ -74,7 +119,7 @@ impl CacheFile {
             });
         }
         if preamble.major == 0 {
-            return Err(format(8, "major version 1", "0".into()));
+            return Err(format(8, "major version 1 or 2", "0".into()));
         }
         let foot = len - FOOTER_LEN;
         if bytes[foot..foot + 8] != FOOTER_MAGIC {
@@ -169,6 +214,7 @@ impl CacheFile {
                     s.stored, s.raw
                 )));
             }
+            check_chunks(s, preamble.major).map_err(bad)?;
             end = stop.unwrap_or(foot);
         }
         Ok(CacheFile {
@@ -247,31 +293,60 @@ impl CacheFile {
         }
     }
 
-    /// The stored bytes of a section after checking its checksum: for a raw section, its
-    /// decoded bytes in place (zero-copy from the map).
-    pub fn checked_stored(&self, entry: &SectionEntry) -> Result<&[u8]> {
-        let stored = self.stored(entry);
-        let sum = hex64(xxh3_64(stored));
-        if sum != entry.xxh3 && !self.skip_checksums {
+    /// Checks a stored run's checksum against `expected` (16 hex digits).
+    fn check_sum(
+        &self,
+        entry: &SectionEntry,
+        what: &str,
+        at: usize,
+        bytes: &[u8],
+        expected: &str,
+    ) -> Result<()> {
+        let sum = hex64(xxh3_64(bytes));
+        if sum != expected && !self.skip_checksums {
             return Err(self.section_error(
                 entry,
                 format!(
-                    "checksum xxh3 {sum}, the table says {} (corrupt)",
-                    entry.xxh3
+                    "{what} (stored bytes {at}..{}): checksum xxh3 {sum}, the table says {expected} (corrupt)",
+                    at + bytes.len()
                 ),
             ));
+        }
+        Ok(())
+    }
+
+    /// The stored bytes of a section after checking its checksums (chunk by chunk, in
+    /// parallel, where it has chunks): for a raw section, its decoded bytes in place
+    /// (zero-copy from the map).
+    pub fn checked_stored(&self, entry: &SectionEntry) -> Result<&[u8]> {
+        use rayon::prelude::*;
+        let stored = self.stored(entry);
+        if entry.chunks.is_empty() {
+            self.check_sum(entry, "section", 0, stored, &entry.xxh3)?;
+        } else {
+            entry
+                .chunk_spans()
+                .par_iter()
+                .zip(&entry.chunks)
+                .enumerate()
+                .try_for_each(|(k, ((st, _), chunk))| {
+                    let what = format!("chunk {k}");
+                    self.check_sum(entry, &what, st.start, &stored[st.clone()], &chunk.xxh3)
+                })?;
         }
         Ok(stored)
     }
 
-    /// Checks the section's checksum, then decodes it into `out` (exactly `entry.raw` bytes,
-    /// e.g. a mapped GPU staging buffer). `scratch` is reused across calls.
+    /// Checks the section's checksums, then decodes it into `out` (exactly `entry.raw` bytes,
+    /// e.g. a mapped GPU staging buffer), its chunks in parallel. `scratch` is reused for a
+    /// section of one run.
     pub fn decode_into(
         &self,
         entry: &SectionEntry,
         out: &mut [u8],
         scratch: &mut Vec<u8>,
     ) -> Result<()> {
+        use rayon::prelude::*;
         if out.len() as u64 != entry.raw {
             return Err(self.section_error(
                 entry,
@@ -282,9 +357,32 @@ impl CacheFile {
                 ),
             ));
         }
-        let stored = self.checked_stored(entry)?;
-        decode_into(stored, entry.encoding, out, scratch)
-            .map_err(|e| self.section_error(entry, e.to_string()))
+        let stored = self.stored(entry);
+        if entry.chunks.is_empty() {
+            self.check_sum(entry, "section", 0, stored, &entry.xxh3)?;
+            return decode_into(stored, entry.encoding, out, scratch)
+                .map_err(|e| self.section_error(entry, e.to_string()));
+        }
+        let spans = entry.chunk_spans();
+        let mut outs: Vec<&mut [u8]> = Vec::with_capacity(spans.len());
+        let mut rest = out;
+        for (_, raw) in &spans {
+            let (head, tail) = rest.split_at_mut(raw.len());
+            outs.push(head);
+            rest = tail;
+        }
+        spans
+            .par_iter()
+            .zip(&entry.chunks)
+            .zip(outs)
+            .enumerate()
+            .try_for_each_init(Vec::new, |scratch, (k, (((st, _), chunk), out))| {
+                let bytes = &stored[st.clone()];
+                self.check_sum(entry, &format!("chunk {k}"), st.start, bytes, &chunk.xxh3)?;
+                decode_into(bytes, entry.encoding, out, scratch).map_err(|e| {
+                    self.section_error(entry, format!("chunk {k} (stored bytes {}..{}): {e}", st.start, st.end))
+                })
+            })
     }
 
     /// One zeroed buffer per section, each the size of its decoded bytes.

@@ -8,8 +8,8 @@ use xxhash_rust::xxh3::xxh3_64;
 
 use crate::error::Result;
 use crate::format::{
-    ALIGN, Encoding, Footer, Header, MAJOR, MINOR, PREAMBLE_LEN, Preamble, SectionEntry, align_up,
-    hex64,
+    ALIGN, CHUNK_RAW, ChunkEntry, Encoding, Footer, Header, MAJOR, MINOR, PREAMBLE_LEN, Preamble,
+    SectionEntry, align_up, hex64,
 };
 use crate::layout::Element;
 
@@ -55,23 +55,49 @@ pub fn encode_step(
     sections: &[SectionInput],
     compression: Compression,
 ) -> Result<Vec<u8>, std::io::Error> {
-    let encoded: Vec<(Encoding, Vec<u8>)> = sections
+    // Every chunk of every section encoded in parallel; a section keeps its encoding only
+    // where that saves at least 10 % over all its chunks.
+    let jobs: Vec<(usize, &[u8])> = sections
+        .iter()
+        .enumerate()
+        .flat_map(|(i, s)| s.bytes.chunks(CHUNK_RAW as usize).map(move |c| (i, c)))
+        .collect();
+    let packed: Vec<Option<Vec<u8>>> = jobs
         .par_iter()
-        .map(|s| {
-            let Compression::Level(level) = compression else {
-                return Ok((Encoding::Raw, s.bytes.clone()));
-            };
-            if s.encoding == Encoding::Raw || s.bytes.is_empty() {
-                return Ok((Encoding::Raw, s.bytes.clone()));
+        .map(|&(i, raw)| {
+            let s = &sections[i];
+            match compression {
+                Compression::Level(level) if s.encoding != Encoding::Raw => {
+                    crate::codec::encode(raw, s.encoding, level).map(Some)
+                }
+                _ => Ok(None),
             }
-            let packed = crate::codec::encode(&s.bytes, s.encoding, level)?;
-            Ok(if packed.len() * 10 <= s.bytes.len() * 9 {
-                (s.encoding, packed)
-            } else {
-                (Encoding::Raw, s.bytes.clone())
-            })
         })
         .collect::<std::io::Result<_>>()?;
+    let mut encoded: Vec<(Encoding, Vec<u8>, Vec<ChunkEntry>)> = Vec::new();
+    let mut at = 0;
+    for s in sections {
+        let n = s.bytes.len().div_ceil(CHUNK_RAW as usize);
+        let chunks = &packed[at..at + n];
+        let raws = &jobs[at..at + n];
+        at += n;
+        let packed_len: usize = chunks.iter().flatten().map(Vec::len).sum();
+        let keep = chunks.iter().all(Option::is_some) && packed_len * 10 <= s.bytes.len() * 9;
+        let parts: Vec<&[u8]> = if keep {
+            chunks.iter().flatten().map(Vec::as_slice).collect()
+        } else {
+            raws.iter().map(|(_, raw)| *raw).collect()
+        };
+        let table = parts
+            .iter()
+            .map(|p| ChunkEntry {
+                stored: p.len() as u64,
+                xxh3: hex64(xxh3_64(p)),
+            })
+            .collect();
+        let encoding = if keep { s.encoding } else { Encoding::Raw };
+        encoded.push((encoding, parts.concat(), table));
+    }
 
     // The header records offsets, which depend on the header's length: lay out with a guess,
     // then again until the length settles (twice at most in practice).
@@ -82,7 +108,7 @@ pub fn encode_step(
         header.sections = sections
             .iter()
             .zip(&encoded)
-            .map(|(s, (encoding, bytes))| {
+            .map(|(s, (encoding, bytes, chunks))| {
                 offsets.push(offset);
                 let entry = SectionEntry {
                     name: s.name.clone(),
@@ -93,6 +119,8 @@ pub fn encode_step(
                     raw: s.bytes.len() as u64,
                     encoding: *encoding,
                     xxh3: hex64(xxh3_64(bytes)),
+                    chunk_raw: CHUNK_RAW,
+                    chunks: chunks.clone(),
                 };
                 offset = align_up(offset + bytes.len());
                 entry
@@ -108,7 +136,7 @@ pub fn encode_step(
     let body_end = offsets
         .last()
         .zip(encoded.last())
-        .map_or(PREAMBLE_LEN + header_bytes.len(), |(o, (_, b))| o + b.len());
+        .map_or(PREAMBLE_LEN + header_bytes.len(), |(o, (_, b, _))| o + b.len());
     let mut out = Vec::with_capacity(body_end + ALIGN);
     out.extend_from_slice(
         &Preamble {
@@ -121,7 +149,7 @@ pub fn encode_step(
         .to_bytes(),
     );
     out.extend_from_slice(&header_bytes);
-    for (offset, (_, bytes)) in offsets.iter().zip(&encoded) {
+    for (offset, (_, bytes, _)) in offsets.iter().zip(&encoded) {
         out.resize(*offset, 0);
         out.extend_from_slice(bytes);
     }

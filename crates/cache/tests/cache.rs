@@ -103,9 +103,9 @@ fn truncation_at_any_length_is_a_clear_error() {
 #[test]
 fn a_newer_major_version_is_refused_by_name() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8] = 2;
+    bytes[8] = 3;
     let err = open(bytes).unwrap_err().to_string();
-    assert!(err.contains("newer") && err.contains("2.0"), "{err}");
+    assert!(err.contains("newer") && err.contains("3.0"), "{err}");
 }
 
 #[test]
@@ -118,4 +118,125 @@ fn the_wrong_file_is_named_as_such() {
 fn shuffle_groups_bytes_by_position() {
     let words: Vec<u8> = vec![1, 2, 3, 4, 5, 6, 7, 8];
     assert_eq!(shuffle4(&words), vec![1, 5, 2, 6, 3, 7, 4, 8]);
+}
+
+/// Sections of several chunks: every encoding round-trips, and a flip in any chunk is caught
+/// naming that chunk.
+#[test]
+fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
+    let n = (3 * CHUNK_RAW as usize + 12_345) / 4;
+    let ids: Vec<u32> = (0..n as u32).map(|i| i * 5 + (i % 11)).collect();
+    let floats: Vec<f32> = (0..n).map(|i| (i as f32 * 1e-3).sin()).collect();
+    let sections = vec![
+        SectionInput::new("ids", Element::U32, &ids, Encoding::Delta4Shuffle4Zstd),
+        SectionInput::new("floats", Element::F32, &floats, Encoding::Shuffle4Zstd),
+        SectionInput::new("plain", Element::F32, &floats, Encoding::Zstd),
+        SectionInput::new("raw", Element::F32, &floats, Encoding::Raw),
+    ];
+    let bytes = encode_step(header(), &sections, Compression::Level(1)).unwrap();
+    let file = open(bytes.clone()).unwrap();
+    for (entry, input) in file.header().sections.iter().zip(&sections) {
+        assert_eq!(entry.chunks.len(), 4, "{}", entry.name);
+        assert_eq!(entry.chunk_raw, CHUNK_RAW);
+        let mut out = vec![0u8; entry.raw as usize];
+        file.decode_into(entry, &mut out, &mut Vec::new()).unwrap();
+        assert!(out == input.bytes, "{} differs after decoding", entry.name);
+    }
+    for entry in &file.header().sections {
+        let spans = entry.chunk_spans();
+        for (k, (stored, _)) in spans.iter().enumerate() {
+            let mut damaged = bytes.clone();
+            damaged[entry.offset as usize + stored.start + stored.len() / 2] ^= 0x01;
+            let file = open(damaged).unwrap();
+            let victim = file.section(&entry.name).unwrap();
+            let mut out = vec![0u8; victim.raw as usize];
+            let err = file
+                .decode_into(victim, &mut out, &mut Vec::new())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!("chunk {k} ")) && err.contains(&entry.name),
+                "{err}"
+            );
+            if entry.encoding == Encoding::Raw {
+                assert!(file.checked_stored(victim).is_err());
+            }
+        }
+    }
+}
+
+/// Every single-byte flip of a file is detected: opening fails, or the footer hash no longer
+/// matches, and a flip inside a section's stored bytes also fails that section's decoding
+/// (which is all a streaming reader checks).
+#[test]
+fn every_single_byte_flip_is_detected() {
+    let bytes = encode_step(header(), &sample_sections(), Compression::Level(3)).unwrap();
+    let file = open(bytes.clone()).unwrap();
+    let ranges: Vec<(String, std::ops::Range<usize>)> = file
+        .header()
+        .sections
+        .iter()
+        .map(|s| (s.name.clone(), s.offset as usize..(s.offset + s.stored) as usize))
+        .collect();
+    for at in 0..bytes.len() {
+        let mut damaged = bytes.clone();
+        damaged[at] ^= 0x20;
+        let Ok(file) = open(damaged) else { continue };
+        assert!(!file.body_intact(), "flip at byte {at} passes the footer hash");
+        if let Some((name, _)) = ranges.iter().find(|(_, r)| r.contains(&at)) {
+            let entry = file.section(name).unwrap();
+            let mut out = vec![0u8; entry.raw as usize];
+            assert!(
+                file.decode_into(entry, &mut out, &mut Vec::new()).is_err(),
+                "flip at byte {at} inside section '{name}' decodes"
+            );
+        }
+    }
+}
+
+/// A format 1.0 file: the same sections as one run each, no chunk table, major version 1.
+fn as_format_1(bytes: &[u8]) -> Vec<u8> {
+    let header_len = u64::from_le_bytes(bytes[16..24].try_into().unwrap()) as usize;
+    let mut header: serde_json::Value =
+        serde_json::from_slice(&bytes[PREAMBLE_LEN..PREAMBLE_LEN + header_len]).unwrap();
+    for s in header["sections"].as_array_mut().unwrap() {
+        let s = s.as_object_mut().unwrap();
+        assert!(s["chunks"].as_array().unwrap().len() <= 1, "one run per section");
+        s.remove("chunks");
+        s.remove("chunk_raw");
+    }
+    let json = serde_json::to_vec(&header).unwrap();
+    assert!(json.len() <= header_len);
+    let mut out = bytes[..bytes.len() - FOOTER_LEN].to_vec();
+    out[8..10].copy_from_slice(&1u16.to_le_bytes());
+    out[16..24].copy_from_slice(&(json.len() as u64).to_le_bytes());
+    out[24..32].copy_from_slice(&xxhash_rust::xxh3::xxh3_64(&json).to_le_bytes());
+    out[PREAMBLE_LEN..PREAMBLE_LEN + header_len].fill(0);
+    out[PREAMBLE_LEN..PREAMBLE_LEN + json.len()].copy_from_slice(&json);
+    let body = xxhash_rust::xxh3::xxh3_64(&out);
+    out.extend_from_slice(b"SLC-END\n");
+    out.extend_from_slice(&((out.len() + 24) as u64).to_le_bytes());
+    out.extend_from_slice(&body.to_le_bytes());
+    out.extend_from_slice(&[0u8; 8]);
+    out
+}
+
+#[test]
+fn format_1_files_still_open_and_decode() {
+    let sections = sample_sections();
+    let bytes = encode_step(header(), &sections, Compression::Level(3)).unwrap();
+    let old = open(as_format_1(&bytes)).unwrap();
+    assert_eq!(old.version(), (1, 0));
+    assert!(old.body_intact());
+    for (entry, input) in old.header().sections.iter().zip(&sections) {
+        assert!(entry.chunks.is_empty());
+        let mut out = vec![0u8; entry.raw as usize];
+        old.decode_into(entry, &mut out, &mut Vec::new()).unwrap();
+        assert!(out == input.bytes, "{}", entry.name);
+    }
+    // A format 1 file with a chunk table is malformed.
+    let mut v2_as_1 = bytes.clone();
+    v2_as_1[8..10].copy_from_slice(&1u16.to_le_bytes());
+    let err = open(v2_as_1).unwrap_err().to_string();
+    assert!(err.contains("format 1 file has a chunk table"), "{err}");
 }

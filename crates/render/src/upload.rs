@@ -537,6 +537,8 @@ fn storage_with(
                 .slice(..)
                 .get_mapped_range_mut()
                 .map_err(|e| Error::Readback(e.to_string()))?;
+            // One copy per section: wgpu 30's write-only views of unsized slices are not `Send`,
+            // so several loader threads, not one step's pieces, share the cores.
             view.slice(..bytes.len()).copy_from_slice(bytes);
         }
         staging.unmap();
