@@ -149,6 +149,59 @@ fn show(engine: &mut Engine, request: &mut FrameRequest, position: usize) -> Res
     }
 }
 
+/// One zstd level over a step's sections: stored bytes and single-core speeds.
+struct CodecRow {
+    level: i32,
+    raw: u64,
+    stored: u64,
+    encode_mb_s: f64,
+    decode_gb_s: f64,
+}
+
+/// Every compressed section of `path` re-encoded in chunks of `CHUNK_RAW` at each level (each
+/// keeps its filter: shuffle, delta), then decoded on one core.
+fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
+    let file = slosh_cache::CacheFile::open(path)?;
+    let mut sections = Vec::new();
+    for entry in &file.header().sections {
+        if entry.encoding != slosh_cache::Encoding::Raw {
+            let mut raw = vec![0u8; entry.raw as usize];
+            file.decode_into(entry, &mut raw, &mut Vec::new())?;
+            sections.push((entry.encoding, raw));
+        }
+    }
+    let mut rows = Vec::new();
+    for level in [-5, -1, 1, 3, 9] {
+        let (mut stored, mut raw_bytes) = (0u64, 0u64);
+        let mut packed = Vec::new();
+        let t = Instant::now();
+        for (encoding, raw) in &sections {
+            for chunk in raw.chunks(slosh_cache::CHUNK_RAW as usize) {
+                let bytes = slosh_cache::encode_bytes(chunk, *encoding, level)?;
+                stored += bytes.len() as u64;
+                raw_bytes += chunk.len() as u64;
+                packed.push((*encoding, bytes, chunk.len()));
+            }
+        }
+        let encode = t.elapsed().as_secs_f64();
+        let mut out = vec![0u8; slosh_cache::CHUNK_RAW as usize];
+        let mut scratch = Vec::new();
+        let t = Instant::now();
+        for (encoding, bytes, len) in &packed {
+            slosh_cache::decode_bytes(bytes, *encoding, &mut out[..*len], &mut scratch)?;
+        }
+        let decode = t.elapsed().as_secs_f64();
+        rows.push(CodecRow {
+            level,
+            raw: raw_bytes,
+            stored,
+            encode_mb_s: raw_bytes as f64 / encode / 1e6,
+            decode_gb_s: raw_bytes as f64 / decode / 1e9,
+        });
+    }
+    Ok(rows)
+}
+
 struct SeriesReport {
     label: String,
     steps: usize,
@@ -157,7 +210,8 @@ struct SeriesReport {
     stored_bytes: u64,
     host_ms: f64,
     record_ms: f64,
-    gpu_ms: f64,
+    copy_ms: f64,
+    pass_ms: f64,
     read_ms: f64,
     read_gbps: f64,
     write_buffer_ms: f64,
@@ -166,6 +220,7 @@ struct SeriesReport {
     sequential: Spread,
     jumps_pool: Spread,
     jumps_page_cache: Spread,
+    codecs: Vec<CodecRow>,
 }
 
 fn measure(
@@ -199,18 +254,25 @@ fn measure(
     let read_gbps = read_bytes as f64 / read_start.elapsed().as_secs_f64() / 1e9;
     // The cost of a step, both halves, on a few steps (median).
     let sample: Vec<&PathBuf> = paths.iter().take(8).collect();
-    let (mut host_ms, mut record_ms, mut gpu_ms) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut host_ms, mut record_ms) = (Vec::new(), Vec::new());
+    let (mut copy_ms, mut pass_ms) = (Vec::new(), Vec::new());
     let (mut step_gpu_bytes, mut section_bytes, mut stored_bytes) = (0, 0, 0);
     for p in &sample {
         let host = HostStep::open(p, None)?;
-        let mut encoder = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        let step = GpuStep::create(gpu, &host, &mut encoder)?;
+        let encoder = || {
+            gpu.device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None })
+        };
+        let (mut copies, mut passes) = (encoder(), encoder());
+        let step = GpuStep::create_in(gpu, &host, &mut copies, Some(&mut passes))?;
         let t = Instant::now();
-        gpu.queue.submit([encoder.finish()]);
+        gpu.queue.submit([copies.finish()]);
         gpu.wait()?;
-        gpu_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        copy_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        let t = Instant::now();
+        gpu.queue.submit([passes.finish()]);
+        gpu.wait()?;
+        pass_ms.push(t.elapsed().as_secs_f64() * 1e3);
         host_ms.push(step.upload.host_seconds * 1e3);
         record_ms.push(step.upload.record_seconds * 1e3);
         step_gpu_bytes = step.gpu_bytes();
@@ -322,7 +384,8 @@ fn measure(
         stored_bytes,
         host_ms: median(host_ms),
         record_ms: median(record_ms),
-        gpu_ms: median(gpu_ms),
+        copy_ms: median(copy_ms),
+        pass_ms: median(pass_ms),
         read_ms: median(read_ms),
         read_gbps,
         write_buffer_ms: median(write_ms),
@@ -331,6 +394,7 @@ fn measure(
         sequential: spread(sequential),
         jumps_pool: spread(pool),
         jumps_page_cache: spread(page_cache),
+        codecs: codec_table(&paths[0])?,
     })
 }
 
@@ -454,24 +518,25 @@ fn markdown(
     let _ = writeln!(md, "## A step, and the floors\n");
     let _ = writeln!(
         md,
-        "Host: `HostStep::open` (map, checks, decode of compressed sections in parallel, tree check). Record: `GpuStep::create` (buffers, copies into mapped staging, passes recorded). GPU: those commands submitted and waited for (copies and the per-step passes). Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
+        "Host: `HostStep::open` (map, checks, decode of compressed sections in parallel, tree check). Record: `GpuStep::create` (buffers, copies into mapped staging, passes recorded). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
     );
     let _ = writeln!(
         md,
-        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | GPU copy + passes ms | fs::read ms (GB/s) | write_buffer ms |"
+        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | GPU copies ms | per-step passes ms | fs::read ms (GB/s) | write_buffer ms |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
     for r in reports {
         let _ = writeln!(
             md,
-            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} | {:.2} ({:.1}) | {:.2} |",
+            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} ({:.1}) | {:.2} |",
             r.label,
             r.section_bytes,
             r.step_gpu_bytes,
             r.stored_bytes,
             r.host_ms,
             r.record_ms,
-            r.gpu_ms,
+            r.copy_ms,
+            r.pass_ms,
             r.read_ms,
             r.read_gbps,
             r.write_buffer_ms
@@ -482,5 +547,29 @@ fn markdown(
         "\nSteps per series: {}.",
         reports.first().map_or(0, |r| r.steps)
     );
+    let _ = writeln!(
+        md,
+        "\n## Codec\n\nThe compressed sections of each series' first step (their filters kept: byte shuffle, word delta) re-encoded with zstd at each level in chunks of 1 MiB, then decoded on one core. Bakes use level 1.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| series | zstd level | raw bytes | stored bytes | ratio | encode MB/s per core | decode GB/s per core |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    for r in reports {
+        for c in &r.codecs {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | {:.2} | {:.0} | {:.2} |",
+                r.label,
+                c.level,
+                c.raw,
+                c.stored,
+                c.raw as f64 / c.stored.max(1) as f64,
+                c.encode_mb_s,
+                c.decode_gb_s
+            );
+        }
+    }
     md
 }

@@ -532,19 +532,37 @@ fn storage_with(
             usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: true,
         });
-        {
-            let mut view = staging
-                .slice(..)
-                .get_mapped_range_mut()
-                .map_err(|e| Error::Readback(e.to_string()))?;
-            // One copy per section: wgpu 30's write-only views of unsized slices are not `Send`,
-            // so several loader threads, not one step's pieces, share the cores.
-            view.slice(..bytes.len()).copy_from_slice(bytes);
-        }
+        copy_in_pieces(&staging, bytes)?;
         staging.unmap();
         encoder.copy_buffer_to_buffer(&staging, 0, &target, lead, size);
     }
     Ok(target)
+}
+
+/// Bytes copied per task into a staging buffer.
+const COPY_PIECE: usize = 1 << 20;
+
+/// `bytes` into the mapped `staging` buffer, piece by piece on rayon's threads: writing to
+/// mapped (often write-combined) memory runs at a few GB/s per core, so a large section needs
+/// many. Each piece is its own mapped range of the buffer.
+fn copy_in_pieces(staging: &wgpu::Buffer, bytes: &[u8]) -> Result<()> {
+    let views = bytes
+        .chunks(COPY_PIECE)
+        .enumerate()
+        .map(|(k, piece)| {
+            let start = (k * COPY_PIECE) as u64;
+            let end = start + (piece.len() as u64).next_multiple_of(4);
+            staging
+                .slice(start..end)
+                .get_mapped_range_mut()
+                .map_err(|e| Error::Readback(e.to_string()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    views
+        .into_par_iter()
+        .zip(bytes.par_chunks(COPY_PIECE))
+        .for_each(|(mut view, piece)| view.slice(..piece.len()).copy_from_slice(piece));
+    Ok(())
 }
 
 /// A storage buffer a per-step pass writes.
@@ -589,6 +607,18 @@ impl GpuStep {
         host: &HostStep<'_>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<GpuStep> {
+        GpuStep::create_in(gpu, host, encoder, None)
+    }
+
+    /// [`GpuStep::create`] with the copies recorded into `copies` and the per-step passes
+    /// into `passes` (or `copies` too): submitted in that order, the two can be timed apart.
+    pub fn create_in(
+        gpu: &Gpu,
+        host: &HostStep<'_>,
+        copies: &mut wgpu::CommandEncoder,
+        passes: Option<&mut wgpu::CommandEncoder>,
+    ) -> Result<GpuStep> {
+        let encoder = copies;
         let start = Instant::now();
         let file = host.file();
         let info = host.info.clone();
@@ -667,7 +697,10 @@ impl GpuStep {
                 ..ExpandSettings::zeroed()
             },
             split,
-            encoder,
+            match passes {
+                Some(passes) => passes,
+                None => encoder,
+            },
         )?;
         let buffers = StepBuffers {
             points,
