@@ -3,8 +3,8 @@
 // `expand`: the neighbour masks: which of a point's cluster
 // candidates are its neighbours (clusters.rs: expand_one, the rule docs/algorithm.md gives):
 // within the point's reach, and not a point whose normal opposes the centre's (both valid).
-// One thread per (point, word): bit b of word w is candidate slot 32 w + b. The refinement
-// loops in mls.wgsl then visit only the set bits.
+// Bit b of word w is candidate slot 32 w + b. The refinement loops in mls.wgsl then visit
+// only the set bits.
 //
 // `widen`: the 4-wide tree the trace walk descends (`Wide` in step.wgsl).
 //
@@ -39,49 +39,103 @@ fn thread(gid: vec3<u32>) -> u32 {
     return gid.y * expand_settings.row_threads + gid.x;
 }
 
-@compute @workgroup_size(64, 1, 1)
-fn expand(@builtin(global_invocation_id) gid: vec3<u32>) {
+// One workgroup per cluster: its candidates' positions and normals are read once into
+// workgroup memory, a tile of MASK_TILE at a time, and every (member, word) pair of the tile
+// tests them there (a member reads each candidate from memory 32 times fewer). The tests are
+// the same expressions as clusters.rs, so the bits are too.
+const MASK_TILE: u32 = 256u;
+const TILE_WORDS: u32 = 8u; // MASK_TILE / 32
+var<workgroup> tile_positions: array<vec4<f32>, MASK_TILE>;
+var<workgroup> tile_normals: array<vec4<f32>, MASK_TILE>;
+var<workgroup> cluster_first: u32;
+var<workgroup> cluster_count: u32;
+
+@compute @workgroup_size(256, 1, 1)
+fn expand(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
     let cfg = expand_settings;
-    let slot = thread(gid);
-    if cfg.mask_words == 0u || slot >= cfg.point_count * cfg.mask_words {
+    let size = max(cfg.cluster_size, 1u);
+    let c = wid.y * groups.x + wid.x;
+    if cfg.mask_words == 0u || c >= (cfg.point_count + size - 1u) / size {
         return;
     }
-    let centre = slot / cfg.mask_words;
-    let word = slot % cfg.mask_words;
-    let c = centre / max(cfg.cluster_size, 1u);
-    let first = cluster_start_at(c) + word * 32u;
-    let last = min(cluster_start_at(c + 1u), cfg.cluster_id_count);
-    let position = points_at(centre).position;
-    let r = reach_at(centre);
-    let reach2 = r * r;
-    var own_normal = vec3<f32>(0.0);
-    if cfg.has_normals != 0u {
-        own_normal = normals_at(centre).normal;
+    if lid == 0u {
+        let first = cluster_start_at(c);
+        let last = min(cluster_start_at(c + 1u), cfg.cluster_id_count);
+        cluster_first = first;
+        cluster_count = select(0u, last - first, last > first);
     }
-    let check_normals = dot(own_normal, own_normal) > 0.0;
-    var bits = 0u;
-    for (var b = 0u; b < 32u; b++) {
-        let k = first + b;
-        if k >= last {
-            break;
-        }
-        let j = cluster_ids_at(k);
-        if j >= cfg.point_count {
-            continue;
-        }
-        let d = points_at(j).position - position;
-        if !(d.x * d.x + d.y * d.y + d.z * d.z <= reach2) {
-            continue;
-        }
-        if check_normals {
-            let n = normals_at(j).normal;
-            if dot(n, n) > 0.0 && dot(own_normal, n) < 0.0 {
-                continue;
+    let first = workgroupUniformLoad(&cluster_first);
+    // Candidates past the mask words are never tested (as the thread per word had none).
+    let count = min(workgroupUniformLoad(&cluster_count), cfg.mask_words * 32u);
+    let members = min(size, cfg.point_count - c * size);
+    for (var base = 0u; base < count; base += MASK_TILE) {
+        let k = base + lid;
+        var position = vec4<f32>(0.0);
+        var normal = vec4<f32>(0.0);
+        if k < count {
+            let j = cluster_ids_at(first + k);
+            // w = 1 marks a candidate inside the point list.
+            if j < cfg.point_count {
+                position = vec4<f32>(points_at(j).position, 1.0);
+                if cfg.has_normals != 0u {
+                    normal = vec4<f32>(normals_at(j).normal, 0.0);
+                }
             }
         }
-        bits |= 1u << b;
+        tile_positions[lid] = position;
+        tile_normals[lid] = normal;
+        workgroupBarrier();
+        for (var pair = lid; pair < members * TILE_WORDS; pair += MASK_TILE) {
+            let word = base / 32u + pair % TILE_WORDS;
+            let centre = c * size + pair / TILE_WORDS;
+            if word * 32u >= count {
+                continue;
+            }
+            let own = points_at(centre).position;
+            let r = reach_at(centre);
+            let reach2 = r * r;
+            var own_normal = vec3<f32>(0.0);
+            if cfg.has_normals != 0u {
+                own_normal = normals_at(centre).normal;
+            }
+            let check_normals = dot(own_normal, own_normal) > 0.0;
+            var bits = 0u;
+            for (var b = 0u; b < 32u; b++) {
+                let slot = word * 32u + b;
+                if slot >= count {
+                    break;
+                }
+                let q = tile_positions[slot - base];
+                if q.w == 0.0 {
+                    continue;
+                }
+                let d = q.xyz - own;
+                if !(d.x * d.x + d.y * d.y + d.z * d.z <= reach2) {
+                    continue;
+                }
+                if check_normals {
+                    let n = tile_normals[slot - base].xyz;
+                    if dot(n, n) > 0.0 && dot(own_normal, n) < 0.0 {
+                        continue;
+                    }
+                }
+                bits |= 1u << b;
+            }
+            neighbour_masks_set(centre * cfg.mask_words + word, bits);
+        }
+        workgroupBarrier();
     }
-    neighbour_masks_set(slot, bits);
+    // Words with no candidates are written too (buffers may be reused).
+    let used = (count + 31u) / 32u;
+    let rest = cfg.mask_words - used;
+    for (var pair = lid; pair < members * rest; pair += MASK_TILE) {
+        let centre = c * size + pair / rest;
+        neighbour_masks_set(centre * cfg.mask_words + used + pair % rest, 0u);
+    }
 }
 
 // A slot whose item is neither a ball nor a droplet gets radius −1, which the walk skips.

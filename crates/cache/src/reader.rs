@@ -66,7 +66,11 @@ fn check_chunks(s: &SectionEntry, major: u16) -> std::result::Result<(), String>
         ));
     }
     if s.encoding == crate::format::Encoding::Raw
-        && let Some((k, _)) = s.chunk_spans().iter().enumerate().find(|(_, (st, r))| st.len() != r.len())
+        && let Some((k, _)) = s
+            .chunk_spans()
+            .iter()
+            .enumerate()
+            .find(|(_, (st, r))| st.len() != r.len())
     {
         return Err(format!("raw chunk {k} is not stored as it is"));
     }
@@ -380,7 +384,10 @@ impl CacheFile {
                 let bytes = &stored[st.clone()];
                 self.check_sum(entry, &format!("chunk {k}"), st.start, bytes, &chunk.xxh3)?;
                 decode_into(bytes, entry.encoding, out, scratch).map_err(|e| {
-                    self.section_error(entry, format!("chunk {k} (stored bytes {}..{}): {e}", st.start, st.end))
+                    self.section_error(
+                        entry,
+                        format!("chunk {k} (stored bytes {}..{}): {e}", st.start, st.end),
+                    )
                 })
             })
     }

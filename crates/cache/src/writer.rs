@@ -136,7 +136,9 @@ pub fn encode_step(
     let body_end = offsets
         .last()
         .zip(encoded.last())
-        .map_or(PREAMBLE_LEN + header_bytes.len(), |(o, (_, b, _))| o + b.len());
+        .map_or(PREAMBLE_LEN + header_bytes.len(), |(o, (_, b, _))| {
+            o + b.len()
+        });
     let mut out = Vec::with_capacity(body_end + ALIGN);
     out.extend_from_slice(
         &Preamble {

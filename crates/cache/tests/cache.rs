@@ -176,13 +176,21 @@ fn every_single_byte_flip_is_detected() {
         .header()
         .sections
         .iter()
-        .map(|s| (s.name.clone(), s.offset as usize..(s.offset + s.stored) as usize))
+        .map(|s| {
+            (
+                s.name.clone(),
+                s.offset as usize..(s.offset + s.stored) as usize,
+            )
+        })
         .collect();
     for at in 0..bytes.len() {
         let mut damaged = bytes.clone();
         damaged[at] ^= 0x20;
         let Ok(file) = open(damaged) else { continue };
-        assert!(!file.body_intact(), "flip at byte {at} passes the footer hash");
+        assert!(
+            !file.body_intact(),
+            "flip at byte {at} passes the footer hash"
+        );
         if let Some((name, _)) = ranges.iter().find(|(_, r)| r.contains(&at)) {
             let entry = file.section(name).unwrap();
             let mut out = vec![0u8; entry.raw as usize];
@@ -201,7 +209,10 @@ fn as_format_1(bytes: &[u8]) -> Vec<u8> {
         serde_json::from_slice(&bytes[PREAMBLE_LEN..PREAMBLE_LEN + header_len]).unwrap();
     for s in header["sections"].as_array_mut().unwrap() {
         let s = s.as_object_mut().unwrap();
-        assert!(s["chunks"].as_array().unwrap().len() <= 1, "one run per section");
+        assert!(
+            s["chunks"].as_array().unwrap().len() <= 1,
+            "one run per section"
+        );
         s.remove("chunks");
         s.remove("chunk_raw");
     }

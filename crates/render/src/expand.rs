@@ -139,16 +139,24 @@ impl Expander {
             entries: &entries,
         });
         let passes = self.passes(gpu, split);
+        // The masks pass runs one workgroup per cluster; the others a thread per element.
+        let clusters = settings.point_count.div_ceil(settings.cluster_size.max(1));
         let dispatches = [
-            (&passes.masks, settings.point_count * settings.mask_words),
-            (&passes.leaves, settings.item_count),
-            (&passes.widen, settings.node_count),
+            (
+                &passes.masks,
+                if settings.mask_words == 0 {
+                    0
+                } else {
+                    clusters
+                },
+            ),
+            (&passes.leaves, settings.item_count.div_ceil(WORKGROUP)),
+            (&passes.widen, settings.node_count.div_ceil(WORKGROUP)),
         ];
-        for (pipeline, threads) in dispatches {
-            if threads == 0 {
+        for (pipeline, groups) in dispatches {
+            if groups == 0 {
                 continue;
             }
-            let groups = threads.div_ceil(WORKGROUP);
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("per-step"),
                 timestamp_writes: None,

@@ -565,12 +565,12 @@ fn copy_in_pieces(staging: &wgpu::Buffer, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
-/// A storage buffer a per-step pass writes.
+/// A storage buffer a per-step pass writes (readable back for tests and tools).
 fn derived(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
     gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size,
-        usage: wgpu::BufferUsages::STORAGE,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     })
 }

@@ -809,3 +809,84 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
         .to_string();
     assert!(missing.contains("baked fields: pressure, x"), "{missing}");
 }
+
+/// Reads a GPU buffer back as `T`s.
+fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, source: &wgpu::Buffer) -> Vec<T> {
+    let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: source.size(),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    encoder.copy_buffer_to_buffer(source, 0, &staging, 0, source.size());
+    gpu.queue.submit([encoder.finish()]);
+    let slice = staging.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |r| r.unwrap());
+    gpu.wait().unwrap();
+    let out = bytemuck::pod_collect_to_vec(&slice.get_mapped_range().unwrap());
+    staging.unmap();
+    out
+}
+
+/// The masks pass's bits are exactly the neighbour lists of `slosh_mls::expand_one` (the
+/// rule docs/algorithm.md gives), on a scene whose flipped normals exercise the normal test.
+#[test]
+fn neighbour_masks_equal_the_cpu_lists() {
+    use slosh_cache::{GpuNormal, GpuPoint, names};
+    use slosh_mls::V3;
+    let Some(dev) = device() else { return };
+    for case in cases() {
+        let input = input_of(&case.spec);
+        let (file, _) = bake(&input, 2);
+        let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+        let masks: Vec<u32> = read_buffer(&dev.gpu, &step.buffers.masks);
+        let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
+        let normals: Option<Vec<GpuNormal>> = file
+            .section(names::NORMALS)
+            .map(|_| file.decode(names::NORMALS).unwrap());
+        let reach: Vec<f32> = file.decode(names::REACH).unwrap();
+        let start: Vec<u32> = file.decode(names::CLUSTER_START).unwrap();
+        let ids: Vec<u32> = file.decode(names::CLUSTER_NEIGHBOURS).unwrap();
+        let v = |a: [f32; 3]| V3::new(a[0], a[1], a[2]);
+        let positions: Vec<V3<f32>> = points.iter().map(|p| v(p.position)).collect();
+        let normals: Option<Vec<V3<f32>>> =
+            normals.map(|ns| ns.iter().map(|n| v(n.normal)).collect());
+        let size = file.header().neighbour_cluster as usize;
+        let words = step.info.mask_words as usize;
+        let mut list = Vec::new();
+        let mut set_bits = 0usize;
+        for i in 0..positions.len() {
+            let c = i / size;
+            let candidates = &ids[start[c] as usize..start[c + 1] as usize];
+            list.clear();
+            slosh_mls::expand_one(
+                i,
+                &positions,
+                normals.as_deref(),
+                &reach,
+                candidates,
+                &mut list,
+            );
+            let mut expected = vec![0u32; words];
+            for j in &list {
+                let slot = candidates.binary_search(j).unwrap();
+                expected[slot / 32] |= 1 << (slot % 32);
+            }
+            set_bits += list.len();
+            assert_eq!(
+                &masks[i * words..(i + 1) * words],
+                &expected[..],
+                "{}: point {i}",
+                case.name
+            );
+        }
+        assert!(
+            set_bits > positions.len() * 4,
+            "{}: {set_bits} bits",
+            case.name
+        );
+    }
+}
