@@ -112,6 +112,20 @@ fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Re
     Ok(())
 }
 
+/// A MAP_READ buffer's u64s.
+fn read_u64s(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u64>> {
+    let slice = buffer.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    gpu.wait()?;
+    rx.recv()??;
+    let words = bytemuck::pod_collect_to_vec(&slice.get_mapped_range()?);
+    buffer.unmap();
+    Ok(words)
+}
+
 /// One frame of the engine submitted and finished.
 fn frame(engine: &mut Engine, request: &FrameRequest) -> Result<FrameReport> {
     let gpu = engine.gpu().clone();
@@ -212,6 +226,8 @@ struct SeriesReport {
     record_ms: f64,
     copy_ms: f64,
     pass_ms: f64,
+    /// GPU time of the masks, leaves and widen passes (0 without timestamps).
+    each_pass_ms: [f64; 3],
     read_ms: f64,
     read_gbps: f64,
     write_buffer_ms: f64,
@@ -256,6 +272,27 @@ fn measure(
     let sample: Vec<&PathBuf> = paths.iter().take(8).collect();
     let (mut host_ms, mut record_ms) = (Vec::new(), Vec::new());
     let (mut copy_ms, mut pass_ms) = (Vec::new(), Vec::new());
+    // GPU timestamps of the three per-step passes, where the adapter has them.
+    let mut each_pass_ms: [Vec<f64>; 3] = Default::default();
+    let stamps = gpu.timestamps.then(|| {
+        let buffer = |usage| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pass stamps"),
+                size: 48,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        (
+            gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("per-step passes"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 6,
+            }),
+            buffer(wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC),
+            buffer(wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
+        )
+    });
     let (mut step_gpu_bytes, mut section_bytes, mut stored_bytes) = (0, 0, 0);
     for p in &sample {
         let host = HostStep::open(p, None)?;
@@ -264,7 +301,17 @@ fn measure(
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None })
         };
         let (mut copies, mut passes) = (encoder(), encoder());
-        let step = GpuStep::create_in(gpu, &host, &mut copies, Some(&mut passes))?;
+        let step = GpuStep::create_in(
+            gpu,
+            &host,
+            &mut copies,
+            Some(&mut passes),
+            stamps.as_ref().map(|(set, _, _)| set),
+        )?;
+        if let Some((set, resolve, readback)) = &stamps {
+            passes.resolve_query_set(set, 0..6, resolve, 0);
+            passes.copy_buffer_to_buffer(resolve, 0, readback, 0, 48);
+        }
         let t = Instant::now();
         gpu.queue.submit([copies.finish()]);
         gpu.wait()?;
@@ -273,6 +320,13 @@ fn measure(
         gpu.queue.submit([passes.finish()]);
         gpu.wait()?;
         pass_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        if let Some((_, _, readback)) = &stamps {
+            let ticks = read_u64s(gpu, readback)?;
+            let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
+            for (k, times) in each_pass_ms.iter_mut().enumerate() {
+                times.push(ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period);
+            }
+        }
         host_ms.push(step.upload.host_seconds * 1e3);
         record_ms.push(step.upload.record_seconds * 1e3);
         step_gpu_bytes = step.gpu_bytes();
@@ -316,7 +370,7 @@ fn measure(
     let streaming_budget = step_gpu_bytes * args.pool_steps.max(3);
     let options = |budget| EngineOptions {
         budget: Some(budget),
-        loaders: args.loaders,
+        loaders: args.loaders.unwrap_or_else(slosh_play::default_loaders),
         ..EngineOptions::default()
     };
     // Sequential playback, streaming through a pool smaller than the series.
@@ -386,6 +440,7 @@ fn measure(
         record_ms: median(record_ms),
         copy_ms: median(copy_ms),
         pass_ms: median(pass_ms),
+        each_pass_ms: each_pass_ms.map(median),
         read_ms: median(read_ms),
         read_gbps,
         write_buffer_ms: median(write_ms),
@@ -481,7 +536,7 @@ fn markdown(
         gpu.describe(),
         size.0,
         size.1,
-        args.loaders,
+        args.loaders.unwrap_or_else(slosh_play::default_loaders),
         args.pool_steps.max(3)
     );
     let _ = writeln!(md, "## Throughput and latency\n");
@@ -522,13 +577,13 @@ fn markdown(
     );
     let _ = writeln!(
         md,
-        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | GPU copies ms | per-step passes ms | fs::read ms (GB/s) | write_buffer ms |"
+        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | GPU copies ms | per-step passes ms (GPU: masks / leaves / widen) | fs::read ms (GB/s) | write_buffer ms |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
     for r in reports {
         let _ = writeln!(
             md,
-            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} ({:.1}) | {:.2} |",
+            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} | {:.2} ({:.2} / {:.2} / {:.2}) | {:.2} ({:.1}) | {:.2} |",
             r.label,
             r.section_bytes,
             r.step_gpu_bytes,
@@ -537,6 +592,9 @@ fn markdown(
             r.record_ms,
             r.copy_ms,
             r.pass_ms,
+            r.each_pass_ms[0],
+            r.each_pass_ms[1],
+            r.each_pass_ms[2],
             r.read_ms,
             r.read_gbps,
             r.write_buffer_ms

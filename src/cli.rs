@@ -71,9 +71,9 @@ pub struct ScrubBenchArgs {
     /// Seed of the jumps.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Loader threads of the engine.
-    #[arg(long, default_value_t = 4)]
-    pub loaders: usize,
+    /// Loader threads of the engine (default: a quarter of the cores, 2 to 4).
+    #[arg(long)]
+    pub loaders: Option<usize>,
     /// Pool size in steps for sequential playback and page-cache jumps (so that steps stream
     /// rather than stay resident).
     #[arg(long, default_value_t = 16)]

@@ -13,6 +13,7 @@ pub mod timeline;
 
 pub use engine::{
     Engine, EngineOptions, FrameReport, FrameRequest, GpuSource, Prepared, default_budget,
+    default_loaders,
 };
 pub use error::{Error, Result};
 pub use pool::{Admission, Resident, StepPool};

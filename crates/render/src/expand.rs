@@ -100,6 +100,7 @@ impl Expander {
         settings: ExpandSettings,
         split: bool,
         encoder: &mut wgpu::CommandEncoder,
+        timestamps: Option<&wgpu::QuerySet>,
     ) -> Result<()> {
         let max_groups = gpu.device.limits().max_compute_workgroups_per_dimension;
         // Rows are full width whenever a dispatch needs more than one.
@@ -153,14 +154,23 @@ impl Expander {
             (&passes.leaves, settings.item_count.div_ceil(WORKGROUP)),
             (&passes.widen, settings.node_count.div_ceil(WORKGROUP)),
         ];
-        for (pipeline, groups) in dispatches {
-            if groups == 0 {
+        for (i, (pipeline, groups)) in dispatches.into_iter().enumerate() {
+            let timestamp_writes = timestamps.map(|set| wgpu::ComputePassTimestampWrites {
+                query_set: set,
+                beginning_of_pass_write_index: Some(2 * i as u32),
+                end_of_pass_write_index: Some(2 * i as u32 + 1),
+            });
+            // A timed pass runs even with nothing to do, so that its stamps are written.
+            if groups == 0 && timestamp_writes.is_none() {
                 continue;
             }
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("per-step"),
-                timestamp_writes: None,
+                timestamp_writes,
             });
+            if groups == 0 {
+                continue;
+            }
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(groups.min(max_groups), groups.div_ceil(max_groups), 1);

@@ -607,16 +607,19 @@ impl GpuStep {
         host: &HostStep<'_>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<GpuStep> {
-        GpuStep::create_in(gpu, host, encoder, None)
+        GpuStep::create_in(gpu, host, encoder, None, None)
     }
 
     /// [`GpuStep::create`] with the copies recorded into `copies` and the per-step passes
     /// into `passes` (or `copies` too): submitted in that order, the two can be timed apart.
+    /// With `timestamps` (a timestamp query set of 6), each of the three passes writes its
+    /// begin and end there (masks 0–1, leaves 2–3, widen 4–5).
     pub fn create_in(
         gpu: &Gpu,
         host: &HostStep<'_>,
         copies: &mut wgpu::CommandEncoder,
         passes: Option<&mut wgpu::CommandEncoder>,
+        timestamps: Option<&wgpu::QuerySet>,
     ) -> Result<GpuStep> {
         let encoder = copies;
         let start = Instant::now();
@@ -701,6 +704,7 @@ impl GpuStep {
                 Some(passes) => passes,
                 None => encoder,
             },
+            timestamps,
         )?;
         let buffers = StepBuffers {
             points,
