@@ -89,9 +89,11 @@ fn expand(
         tile_positions[lid] = position;
         tile_normals[lid] = normal;
         workgroupBarrier();
+        // Neighbouring threads take neighbouring members of one word: they read the same
+        // tile entry at each step (a broadcast, no bank conflicts) and neighbouring points.
         for (var pair = lid; pair < members * TILE_WORDS; pair += MASK_TILE) {
-            let word = base / 32u + pair % TILE_WORDS;
-            let centre = c * size + pair / TILE_WORDS;
+            let word = base / 32u + pair / members;
+            let centre = c * size + pair % members;
             if word * 32u >= count {
                 continue;
             }
@@ -133,8 +135,8 @@ fn expand(
     let used = (count + 31u) / 32u;
     let rest = cfg.mask_words - used;
     for (var pair = lid; pair < members * rest; pair += MASK_TILE) {
-        let centre = c * size + pair / rest;
-        neighbour_masks_set(centre * cfg.mask_words + used + pair % rest, 0u);
+        let centre = c * size + pair % members;
+        neighbour_masks_set(centre * cfg.mask_words + used + pair / members, 0u);
     }
 }
 

@@ -509,61 +509,69 @@ fn finite_range(bytes: &[u8]) -> (f32, f32) {
     if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
 }
 
-/// A device-local storage buffer of `bytes` after `lead` blank bytes, filled through a mapped
-/// staging buffer whose copy is recorded into `encoder`.
-fn storage_with(
+/// Device-local storage buffers for `arrays` (label, bytes, blank lead bytes), all filled
+/// through one `mapped_at_creation` staging buffer (one allocation per step, not one per
+/// section), whose pieces are copied in parallel; the copies are recorded into `encoder`.
+fn storage_buffers(
     gpu: &Gpu,
-    label: &str,
-    bytes: &[u8],
-    lead: u64,
+    arrays: &[(&str, &[u8], u64)],
     encoder: &mut wgpu::CommandEncoder,
-) -> Result<wgpu::Buffer> {
-    let size = (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4);
-    let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: lead + size,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    if !bytes.is_empty() {
-        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("staging"),
-            size,
-            usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: true,
-        });
-        copy_in_pieces(&staging, bytes)?;
-        staging.unmap();
-        encoder.copy_buffer_to_buffer(&staging, 0, &target, lead, size);
+) -> Result<Vec<wgpu::Buffer>> {
+    // Each array's place in the staging buffer, 256-byte aligned.
+    let mut offsets = Vec::with_capacity(arrays.len());
+    let mut total = 0u64;
+    for (_, bytes, _) in arrays {
+        offsets.push(total);
+        total += (bytes.len() as u64).next_multiple_of(256);
     }
-    Ok(target)
+    let targets: Vec<wgpu::Buffer> = arrays
+        .iter()
+        .map(|(label, bytes, lead)| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: lead + (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })
+        .collect();
+    if total == 0 {
+        return Ok(targets);
+    }
+    let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("staging"),
+        size: total,
+        usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: true,
+    });
+    // Every array's pieces, each its own mapped range, copied on rayon's threads.
+    let mut pieces = Vec::new();
+    for ((_, bytes, _), &offset) in arrays.iter().zip(&offsets) {
+        for (k, piece) in bytes.chunks(COPY_PIECE).enumerate() {
+            let start = offset + (k * COPY_PIECE) as u64;
+            let end = start + (piece.len() as u64).next_multiple_of(4);
+            let view = staging
+                .slice(start..end)
+                .get_mapped_range_mut()
+                .map_err(|e| Error::Readback(e.to_string()))?;
+            pieces.push((view, piece));
+        }
+    }
+    pieces
+        .into_par_iter()
+        .for_each(|(mut view, piece)| view.slice(..piece.len()).copy_from_slice(piece));
+    staging.unmap();
+    for (((_, bytes, lead), offset), target) in arrays.iter().zip(&offsets).zip(&targets) {
+        if !bytes.is_empty() {
+            let size = (bytes.len() as u64).next_multiple_of(4);
+            encoder.copy_buffer_to_buffer(&staging, *offset, target, *lead, size);
+        }
+    }
+    Ok(targets)
 }
 
 /// Bytes copied per task into a staging buffer.
 const COPY_PIECE: usize = 1 << 20;
-
-/// `bytes` into the mapped `staging` buffer, piece by piece on rayon's threads: writing to
-/// mapped (often write-combined) memory runs at a few GB/s per core, so a large section needs
-/// many. Each piece is its own mapped range of the buffer.
-fn copy_in_pieces(staging: &wgpu::Buffer, bytes: &[u8]) -> Result<()> {
-    let views = bytes
-        .chunks(COPY_PIECE)
-        .enumerate()
-        .map(|(k, piece)| {
-            let start = (k * COPY_PIECE) as u64;
-            let end = start + (piece.len() as u64).next_multiple_of(4);
-            staging
-                .slice(start..end)
-                .get_mapped_range_mut()
-                .map_err(|e| Error::Readback(e.to_string()))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    views
-        .into_par_iter()
-        .zip(bytes.par_chunks(COPY_PIECE))
-        .for_each(|(mut view, piece)| view.slice(..piece.len()).copy_from_slice(piece));
-    Ok(())
-}
 
 /// A storage buffer a per-step pass writes (readable back for tests and tools).
 fn derived(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
@@ -649,17 +657,20 @@ impl GpuStep {
             host_seconds: host.host_seconds,
             ..UploadStats::default()
         };
-        let mut sections = Vec::with_capacity(SECTIONS.len());
-        for (slot, name) in SECTIONS.iter().enumerate() {
-            let bytes = host.section_bytes(slot);
-            sections.push(storage_with(gpu, name, bytes, lead(name), encoder)?);
-            stats.bytes += bytes.len() as u64;
+        let mut arrays: Vec<(&str, &[u8], u64)> = SECTIONS
+            .iter()
+            .enumerate()
+            .map(|(slot, name)| (*name, host.section_bytes(slot), lead(name)))
+            .collect();
+        if let Some(f) = &host.field {
+            arrays.push(("field", &f.bytes, 0));
         }
+        stats.bytes = arrays.iter().map(|(_, b, _)| b.len() as u64).sum();
+        let mut sections = storage_buffers(gpu, &arrays, encoder)?;
         let field_values = match &host.field {
-            Some(f) => {
-                stats.bytes += f.bytes.len() as u64;
-                storage_with(gpu, "field", &f.bytes, 0, encoder)?
-            }
+            Some(_) => sections
+                .pop()
+                .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))?,
             None => derived(gpu, "no field", EMPTY_BINDING),
         };
         let mut it = sections.into_iter();
