@@ -134,10 +134,8 @@ fn frame(engine: &mut Engine, request: &FrameRequest) -> Result<FrameReport> {
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("scrub frame"),
         });
-    let mut report = engine.frame(request, &mut encoder)?;
-    let uploads = std::mem::take(&mut report.uploads);
-    gpu.queue
-        .submit(uploads.into_iter().chain([encoder.finish()]));
+    let report = engine.frame(request, &mut encoder)?;
+    gpu.queue.submit([encoder.finish()]);
     gpu.wait()?;
     Ok(report)
 }
@@ -270,6 +268,8 @@ fn measure(
     let read_gbps = read_bytes as f64 / read_start.elapsed().as_secs_f64() / 1e9;
     // The cost of a step, both halves, on a few steps (median).
     let sample: Vec<&PathBuf> = paths.iter().take(8).collect();
+    // Staging memory reused as the engine reuses it (the first sample allocates it).
+    let staging = slosh_render::StagingPool::new(2);
     let (mut host_ms, mut record_ms) = (Vec::new(), Vec::new());
     let (mut copy_ms, mut pass_ms) = (Vec::new(), Vec::new());
     // GPU timestamps of the three per-step passes, where the adapter has them.
@@ -307,6 +307,7 @@ fn measure(
             &mut copies,
             Some(&mut passes),
             stamps.as_ref().map(|(set, _, _)| set),
+            Some(&staging),
         )?;
         if let Some((set, resolve, readback)) = &stamps {
             passes.resolve_query_set(set, 0..6, resolve, 0);
@@ -316,6 +317,10 @@ fn measure(
         gpu.queue.submit([copies.finish()]);
         gpu.wait()?;
         copy_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        let mut step = step;
+        if let Some(buffer) = step.take_staging() {
+            staging.recycle(buffer);
+        }
         let t = Instant::now();
         gpu.queue.submit([passes.finish()]);
         gpu.wait()?;

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, PoisonError};
 
 use slosh_mls::Camera;
-use slosh_render::{FrameTargets, Gpu, GpuStep, HostField, HostStep, TraceParams, Tracer};
+use slosh_render::{
+    FrameTargets, Gpu, GpuStep, HostField, HostStep, StagingPool, TraceParams, Tracer,
+};
 
 use crate::error::{Error, Result};
 use crate::pool::{Admission, StepPool};
@@ -72,6 +74,7 @@ pub struct Prepared {
 #[derive(Debug)]
 pub struct GpuSource {
     gpu: Arc<Gpu>,
+    staging: StagingPool,
     paths: Mutex<HashMap<usize, PathBuf>>,
     field: Mutex<Option<String>>,
 }
@@ -138,8 +141,6 @@ pub struct FrameReport {
     /// Iterations drawn this frame; `None` when the targets already hold this view.
     pub drawn: Option<u32>,
     pub progress: Option<Progress>,
-    /// Commands that fill steps made resident this frame: submit them before the frame.
-    pub uploads: Vec<wgpu::CommandBuffer>,
     /// Steps made resident this frame, by position.
     pub uploaded: Vec<usize>,
     /// Steps that failed this frame, by position, with why.
@@ -187,6 +188,7 @@ impl Engine {
         let budget = options.budget.unwrap_or_else(|| default_budget(&gpu));
         let source = Arc::new(GpuSource {
             gpu: gpu.clone(),
+            staging: StagingPool::new(options.loaders + 2),
             paths: Mutex::new(HashMap::new()),
             field: Mutex::new(options.field.clone()),
         });
@@ -408,6 +410,8 @@ impl Engine {
     /// only takes free room).
     fn admit(&mut self, window: &[usize], report: &mut FrameReport) {
         let keep = self.shown;
+        let mut commands = Vec::new();
+        let mut staging = Vec::new();
         for loaded in self.prefetch.poll() {
             let Some(position) = self.position(loaded.index) else {
                 continue;
@@ -417,7 +421,8 @@ impl Engine {
                     report.failures.push((position, why.clone()));
                     self.failed.insert(loaded.index, why);
                 }
-                Ok(prepared) => {
+                Ok(mut prepared) => {
+                    staging.extend(prepared.step.take_staging());
                     let bytes = prepared.step.gpu_bytes();
                     let urgent = window.contains(&position);
                     let free = self.pool.used() + bytes <= self.pool.budget();
@@ -433,7 +438,7 @@ impl Engine {
                             self.step_fields.remove(&gone);
                         }
                         self.step_fields.insert(loaded.index, prepared.field);
-                        report.uploads.push(prepared.commands);
+                        commands.push(prepared.commands);
                         report.uploaded.push(position);
                         report.upload_host_ms += upload.host_seconds * 1e3;
                         report.upload_record_ms += upload.record_seconds * 1e3;
@@ -442,6 +447,13 @@ impl Engine {
                     }
                 }
             }
+        }
+        if !commands.is_empty() {
+            self.gpu.queue.submit(commands);
+        }
+        // After the submission: their copies are done before the buffers map again.
+        for buffer in staging {
+            self.source.staging.recycle(buffer);
         }
     }
 
@@ -470,9 +482,10 @@ impl Engine {
         self.prefetch.request(indices);
     }
 
-    /// Plays the timeline on, takes in prepared steps, asks for the next ones, and records
-    /// the frame into `encoder` (unless the targets already hold this view). Never waits on
-    /// disk: a step not yet resident is drawn by its nearest resident stand-in.
+    /// Plays the timeline on, takes in prepared steps (their uploads submitted here, ahead of
+    /// the caller's frame), asks for the next ones, and records the frame into `encoder`
+    /// (unless the targets already hold this view). Never waits on disk: a step not yet
+    /// resident is drawn by its nearest resident stand-in.
     pub fn frame(
         &mut self,
         request: &FrameRequest,

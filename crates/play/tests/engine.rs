@@ -87,10 +87,8 @@ fn frame(engine: &mut Engine, request: &FrameRequest) -> FrameReport {
     let mut encoder = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    let mut report = engine.frame(request, &mut encoder).unwrap();
-    let uploads = std::mem::take(&mut report.uploads);
-    gpu.queue
-        .submit(uploads.into_iter().chain([encoder.finish()]));
+    let report = engine.frame(request, &mut encoder).unwrap();
+    gpu.queue.submit([encoder.finish()]);
     gpu.wait().unwrap();
     report
 }

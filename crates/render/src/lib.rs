@@ -11,12 +11,14 @@ mod error;
 mod expand;
 pub mod layout;
 pub mod shaders;
+mod staging;
 mod tracer;
 mod upload;
 
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
+pub use staging::StagingPool;
 pub use tracer::{
     FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings,
 };

@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::expand::ExpandInputs;
 use crate::layout::ExpandSettings;
 use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS};
+use crate::staging::StagingPool;
 
 /// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
 /// tree has 31 levels, each stacking up to three slots.
@@ -412,6 +413,8 @@ pub struct GpuStep {
     /// The trace and shade passes' group 0, made for `binding_limit`.
     bind_group: wgpu::BindGroup,
     binding_limit: u64,
+    /// The pooled staging buffer of the upload, until taken back.
+    staging: Option<wgpu::Buffer>,
 }
 
 const SECTIONS: [&str; 9] = [
@@ -516,7 +519,8 @@ fn storage_buffers(
     gpu: &Gpu,
     arrays: &[(&str, &[u8], u64)],
     encoder: &mut wgpu::CommandEncoder,
-) -> Result<Vec<wgpu::Buffer>> {
+    pool: Option<&StagingPool>,
+) -> Result<(Vec<wgpu::Buffer>, Option<wgpu::Buffer>)> {
     // Each array's place in the staging buffer, 256-byte aligned.
     let mut offsets = Vec::with_capacity(arrays.len());
     let mut total = 0u64;
@@ -536,14 +540,17 @@ fn storage_buffers(
         })
         .collect();
     if total == 0 {
-        return Ok(targets);
+        return Ok((targets, None));
     }
-    let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("staging"),
-        size: total,
-        usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: true,
-    });
+    let staging = match pool {
+        Some(pool) => pool.take(gpu, total),
+        None => gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("staging"),
+            size: total,
+            usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: true,
+        }),
+    };
     // Every array's pieces, each its own mapped range, copied on rayon's threads.
     let mut pieces = Vec::new();
     for ((_, bytes, _), &offset) in arrays.iter().zip(&offsets) {
@@ -567,7 +574,7 @@ fn storage_buffers(
             encoder.copy_buffer_to_buffer(&staging, *offset, target, *lead, size);
         }
     }
-    Ok(targets)
+    Ok((targets, pool.map(|_| staging)))
 }
 
 /// Bytes copied per task into a staging buffer.
@@ -615,19 +622,22 @@ impl GpuStep {
         host: &HostStep<'_>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<GpuStep> {
-        GpuStep::create_in(gpu, host, encoder, None, None)
+        GpuStep::create_in(gpu, host, encoder, None, None, None)
     }
 
     /// [`GpuStep::create`] with the copies recorded into `copies` and the per-step passes
     /// into `passes` (or `copies` too): submitted in that order, the two can be timed apart.
     /// With `timestamps` (a timestamp query set of 6), each of the three passes writes its
-    /// begin and end there (masks 0–1, leaves 2–3, widen 4–5).
+    /// begin and end there (masks 0–1, leaves 2–3, widen 4–5). With `staging`, the staging
+    /// memory comes from that pool; hand it back with [`GpuStep::take_staging`] and
+    /// [`StagingPool::recycle`] once the copies are submitted.
     pub fn create_in(
         gpu: &Gpu,
         host: &HostStep<'_>,
         copies: &mut wgpu::CommandEncoder,
         passes: Option<&mut wgpu::CommandEncoder>,
         timestamps: Option<&wgpu::QuerySet>,
+        staging: Option<&StagingPool>,
     ) -> Result<GpuStep> {
         let encoder = copies;
         let start = Instant::now();
@@ -666,7 +676,7 @@ impl GpuStep {
             arrays.push(("field", &f.bytes, 0));
         }
         stats.bytes = arrays.iter().map(|(_, b, _)| b.len() as u64).sum();
-        let mut sections = storage_buffers(gpu, &arrays, encoder)?;
+        let (mut sections, staging) = storage_buffers(gpu, &arrays, encoder, staging)?;
         let field_values = match &host.field {
             Some(_) => sections
                 .pop()
@@ -744,7 +754,14 @@ impl GpuStep {
             upload: stats,
             bind_group,
             binding_limit,
+            staging,
         })
+    }
+
+    /// The pooled staging buffer the upload's copies read, to recycle once they are
+    /// submitted.
+    pub fn take_staging(&mut self) -> Option<wgpu::Buffer> {
+        self.staging.take()
     }
 
     /// Replaces the colour field (or drops it with `None`): only the field's buffer is
