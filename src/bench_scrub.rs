@@ -216,6 +216,7 @@ fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
 
 struct SeriesReport {
     label: String,
+    points: usize,
     steps: usize,
     step_gpu_bytes: u64,
     section_bytes: u64,
@@ -240,6 +241,7 @@ struct SeriesReport {
 fn measure(
     gpu: &Arc<Gpu>,
     dir: &Path,
+    points: usize,
     label: String,
     size: (u32, u32),
     args: &ScrubBenchArgs,
@@ -437,6 +439,7 @@ fn measure(
     }
     Ok(SeriesReport {
         label,
+        points,
         steps,
         step_gpu_bytes,
         section_bytes,
@@ -512,7 +515,7 @@ pub fn run(args: &ScrubBenchArgs) -> Result<()> {
         println!("series: {points} points, {steps} steps ({distinct} distinct)");
         ensure_series(&dir, points, steps, distinct)?;
         let label = format!("{points} points, {steps} steps ({distinct} distinct shapes)");
-        let report = measure(&gpu, &dir, label, size, &jumps_args)?;
+        let report = measure(&gpu, &dir, points, label, size, &jumps_args)?;
         println!(
             "  sequential {:.1} steps/s; jumps p99: pool {:.2} ms, page cache {:.2} ms",
             report.sequential_steps_per_s, report.jumps_pool.p99, report.jumps_page_cache.p99
@@ -566,6 +569,42 @@ fn markdown(
             r.jumps_page_cache.p99,
             r.jumps_page_cache.max,
             r.trace_ms
+        );
+    }
+    let _ = writeln!(md, "\n### Goals (page cache, 1280×800, 1 iteration)\n");
+    let _ = writeln!(md, "| series | measure | goal | measured | met |");
+    let _ = writeln!(md, "|---|---|---|---|---|");
+    let met = |ok: bool| if ok { "yes" } else { "no" };
+    for r in reports {
+        // The goals: 1M points 60 steps/s and 33 ms; 100k points 240 and 8 ms.
+        let goal = match r.points {
+            p if p >= 1_000_000 => Some((60.0, 33.0)),
+            p if p >= 100_000 => Some((240.0, 8.0)),
+            _ => None,
+        };
+        if let Some((rate, jump)) = goal {
+            let _ = writeln!(
+                md,
+                "| {} | sequential steps/s | ≥ {rate} | {:.1} | {} |",
+                r.label,
+                r.sequential_steps_per_s,
+                met(r.sequential_steps_per_s >= rate)
+            );
+            let _ = writeln!(
+                md,
+                "| {} | jump from page cache, p99 | ≤ {jump} ms | {:.2} ms | {} |",
+                r.label,
+                r.jumps_page_cache.p99,
+                met(r.jumps_page_cache.p99 <= jump)
+            );
+        }
+        let _ = writeln!(
+            md,
+            "| {} | jump to a resident step, p99 | ≤ 2 ms + frame ({:.2} ms) | {:.2} ms | {} |",
+            r.label,
+            2.0 + r.trace_ms,
+            r.jumps_pool.p99,
+            met(r.jumps_pool.p99 <= 2.0 + r.trace_ms)
         );
     }
     let _ = writeln!(
