@@ -690,3 +690,49 @@ fn a_killed_bake_leaves_only_valid_caches_and_resumes() {
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
+
+/// `slosh bench scrub --quick`: the engine streams a small baked series on the adapter there
+/// is (lavapipe in CI), and the report holds every table with measured, positive figures.
+#[test]
+fn scrub_bench_streams_a_series_on_the_engine() {
+    let dir = tempfile::tempdir().unwrap();
+    let md = dir.path().join("scrub.md");
+    let series = dir.path().join("series");
+    let (ok, out, err) = slosh(&[
+        "bench",
+        "scrub",
+        "--quick",
+        "--out",
+        md.to_str().unwrap(),
+        "--dir",
+        series.to_str().unwrap(),
+    ]);
+    if !ok && !in_ci() && err.contains("adapter") {
+        eprintln!("skipping the scrub benchmark: {err}");
+        return;
+    }
+    assert!(ok, "{out}{err}");
+    let report = std::fs::read_to_string(&md).unwrap();
+    let rows: Vec<Vec<&str>> = report
+        .lines()
+        .filter(|l| l.starts_with("| 2000 points"))
+        .map(|l| l.split('|').map(str::trim).collect())
+        .collect();
+    // Throughput, the resident-jump goal, step costs, five codec levels.
+    assert_eq!(rows.len(), 8, "{report}");
+    assert!(rows[1][2].contains("jump to a resident step"), "{report}");
+    let number = |s: &str| -> f64 { s.split_whitespace().next().unwrap().parse().unwrap() };
+    let throughput = &rows[0];
+    assert!(number(throughput[2]) > 0.0, "steps/s: {report}");
+    for cell in &throughput[3..7] {
+        for part in cell.split('/') {
+            assert!(number(part) > 0.0, "{cell}: {report}");
+        }
+    }
+    let (sections, all) = rows[2][2].split_once('/').unwrap();
+    assert!(number(all) > number(sections), "derived buffers count: {report}");
+    // The series it wrote is a verified cache series.
+    let cache = series.join("sphere-2000-12");
+    let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
+    assert!(ok, "{out}{err}");
+}
