@@ -651,7 +651,7 @@ fn markdown(
     );
     let _ = writeln!(
         md,
-        "\n## Codec\n\nThe compressed sections of each series' first step (their filters kept: byte shuffle, word delta) re-encoded with zstd at each level in chunks of 1 MiB, then decoded on one core. Bakes use level 1.\n"
+        "\n## Codec\n\nThe compressed sections of each series' first step (their filters kept: byte shuffle, word delta) re-encoded with zstd at each level in chunks of 1 MiB, then decoded on one core. Bakes use level -1 by default.\n"
     );
     let _ = writeln!(
         md,

@@ -173,9 +173,11 @@ impl BakeConfig {
                 let level: i32 = l
                     .parse()
                     .ok()
-                    .filter(|v| (1..=22).contains(v))
+                    .filter(|v| (-7..=22).contains(v) && *v != 0)
                     .with_context(|| {
-                        format!("--compress {l}: expected a zstd level 1-22 or 'none'")
+                        format!(
+                            "--compress {l}: expected a zstd level from -7 (fastest) to 22, not 0, or 'none'"
+                        )
                     })?;
                 slosh_cache::Compression::Level(level)
             }

@@ -54,7 +54,7 @@ impl BakeParams {
             surface,
             normals,
             fields: Vec::new(),
-            compression: Compression::Level(1),
+            compression: Compression::Level(-1),
         }
     }
 

@@ -154,7 +154,8 @@ impl SectionEntry {
             .iter()
             .map(|c| {
                 let s = stored..stored + c.stored as usize;
-                let r = raw..(raw + self.chunk_raw as usize).min(self.raw as usize);
+                let end = raw.saturating_add(usize::try_from(self.chunk_raw).unwrap_or(usize::MAX));
+                let r = raw..end.min(self.raw as usize);
                 stored = s.end;
                 raw = r.end;
                 (s, r)

@@ -298,7 +298,7 @@ impl CacheFile {
     }
 
     /// Checks a stored run's checksum against `expected` (16 hex digits).
-    fn check_sum(
+    pub(crate) fn check_sum(
         &self,
         entry: &SectionEntry,
         what: &str,

@@ -45,13 +45,7 @@ impl CacheFile {
             // Chunked sections are decoded against their chunks' checksums; the section's
             // own checksum is checked too.
             if !entry.chunks.is_empty() {
-                let sum = crate::format::hex64(xxhash_rust::xxh3::xxh3_64(self.stored(entry)));
-                if sum != entry.xxh3 {
-                    return Err(invalid(format!(
-                        "section '{}' (at byte {}): checksum xxh3 {sum}, the table says {} (corrupt)",
-                        entry.name, entry.offset, entry.xxh3
-                    )));
-                }
+                self.check_sum(entry, "section", 0, self.stored(entry), &entry.xxh3)?;
             }
             if !STRUCTURAL.contains(&entry.name.as_str()) {
                 let mut out = vec![0u8; entry.raw as usize];
