@@ -730,7 +730,10 @@ fn scrub_bench_streams_a_series_on_the_engine() {
         }
     }
     let (sections, all) = rows[2][2].split_once('/').unwrap();
-    assert!(number(all) > number(sections), "derived buffers count: {report}");
+    assert!(
+        number(all) > number(sections),
+        "derived buffers count: {report}"
+    );
     // The series it wrote is a verified cache series.
     let cache = series.join("sphere-2000-12");
     let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);

@@ -380,9 +380,8 @@ impl Engine {
         };
         let mut ahead = ((rate * self.options.lookahead_seconds).ceil() as usize)
             .clamp(self.options.min_ahead, self.options.max_ahead.max(1));
-        if self.step_bytes > 0 {
-            let fit = (self.pool.budget() / self.step_bytes) as usize;
-            ahead = ahead.min(fit.saturating_sub(2));
+        if let Some(fit) = self.pool.budget().checked_div(self.step_bytes) {
+            ahead = ahead.min((fit as usize).saturating_sub(2));
         }
         let wraps = self.timeline.is_playing() && self.timeline.looping() != Looping::Off;
         let (first, last) = self.timeline.bounds();

@@ -62,7 +62,7 @@ impl<T: Send + 'static> Prefetcher<T> {
             // the engine reports steps as not yet loaded.
             let _ = std::thread::Builder::new()
                 .name(format!("slosh-prefetch-{n}"))
-                .spawn(move || worker(&*shared, &*source, &tx));
+                .spawn(move || worker(&shared, &*source, &tx));
         }
         Prefetcher { shared, results }
     }

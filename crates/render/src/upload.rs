@@ -245,7 +245,7 @@ impl HostField {
 /// borrowed (a caller that keeps the file).
 #[derive(Debug)]
 enum HeldFile<'a> {
-    Owned(CacheFile),
+    Owned(Box<CacheFile>),
     Borrowed(&'a CacheFile),
 }
 
@@ -275,7 +275,7 @@ impl HostStep<'static> {
     /// Opens `path` and runs the host half on it.
     pub fn open(path: &Path, field: Option<&str>) -> Result<HostStep<'static>> {
         let start = Instant::now();
-        let mut step = HostStep::prepare(HeldFile::Owned(CacheFile::open(path)?), field)?;
+        let mut step = HostStep::prepare(HeldFile::Owned(Box::new(CacheFile::open(path)?)), field)?;
         step.host_seconds = start.elapsed().as_secs_f64();
         Ok(step)
     }
