@@ -50,26 +50,10 @@ pub fn parse_size(s: &str) -> Result<(u32, u32)> {
     Ok((w, h))
 }
 
-/// A camera looking at the centre of `bounds` from the front-left, above, framing them.
+/// The framing camera of `slosh render` and the benchmarks: z up unless `--up` says
+/// otherwise.
 pub fn framing_camera(bounds: &[[f64; 3]; 2], fov_y: f64, width: u32, height: u32) -> Camera {
-    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds[0][a] + bounds[1][a]));
-    let radius = (0..3)
-        .map(|a| (bounds[1][a] - bounds[0][a]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-        .max(1e-9)
-        * 0.5;
-    let dir: [f64; 3] = [0.45, -0.8, 0.4];
-    let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
-    let distance = 1.1 * radius / (fov_y.to_radians() * 0.5).sin();
-    Camera {
-        eye: std::array::from_fn(|a| centre[a] + dir[a] / len * distance),
-        target: centre,
-        up: [0.0, 0.0, 1.0],
-        fov_y,
-        width,
-        height,
-    }
+    Camera::framing(bounds, fov_y, width, height, [0.0, 0.0, 1.0])
 }
 
 fn step_path(path: &Path, step: usize) -> PathBuf {
@@ -136,49 +120,18 @@ fn shade(hit: &TraceHit, dir: [f64; 3], mode: ModeArg) -> [f64; 3] {
 }
 
 fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, width, height);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut w = enc.write_header()?;
-        w.write_image_data(rgb)?;
-    }
-    slosh_fileio::atomic_write(path, &bytes)?;
-    Ok(())
+    Ok(slosh_render::write_rgb_png(path, width, height, rgb)?)
 }
 
 /// A GPU frame's RGBA pixels as an RGB PNG.
 pub fn write_frame_png(path: &Path, frame: &slosh_render::Frame) -> Result<()> {
-    let rgb: Vec<u8> = bytemuck::cast_slice::<u32, u8>(&frame.rgba)
-        .chunks_exact(4)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect();
-    write_png(path, frame.width, frame.height, &rgb)
+    Ok(slosh_render::write_frame_png(path, frame)?)
 }
 
-/// float32 H×W×C little-endian .npy.
-pub fn write_npy(
-    path: &Path,
-    height: u32,
-    width: u32,
-    channels: usize,
-    data: &[f32],
-) -> Result<()> {
-    let dict = format!(
-        "{{'descr': '<f4', 'fortran_order': False, 'shape': ({height}, {width}, {channels}), }}"
-    );
-    // Magic (6) + version (2) + length (2) + dict + newline, padded to 64 bytes.
-    let total = (10 + dict.len() + 1).div_ceil(64) * 64;
-    let mut bytes = Vec::with_capacity(total + data.len() * 4);
-    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
-    bytes.extend_from_slice(&((total - 10) as u16).to_le_bytes());
-    bytes.extend_from_slice(dict.as_bytes());
-    bytes.resize(total - 1, b' ');
-    bytes.push(b'\n');
-    bytes.extend_from_slice(bytemuck::cast_slice(data));
-    slosh_fileio::atomic_write(path, &bytes)?;
-    Ok(())
+fn write_npy(path: &Path, height: u32, width: u32, channels: usize, data: &[f32]) -> Result<()> {
+    Ok(slosh_render::write_npy(
+        path, height, width, channels, data,
+    )?)
 }
 
 /// The hit buffer of a render: 8 floats per pixel, zeros for a miss.

@@ -78,6 +78,47 @@ pub struct CameraBasis {
 }
 
 impl Camera {
+    /// A camera looking at the centre of `bounds` from the front-left and above, framing
+    /// them, with `up` (a unit axis, e.g. `[0, 0, 1]`) up: the view direction is fixed in the
+    /// frame of `up`, so y-up and z-up data are seen alike.
+    pub fn framing(
+        bounds: &[[f64; 3]; 2],
+        fov_y: f64,
+        width: u32,
+        height: u32,
+        up: [f64; 3],
+    ) -> Camera {
+        let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds[0][a] + bounds[1][a]));
+        let radius = (0..3)
+            .map(|a| (bounds[1][a] - bounds[0][a]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            .max(1e-9)
+            * 0.5;
+        // (right, front, up) = (0.45, -0.8, 0.4) in the frame whose third axis is `up`:
+        // for z up that is x, y, z; for another axis the two others follow cyclically.
+        let axis = (0..3)
+            .max_by(|&a, &b| up[a].abs().total_cmp(&up[b].abs()))
+            .unwrap_or(2);
+        let sign = if up[axis] < 0.0 { -1.0 } else { 1.0 };
+        let mut dir = [0.0f64; 3];
+        dir[(axis + 1) % 3] = 0.45 * sign;
+        dir[(axis + 2) % 3] = -0.8;
+        dir[axis] = 0.4 * sign;
+        let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+        let distance = 1.1 * radius / (fov_y.to_radians() * 0.5).sin();
+        let mut unit = [0.0; 3];
+        unit[axis] = sign;
+        Camera {
+            eye: std::array::from_fn(|a| centre[a] + dir[a] / len * distance),
+            target: centre,
+            up: unit,
+            fov_y,
+            width,
+            height,
+        }
+    }
+
     /// The ray basis, shared by the CPU tracer and the GPU's uniforms.
     pub fn basis(&self) -> CameraBasis {
         let w = normalize(sub(self.target, self.eye));

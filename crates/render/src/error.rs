@@ -21,6 +21,8 @@ pub enum Error {
     Readback(String),
     #[error("GPU validation: {0}")]
     Validation(String),
+    #[error("writing {path}: {problem}")]
+    Output { path: PathBuf, problem: String },
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -10,6 +10,7 @@ mod context;
 mod error;
 mod expand;
 pub mod layout;
+mod output;
 pub mod shaders;
 mod staging;
 mod tracer;
@@ -18,6 +19,7 @@ mod upload;
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
+pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use staging::StagingPool;
 pub use tracer::{
     FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings,
