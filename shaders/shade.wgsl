@@ -9,18 +9,9 @@ const MODE_NORMALS: u32 = 1u;
 const MODE_STATUS: u32 = 2u;
 const MODE_BACKFACES: u32 = 3u;
 
-// Viridis (perceptually uniform), a degree-6 fit of the matplotlib table; t in [0, 1].
-fn viridis(t_in: f32) -> vec3<f32> {
-    let t = clamp(t_in, 0.0, 1.0);
-    let c0 = vec3<f32>(0.2777273, 0.0054073, 0.3340998);
-    let c1 = vec3<f32>(0.1050930, 1.4046135, 1.3845901);
-    let c2 = vec3<f32>(-0.3308618, 0.2148476, 0.0950952);
-    let c3 = vec3<f32>(-4.6342305, -5.7991009, -19.3324410);
-    let c4 = vec3<f32>(6.2282699, 14.1799333, 56.6905526);
-    let c5 = vec3<f32>(4.7763849, -13.7451453, -65.3530327);
-    let c6 = vec3<f32>(-5.4354558, 4.6458524, 26.3124352);
-    return max(c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * (c5 + t * c6))))), vec3<f32>(0.0));
-}
+// Viridis (perceptually uniform), a degree-6 fit of the matplotlib table; t in [0, 1]:
+// fn viridis(t: f32) -> vec3<f32>: generated from crates/render's colormap.rs (one source
+// for the shader and legends) and prepended to this file by shaders.rs.
 
 // The field at a hit: the MLS-weighted mean over the hit ball's neighbours (θ with the ball's
 // h), or the ball's own value where no weight reaches.

@@ -6,6 +6,7 @@
 //! oracle.
 
 mod bindings;
+pub mod colormap;
 mod context;
 mod error;
 mod expand;

@@ -193,9 +193,13 @@ pub fn trace_wgsl(entries: u32, limit: u64, split: bool) -> String {
     frame_module(&source, limit, split)
 }
 
-/// The shade module.
+/// The shade module (with the colour map generated from `colormap.rs`).
 pub fn shade_wgsl(limit: u64, split: bool) -> String {
-    frame_module(SHADE_WGSL, limit, split)
+    frame_module(
+        &format!("{}{SHADE_WGSL}", crate::colormap::viridis_wgsl()),
+        limit,
+        split,
+    )
 }
 
 /// mls.wgsl alone, with the bindings it reads.
