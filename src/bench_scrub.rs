@@ -367,6 +367,7 @@ fn measure(
         covariance: false,
         epsilon: 1e-4,
         mode: ShadeMode::Shade,
+        field_range: None,
     };
     let mut request = FrameRequest {
         seconds: 0.0,

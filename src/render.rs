@@ -354,6 +354,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 ModeArg::Backfaces => ShadeMode::Backfaces,
                 ModeArg::Water => ShadeMode::Water,
             },
+            field_range: None,
         };
         let start = std::time::Instant::now();
         let frame = tracer.render(&gpu, &gpu_step, &camera, &params)?;

@@ -118,6 +118,7 @@ mod tests {
             covariance: false,
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
+            field_range: None,
         };
         ViewKey::new(step, camera, &params, None, 0)
     }

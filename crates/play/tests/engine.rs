@@ -77,6 +77,7 @@ fn request(iterations: u32) -> FrameRequest {
             covariance: false,
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
+            field_range: None,
         },
         camera_moving: false,
     }

@@ -51,6 +51,8 @@ pub struct TraceParams {
     /// Converged when successive hits differ by less than `epsilon` · h.
     pub epsilon: f32,
     pub mode: ShadeMode,
+    /// The field values mapped to the ends of the colour map; `None`: the step's own range.
+    pub field_range: Option<(f32, f32)>,
 }
 
 impl TraceParams {
@@ -63,6 +65,7 @@ impl TraceParams {
             covariance: step.info.covariance,
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
+            field_range: None,
         }
     }
 }
@@ -219,7 +222,10 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
     let basis = camera.basis();
     let info = &step.info;
     let eye = info.transform.to_local(camera.eye);
-    let (field_min, field_max) = step.field.as_ref().map_or((0.0, 0.0), |f| (f.1, f.2));
+    let (field_min, field_max) = params
+        .field_range
+        .or(step.field.as_ref().map(|f| (f.1, f.2)))
+        .unwrap_or((0.0, 0.0));
     GpuSettings {
         eye: to_f32(eye),
         width: camera.width,
