@@ -28,9 +28,72 @@ pub enum Command {
     Inspect(InspectArgs),
     /// Render a frame and its hit buffer from a cache.
     Render(RenderArgs),
+    /// Open the player on a cache directory (one a bake may still be filling).
+    Play(PlayArgs),
+    /// Generate, bake and play a demo series (a sloshing tank with droplets); without a
+    /// display, or with --headless, render a short sequence of frames instead.
+    Demo(DemoArgs),
     /// Measure speed against error.
     #[command(subcommand)]
     Bench(BenchCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct PlayArgs {
+    /// A cache directory written by `slosh bake`.
+    pub dir: PathBuf,
+    /// GPU adapter whose name contains this.
+    #[arg(long)]
+    pub adapter: Option<String>,
+    /// GPU memory for resident steps, in GiB (default: half the adapter's memory).
+    #[arg(long)]
+    pub budget: Option<f64>,
+    /// Field to colour by.
+    #[arg(long)]
+    pub field: Option<String>,
+    /// Traced pixels per screen pixel, per axis (0.25-2; lower for large screens).
+    #[arg(long, default_value_t = 1.0)]
+    pub render_scale: f32,
+    /// Up axis: x, y or z.
+    #[arg(long, default_value = "z")]
+    pub up: String,
+    /// Iterations refined to when the view is still.
+    #[arg(long, default_value_t = 3)]
+    pub iterations: u32,
+    /// Window size in points, WxH.
+    #[arg(long, default_value = "1280x800")]
+    pub window: String,
+    /// Folder for screenshots and exported frames.
+    #[arg(long, default_value = ".")]
+    pub output: PathBuf,
+    /// Loader threads (default: a quarter of the cores, 2 to 4).
+    #[arg(long)]
+    pub loaders: Option<usize>,
+    /// Pause every step load this long (tests a frame loop that must not wait on loads).
+    #[arg(long, hide = true)]
+    pub load_delay_ms: Option<u64>,
+    /// Print a line per UI pass and per failed step (for tests driving the window).
+    #[arg(long, hide = true)]
+    pub log_frames: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Render frames instead of opening the player.
+    #[arg(long)]
+    pub headless: bool,
+    /// Steps in the demo series.
+    #[arg(long, default_value_t = 200)]
+    pub steps: usize,
+    /// Particles per step.
+    #[arg(long, default_value_t = 20_000)]
+    pub points: usize,
+    /// Where the demo lives (default: the user's cache directory, slosh/demo).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+    /// Frames rendered on the headless path.
+    #[arg(long, default_value_t = 12)]
+    pub frames: usize,
 }
 
 #[derive(Debug, Subcommand)]

@@ -13,6 +13,7 @@ mod import;
 mod info;
 mod inspect;
 mod output;
+mod play;
 mod render;
 
 use anyhow::Result;
@@ -30,7 +31,7 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
+pub(crate) fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
         Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
@@ -41,6 +42,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
         Command::Inspect(args) => inspect::run(&args),
         Command::Render(args) => render::run(&args),
+        Command::Play(args) => play::play(&args),
+        Command::Demo(args) => play::demo(&args),
         Command::Info(args) => {
             let mut case = slosh_ensight::Case::open(&args.case)?;
             case.set_byte_order(args.byte_order.map(Into::into));

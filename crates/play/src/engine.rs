@@ -33,6 +33,9 @@ pub struct EngineOptions {
     pub max_ahead: usize,
     /// The field to colour by, if any.
     pub field: Option<String>,
+    /// A pause before every load: an instrumented slow source, for tests of a frame loop
+    /// that must not wait on loads.
+    pub load_delay: Option<std::time::Duration>,
 }
 
 impl Default for EngineOptions {
@@ -44,6 +47,7 @@ impl Default for EngineOptions {
             min_ahead: 2,
             max_ahead: 64,
             field: None,
+            load_delay: None,
         }
     }
 }
@@ -75,6 +79,7 @@ pub struct Prepared {
 pub struct GpuSource {
     gpu: Arc<Gpu>,
     staging: StagingPool,
+    delay: Option<std::time::Duration>,
     paths: Mutex<HashMap<usize, PathBuf>>,
     field: Mutex<Option<String>>,
 }
@@ -100,6 +105,9 @@ impl StepSource for GpuSource {
         let path = self
             .path(index)
             .ok_or_else(|| format!("step {index} is not in the series"))?;
+        if let Some(delay) = self.delay {
+            std::thread::sleep(delay);
+        }
         let field = self.field();
         let host = HostStep::open(&path, field.as_deref()).map_err(|e| e.to_string())?;
         let mut encoder = self
@@ -189,6 +197,7 @@ impl Engine {
         let source = Arc::new(GpuSource {
             gpu: gpu.clone(),
             staging: StagingPool::new(options.loaders + 2),
+            delay: options.load_delay,
             paths: Mutex::new(HashMap::new()),
             field: Mutex::new(options.field.clone()),
         });

@@ -3,6 +3,8 @@
 //! steps under a byte budget ([`StepPool`]), progressive refinement ([`Refinement`]), and the
 //! [`Engine`] that drives them one frame at a time. No widgets: the app draws what this holds.
 
+#[cfg(feature = "app")]
+pub mod app;
 mod engine;
 mod error;
 pub mod pool;

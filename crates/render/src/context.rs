@@ -17,6 +17,9 @@ pub const MIN_BINDING_LIMIT: u64 = 1 << 16;
 /// A GPU device ready for slosh's passes.
 #[derive(Debug)]
 pub struct Gpu {
+    /// The instance the adapter came from, where this `Gpu` made it (a window toolkit that
+    /// shares the device needs it for its surfaces).
+    pub instance: Option<wgpu::Instance>,
     pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
@@ -35,9 +38,14 @@ pub struct Gpu {
 
 /// The adapters wgpu can see, Vulkan first.
 pub fn adapters() -> Vec<wgpu::Adapter> {
+    instance_and_adapters().1
+}
+
+fn instance_and_adapters() -> (wgpu::Instance, Vec<wgpu::Adapter>) {
     let instance =
         wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()))
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    (instance, adapters)
 }
 
 fn describe(info: &wgpu::AdapterInfo) -> String {
@@ -51,7 +59,7 @@ impl Gpu {
     /// Opens the first adapter whose name contains `name` (case-insensitive), or the best one:
     /// a discrete GPU before an integrated one before a software rasteriser.
     pub fn new(name: Option<&str>) -> Result<Gpu> {
-        let mut candidates = adapters();
+        let (instance, mut candidates) = instance_and_adapters();
         if candidates.is_empty() {
             return Err(Error::NoAdapter(
                 "wgpu found no Vulkan adapter (install a driver, e.g. mesa-vulkan-drivers for lavapipe)"
@@ -78,7 +86,9 @@ impl Gpu {
         };
         candidates.sort_by_key(rank);
         let adapter = candidates.remove(0);
-        Gpu::open(adapter)
+        let mut gpu = Gpu::open(adapter)?;
+        gpu.instance = Some(instance);
+        Ok(gpu)
     }
 
     fn open(adapter: wgpu::Adapter) -> Result<Gpu> {
@@ -157,6 +167,7 @@ impl Gpu {
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let binding_limit = limits.max_storage_buffer_binding_size;
         Ok(Gpu {
+            instance: None,
             adapter,
             device,
             queue,

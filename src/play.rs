@@ -1,0 +1,210 @@
+//! `slosh play` (one call into the player) and `slosh demo` (generate, bake, then play, or
+//! render frames where there is no display).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use slosh_play::EngineOptions;
+use slosh_play::app::{PlayOptions, run as run_player};
+
+use crate::cli::{Cli, DemoArgs, PlayArgs};
+
+fn up_axis(s: &str) -> Result<[f64; 3]> {
+    Ok(match s {
+        "x" | "X" => [1.0, 0.0, 0.0],
+        "y" | "Y" => [0.0, 1.0, 0.0],
+        "z" | "Z" => [0.0, 0.0, 1.0],
+        other => bail!("--up {other}: expected x, y or z"),
+    })
+}
+
+fn window(s: &str) -> Result<(f32, f32)> {
+    let (w, h) = crate::render::parse_size(s)
+        .map_err(|_| anyhow::anyhow!("--window {s}: expected WxH, e.g. 1280x800"))?;
+    Ok((w as f32, h as f32))
+}
+
+fn options(args: &PlayArgs) -> Result<PlayOptions> {
+    if !args.dir.is_dir() {
+        bail!(
+            "{}: not a directory (give the --out directory of `slosh bake`)",
+            args.dir.display()
+        );
+    }
+    let budget = match args.budget {
+        Some(g) if g.is_finite() && g > 0.0 => Some((g * f64::from(1u32 << 30)) as u64),
+        Some(g) => bail!("--budget {g}: expected a positive number of GiB"),
+        None => None,
+    };
+    if !(0.25..=2.0).contains(&args.render_scale) {
+        bail!("--render-scale {}: expected 0.25 to 2", args.render_scale);
+    }
+    let mut engine = EngineOptions {
+        budget,
+        field: args.field.clone(),
+        load_delay: args.load_delay_ms.map(std::time::Duration::from_millis),
+        ..EngineOptions::default()
+    };
+    if let Some(n) = args.loaders {
+        engine.loaders = n.clamp(1, 64);
+    }
+    Ok(PlayOptions {
+        dir: args.dir.clone(),
+        adapter: args.adapter.clone(),
+        engine,
+        render_scale: args.render_scale,
+        up: Some(up_axis(&args.up)?),
+        iterations: args.iterations.clamp(1, 8),
+        window: window(&args.window)?,
+        output: args.output.clone(),
+        log_frames: args.log_frames,
+    })
+}
+
+pub fn play(args: &PlayArgs) -> Result<()> {
+    Ok(run_player(options(args)?)?)
+}
+
+/// `$XDG_CACHE_HOME/slosh/demo`, else `~/.cache/slosh/demo`.
+fn demo_dir() -> Result<PathBuf> {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .filter(|p| p.is_absolute())
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .context("neither XDG_CACHE_HOME nor HOME is set: give --dir")?;
+    Ok(base.join("slosh").join("demo"))
+}
+
+/// Runs a `slosh` command line in this process.
+fn slosh(args: &[&str]) -> Result<()> {
+    let cli = Cli::try_parse_from(std::iter::once("slosh").chain(args.iter().copied()))
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    crate::run(cli)
+}
+
+fn path(p: &Path) -> Result<&str> {
+    p.to_str()
+        .with_context(|| format!("{}: the demo needs a UTF-8 path", p.display()))
+}
+
+/// Whether `cache` holds a complete demo of `steps` steps.
+fn demo_ready(cache: &Path, steps: usize) -> bool {
+    slosh_cache::Manifest::read(cache).is_ok_and(|m| m.steps.len() == steps)
+}
+
+pub fn demo(args: &DemoArgs) -> Result<()> {
+    if args.steps < 2 || args.points < 100 {
+        bail!("--steps must be at least 2 and --points at least 100");
+    }
+    let root = match &args.dir {
+        Some(d) => d.clone(),
+        None => demo_dir()?,
+    };
+    let case_dir = root.join("case");
+    let cache = root.join("cache");
+    if demo_ready(&cache, args.steps) {
+        println!("demo series: {} (already baked)", cache.display());
+    } else {
+        println!(
+            "generating the demo series: a sloshing tank with droplets, {} steps of {} particles, in {}",
+            args.steps,
+            args.points,
+            root.display()
+        );
+        let (steps, points) = (args.steps.to_string(), args.points.to_string());
+        slosh(&[
+            "gen",
+            "droplets",
+            "--points",
+            &points,
+            "--steps",
+            &steps,
+            "--dt",
+            "0.02",
+            "--out",
+            path(&case_dir)?,
+        ])?;
+        println!("baking it (resumes if interrupted)");
+        slosh(&[
+            "bake",
+            path(&case_dir.join("droplets.case"))?,
+            "--out",
+            path(&cache)?,
+            "--fields",
+            "pressure",
+        ])?;
+    }
+    let display = std::env::var_os("DISPLAY").is_some_and(|d| !d.is_empty())
+        || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|d| !d.is_empty());
+    if display && !args.headless {
+        let play_args = PlayArgs {
+            dir: cache.clone(),
+            adapter: None,
+            budget: None,
+            field: Some("pressure".into()),
+            render_scale: 1.0,
+            up: "z".into(),
+            iterations: 3,
+            window: "1280x800".into(),
+            output: root.clone(),
+            loaders: None,
+            load_delay_ms: None,
+            log_frames: false,
+        };
+        match run_player(options(&play_args)?) {
+            Ok(()) => return Ok(()),
+            Err(slosh_play::app::AppError::NoGpu(e)) => {
+                eprintln!("no Vulkan adapter ({e}); rendering frames with the CPU tracer instead")
+            }
+            Err(e) => return Err(e.into()),
+        }
+    } else if !args.headless {
+        println!(
+            "no display (neither DISPLAY nor WAYLAND_DISPLAY is set): rendering frames instead"
+        );
+    }
+    headless(
+        &cache,
+        &root.join("frames"),
+        args.frames.clamp(1, args.steps),
+    )
+}
+
+/// A short sequence of frames, on the GPU where there is one, else the CPU tracer.
+fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
+    std::fs::create_dir_all(frames).with_context(|| format!("creating {}", frames.display()))?;
+    let gpu = slosh_render::Gpu::new(None);
+    let steps = format!("0..{count}");
+    let pattern = frames.join("{:05}.png");
+    let mut line = vec![
+        "render",
+        path(cache)?,
+        "--steps",
+        &steps,
+        "--size",
+        "640x400",
+        "--iterations",
+        "3",
+        "--out",
+        path(&pattern)?,
+    ];
+    match &gpu {
+        Ok(g) => {
+            println!("rendering {count} frames on {}", g.describe());
+            line.extend(["--field", "pressure"]);
+        }
+        Err(e) => {
+            println!("rendering {count} frames with the CPU tracer (no GPU: {e})");
+            line.push("--cpu");
+        }
+    }
+    drop(gpu);
+    slosh(&line)?;
+    println!(
+        "frames: {} ({count} PNG files, 00000.png to {:05}.png)",
+        frames.display(),
+        count - 1
+    );
+    Ok(())
+}
