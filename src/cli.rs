@@ -419,11 +419,11 @@ pub struct RenderArgs {
     #[arg(long)]
     pub steps: Option<String>,
     /// Camera position X,Y,Z (default: framing the step's bounds).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub eye: Option<String>,
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub target: Option<String>,
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub up: Option<String>,
     /// Vertical field of view in degrees.
     #[arg(long, default_value_t = 40.0)]

@@ -147,6 +147,15 @@ pub fn run(options: PlayOptions) -> Result<(), AppError> {
     .map_err(|e| AppError::Window(e.to_string()))
 }
 
+/// A line on stdout, flushed at once (a test reading it through a pipe or file must not wait
+/// for a buffer to fill).
+fn say(line: &str) {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
+}
+
 /// Field names baked into a step file.
 fn baked_fields(engine: &Engine) -> Vec<String> {
     let Some(first) = engine.series().steps().first() else {
@@ -352,7 +361,7 @@ impl Player {
                 }
                 if self.log_frames {
                     for (step, why) in &report.failures {
-                        println!("failed step {step}: {why}");
+                        say(&format!("failed step {step}: {why}"));
                     }
                 }
                 self.last = report;
@@ -596,7 +605,7 @@ impl Player {
             Ok(()) => {
                 // The camera, as `slosh render` takes it, so the frame can be made again.
                 let r = self.viewport_px;
-                println!(
+                say(&format!(
                     "screenshot {} ({w}x{h}, viewport at {},{} in the window): step {step} --size {w}x{h} --eye {} --target {} --up {} --fov {} --iterations {}",
                     path.display(),
                     r.min.x.round(),
@@ -606,7 +615,7 @@ impl Player {
                     v(c.up),
                     c.fov_y,
                     self.last.progress.map_or(1, |p| p.done)
-                );
+                ));
                 format!("saved {}", path.display())
             }
             Err(e) => format!("screenshot failed: {e}"),
@@ -770,7 +779,7 @@ impl eframe::App for Player {
         egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
         self.passes += 1;
         if self.log_frames {
-            println!(
+            say(&format!(
                 "pass {}: wanted {} shown {:?}{}{}",
                 self.passes,
                 self.last.wanted,
@@ -779,20 +788,26 @@ impl eframe::App for Player {
                 self.last
                     .drawn
                     .map_or(String::new(), |n| format!(" drew {n}"))
-            );
+            ));
         }
-        let shown = self.last.shown.unwrap_or(self.engine.timeline().current());
-        let time = self
-            .engine
-            .timeline()
-            .times()
-            .get(shown)
-            .copied()
-            .unwrap_or(0.0);
-        ctx.send_viewport_cmd(egui::ViewportCommand::Title(format!(
-            "slosh — step {shown}/{}, t = {time:.3}",
-            self.engine.timeline().len().saturating_sub(1)
-        )));
+        // The title names the step on screen (a stand-in's own number while another loads).
+        let title = match self.last.shown {
+            Some(shown) => {
+                let time = self
+                    .engine
+                    .timeline()
+                    .times()
+                    .get(shown)
+                    .copied()
+                    .unwrap_or(0.0);
+                format!(
+                    "slosh — step {shown}/{}, t = {time:.3}",
+                    self.engine.timeline().len().saturating_sub(1)
+                )
+            }
+            None => format!("slosh — loading {}", self.engine.series().dir().display()),
+        };
+        ctx.send_viewport_cmd(egui::ViewportCommand::Title(title));
         // Keep drawing while something changes: playback, loads, refinement, exports.
         let busy = self.engine.timeline().is_playing()
             || self.last.stand_in

@@ -1,0 +1,495 @@
+//! The player in a real window: Xvfb, lavapipe, and real X input events (XTEST, through
+//! xdotool). Keys move and play, a drag orbits, the X screen capture shows what `slosh
+//! render` makes of the same step and camera, a corrupted step is marked while the app goes
+//! on, and a slow step source never stops the UI. Required under `CI=true`; skipped with a
+//! message where Xvfb, xdotool or ImageMagick's `import` is missing.
+
+#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+fn have(tool: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+fn slosh(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        .args(args)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "slosh {args:?}: {text}");
+    text
+}
+
+/// Kills the child when dropped (the test may fail half-way).
+struct Guard(Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        // SIGTERM first, so that Xvfb removes its lock file and socket.
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        for _ in 0..50 {
+            if self.0.try_wait().is_ok_and(|s| s.is_some()) {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+struct Display {
+    name: String,
+    _server: Guard,
+}
+
+impl Display {
+    fn start() -> Display {
+        // Xvfb picks a free display and writes its number to the pipe (-displayfd), so tests
+        // running side by side never share one.
+        let mut server = Command::new("Xvfb")
+            .args([
+                "-displayfd",
+                "1",
+                "-screen",
+                "0",
+                "1024x768x24",
+                "-nolisten",
+                "tcp",
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        let stdout = server.stdout.take().unwrap();
+        std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line).unwrap();
+        let number: u32 = line
+            .trim()
+            .parse()
+            .unwrap_or_else(|_| panic!("Xvfb said '{line}'"));
+        let display = Display {
+            name: format!(":{number}"),
+            _server: Guard(server),
+        };
+        wait_for("Xvfb", Duration::from_secs(20), || {
+            display.xdotool(&["getdisplaygeometry"]).is_some()
+        });
+        display
+    }
+
+    fn xdotool(&self, args: &[&str]) -> Option<String> {
+        let out = Command::new("xdotool")
+            .args(args)
+            .env("DISPLAY", &self.name)
+            .output()
+            .ok()?;
+        out.status
+            .success()
+            .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+    }
+
+    /// The whole screen, as captured by the X server (ImageMagick's `import`).
+    fn capture(&self, path: &Path) -> (u32, u32, Vec<u8>) {
+        let ok = Command::new("import")
+            .args(["-window", "root", path.to_str().unwrap()])
+            .env("DISPLAY", &self.name)
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "import failed");
+        rgb(path)
+    }
+}
+
+fn wait_for(what: &str, limit: Duration, mut ok: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !ok() {
+        assert!(start.elapsed() < limit, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A PNG as RGB8.
+fn rgb(path: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let channels = info.color_type.samples();
+    let pixels: Vec<u8> = buf[..info.buffer_size()]
+        .chunks_exact(channels)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    (info.width, info.height, pixels)
+}
+
+fn crop(image: &(u32, u32, Vec<u8>), x: u32, y: u32, w: u32, h: u32) -> Vec<u8> {
+    let (width, _, pixels) = image;
+    (y..y + h)
+        .flat_map(|row| {
+            let start = ((row * width + x) * 3) as usize;
+            pixels[start..start + (w * 3) as usize].to_vec()
+        })
+        .collect()
+}
+
+/// A baked series of `steps` steps of a moving sphere, step 4 corrupted after baking.
+fn series(dir: &Path, steps: usize) -> PathBuf {
+    let case = dir.join("case");
+    let cache = dir.join("cache");
+    slosh(&[
+        "gen",
+        "sphere",
+        "--points",
+        "3000",
+        "--steps",
+        &steps.to_string(),
+        "--out",
+        case.to_str().unwrap(),
+    ]);
+    slosh(&[
+        "bake",
+        case.join("sphere.case").to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--quiet",
+    ]);
+    cache
+}
+
+/// Flips a byte inside step `index`'s balls section: the file opens, its data fails.
+fn corrupt(cache: &Path, index: usize) {
+    let path = cache.join(slosh_cache::step_file_name(index));
+    let offset = slosh_cache::CacheFile::open(&path)
+        .unwrap()
+        .section(slosh_cache::names::BALLS)
+        .unwrap()
+        .offset as usize;
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[offset + 100] ^= 0x08;
+    std::fs::write(&path, bytes).unwrap();
+}
+
+struct Player {
+    _process: Guard,
+    log: PathBuf,
+    window: String,
+}
+
+impl Player {
+    fn start(display: &Display, cache: &Path, out: &Path, extra: &[&str]) -> Player {
+        let log = out.join("player.log");
+        let process = Command::new(env!("CARGO_BIN_EXE_slosh"))
+            .args([
+                "play",
+                cache.to_str().unwrap(),
+                "--window",
+                "640x480",
+                "--output",
+                out.to_str().unwrap(),
+                "--log-frames",
+            ])
+            .args(extra)
+            .env("DISPLAY", &display.name)
+            .stdout(std::fs::File::create(&log).unwrap())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let mut window = String::new();
+        wait_for("the player's window", Duration::from_secs(120), || {
+            window = display
+                .xdotool(&["search", "--name", "^slosh"])
+                .and_then(|w| w.lines().next().map(str::to_string))
+                .unwrap_or_default();
+            !window.is_empty()
+        });
+        Player {
+            _process: Guard(process),
+            log,
+            window,
+        }
+    }
+
+    /// A key press through XTEST, as a person's: there is no window manager, so the window
+    /// is given the focus and the pointer first.
+    fn key(&self, display: &Display, key: &str) {
+        display.xdotool(&["windowfocus", "--sync", &self.window]);
+        display.xdotool(&["mousemove", "--window", &self.window, "150", "150"]);
+        display.xdotool(&["key", key]).unwrap();
+    }
+
+    fn title(&self, display: &Display) -> String {
+        display
+            .xdotool(&["getwindowname", &self.window])
+            .unwrap_or_default()
+    }
+
+    fn wait_title(&self, display: &Display, wanted: &str) {
+        wait_for(
+            &format!("a title with '{wanted}'"),
+            Duration::from_secs(60),
+            || self.title(display).contains(wanted),
+        );
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    fn alive(&mut self) -> bool {
+        self._process.0.try_wait().is_ok_and(|s| s.is_none())
+    }
+}
+
+fn tools() -> bool {
+    let missing: Vec<&str> = ["Xvfb", "xdotool", "import"]
+        .into_iter()
+        .filter(|t| !have(t))
+        .collect();
+    if missing.is_empty() {
+        return true;
+    }
+    assert!(
+        !in_ci(),
+        "CI=true requires {missing:?} for the window tests"
+    );
+    eprintln!("skipping the window test: {missing:?} missing");
+    false
+}
+
+#[test]
+fn keys_drag_and_the_screen_agree_with_slosh_render() {
+    if !tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cache = series(dir.path(), 6);
+    corrupt(&cache, 4);
+    let display = Display::start();
+    let mut player = Player::start(&display, &cache, dir.path(), &[]);
+    player.wait_title(&display, "step 0/5, t = 0.000");
+
+    // → moves to the next step.
+    player.key(&display, "Right");
+    player.wait_title(&display, "step 1/5");
+
+    // Space plays: with loop off it runs to the last step and stops; the corrupted step 4 is
+    // reported on the way, and the app goes on.
+    player.key(&display, "space");
+    player.wait_title(&display, "step 5/5");
+    wait_for("the failure of step 4", Duration::from_secs(60), || {
+        player.log().contains("failed step 4:")
+    });
+    let log = player.log();
+    let failure = log
+        .lines()
+        .find(|l| l.starts_with("failed step 4:"))
+        .unwrap();
+    assert!(failure.contains("step-00004.slc"), "{failure}");
+    assert!(player.alive(), "the player died on a corrupted step");
+
+    // Home, then → again: step 1, refined and still.
+    player.key(&display, "Home");
+    player.wait_title(&display, "step 0/5");
+    player.key(&display, "Right");
+    player.wait_title(&display, "step 1/5");
+    std::thread::sleep(Duration::from_secs(3));
+    let before = display.capture(&dir.path().join("before.png"));
+
+    // A drag with the left button orbits the camera: the viewport changes, the step stays.
+    display.xdotool(&["mousemove", "--window", &player.window, "150", "200"]);
+    display.xdotool(&["mousedown", "1"]).unwrap();
+    for x in [170, 190, 210, 230] {
+        display.xdotool(&[
+            "mousemove",
+            "--window",
+            &player.window,
+            &x.to_string(),
+            "190",
+        ]);
+        std::thread::sleep(Duration::from_millis(80));
+    }
+    display.xdotool(&["mouseup", "1"]).unwrap();
+    std::thread::sleep(Duration::from_secs(3));
+    let after = display.capture(&dir.path().join("after.png"));
+    assert!(player.title(&display).contains("step 1/5"));
+    let viewport = |img| crop(img, 0, 0, 300, 300);
+    let changed = viewport(&before)
+        .chunks_exact(3)
+        .zip(viewport(&after).chunks_exact(3))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        changed > 2000,
+        "the drag changed only {changed} viewport pixels"
+    );
+
+    // F12: the app's own screenshot, with the camera it used.
+    player.key(&display, "F12");
+    wait_for("the screenshot", Duration::from_secs(120), || {
+        player.log().lines().any(|l| l.starts_with("screenshot "))
+    });
+    let log = player.log();
+    let line = log
+        .lines()
+        .find(|l| l.starts_with("screenshot "))
+        .unwrap()
+        .to_string();
+    eprintln!("{line}");
+    let after_colon = line.split_once("): ").unwrap().1;
+    let words: Vec<&str> = after_colon.split_whitespace().collect();
+    let flag = |name: &str| {
+        let i = words.iter().position(|w| *w == name).unwrap();
+        words[i + 1].to_string()
+    };
+    let size = flag("--size");
+    let (w, h): (u32, u32) = {
+        let (a, b) = size.split_once('x').unwrap();
+        (a.parse().unwrap(), b.parse().unwrap())
+    };
+    let at = line.split_once("viewport at ").unwrap().1;
+    let at = at.split_once(' ').unwrap().0;
+    let (vx, vy) = at.split_once(',').unwrap();
+    let (vx, vy): (u32, u32) = (
+        vx.parse::<f32>().unwrap() as u32,
+        vy.parse::<f32>().unwrap() as u32,
+    );
+    // The X server's picture of the viewport, once the screenshot frame is on screen.
+    std::thread::sleep(Duration::from_secs(2));
+    let screen = display.capture(&dir.path().join("screen.png"));
+    let geometry = display
+        .xdotool(&["getwindowgeometry", "--shell", &player.window])
+        .unwrap();
+    let field = |key: &str| -> u32 {
+        geometry
+            .lines()
+            .find_map(|l| l.strip_prefix(key))
+            .and_then(|v| v.parse().ok())
+            .unwrap()
+    };
+    let shown = crop(&screen, field("X=") + vx, field("Y=") + vy, w, h);
+    let render = dir.path().join("render.png");
+    slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--size",
+        &size,
+        "--eye",
+        &flag("--eye"),
+        "--target",
+        &flag("--target"),
+        "--up",
+        &flag("--up"),
+        "--fov",
+        &flag("--fov"),
+        "--iterations",
+        &flag("--iterations"),
+        "--out",
+        render.to_str().unwrap(),
+    ]);
+    let (rw, rh, rendered) = rgb(&render);
+    assert_eq!((rw, rh), (w, h));
+    // The app's own screenshot is the render, pixel for pixel.
+    let own = rgb(&dir.path().join("slosh-step-00001.png"));
+    assert!(
+        own.2 == rendered,
+        "the app's screenshot differs from slosh render"
+    );
+    // The screen: the same hit/miss pattern (the background is a vertical gradient of dark
+    // blue-greys, the surface is lit) and colours within 3/255 but at a few edge pixels.
+    let background = |p: &[u8]| p[2] > p[0] && p[0] < 40 && p[1] < 45;
+    let mut pattern_differs = 0usize;
+    let mut colour_differs = 0usize;
+    let mut total_error = 0u64;
+    for (a, b) in shown.chunks_exact(3).zip(rendered.chunks_exact(3)) {
+        if background(a) != background(b) {
+            pattern_differs += 1;
+        }
+        let e = a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+        total_error += u64::from(e);
+        if e > 3 {
+            colour_differs += 1;
+        }
+    }
+    let pixels = (w * h) as usize;
+    let mean = total_error as f64 / pixels as f64;
+    eprintln!(
+        "screen vs render, {w}x{h}: {pattern_differs} pixels differ in hit/miss, {colour_differs} by more than 3/255, mean max-channel error {mean:.3}"
+    );
+    assert!(
+        pattern_differs * 1000 <= pixels,
+        "{pattern_differs} hit/miss differences"
+    );
+    assert!(
+        colour_differs * 200 <= pixels,
+        "{colour_differs} colour differences"
+    );
+    assert!(mean < 1.0, "mean error {mean}");
+    // Keep the captures for the closing note and the README when asked.
+    if let Some(keep) = std::env::var_os("SLOSH_KEEP_SCREENS") {
+        let keep = PathBuf::from(keep);
+        std::fs::create_dir_all(&keep).unwrap();
+        for name in ["screen.png", "slosh-step-00001.png", "render.png"] {
+            std::fs::copy(dir.path().join(name), keep.join(name)).unwrap();
+        }
+    }
+    assert!(player.alive());
+}
+
+/// With every load taking 1.5 s, the UI keeps drawing: the frame counter advances and the
+/// last shown step stands in until the new one is resident.
+#[test]
+fn a_slow_step_source_never_stops_the_ui() {
+    if !tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cache = series(dir.path(), 4);
+    let display = Display::start();
+    let player = Player::start(
+        &display,
+        &cache,
+        dir.path(),
+        &["--load-delay-ms", "1500", "--loaders", "1"],
+    );
+    player.wait_title(&display, "step 0/3");
+    let passes = |log: &str| log.lines().filter(|l| l.starts_with("pass ")).count();
+    let before = passes(&player.log());
+    player.key(&display, "End");
+    // While step 3 loads, the window shows step 0 as a stand-in and keeps drawing.
+    std::thread::sleep(Duration::from_millis(1000));
+    let log = player.log();
+    let during = passes(&log);
+    let tail: Vec<&str> = log.lines().rev().take(15).collect();
+    assert!(
+        log.lines()
+            .any(|l| l.contains("wanted 3 shown Some(") && l.contains("stand-in")),
+        "no stand-in frame while step 3 loaded: {tail:#?}"
+    );
+    assert!(
+        during >= before + 5,
+        "only {} UI passes in the first second of a 1.5 s load",
+        during - before
+    );
+    player.wait_title(&display, "step 3/3");
+}
