@@ -51,6 +51,10 @@ pub struct PlayArgs {
     /// Field to colour by.
     #[arg(long)]
     pub field: Option<String>,
+    /// Colour range: `series` (widest seen over the steps shown) or `step` (each step's own,
+    /// as `slosh render` does).
+    #[arg(long, default_value = "series")]
+    pub field_range: String,
     /// Traced pixels per screen pixel, per axis (0.25-2; lower for large screens).
     #[arg(long, default_value_t = 1.0)]
     pub render_scale: f32,

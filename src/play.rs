@@ -59,6 +59,11 @@ fn options(args: &PlayArgs) -> Result<PlayOptions> {
         window: window(&args.window)?,
         output: args.output.clone(),
         log_frames: args.log_frames,
+        step_range: match args.field_range.as_str() {
+            "series" => false,
+            "step" => true,
+            other => bail!("--field-range {other}: expected series or step"),
+        },
     })
 }
 
@@ -143,6 +148,7 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
             adapter: None,
             budget: None,
             field: Some("pressure".into()),
+            field_range: "series".into(),
             render_scale: 1.0,
             up: "z".into(),
             iterations: 3,

@@ -739,3 +739,36 @@ fn scrub_bench_streams_a_series_on_the_engine() {
     let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
     assert!(ok, "{out}{err}");
 }
+
+/// `slosh demo --headless`: generates and bakes the series once (a second run reuses it) and
+/// renders frames, on the GPU where there is one, else with the CPU tracer.
+#[test]
+fn demo_headless_renders_frames_and_reuses_its_series() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("demo");
+    let args = [
+        "demo",
+        "--headless",
+        "--steps",
+        "4",
+        "--points",
+        "3000",
+        "--frames",
+        "3",
+        "--dir",
+        root.to_str().unwrap(),
+    ];
+    let (ok, out, err) = slosh(&args);
+    assert!(ok, "{out}{err}");
+    assert!(out.contains("generating the demo series"), "{out}");
+    for i in 0..3 {
+        let frame = std::fs::read(root.join("frames").join(format!("{i:05}.png"))).unwrap();
+        assert!(frame.starts_with(b"\x89PNG"), "{out}");
+    }
+    let (ok, out, err) = slosh(&args);
+    assert!(ok, "{out}{err}");
+    assert!(out.contains("already baked"), "{out}");
+    assert!(out.contains("frames: "), "{out}");
+    let (ok, out, err) = slosh(&["inspect", root.join("cache").to_str().unwrap(), "--verify"]);
+    assert!(ok, "{out}{err}");
+}

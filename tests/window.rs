@@ -151,25 +151,29 @@ fn crop(image: &(u32, u32, Vec<u8>), x: u32, y: u32, w: u32, h: u32) -> Vec<u8> 
         .collect()
 }
 
-/// A baked series of `steps` steps of a moving sphere, step 4 corrupted after baking.
+/// A baked series of `steps` steps of the sloshing tank with droplets, coloured by pressure.
 fn series(dir: &Path, steps: usize) -> PathBuf {
     let case = dir.join("case");
     let cache = dir.join("cache");
     slosh(&[
         "gen",
-        "sphere",
+        "droplets",
         "--points",
-        "3000",
+        "8000",
         "--steps",
         &steps.to_string(),
+        "--dt",
+        "0.02",
         "--out",
         case.to_str().unwrap(),
     ]);
     slosh(&[
         "bake",
-        case.join("sphere.case").to_str().unwrap(),
+        case.join("droplets.case").to_str().unwrap(),
         "--out",
         cache.to_str().unwrap(),
+        "--fields",
+        "pressure",
         "--quiet",
     ]);
     cache
@@ -284,7 +288,12 @@ fn keys_drag_and_the_screen_agree_with_slosh_render() {
     let cache = series(dir.path(), 6);
     corrupt(&cache, 4);
     let display = Display::start();
-    let mut player = Player::start(&display, &cache, dir.path(), &[]);
+    let mut player = Player::start(
+        &display,
+        &cache,
+        dir.path(),
+        &["--field", "pressure", "--field-range", "step"],
+    );
     player.wait_title(&display, "step 0/5, t = 0.000");
 
     // → moves to the next step.
@@ -404,6 +413,8 @@ fn keys_drag_and_the_screen_agree_with_slosh_render() {
         &flag("--fov"),
         "--iterations",
         &flag("--iterations"),
+        "--field",
+        "pressure",
         "--out",
         render.to_str().unwrap(),
     ]);
@@ -452,6 +463,10 @@ fn keys_drag_and_the_screen_agree_with_slosh_render() {
         for name in ["screen.png", "slosh-step-00001.png", "render.png"] {
             std::fs::copy(dir.path().join(name), keep.join(name)).unwrap();
         }
+        // The whole window, as the X server shows it.
+        let (ww, wh) = (field("WIDTH="), field("HEIGHT="));
+        let window = crop(&screen, field("X="), field("Y="), ww, wh);
+        slosh_render::write_rgb_png(&keep.join("window.png"), ww, wh, &window).unwrap();
     }
     assert!(player.alive());
 }

@@ -33,6 +33,9 @@ pub struct PlayOptions {
     pub output: PathBuf,
     /// Print a line per UI frame and per failure (for tests driving the window).
     pub log_frames: bool,
+    /// Map each step's own field range to the colour map, instead of the range seen over
+    /// the series.
+    pub step_range: bool,
 }
 
 /// Why the player could not start.
@@ -217,7 +220,11 @@ impl Player {
             up_axis,
             field_choice,
             fields,
-            range_mode: RangeMode::Series,
+            range_mode: if options.step_range {
+                RangeMode::Step
+            } else {
+                RangeMode::Series
+            },
             series_range: None,
             texture: None,
             last_frame: Instant::now(),
