@@ -501,8 +501,9 @@ fn a_slow_step_source_never_stops_the_ui() {
             .any(|l| l.contains("wanted 3 shown Some(") && l.contains("stand-in")),
         "no stand-in frame while step 3 loaded: {tail:#?}"
     );
+    // A UI blocked on the load would draw none.
     assert!(
-        during >= before + 5,
+        during >= before + 3,
         "only {} UI passes in the first second of a 1.5 s load",
         during - before
     );

@@ -550,11 +550,9 @@ impl Engine {
             self.field.clone(),
             self.revision,
         );
-        let moving = request.camera_moving
-            || time_moved
-            || scrubbed
-            || report.stand_in
-            || self.timeline.is_playing();
+        // A stand-in is a still view of its own step: it refines like any other, and the
+        // step asked for starts over at one iteration when it arrives (another key).
+        let moving = request.camera_moving || time_moved || scrubbed || self.timeline.is_playing();
         let target = request.params.iterations.max(1);
         report.drawn = self.refinement.next(key, moving, target);
         report.progress = Some(self.refinement.progress(target));

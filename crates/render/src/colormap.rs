@@ -4,7 +4,9 @@
 //! frame applies that same encoding. `shade.wgsl` gets its `viridis` function generated from
 //! these coefficients.
 
-/// Coefficients c0..c6 of `c0 + t (c1 + t (c2 + …))`, per channel.
+/// Coefficients c0..c6 of `c0 + t (c1 + t (c2 + …))`, per channel, with the digits of the
+/// published fit (rounded to f32 here as WGSL rounds them).
+#[allow(clippy::excessive_precision)]
 pub const VIRIDIS: [[f32; 3]; 7] = [
     [0.2777273, 0.0054073, 0.3340998],
     [0.1050930, 1.4046135, 1.3845901],
