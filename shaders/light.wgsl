@@ -1,9 +1,8 @@
 // Lighting shared by the shade pass and the water pass (appended before either): sRGB
 // packing, the background, and a light rig that reads well on fluids.
 
-// Unit direction toward the key light, normalize(0.4, −0.3, 0.85), in the cache's local
-// coordinates (z up).
-const KEY_LIGHT: vec3<f32> = vec3<f32>(0.40561610, -0.30421208, 0.86193422);
+// The key light is `settings.key_light`: a unit direction in the cache's local coordinates
+// (world directions: the local frame is only shifted and scaled), set per frame.
 
 fn srgb(v: f32) -> f32 {
     let c = clamp(v, 0.0, 1.0);
@@ -23,7 +22,7 @@ fn background(y: u32) -> vec3<f32> {
 fn blinn_phong(n_in: vec3<f32>, dir: vec3<f32>, base: vec3<f32>) -> vec3<f32> {
     let n = select(n_in, -n_in, dot(n_in, dir) > 0.0);
     let view = -dir;
-    let key = KEY_LIGHT;
+    let key = settings.key_light;
     let fill = normalize(vec3<f32>(-0.6, 0.5, 0.3));
     let half_vector = normalize(key + view);
     let diffuse = 0.85 * max(dot(n, key), 0.0) + 0.25 * max(dot(n, fill), 0.0);

@@ -57,6 +57,9 @@ struct Settings {
     item_count: u32,
     pad0: u32,
     pad1: u32,
+    // Unit direction towards the key light (the shade and water passes).
+    key_light: vec3<f32>,
+    pad2: f32,
 }
 
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's

@@ -43,8 +43,8 @@ fn environment(origin: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec3<f32> {
         let light = select(0.8, 0.3, ((cell.x + cell.y) & 1) == 0);
         // Grazing rays see a greyer floor, so the horizon does not alias.
         let fade = clamp(-dir.z * 4.0, 0.0, 1.0);
-        var lit = 0.25 + 0.75 * KEY_LIGHT.z;
-        if blocked(p + vec3<f32>(0.0, 0.0, 1e-4 * st.extent), KEY_LIGHT) {
+        var lit = 0.25 + 0.75 * settings.key_light.z;
+        if blocked(p + vec3<f32>(0.0, 0.0, 1e-4 * st.extent), settings.key_light) {
             lit = 0.25;
         }
         return mix(vec3<f32>(0.45), vec3<f32>(light), fade) * lit;
@@ -111,9 +111,9 @@ fn water_colour(p: vec3<f32>, n_in: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec
         }
     }
     let view = -dir;
-    let half_vector = normalize(KEY_LIGHT + view);
+    let half_vector = normalize(settings.key_light + view);
     var spec = 0.8 * pow(max(dot(n, half_vector), 0.0), 120.0);
-    if blocked(p + n * eps, KEY_LIGHT) {
+    if blocked(p + n * eps, settings.key_light) {
         spec = 0.0;
     }
     return fresnel * reflected + (1.0 - fresnel) * refracted + vec3<f32>(spec);

@@ -368,6 +368,7 @@ fn measure(
         epsilon: 1e-4,
         mode: ShadeMode::Shade,
         field_range: None,
+        key_light: slosh_render::DEFAULT_KEY_LIGHT,
     };
     let mut request = FrameRequest {
         seconds: 0.0,

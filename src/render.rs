@@ -106,7 +106,7 @@ fn shade(hit: &TraceHit, dir: [f64; 3], mode: ModeArg) -> [f64; 3] {
                 let l = dot(v, v).sqrt();
                 v.map(|c| c / l)
             };
-            let key = norm([0.4, -0.3, 0.85]);
+            let key = slosh_render::DEFAULT_KEY_LIGHT.map(f64::from);
             let fill = norm([-0.6, 0.5, 0.3]);
             let base = [0.16, 0.42, 0.72];
             let half = norm([key[0] + view[0], key[1] + view[1], key[2] + view[2]]);
@@ -355,6 +355,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 ModeArg::Water => ShadeMode::Water,
             },
             field_range: None,
+            key_light: slosh_render::DEFAULT_KEY_LIGHT,
         };
         let start = std::time::Instant::now();
         let frame = tracer.render(&gpu, &gpu_step, &camera, &params)?;

@@ -119,6 +119,7 @@ mod tests {
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
             field_range: None,
+            key_light: slosh_render::DEFAULT_KEY_LIGHT,
         };
         ViewKey::new(step, camera, &params, None, 0)
     }

@@ -78,6 +78,7 @@ fn request(iterations: u32) -> FrameRequest {
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
             field_range: None,
+            key_light: slosh_render::DEFAULT_KEY_LIGHT,
         },
         camera_moving: false,
     }

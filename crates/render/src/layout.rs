@@ -38,7 +38,15 @@ pub struct GpuSettings {
     pub item_count: u32,
     pub pad0: u32,
     pub pad1: u32,
+    /// Unit direction towards the key light.
+    pub key_light: [f32; 3],
+    pub pad2: f32,
 }
+
+/// The key light's direction by default, normalize(0.4, −0.3, 0.85): from the front left,
+/// high above a z-up scene. One source for the GPU passes and the CPU shading.
+#[allow(clippy::excessive_precision)]
+pub const DEFAULT_KEY_LIGHT: [f32; 3] = [0.40561610, -0.30421208, 0.86193422];
 
 /// `struct ExpandSettings` in expand.wgsl: the uniforms of the per-step passes (neighbour
 /// masks and leaf spheres).

@@ -19,7 +19,7 @@ mod upload;
 
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
-pub use layout::{ExpandSettings, GpuHit, GpuSettings, status};
+pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, status};
 pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use staging::StagingPool;
 pub use tracer::{

@@ -8,7 +8,7 @@ use slosh_mls::Camera;
 use crate::bindings::{bind_entries, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
-use crate::layout::{GpuHit, GpuSettings, status};
+use crate::layout::{DEFAULT_KEY_LIGHT, GpuHit, GpuSettings, status};
 use crate::shaders::{
     FRAME_ARRAYS, PRESENT_ARRAYS, TEXTURE_BINDING, TRACE_STACK_SIZES, present_wgsl, shade_wgsl,
     trace_wgsl,
@@ -53,6 +53,8 @@ pub struct TraceParams {
     pub mode: ShadeMode,
     /// The field values mapped to the ends of the colour map; `None`: the step's own range.
     pub field_range: Option<(f32, f32)>,
+    /// Direction towards the key light (normalised here); `DEFAULT_KEY_LIGHT` by default.
+    pub key_light: [f32; 3],
 }
 
 impl TraceParams {
@@ -66,6 +68,7 @@ impl TraceParams {
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
             field_range: None,
+            key_light: DEFAULT_KEY_LIGHT,
         }
     }
 }
@@ -251,6 +254,18 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         item_count: info.item_count,
         pad0: 0,
         pad1: 0,
+        key_light: unit_or_default(params.key_light),
+        pad2: 0.0,
+    }
+}
+
+/// `v` normalised; the default key light where `v` has no direction.
+fn unit_or_default(v: [f32; 3]) -> [f32; 3] {
+    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if len.is_finite() && len > 1e-6 {
+        v.map(|c| c / len)
+    } else {
+        DEFAULT_KEY_LIGHT
     }
 }
 

@@ -388,7 +388,9 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 node_count,
                 item_count,
                 pad0,
-                pad1
+                pad1,
+                key_light,
+                pad2
             ]
         );
     }
@@ -889,4 +891,50 @@ fn neighbour_masks_equal_the_cpu_lists() {
             case.name
         );
     }
+}
+
+/// The key light follows `TraceParams::key_light`: lit from above, the upper half of a sphere
+/// is the brighter one; lit from below, the lower half.
+#[test]
+fn the_key_light_comes_from_where_it_is_set() {
+    let Some(dev) = device() else { return };
+    let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 7));
+    let (file, _) = bake(&input, 2);
+    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+    let (lo, hi) = slosh_mls::bounds(&input.positions);
+    let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+    // Looking along +y at the sphere's centre, z up in the image.
+    let camera = Camera {
+        eye: [c[0], c[1] - 4.0, c[2]],
+        target: c,
+        up: [0.0, 0.0, 1.0],
+        fov_y: 45.0,
+        width: 64,
+        height: 64,
+    };
+    let halves = |light: [f32; 3]| {
+        let mut params = TraceParams::for_step(&step, 1);
+        params.key_light = light;
+        let frame = dev
+            .tracer
+            .render(&dev.gpu, &step, &camera, &params)
+            .unwrap();
+        let luminance = |w: u32| (w & 0xff) + ((w >> 8) & 0xff) + ((w >> 16) & 0xff);
+        let (mut top, mut bottom) = (0u64, 0u64);
+        for (i, (w, h)) in frame.rgba.iter().zip(&frame.hits).enumerate() {
+            if h.status == status::MISS {
+                continue;
+            }
+            if i / 64 < 32 {
+                top += u64::from(luminance(*w));
+            } else {
+                bottom += u64::from(luminance(*w));
+            }
+        }
+        (top, bottom)
+    };
+    let (top, bottom) = halves([0.0, -0.2, 1.0]);
+    assert!(top > bottom * 3 / 2, "lit from above: {top} vs {bottom}");
+    let (top, bottom) = halves([0.0, -0.2, -1.0]);
+    assert!(bottom > top * 3 / 2, "lit from below: {top} vs {bottom}");
 }

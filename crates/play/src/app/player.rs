@@ -102,6 +102,8 @@ struct Player {
     /// F12 was pressed: save the next drawn frame.
     screenshot_pending: bool,
     log_frames: bool,
+    /// The key light's azimuth and elevation about the up axis, in degrees.
+    light: (f32, f32),
     /// UI passes so far.
     passes: u64,
     /// The viewport in physical pixels within the window.
@@ -189,6 +191,15 @@ fn series_bounds(engine: &Engine) -> [[f64; 3]; 2] {
         .map_or([[-1.0; 3], [1.0; 3]], |f| f.header().bounds)
 }
 
+/// Azimuth and elevation (degrees) of the default key light about z.
+fn default_light() -> (f32, f32) {
+    let [x, y, z] = slosh_render::DEFAULT_KEY_LIGHT;
+    (
+        y.atan2(x).to_degrees(),
+        z.clamp(-1.0, 1.0).asin().to_degrees(),
+    )
+}
+
 fn axis_vector(axis: usize) -> [f64; 3] {
     std::array::from_fn(|a| if a == axis { 1.0 } else { 0.0 })
 }
@@ -246,6 +257,7 @@ impl Player {
             screenshot_pending: false,
             viewport_px: egui::Rect::NOTHING,
             log_frames: options.log_frames,
+            light: default_light(),
             passes: 0,
         }
     }
@@ -278,6 +290,17 @@ impl Player {
         }
     }
 
+    /// The key light's direction: azimuth and elevation about the chosen up axis (for z up,
+    /// the default is `DEFAULT_KEY_LIGHT`).
+    fn key_light(&self) -> [f32; 3] {
+        let (az, el) = (self.light.0.to_radians(), self.light.1.to_radians());
+        let mut d = [0.0f32; 3];
+        d[(self.up_axis + 1) % 3] = el.cos() * az.cos();
+        d[(self.up_axis + 2) % 3] = el.cos() * az.sin();
+        d[self.up_axis] = el.sin();
+        d
+    }
+
     fn params(&self) -> TraceParams {
         let (degree, covariance) = self
             .engine
@@ -296,6 +319,7 @@ impl Player {
             epsilon: 1e-4,
             mode: self.mode,
             field_range,
+            key_light: self.key_light(),
         }
     }
 
@@ -475,6 +499,11 @@ impl Player {
                 ui.selectable_value(&mut self.up_axis, axis, *name);
             }
         });
+        ui.add(egui::Slider::new(&mut self.light.0, -180.0..=180.0).text("light azimuth °"));
+        ui.add(egui::Slider::new(&mut self.light.1, -10.0..=90.0).text("light elevation °"));
+        if ui.small_button("default light").clicked() {
+            self.light = default_light();
+        }
         if before != self.up_axis || ui.button("reset view").clicked() {
             self.home = OrbitCamera::framing(&self.bounds, 40.0, axis_vector(self.up_axis));
             self.camera = self.home;
