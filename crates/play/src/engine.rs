@@ -19,6 +19,11 @@ use crate::refine::{Progress, Refinement, ViewKey};
 use crate::series::Series;
 use crate::timeline::{Direction, Looping, Timeline};
 
+/// The span over which the rate of motion is measured.
+const RATE_WINDOW_SECONDS: f64 = 0.5;
+/// Steps one frame may count towards that rate (a jump is not motion).
+const MAX_STEPS_PER_FRAME: f64 = 4.0;
+
 /// How the engine streams.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EngineOptions {
@@ -44,7 +49,7 @@ impl Default for EngineOptions {
             budget: None,
             loaders: default_loaders(),
             lookahead_seconds: 0.5,
-            min_ahead: 2,
+            min_ahead: 4,
             max_ahead: 64,
             field: None,
             load_delay: None,
@@ -177,8 +182,11 @@ pub struct Engine {
     step_fields: HashMap<usize, Option<String>>,
     field: Option<String>,
     revision: u64,
-    /// Steps per second the current position has been moving at (smoothed).
-    rate: f64,
+    /// Steps moved in the recent frames, with the engine clock at each (seconds), for the
+    /// rate the position moves at.
+    moves: std::collections::VecDeque<(f64, f64)>,
+    /// Seconds of frames handed to the engine so far.
+    clock: f64,
     last_position: usize,
     scrub_direction: Direction,
     /// The bake index drawn last.
@@ -217,7 +225,8 @@ impl Engine {
             failed: BTreeMap::new(),
             step_fields: HashMap::new(),
             revision: 0,
-            rate: 0.0,
+            moves: std::collections::VecDeque::new(),
+            clock: 0.0,
             last_position: 0,
             scrub_direction: Direction::Forward,
             shown: None,
@@ -369,6 +378,17 @@ impl Engine {
             .ok()
     }
 
+    /// Steps per second the position has moved at over the last `RATE_WINDOW_SECONDS`.
+    fn rate(&self) -> f64 {
+        let steps: f64 = self.moves.iter().map(|(_, m)| m).sum();
+        let span = self
+            .moves
+            .front()
+            .map_or(0.0, |(t, _)| self.clock - t)
+            .max(RATE_WINDOW_SECONDS / 4.0);
+        steps / span
+    }
+
     /// Positions to have resident, most urgent first: the current one, then ahead in the
     /// direction of motion (as many as the rate and the budget allow), then one behind.
     fn window(&self) -> Vec<usize> {
@@ -383,9 +403,9 @@ impl Engine {
             self.scrub_direction
         };
         let rate = if self.timeline.is_playing() {
-            self.timeline.speed().max(self.rate)
+            self.timeline.speed().max(self.rate())
         } else {
-            self.rate
+            self.rate()
         };
         let mut ahead = ((rate * self.options.lookahead_seconds).ceil() as usize)
             .clamp(self.options.min_ahead, self.options.max_ahead.max(1));
@@ -511,8 +531,17 @@ impl Engine {
                 Direction::Backward
             };
         }
-        let instant_rate = moved / request.seconds.max(1e-3);
-        self.rate = 0.8 * self.rate + 0.2 * instant_rate;
+        self.clock += request.seconds.max(0.0);
+        // A jump is not motion: a frame counts at most a few steps.
+        self.moves
+            .push_back((self.clock, moved.min(MAX_STEPS_PER_FRAME)));
+        while self
+            .moves
+            .front()
+            .is_some_and(|(t, _)| self.clock - t > RATE_WINDOW_SECONDS)
+        {
+            self.moves.pop_front();
+        }
         let scrubbed = position != self.last_position || before != position;
         self.last_position = position;
         let window = self.window();
