@@ -36,7 +36,7 @@ pub struct Gpu {
     binding_limit: u64,
 }
 
-/// The adapters wgpu can see, Vulkan first.
+/// The Vulkan adapters wgpu can see (the tracer binds more storage buffers than GL allows).
 pub fn adapters() -> Vec<wgpu::Adapter> {
     instance_and_adapters().1
 }
@@ -44,7 +44,7 @@ pub fn adapters() -> Vec<wgpu::Adapter> {
 fn instance_and_adapters() -> (wgpu::Instance, Vec<wgpu::Adapter>) {
     let instance =
         wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
     (instance, adapters)
 }
 
