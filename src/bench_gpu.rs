@@ -16,7 +16,7 @@ use slosh_render::{Gpu, GpuStep, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 
 use crate::cli::{BenchTable, GpuBenchArgs};
-use crate::render::{framing_camera, write_frame_png};
+use crate::render::write_frame_png;
 
 /// A baked step in memory, its analytic truth if it has one, and its world spacing.
 struct Bench {
@@ -104,8 +104,16 @@ struct Runner<'a> {
 }
 
 impl Runner<'_> {
+    /// The framing camera, up from the data (the bunny is y-up).
     fn camera(bench: &Bench, w: u32, h: u32) -> Camera {
-        framing_camera(&bench.file.header().bounds, 40.0, w, h)
+        let header = bench.file.header();
+        Camera::framing(
+            &header.bounds,
+            40.0,
+            w,
+            h,
+            header.up.unwrap_or([0.0, 0.0, 1.0]),
+        )
     }
 
     /// Times `iterations` on `bench` at w × h; also returns the frame for errors and images.

@@ -58,9 +58,9 @@ pub struct PlayArgs {
     /// Traced pixels per screen pixel, per axis (0.25-2; lower for large screens).
     #[arg(long, default_value_t = 1.0)]
     pub render_scale: f32,
-    /// Up axis: x, y or z.
-    #[arg(long, default_value = "z")]
-    pub up: String,
+    /// Up axis: x, y or z (default: from the data, else z).
+    #[arg(long)]
+    pub up: Option<String>,
     /// Iterations refined to when the view is still.
     #[arg(long, default_value_t = 3)]
     pub iterations: u32,

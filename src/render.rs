@@ -252,21 +252,26 @@ impl RenderConfig {
     }
 }
 
+/// The framing camera of the step, up from `--up`, else from the data (the header's `up`),
+/// else z; `--eye` and `--target` replace the framing's.
 fn camera_for(
     args: &RenderArgs,
-    bounds: &[[f64; 3]; 2],
+    header: &slosh_cache::Header,
     width: u32,
     height: u32,
 ) -> Result<Camera> {
-    let mut camera = framing_camera(bounds, args.fov, width, height);
+    let up = match &args.up {
+        Some(u) => parse_vec3("up", u)?,
+        None => header.up.unwrap_or([0.0, 0.0, 1.0]),
+    };
+    let mut camera = Camera::framing(&header.bounds, args.fov, width, height, up);
+    // An explicit up is taken as given (the framing snapped it to an axis).
+    camera.up = up;
     if let Some(e) = &args.eye {
         camera.eye = parse_vec3("eye", e)?;
     }
     if let Some(t) = &args.target {
         camera.target = parse_vec3("target", t)?;
-    }
-    if let Some(u) = &args.up {
-        camera.up = parse_vec3("up", u)?;
     }
     Ok(camera)
 }
@@ -304,7 +309,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let config = RenderConfig::from_args(args)?;
     let first = CacheFile::open(&step_path(&args.path, config.steps[0]))
         .with_context(|| format!("opening step {}", config.steps[0]))?;
-    let camera = camera_for(args, &first.header().bounds, config.width, config.height)?;
+    let camera = camera_for(args, first.header(), config.width, config.height)?;
     drop(first);
     // Output folders (e.g. frames/ of a sequence) are created as needed.
     for pattern in [&args.out, &args.aov].into_iter().flatten() {

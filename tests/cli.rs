@@ -256,6 +256,19 @@ fn classic_models_convert() {
             );
         }
     }
+    // The bunny stands on its base: baked, its cache says y is up (the framing camera's up).
+    let cache = dir.path().join("bunny-cache");
+    let case = dir.path().join("bunny.obj").join("bunny.case");
+    let (ok, out, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{out}{err}");
+    let file = slosh_cache::CacheFile::open(&cache.join("step-00000.slc")).unwrap();
+    assert_eq!(file.header().up, Some([0.0, 1.0, 0.0]));
 }
 
 fn vtk_available() -> bool {

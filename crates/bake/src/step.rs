@@ -125,6 +125,12 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     };
     clock.lap("morton order");
 
+    // Which way is up, from the selected points and their data normals (local coordinates
+    // keep directions).
+    let up = normals
+        .as_deref()
+        .and_then(|ns| slosh_mls::guess_up(&local, ns));
+
     // 4–7. kNN, radii, neighbour lists, initial fits, droplets.
     let surface = Surface::<f64>::build(&local, normals.as_deref(), &params.mls)
         .map_err(|source| BakeError::Surface { step, source })?;
@@ -348,6 +354,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         params_hash: params.hash(),
         stats,
         sections: Vec::new(),
+        up,
     };
     Ok(BakedStep { header, sections })
 }

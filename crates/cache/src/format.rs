@@ -246,6 +246,10 @@ pub struct Header {
     pub params_hash: String,
     pub stats: StepStats,
     pub sections: Vec<SectionEntry>,
+    /// The unit axis that is up in this step's data (`slosh_mls::guess_up`), where the data
+    /// says; renderers frame with it unless told otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<[f64; 3]>,
 }
 
 pub fn hex64(v: u64) -> String {

@@ -29,6 +29,7 @@ fn header() -> Header {
         params_hash: "0123456789abcdef".into(),
         stats: StepStats::default(),
         sections: Vec::new(),
+        up: None,
     }
 }
 

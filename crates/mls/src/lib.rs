@@ -19,6 +19,7 @@ mod support;
 mod surface;
 mod timing;
 mod tracer;
+mod up;
 
 pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
@@ -37,3 +38,4 @@ pub use support::{
 pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds};
 pub use timing::StageClock;
 pub use tracer::{BallIndex, Camera, CameraBasis, MAX_CANDIDATES, TraceHit};
+pub use up::guess_up;

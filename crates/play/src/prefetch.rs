@@ -253,7 +253,10 @@ mod tests {
         assert!(prefetch.queued().is_empty());
         let start = std::time::Instant::now();
         while prefetch.pending(12) || prefetch.pending(13) {
-            assert!(start.elapsed().as_secs() < 5, "loads stay pending after they finished");
+            assert!(
+                start.elapsed().as_secs() < 5,
+                "loads stay pending after they finished"
+            );
             std::thread::yield_now();
         }
     }

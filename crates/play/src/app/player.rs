@@ -211,7 +211,18 @@ impl Player {
         render_state: eframe::egui_wgpu::RenderState,
         options: PlayOptions,
     ) -> Player {
-        let up = options.up.unwrap_or([0.0, 0.0, 1.0]);
+        // Up from the command line, else from the data (the first step's header), else z.
+        let up = options
+            .up
+            .or_else(|| {
+                engine
+                    .series()
+                    .steps()
+                    .first()
+                    .and_then(|s| CacheFile::open(&s.path).ok())
+                    .and_then(|f| f.header().up)
+            })
+            .unwrap_or([0.0, 0.0, 1.0]);
         let up_axis = (0..3)
             .max_by(|&a, &b| up[a].abs().total_cmp(&up[b].abs()))
             .unwrap_or(2);
