@@ -251,7 +251,7 @@ mod tests {
         assert_eq!(results[1], (13, Err("step 13 is unlucky".into())));
         // Nothing is left queued; the loader lets go of each step right after sending it.
         assert!(prefetch.queued().is_empty());
-        let start = std::time::Instant::now();
+        let start = Instant::now();
         while prefetch.pending(12) || prefetch.pending(13) {
             assert!(
                 start.elapsed().as_secs() < 5,
