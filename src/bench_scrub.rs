@@ -14,7 +14,7 @@ use rand::{Rng, SeedableRng};
 use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{Manifest, step_file_name, write_step};
 use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest};
-use slosh_render::{Gpu, GpuStep, HostStep, ShadeMode, TraceParams};
+use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 use crate::cli::ScrubBenchArgs;
@@ -110,20 +110,6 @@ fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Re
         start.elapsed().as_secs_f64()
     );
     Ok(())
-}
-
-/// A MAP_READ buffer's u64s.
-fn read_u64s(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u64>> {
-    let slice = buffer.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    gpu.wait()?;
-    rx.recv()??;
-    let words = bytemuck::pod_collect_to_vec(&slice.get_mapped_range()?);
-    buffer.unmap();
-    Ok(words)
 }
 
 /// One frame of the engine submitted and finished.
@@ -328,7 +314,7 @@ fn measure(
         gpu.wait()?;
         pass_ms.push(t.elapsed().as_secs_f64() * 1e3);
         if let Some((_, _, readback)) = &stamps {
-            let ticks = read_u64s(gpu, readback)?;
+            let ticks: Vec<u64> = slosh_render::read_buffer(gpu, readback)?;
             let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
             for (k, times) in each_pass_ms.iter_mut().enumerate() {
                 times.push(ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period);
@@ -362,13 +348,7 @@ fn measure(
     let camera = framing_camera(&bounds, 40.0, size.0, size.1);
     let params = TraceParams {
         iterations: 1,
-        degree: 2,
-        h_factor: 1.0,
-        covariance: false,
-        epsilon: 1e-4,
-        mode: ShadeMode::Shade,
-        field_range: None,
-        key_light: slosh_render::DEFAULT_KEY_LIGHT,
+        ..TraceParams::default()
     };
     let mut request = FrameRequest {
         seconds: 0.0,

@@ -100,7 +100,6 @@ impl Refinement {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use slosh_render::ShadeMode;
 
     fn key(step: usize, x: f64) -> ViewKey {
         let camera = Camera {
@@ -113,13 +112,7 @@ mod tests {
         };
         let params = TraceParams {
             iterations: 7,
-            degree: 2,
-            h_factor: 1.0,
-            covariance: false,
-            epsilon: 1e-4,
-            mode: ShadeMode::Shade,
-            field_range: None,
-            key_light: slosh_render::DEFAULT_KEY_LIGHT,
+            ..TraceParams::default()
         };
         ViewKey::new(step, camera, &params, None, 0)
     }

@@ -10,7 +10,7 @@ use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{Manifest, step_file_name, write_step};
 use slosh_mls::Camera;
 use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest};
-use slosh_render::{Gpu, GpuStep, HostStep, ShadeMode, TraceParams};
+use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn gpu() -> Option<Arc<Gpu>> {
@@ -72,13 +72,7 @@ fn request(iterations: u32) -> FrameRequest {
         camera: camera(),
         params: TraceParams {
             iterations,
-            degree: 2,
-            h_factor: 1.0,
-            covariance: false,
-            epsilon: 1e-4,
-            mode: ShadeMode::Shade,
-            field_range: None,
-            key_light: slosh_render::DEFAULT_KEY_LIGHT,
+            ..TraceParams::default()
         },
         camera_moving: false,
     }

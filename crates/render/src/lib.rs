@@ -23,7 +23,8 @@ pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, status}
 pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use staging::StagingPool;
 pub use tracer::{
-    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer, settings,
+    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer,
+    read_buffer, settings,
 };
 pub use upload::{
     GpuStep, HostField, HostStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, StepBuffers,

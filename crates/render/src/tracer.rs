@@ -57,18 +57,31 @@ pub struct TraceParams {
     pub key_light: [f32; 3],
 }
 
+impl Default for TraceParams {
+    /// One iteration, quadratic fits, the baked smoothing length, data normals, shaded, the
+    /// step's field range and the default key light.
+    fn default() -> TraceParams {
+        TraceParams {
+            iterations: 1,
+            degree: 2,
+            h_factor: 1.0,
+            covariance: false,
+            epsilon: 1e-4,
+            mode: ShadeMode::Shade,
+            field_range: None,
+            key_light: DEFAULT_KEY_LIGHT,
+        }
+    }
+}
+
 impl TraceParams {
     /// The step's baked settings with `iterations`.
     pub fn for_step(step: &GpuStep, iterations: u32) -> TraceParams {
         TraceParams {
             iterations,
             degree: step.info.degree,
-            h_factor: 1.0,
             covariance: step.info.covariance,
-            epsilon: 1e-4,
-            mode: ShadeMode::Shade,
-            field_range: None,
-            key_light: DEFAULT_KEY_LIGHT,
+            ..TraceParams::default()
         }
     }
 }
@@ -698,6 +711,11 @@ impl Tracer {
             rgba,
         })
     }
+}
+
+/// Maps a `MAP_READ` buffer, waits, and copies its contents out as `T`s.
+pub fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
+    read(gpu, buffer)
 }
 
 /// Maps a MAP_READ buffer and copies its contents out.
