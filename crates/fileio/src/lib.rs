@@ -1,7 +1,7 @@
 //! Whole files in and out: bytes memory-mapped where the OS allows (read into memory
 //! otherwise), and writes that either land completely or not at all.
 
-use std::fs::File;
+use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::ops::Deref;
 use std::path::{Path, PathBuf};
@@ -97,22 +97,69 @@ pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
         .file_name()
         .map(|f| f.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let serial = TEMP_SERIAL.fetch_add(1, Ordering::Relaxed);
-    let tmp = path.with_file_name(format!(".{file_name}.tmp-{}-{serial}", std::process::id()));
-    let written = File::create(&tmp)
-        .and_then(|mut f| {
-            f.write_all(bytes)?;
-            f.sync_data()
-        })
-        .map_err(|e| IoError::new(&tmp, e));
+    // The temporary file is created exclusively (O_EXCL: never an existing file, never
+    // through a link someone planted under its name); a name that is taken gets the next
+    // serial. Errors name the file asked for, not the temporary one.
+    let (tmp, mut file) = loop {
+        let serial = TEMP_SERIAL.fetch_add(1, Ordering::Relaxed);
+        let tmp = path.with_file_name(format!(".{file_name}.tmp-{}-{serial}", std::process::id()));
+        match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+            Ok(file) => break (tmp, file),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && serial < 1 << 20 => {
+                continue;
+            }
+            Err(e) => return Err(IoError::new(path, e)),
+        }
+    };
+    let written = file.write_all(bytes).and_then(|()| file.sync_data());
+    drop(file);
     if let Err(e) = written {
         let _ = std::fs::remove_file(&tmp);
-        return Err(e);
+        return Err(IoError::new(path, e));
     }
     std::fs::rename(&tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         IoError::new(path, e)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A link planted under the next temporary name is never written through.
+    #[cfg(unix)]
+    #[test]
+    fn a_planted_link_is_not_followed() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let outside = dir.path().join("outside.txt");
+        std::fs::write(&outside, b"precious").unwrap_or_else(|e| panic!("{e}"));
+        let target = dir.path().join("out.bin");
+        // Plant links under the next few temporary names.
+        let next = TEMP_SERIAL.load(Ordering::Relaxed);
+        for serial in next..next + 4 {
+            let name = format!(".out.bin.tmp-{}-{serial}", std::process::id());
+            std::os::unix::fs::symlink(&outside, dir.path().join(name))
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        atomic_write(&target, b"new").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            std::fs::read(&outside).ok().as_deref(),
+            Some(&b"precious"[..])
+        );
+        assert_eq!(std::fs::read(&target).ok().as_deref(), Some(&b"new"[..]));
+    }
+
+    #[test]
+    fn errors_name_the_file_asked_for() {
+        let missing = Path::new("/nonexistent-slosh-dir/out.png");
+        let err = atomic_write(missing, b"x")
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("/nonexistent-slosh-dir/out.png:"), "{err}");
+        assert!(!err.contains(".tmp-"), "{err}");
+    }
 }
 
 /// True for the temporary files `atomic_write` leaves behind when it is killed mid-write.
