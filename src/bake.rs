@@ -1,5 +1,6 @@
 //! `slosh bake`: the batch driver with a progress bar and a summary.
 
+use crate::output::say;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
@@ -38,7 +39,7 @@ impl StepSource for CloudSource<'_> {
 pub fn manifest_only(dir: &std::path::Path) -> Result<()> {
     let (manifest, problems) = Manifest::rebuild(dir)?;
     manifest.write(dir)?;
-    println!(
+    say!(
         "wrote {} ({} steps)",
         dir.join(slosh_cache::MANIFEST_NAME).display(),
         manifest.steps.len()
@@ -103,7 +104,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     bar.finish_and_clear();
 
     let stage_total: f64 = report.stages.iter().map(|(_, s)| s).sum();
-    println!(
+    say!(
         "baked {} steps, kept {} already current, {} failed, into {} in {:.2} s",
         report.baked,
         report.kept,
@@ -112,14 +113,14 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         report.wall_seconds
     );
     if report.baked > 0 {
-        println!(
+        say!(
             "{} points, {:.1} MB written ({:.1} bytes per point); per-stage CPU seconds summed over steps:",
             report.points,
             report.bytes as f64 / 1e6,
             report.bytes as f64 / report.points.max(1) as f64
         );
         for (name, s) in &report.stages {
-            println!(
+            say!(
                 "  {name:<26} {s:>9.3} s  {:>5.1} %",
                 100.0 * s / stage_total.max(f64::MIN_POSITIVE)
             );

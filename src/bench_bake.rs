@@ -2,6 +2,7 @@
 //! per point per section, the measured trade-off of each section encoding, and load times.
 //! Writes a Markdown report (docs/results-bake.md).
 
+use crate::output::say;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -276,6 +277,6 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         }
     }
     slosh_fileio::atomic_write(&args.out, md.as_bytes())?;
-    println!("wrote {}", args.out.display());
+    say!("wrote {}", args.out.display());
     Ok(())
 }

@@ -3,6 +3,7 @@
 //! 4.6 plus 1M points and 1920×1080, each row beside its error against the analytic surface
 //! (or, for the bunny, against the 5-iteration solution), and upload times per step.
 
+use crate::output::say;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -192,7 +193,7 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
         tracer: Tracer::new(&gpu)?,
         frames: args.frames,
     };
-    println!("GPU benchmark on {}", gpu.describe());
+    say!("GPU benchmark on {}", gpu.describe());
     let mut rows: Vec<Row> = Vec::new();
     let mut uploads: Vec<(String, usize, slosh_render::UploadStats)> = Vec::new();
     std::fs::create_dir_all(&args.images).ok();
@@ -248,14 +249,14 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
                         THESIS_BUNNY_FPS[usize::from(degree == 3)][iterations as usize - 1],
                     ),
                 });
-                println!(
+                say!(
                     "  bunny degree {degree} {iterations} it: {:.3} ms",
                     trace_ms + shade_ms
                 );
             }
         }
     } else if wanted(BenchTable::Bunny) {
-        println!("  (no bunny.obj: give --bunny or set SLOSH_DATA; table 4.1 skipped)");
+        say!("  (no bunny.obj: give --bunny or set SLOSH_DATA; table 4.1 skipped)");
     }
 
     // Table 4.5: the tank, ~10k surface points, image sizes.
@@ -338,7 +339,7 @@ fn tank_rows(
         error: error(&tank, &tank_step, &frame.hits, None),
         thesis_fps: Some(1.0 / 4.59),
     });
-    println!("  tank done");
+    say!("  tank done");
     Ok(())
 }
 
@@ -359,7 +360,7 @@ fn points_rows(
     for &points in counts {
         let start = Instant::now();
         let bench = scene(SceneKind::Sphere, points, 2)?;
-        println!(
+        say!(
             "  sphere {points}: baked in {:.1} s",
             start.elapsed().as_secs_f64()
         );
@@ -553,6 +554,6 @@ fn write_report(
     }
     slosh_fileio::atomic_write(&args.out, md.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    print!("{md}");
+    crate::output::say_text(&md);
     Ok(())
 }

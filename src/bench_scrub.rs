@@ -4,6 +4,7 @@
 //! step (bytes on the GPU, host ms, GPU upload and passes ms), and, in the same run, the
 //! floors: `std::fs::read` of the same files and a raw `Queue::write_buffer` of as many bytes.
 
+use crate::output::say;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -58,7 +59,7 @@ fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Re
         && m.steps.iter().all(|s| s.points == points as u64)
         && m.bake.get("scrub_distinct").and_then(|v| v.as_u64()) == Some(distinct as u64)
     {
-        println!("  reusing the series in {}", dir.display());
+        say!("  reusing the series in {}", dir.display());
         return Ok(());
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -80,7 +81,7 @@ fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Re
         };
         baked.push(bake_step(&input, &params)?);
     }
-    println!(
+    say!(
         "  baked {distinct} distinct steps of {points} points in {:.1} s",
         start.elapsed().as_secs_f64()
     );
@@ -104,7 +105,7 @@ fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Re
         bail!("{}: {e}", path.display());
     }
     manifest.write(dir)?;
-    println!(
+    say!(
         "  wrote {steps} step files to {} in {:.1} s",
         dir.display(),
         start.elapsed().as_secs_f64()
@@ -482,7 +483,7 @@ pub fn run(args: &ScrubBenchArgs) -> Result<()> {
     };
     let gpu = Arc::new(Gpu::new(args.adapter.as_deref())?);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    println!("scrub benchmark on {} ({cores} cores)", gpu.describe());
+    say!("scrub benchmark on {} ({cores} cores)", gpu.describe());
     let root = args
         .dir
         .clone()
@@ -494,20 +495,22 @@ pub fn run(args: &ScrubBenchArgs) -> Result<()> {
             .unwrap_or(if points <= 200_000 { steps } else { 8 })
             .clamp(1, steps);
         let dir = root.join(format!("sphere-{points}-{steps}"));
-        println!("series: {points} points, {steps} steps ({distinct} distinct)");
+        say!("series: {points} points, {steps} steps ({distinct} distinct)");
         ensure_series(&dir, points, steps, distinct)?;
         let label = format!("{points} points, {steps} steps ({distinct} distinct shapes)");
         let report = measure(&gpu, &dir, points, label, size, &jumps_args)?;
-        println!(
+        say!(
             "  sequential {:.1} steps/s; jumps p99: pool {:.2} ms, page cache {:.2} ms",
-            report.sequential_steps_per_s, report.jumps_pool.p99, report.jumps_page_cache.p99
+            report.sequential_steps_per_s,
+            report.jumps_pool.p99,
+            report.jumps_page_cache.p99
         );
         reports.push(report);
     }
     let md = markdown(&gpu, cores, size, args, &reports);
     slosh_fileio::atomic_write(&args.out, md.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    print!("{md}");
+    crate::output::say_text(&md);
     Ok(())
 }
 

@@ -22,7 +22,13 @@ use clap::Parser;
 use crate::cli::{Cli, Command};
 
 fn main() -> std::process::ExitCode {
-    match run(Cli::parse()) {
+    let result = run(Cli::parse());
+    // Output that could not be written is an error too, once the work is done.
+    let result = result.and_then(|()| match output::stdout_error() {
+        Some(e) => Err(anyhow::anyhow!("writing to stdout: {e}")),
+        None => Ok(()),
+    });
+    match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

@@ -1,6 +1,7 @@
 //! `slosh play` (one call into the player) and `slosh demo` (generate, bake, then play, or
 //! render frames where there is no display).
 
+use crate::output::say;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
@@ -109,9 +110,9 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
     let case_dir = root.join("case");
     let cache = root.join("cache");
     if demo_ready(&cache, args.steps) {
-        println!("demo series: {} (already baked)", cache.display());
+        say!("demo series: {} (already baked)", cache.display());
     } else {
-        println!(
+        say!(
             "generating the demo series: a sloshing tank with droplets, {} steps of {} particles, in {}",
             args.steps,
             args.points,
@@ -130,7 +131,7 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
             "--out",
             path(&case_dir)?,
         ])?;
-        println!("baking it (resumes if interrupted)");
+        say!("baking it (resumes if interrupted)");
         slosh(&[
             "bake",
             path(&case_dir.join("droplets.case"))?,
@@ -166,9 +167,7 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
             Err(e) => return Err(e.into()),
         }
     } else if !args.headless {
-        println!(
-            "no display (neither DISPLAY nor WAYLAND_DISPLAY is set): rendering frames instead"
-        );
+        say!("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): rendering frames instead");
     }
     headless(
         &cache,
@@ -197,17 +196,17 @@ fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
     ];
     match &gpu {
         Ok(g) => {
-            println!("rendering {count} frames on {}", g.describe());
+            say!("rendering {count} frames on {}", g.describe());
             line.extend(["--field", "pressure"]);
         }
         Err(e) => {
-            println!("rendering {count} frames with the CPU tracer (no GPU: {e})");
+            say!("rendering {count} frames with the CPU tracer (no GPU: {e})");
             line.push("--cpu");
         }
     }
     drop(gpu);
     slosh(&line)?;
-    println!(
+    say!(
         "frames: {} ({count} PNG files, 00000.png to {:05}.png)",
         frames.display(),
         count - 1

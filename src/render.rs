@@ -2,6 +2,7 @@
 //! steps. The GPU path uploads each step into wgpu buffers and runs the WGSL trace and shade
 //! passes; `--cpu` runs the CPU reference tracer on the mapped cache through its baked BVH.
 
+use crate::output::say;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
@@ -335,7 +336,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let gpu = slosh_render::Gpu::new(args.adapter.as_deref())?;
     let tracer = Tracer::new(&gpu)?;
     if config.sequence {
-        println!(
+        say!(
             "rendering {} steps on {}",
             config.steps.len(),
             gpu.describe()
@@ -380,7 +381,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
         let hits = frame.hits.iter().filter(|h| h.status != 0).count();
         let up = gpu_step.upload;
-        println!(
+        say!(
             "step {step} ({} points): {}x{}, {} iterations, {hits} hit pixels; upload {:.1} ms ({:.2} GB/s), frame {:.1} ms with readback, on {}",
             h.points,
             frame.width,
@@ -437,9 +438,11 @@ fn render_cpu(
     if let Some(aov) = aov {
         write_npy(aov, height, width, 8, &hit_buffer(&hits))?;
     }
-    println!(
+    say!(
         "step {} ({} points): {width}x{height}, {} iterations, {hit_count} hit pixels, traced in {seconds:.2} s on the CPU",
-        h.source.step, h.points, args.iterations
+        h.source.step,
+        h.points,
+        args.iterations
     );
     Ok(())
 }

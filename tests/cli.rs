@@ -785,3 +785,56 @@ fn demo_headless_renders_frames_and_reuses_its_series() {
     let (ok, out, err) = slosh(&["inspect", root.join("cache").to_str().unwrap(), "--verify"]);
     assert!(ok, "{out}{err}");
 }
+
+/// A closed or full stdout never panics a command: a reader that went away is fine (exit 0,
+/// the work done), a full device is an error after the work (issue 14, item 7).
+#[test]
+fn closed_or_full_stdout_is_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(
+        &dir.path().join("case"),
+        &["sphere", "--points", "1500", "--steps", "2"],
+    );
+    let case = dir.path().join("case/sphere.case");
+    let cache = dir.path().join("cache");
+    // stdout a pipe whose reader is gone before the first line.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        .args([
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "{err}");
+    assert!(cache.join("step-00001.slc").exists());
+    // stdout on a full device: the frame is written, then the error, no panic.
+    if let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") {
+        let png = dir.path().join("x.png");
+        let out = Command::new(env!("CARGO_BIN_EXE_slosh"))
+            .args([
+                "render",
+                cache.to_str().unwrap(),
+                "--cpu",
+                "--size",
+                "32x32",
+                "--out",
+                png.to_str().unwrap(),
+            ])
+            .stdout(full)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{err}");
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("writing to stdout"), "{err}");
+        assert!(png.exists());
+    }
+}
