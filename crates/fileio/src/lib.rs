@@ -123,6 +123,11 @@ pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     })
 }
 
+/// True for the temporary files `atomic_write` leaves behind when it is killed mid-write.
+pub fn is_atomic_temp(file_name: &str) -> bool {
+    file_name.starts_with('.') && file_name.contains(".tmp-")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -160,9 +165,4 @@ mod tests {
         assert!(err.starts_with("/nonexistent-slosh-dir/out.png:"), "{err}");
         assert!(!err.contains(".tmp-"), "{err}");
     }
-}
-
-/// True for the temporary files `atomic_write` leaves behind when it is killed mid-write.
-pub fn is_atomic_temp(file_name: &str) -> bool {
-    file_name.starts_with('.') && file_name.contains(".tmp-")
 }
