@@ -149,7 +149,10 @@ fn remove_stale_temps(dir: &Path) {
     };
     for e in entries.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        if !(slosh_fileio::is_atomic_temp(&name) && name.starts_with(".step-")) {
+        // Step files and the manifest are the only files a bake writes.
+        let ours = name.starts_with(".step-")
+            || name.starts_with(&format!(".{}.", slosh_cache::MANIFEST_NAME));
+        if !(slosh_fileio::is_atomic_temp(&name) && ours) {
             continue;
         }
         let pid = name
