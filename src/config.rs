@@ -274,13 +274,23 @@ impl BakeConfig {
             .unwrap_or(slosh_mls::coefficient_count(a.degree));
         params.fields = a.fields.clone();
         params.compression = compression;
+        // Each job holds a whole step in memory and is parallel inside: more jobs than a few
+        // per core only cost memory and threads.
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let most_jobs = (4 * cores).max(8);
+        if a.jobs == 0 || a.jobs > most_jobs {
+            bail!(
+                "--jobs {}: expected 1 to {most_jobs} (steps baked at once, each parallel inside; this machine has {cores} cores)",
+                a.jobs
+            );
+        }
         Ok(BakeConfig {
             input,
             input_path: a.input.clone(),
             options: slosh_bake::BatchOptions {
                 out,
                 steps: a.steps.as_deref().map(parse_step_range).transpose()?,
-                jobs: a.jobs.max(1),
+                jobs: a.jobs,
                 shard: a
                     .shard
                     .as_deref()

@@ -840,3 +840,26 @@ fn closed_or_full_stdout_is_not_a_panic() {
         assert!(png.exists());
     }
 }
+
+/// `--jobs` outside what the machine can use is refused by name, not obeyed (issue 14,
+/// item 10).
+#[test]
+fn absurd_job_counts_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(&dir.path().join("case"), &["sphere", "--points", "500", "--steps", "1"]);
+    let case = dir.path().join("case/sphere.case");
+    for jobs in ["0", "100000", "18446744073709551615"] {
+        let start = std::time::Instant::now();
+        let (ok, _, err) = slosh(&[
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            dir.path().join("cache").to_str().unwrap(),
+            "--jobs",
+            jobs,
+        ]);
+        assert!(!ok, "--jobs {jobs} was accepted");
+        assert!(err.contains(&format!("--jobs {jobs}: expected 1 to")), "{err}");
+        assert!(start.elapsed().as_secs() < 10, "--jobs {jobs} took {:?}", start.elapsed());
+    }
+}
