@@ -227,6 +227,38 @@ impl RenderConfig {
         if args.cpu && matches!(args.mode, ModeArg::Water) {
             bail!("--mode water traces secondary rays on the GPU only; drop --cpu");
         }
+        if !(args.fov.is_finite() && args.fov > 0.0 && args.fov < 180.0) {
+            bail!(
+                "--fov {}: expected a vertical field of view between 0 and 180 degrees, exclusive",
+                args.fov
+            );
+        }
+        if let (Some(out), Some(aov)) = (&args.out, &args.aov)
+            && out == aov
+        {
+            bail!(
+                "--out and --aov are both {}: the hit buffer would replace the picture",
+                out.display()
+            );
+        }
+        // Writing into the cache directory could replace the input itself.
+        let cache_dir = if args.path.is_dir() {
+            Some(args.path.as_path())
+        } else {
+            args.path.parent()
+        };
+        for (flag, path) in [("--out", &args.out), ("--aov", &args.aov)] {
+            if let (Some(p), Some(dir)) = (path, cache_dir)
+                && let Some(name) = p.file_name().and_then(|n| n.to_str())
+                && (name.ends_with(".slc") || name == slosh_cache::MANIFEST_NAME)
+                && p.parent().and_then(|d| d.canonicalize().ok()) == dir.canonicalize().ok()
+            {
+                bail!(
+                    "{flag} {}: that is a file of the cache being rendered; write the frame elsewhere",
+                    p.display()
+                );
+            }
+        }
         let (width, height) = parse_size(&args.size)?;
         let (steps, sequence) = match &args.steps {
             Some(range) => (parse_steps(range)?, true),
@@ -273,6 +305,20 @@ fn camera_for(
     }
     if let Some(t) = &args.target {
         camera.target = parse_vec3("target", t)?;
+    }
+    // A camera with no view direction, or an up along it, has no image plane.
+    let view: [f64; 3] = std::array::from_fn(|a| camera.target[a] - camera.eye[a]);
+    let length = (view[0] * view[0] + view[1] * view[1] + view[2] * view[2]).sqrt();
+    if !(length > 0.0) {
+        bail!("--eye and --target are the same point: the camera looks nowhere");
+    }
+    let up_length = (camera.up.iter().map(|u| u * u).sum::<f64>()).sqrt();
+    let along = (view[0] * camera.up[0] + view[1] * camera.up[1] + view[2] * camera.up[2]).abs();
+    if !(up_length > 0.0) || along > 0.9999 * length * up_length {
+        bail!(
+            "--up {:?} is parallel to the view direction (or zero): give an up that is not along --target minus --eye",
+            camera.up
+        );
     }
     Ok(camera)
 }

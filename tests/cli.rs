@@ -863,3 +863,52 @@ fn absurd_job_counts_are_refused() {
         assert!(start.elapsed().as_secs() < 10, "--jobs {jobs} took {:?}", start.elapsed());
     }
 }
+
+/// Render settings without a meaning, or that would destroy the input, are refused by name
+/// (issue 14, item 11).
+#[test]
+fn meaningless_or_destructive_render_settings_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(&dir.path().join("case"), &["sphere", "--points", "800", "--steps", "1"]);
+    let cache = dir.path().join("cache");
+    let (ok, _, err) = slosh(&[
+        "bake",
+        dir.path().join("case/sphere.case").to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let before = std::fs::read(cache.join("step-00000.slc")).unwrap();
+    let png = dir.path().join("x.png");
+    let c = cache.to_str().unwrap();
+    let p = png.to_str().unwrap();
+    let input = cache.join("step-00000.slc");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--fov", "0"], "--fov 0"),
+        (vec!["--fov", "180"], "--fov 180"),
+        (vec!["--fov", "nan"], "--fov NaN"),
+        (vec!["--eye", "1,1,1", "--target", "1,1,1"], "same point"),
+        (vec!["--eye=0,0,5", "--target", "0,0,0", "--up", "0,0,1"], "parallel"),
+        (vec!["--aov", p], "--out and --aov are both"),
+    ];
+    for (extra, expected) in cases {
+        let mut args = vec!["render", c, "--cpu", "--size", "16x16", "--out", p];
+        args.extend(extra.iter().copied());
+        let (ok, _, err) = slosh(&args);
+        assert!(!ok, "{extra:?} accepted");
+        assert!(err.contains(expected), "{extra:?}: {err}");
+    }
+    let (ok, _, err) = slosh(&[
+        "render",
+        c,
+        "--cpu",
+        "--size",
+        "16x16",
+        "--out",
+        input.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(err.contains("a file of the cache being rendered"), "{err}");
+    assert_eq!(std::fs::read(&input).unwrap(), before, "the input was touched");
+}
