@@ -283,8 +283,8 @@ pub struct GenArgs {
     /// Fraction of normals reversed.
     #[arg(long, default_value_t = 0.0)]
     pub flip_normals: f64,
-    /// Translate everything (truth included) by this in x, y and z, e.g. 1e5.
-    #[arg(long, default_value_t = 0.0)]
+    /// Translate everything (truth included) by this in x, y and z, e.g. 1e5 or -1.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub offset: f64,
     /// Fraction of points duplicated exactly.
     #[arg(long, default_value_t = 0.0)]

@@ -846,7 +846,10 @@ fn closed_or_full_stdout_is_not_a_panic() {
 #[test]
 fn absurd_job_counts_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    generate(&dir.path().join("case"), &["sphere", "--points", "500", "--steps", "1"]);
+    generate(
+        &dir.path().join("case"),
+        &["sphere", "--points", "500", "--steps", "1"],
+    );
     let case = dir.path().join("case/sphere.case");
     for jobs in ["0", "100000", "18446744073709551615"] {
         let start = std::time::Instant::now();
@@ -859,8 +862,15 @@ fn absurd_job_counts_are_refused() {
             jobs,
         ]);
         assert!(!ok, "--jobs {jobs} was accepted");
-        assert!(err.contains(&format!("--jobs {jobs}: expected 1 to")), "{err}");
-        assert!(start.elapsed().as_secs() < 10, "--jobs {jobs} took {:?}", start.elapsed());
+        assert!(
+            err.contains(&format!("--jobs {jobs}: expected 1 to")),
+            "{err}"
+        );
+        assert!(
+            start.elapsed().as_secs() < 10,
+            "--jobs {jobs} took {:?}",
+            start.elapsed()
+        );
     }
 }
 
@@ -869,7 +879,10 @@ fn absurd_job_counts_are_refused() {
 #[test]
 fn meaningless_or_destructive_render_settings_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    generate(&dir.path().join("case"), &["sphere", "--points", "800", "--steps", "1"]);
+    generate(
+        &dir.path().join("case"),
+        &["sphere", "--points", "800", "--steps", "1"],
+    );
     let cache = dir.path().join("cache");
     let (ok, _, err) = slosh(&[
         "bake",
@@ -889,7 +902,10 @@ fn meaningless_or_destructive_render_settings_are_refused() {
         (vec!["--fov", "180"], "--fov 180"),
         (vec!["--fov", "nan"], "--fov NaN"),
         (vec!["--eye", "1,1,1", "--target", "1,1,1"], "same point"),
-        (vec!["--eye=0,0,5", "--target", "0,0,0", "--up", "0,0,1"], "parallel"),
+        (
+            vec!["--eye=0,0,5", "--target", "0,0,0", "--up", "0,0,1"],
+            "parallel",
+        ),
         (vec!["--aov", p], "--out and --aov are both"),
     ];
     for (extra, expected) in cases {
@@ -910,5 +926,33 @@ fn meaningless_or_destructive_render_settings_are_refused() {
     ]);
     assert!(!ok);
     assert!(err.contains("a file of the cache being rendered"), "{err}");
-    assert_eq!(std::fs::read(&input).unwrap(), before, "the input was touched");
+    assert_eq!(
+        std::fs::read(&input).unwrap(),
+        before,
+        "the input was touched"
+    );
+}
+
+/// Negative values are read as values where they make sense (issue 14, item 12).
+#[test]
+fn negative_values_are_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ok, out, err) = slosh(&[
+        "gen",
+        "sphere",
+        "--points",
+        "300",
+        "--steps",
+        "1",
+        "--offset",
+        "-1",
+        "--out",
+        dir.path().join("case").to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}{err}");
+    let case = Case::open(dir.path().join("case/sphere.case")).unwrap();
+    let step = case.read_step(0, &StepRequest::default()).unwrap();
+    let mean_x =
+        step.positions.iter().map(|p| f64::from(p[0])).sum::<f64>() / step.positions.len() as f64;
+    assert!(mean_x < -0.5, "the offset moved the points by {mean_x}");
 }
