@@ -309,12 +309,12 @@ fn camera_for(
     // A camera with no view direction, or an up along it, has no image plane.
     let view: [f64; 3] = std::array::from_fn(|a| camera.target[a] - camera.eye[a]);
     let length = (view[0] * view[0] + view[1] * view[1] + view[2] * view[2]).sqrt();
-    if !(length > 0.0) {
+    if length.is_nan() || length == 0.0 {
         bail!("--eye and --target are the same point: the camera looks nowhere");
     }
     let up_length = (camera.up.iter().map(|u| u * u).sum::<f64>()).sqrt();
     let along = (view[0] * camera.up[0] + view[1] * camera.up[1] + view[2] * camera.up[2]).abs();
-    if !(up_length > 0.0) || along > 0.9999 * length * up_length {
+    if up_length.is_nan() || up_length == 0.0 || along > 0.9999 * length * up_length {
         bail!(
             "--up {:?} is parallel to the view direction (or zero): give an up that is not along --target minus --eye",
             camera.up
