@@ -454,6 +454,8 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
         increment: Option<i64>,
         numbers: Option<Vec<i64>>,
         times: Option<Vec<f64>>,
+        /// The line of the "time values" entry.
+        times_line: usize,
     }
     impl Partial {
         fn new(id: u32, description: Option<String>, line: usize) -> Partial {
@@ -466,6 +468,7 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
                 increment: None,
                 numbers: None,
                 times: None,
+                times_line: line,
             }
         }
     }
@@ -495,8 +498,14 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
             "filename increment" => set.increment = Some(single(path, e)?),
             "filename numbers" => set.numbers = Some(numbers(path, e)?),
             "filename numbers file" => set.numbers = Some(numbers_from_file(path, e)?),
-            "time values" => set.times = Some(numbers(path, e)?),
-            "time values file" => set.times = Some(numbers_from_file(path, e)?),
+            "time values" => {
+                set.times = Some(numbers(path, e)?);
+                set.times_line = e.line;
+            }
+            "time values file" => {
+                set.times = Some(numbers_from_file(path, e)?);
+                set.times_line = e.line;
+            }
             _ => {
                 return Err(Error::parse(
                     path,
@@ -533,6 +542,33 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
                     format!("{steps} time values in time set {}", p.id),
                     format!("{}", times.len()),
                 ));
+            }
+            // Steps are ordered by time: every value finite, each after the one before.
+            let expected = format!("finite, increasing time values in time set {}", p.id);
+            for (i, t) in times.iter().enumerate() {
+                let problem = if !t.is_finite() {
+                    Some(format!("time value {i} is {t}"))
+                } else if i > 0 && *t <= times[i - 1] {
+                    Some(format!(
+                        "time value {i} ({t}) after {} ({})",
+                        times[i - 1],
+                        if *t == times[i - 1] {
+                            "a duplicate"
+                        } else {
+                            "decreasing"
+                        }
+                    ))
+                } else {
+                    None
+                };
+                if let Some(found) = problem {
+                    return Err(Error::parse(
+                        path,
+                        Location::Line(p.times_line),
+                        expected,
+                        found,
+                    ));
+                }
             }
             let file_numbers = match (p.numbers, p.start) {
                 (Some(n), _) => {
@@ -656,5 +692,30 @@ mod tests {
         assert_eq!(ts.times, vec![0.0, 0.5, 1.0, 1.5]);
         assert_eq!(c.variables[1].constants, vec![100.0]);
         assert_eq!(c.variables[0].file.as_ref().unwrap().time_set, Some(1));
+    }
+
+    /// Time values that are not finite, repeat or go back are an error naming the case file
+    /// and the line (issue 14, item 2): a step without a usable time cannot be baked.
+    #[test]
+    fn non_finite_duplicate_and_decreasing_times_are_refused() {
+        let case = |times: &str| {
+            format!(
+                "FORMAT\ntype: ensight gold\nGEOMETRY\nmodel: 1 g.geo*\nTIME\ntime set: 1\nnumber of steps: 3\nfilename start number: 0\nfilename increment: 1\ntime values: {times}\n"
+            )
+        };
+        for (times, found) in [
+            ("0 nan inf", "time value 1 is NaN"),
+            ("0 1 inf", "time value 2 is inf"),
+            ("0 0.5 0.5", "time value 2 (0.5) after 0.5 (a duplicate)"),
+            ("0 1 0.5", "time value 2 (0.5) after 1 (decreasing)"),
+        ] {
+            let err = CaseFile::parse(Path::new("runs/x.case"), &case(times))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("runs/x.case"), "{err}");
+            assert!(err.contains("line 10"), "{err}");
+            assert!(err.contains(found), "{times}: {err}");
+        }
+        assert!(CaseFile::parse(Path::new("x.case"), &case("0 0.5 1")).is_ok());
     }
 }
