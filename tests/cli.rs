@@ -956,3 +956,33 @@ fn negative_values_are_values() {
         step.positions.iter().map(|p| f64::from(p[0])).sum::<f64>() / step.positions.len() as f64;
     assert!(mean_x < -0.5, "the offset moved the points by {mean_x}");
 }
+
+/// A step whose cache the verifier would reject is reported and never written, so a re-run
+/// cannot keep it (issue 14, item 2): at an offset of 1e8 the points of a small sphere
+/// coincide in f32.
+#[test]
+fn a_bake_never_writes_what_its_verifier_rejects() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("case");
+    generate(
+        &case_dir,
+        &[
+            "sphere", "--points", "2000", "--steps", "1", "--offset", "1e8",
+        ],
+    );
+    let cache = dir.path().join("cache");
+    for _ in 0..2 {
+        let (ok, out, err) = slosh(&[
+            "bake",
+            case_dir.join("sphere.case").to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+        ]);
+        assert!(!ok, "{out}");
+        assert!(
+            err.contains("step-00000.slc") && err.contains("not written"),
+            "{err}"
+        );
+        assert!(!cache.join("step-00000.slc").exists());
+    }
+}

@@ -7,7 +7,8 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use slosh_cache::{CacheFile, Manifest, StepStats, step_file_name, write_step};
+use slosh_cache::{CacheFile, Manifest, StepStats, encode_step, step_file_name};
+use slosh_fileio::FileBytes;
 
 use crate::params::BakeParams;
 use crate::select::StepInput;
@@ -125,10 +126,24 @@ fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &s
     let points = header.points;
     let mut stats = header.stats.clone();
     let write_start = Instant::now();
-    match write_step(&path, header, &baked.sections, opts.params.compression) {
+    // What is written is what the verifier accepts: the encoded file is opened and verified
+    // in memory first, and a step that fails is reported, never written.
+    let written = encode_step(header, &baked.sections, opts.params.compression)
+        .map_err(|e| format!("{}: encoding: {e}", path.display()))
+        .and_then(|bytes| {
+            CacheFile::from_bytes(FileBytes::from_vec(&path, bytes))
+                .and_then(|file| file.verify().map(|_| file))
+                .map_err(|e| format!("{e} (the step was not written)"))
+        })
+        .and_then(|file| {
+            slosh_fileio::atomic_write(&path, file.bytes())
+                .map(|()| file.file_len())
+                .map_err(|e| e.to_string())
+        });
+    match written {
         Ok(bytes) => {
             stats.stage_seconds.push((
-                "compress and write".into(),
+                "compress, verify and write".into(),
                 write_start.elapsed().as_secs_f64(),
             ));
             Outcome::Baked {
@@ -138,7 +153,7 @@ fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &s
                 stats: Box::new(stats),
             }
         }
-        Err(e) => Outcome::Failed(e.to_string()),
+        Err(e) => Outcome::Failed(e),
     }
 }
 

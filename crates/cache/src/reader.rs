@@ -234,6 +234,11 @@ impl CacheFile {
         self.bytes.path()
     }
 
+    /// Every byte of the file.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
     pub fn header(&self) -> &Header {
         &self.header
     }
