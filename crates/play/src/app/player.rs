@@ -85,6 +85,7 @@ struct Player {
     /// The registered texture and the size it was registered at.
     texture: Option<(egui::TextureId, (u32, u32))>,
     last_frame: Instant,
+    /// Milliseconds between the last two UI frames.
     frame_ms: f64,
     trace_ms: Option<f64>,
     upload_ms: f64,
@@ -377,7 +378,8 @@ impl Player {
             params: self.params(),
             camera_moving: moving,
         };
-        let started = Instant::now();
+        // The interval between UI frames: what a person sees as the frame time.
+        self.frame_ms = seconds * 1e3;
         let mut encoder = self
             .gpu
             .device
@@ -410,7 +412,6 @@ impl Player {
             }
             Err(e) => self.message = Some(e.to_string()),
         }
-        self.frame_ms = started.elapsed().as_secs_f64() * 1e3;
         self.track_field_range();
         self.show_texture(ui, rect);
         if self.screenshot_pending && self.last.progress.is_some_and(|p| p.finished()) {
