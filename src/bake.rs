@@ -1,7 +1,8 @@
 //! `slosh bake`: the batch driver with a progress bar and a summary.
 
-use crate::output::say;
 use std::time::Duration;
+
+use crate::output::say;
 
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -32,7 +33,13 @@ impl StepSource for CloudSource<'_> {
             normals: self.cloud.normals.clone(),
             surface_flags: None,
             fields: Vec::new(),
+            identity: None,
         })
+    }
+
+    /// The point-cloud file itself.
+    fn identity(&self, _index: usize) -> Option<String> {
+        slosh_bake::files_identity([std::path::Path::new(&self.label)])
     }
 }
 

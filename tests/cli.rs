@@ -986,3 +986,72 @@ fn a_bake_never_writes_what_its_verifier_rejects() {
         assert!(!cache.join("step-00000.slc").exists());
     }
 }
+
+/// Resume keeps a step only when its input is the same: another case or regenerated data
+/// into the same directory is baked again (issue 14, item 1).
+#[test]
+fn resume_rebakes_when_the_input_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let bake = |case: &Path| {
+        let (ok, out, err) = slosh(&[
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--quiet",
+        ]);
+        assert!(ok, "{out}{err}");
+        out
+    };
+    let sphere = dir.path().join("in");
+    generate(&sphere, &["sphere", "--points", "1500", "--steps", "3"]);
+    assert!(bake(&sphere.join("sphere.case")).contains("baked 3 steps, kept 0"));
+    assert!(bake(&sphere.join("sphere.case")).contains("baked 0 steps, kept 3"));
+    // Another case into the same directory.
+    let torus = dir.path().join("torus");
+    generate(&torus, &["torus", "--points", "2000", "--steps", "3"]);
+    assert!(bake(&torus.join("torus.case")).contains("baked 3 steps, kept 0"));
+    let file = slosh_cache::CacheFile::open(&cache.join("step-00001.slc")).unwrap();
+    assert!(file.header().source.path.ends_with("torus.case"));
+    // The same case path, regenerated with other data.
+    std::fs::remove_dir_all(&torus).unwrap();
+    generate(&torus, &["torus", "--points", "2500", "--steps", "3"]);
+    assert!(bake(&torus.join("torus.case")).contains("baked 3 steps, kept 0"));
+}
+
+/// A partial re-bake with other settings is refused before anything is written, naming the
+/// step it would leave behind (issue 14, item 3).
+#[test]
+fn a_partial_rebake_with_other_settings_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "1500", "--steps", "2"]);
+    let case = case_dir.join("sphere.case");
+    let cache = dir.path().join("cache");
+    let (ok, _, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let before = std::fs::read(cache.join("step-00000.slc")).unwrap();
+    let (ok, out, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--steps",
+        "0..0",
+        "--k",
+        "8",
+    ]);
+    assert!(!ok, "{out}");
+    assert!(
+        err.contains("step-00001.slc") && err.contains("nothing was written"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(cache.join("step-00000.slc")).unwrap(), before);
+}

@@ -20,6 +20,31 @@ pub trait StepSource: Sync {
     fn steps(&self) -> Vec<(usize, f64)>;
     /// Reads one step with everything `BakeParams` asks for.
     fn read(&self, index: usize) -> Result<StepInput, String>;
+    /// What step `index` is read from (its files' paths, sizes and modification times,
+    /// hashed), cheaply: a kept cache must have been baked from the same input. `None`
+    /// where the source cannot tell (then only the settings decide).
+    fn identity(&self, index: usize) -> Option<String> {
+        let _ = index;
+        None
+    }
+}
+
+/// The identity of a set of input files: their paths, sizes and modification times, hashed.
+/// A file that cannot be read gives `None` (nothing can be kept against it).
+pub fn files_identity<'a>(paths: impl IntoIterator<Item = &'a Path>) -> Option<String> {
+    let mut text = String::new();
+    for path in paths {
+        let meta = std::fs::metadata(path).ok()?;
+        let modified = meta
+            .modified()
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_nanos());
+        text += &format!("{}\u{0}{}\u{0}{modified}\n", path.display(), meta.len());
+    }
+    Some(slosh_cache::hex64(xxhash_rust::xxh3::xxh3_64(
+        text.as_bytes(),
+    )))
 }
 
 /// Which of the series' steps this process bakes.
@@ -97,14 +122,22 @@ pub fn plan(source: &dyn StepSource, opts: &BatchOptions) -> Vec<(usize, f64)> {
         .collect()
 }
 
-/// True when `path` holds a complete cache made with `hash` whose bytes are intact.
-pub fn is_current(path: &Path, hash: &str) -> bool {
-    CacheFile::open(path).is_ok_and(|f| f.header().params_hash == hash && f.body_intact())
+/// True when `path` holds a complete cache made with `hash`, from the input `identity`
+/// (where the source gives one) of step `index`, whose bytes are intact.
+pub fn is_current(path: &Path, hash: &str, index: usize, identity: Option<&str>) -> bool {
+    CacheFile::open(path).is_ok_and(|f| {
+        let source = &f.header().source;
+        f.header().params_hash == hash
+            && source.step == index
+            && identity.is_none_or(|id| source.identity.as_deref() == Some(id))
+            && f.body_intact()
+    })
 }
 
 fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &str) -> Outcome {
     let path = opts.out.join(step_file_name(index));
-    if is_current(&path, hash) {
+    let identity = source.identity(index);
+    if is_current(&path, hash, index, identity.as_deref()) {
         return Outcome::Kept;
     }
     let start = Instant::now();
@@ -113,6 +146,8 @@ fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &s
         Err(e) => return Outcome::Failed(e),
     };
     let read_seconds = start.elapsed().as_secs_f64();
+    let mut input = input;
+    input.identity = identity;
     let baked = match bake_step(&input, &opts.params) {
         Ok(b) => b,
         Err(e) => return Outcome::Failed(e.to_string()),
@@ -157,6 +192,41 @@ fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &s
     }
 }
 
+/// One directory holds one bake: a step file this run will not rewrite, made with other
+/// settings, stops the run before anything is written (otherwise the steps it bakes would
+/// replace good ones and the manifest would then refuse the mixture).
+fn refuse_mixing(
+    dir: &Path,
+    planned: &[(usize, f64)],
+    hash: &str,
+) -> Result<(), slosh_cache::Error> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(index) = slosh_cache::parse_step_file_name(&name) else {
+            continue;
+        };
+        if planned.iter().any(|(i, _)| *i == index) {
+            continue;
+        }
+        let Ok(file) = CacheFile::open(&e.path()) else {
+            continue;
+        };
+        let theirs = &file.header().params_hash;
+        if theirs != hash {
+            return Err(slosh_cache::Error::Invalid {
+                path: e.path(),
+                problem: format!(
+                    "this step was baked with other settings (parameter hash {theirs}, this run's {hash}), and this run does not rebake it; one directory holds one bake, so nothing was written: bake every step with the new settings, or into another directory"
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Removes temporary files that a killed bake left behind (their writer is gone).
 fn remove_stale_temps(dir: &Path) {
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -197,6 +267,7 @@ pub fn run_batch(
         steps: planned.len(),
     });
     let hash = opts.params.hash();
+    refuse_mixing(&opts.out, &planned, &hash)?;
     let next = AtomicUsize::new(0);
     let report = Mutex::new(BatchReport::default());
     // Plain threads pull steps; each step runs on the rayon pool. A rayon thread waiting inside

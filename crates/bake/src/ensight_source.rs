@@ -68,6 +68,20 @@ impl StepSource for EnsightSource {
                 .into_iter()
                 .map(|f| (f.name, f.values))
                 .collect(),
+            identity: None,
         })
+    }
+
+    /// The case file, the step's geometry or measured file and its variable files.
+    fn identity(&self, index: usize) -> Option<String> {
+        let mut files = vec![self.case.path().to_path_buf()];
+        files.extend(self.case.model_file(index).ok()?.map(|f| f.path));
+        files.extend(self.case.measured_file(index).ok()?.map(|f| f.path));
+        for v in self.case.variables() {
+            if let Some(fref) = &v.file {
+                files.push(self.case.resolve(fref, index).ok()?.path);
+            }
+        }
+        crate::batch::files_identity(files.iter().map(|p| p.as_path()))
     }
 }

@@ -10,7 +10,8 @@ mod select;
 mod step;
 
 pub use batch::{
-    BatchOptions, BatchReport, Event, Outcome, Shard, StepSource, is_current, plan, run_batch,
+    BatchOptions, BatchReport, Event, Outcome, Shard, StepSource, files_identity, is_current, plan,
+    run_batch,
 };
 pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use ensight_source::EnsightSource;

@@ -19,6 +19,8 @@ pub struct StepInput {
     /// Surface flags from a variable (`SurfaceSelect::Variable`).
     pub surface_flags: Option<Vec<bool>>,
     pub fields: Vec<(String, FieldValues)>,
+    /// The input files' identity ([`crate::StepSource::identity`]), recorded in the cache.
+    pub identity: Option<String>,
 }
 
 /// Neighbours looked at per particle by the surface estimate.

@@ -342,6 +342,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             path: input.source.clone(),
             step: input.index,
             time: input.time,
+            identity: input.identity.clone(),
         },
         points: n as u64,
         transform,

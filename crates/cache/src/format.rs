@@ -201,6 +201,10 @@ pub struct Source {
     pub path: String,
     pub step: usize,
     pub time: f64,
+    /// What the input files were when the step was baked (their paths, sizes and modification
+    /// times, hashed): a resumed bake re-bakes a step whose input changed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub identity: Option<String>,
 }
 
 /// Counts the bake records about a step.

@@ -14,6 +14,7 @@ fn header() -> Header {
             path: "test".into(),
             step: 3,
             time: 0.25,
+            identity: None,
         },
         points: 0,
         transform: Transform {
