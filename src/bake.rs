@@ -44,8 +44,7 @@ impl StepSource for CloudSource<'_> {
 }
 
 pub fn manifest_only(dir: &std::path::Path) -> Result<()> {
-    let (manifest, problems) = Manifest::rebuild(dir)?;
-    manifest.write(dir)?;
+    let (manifest, problems) = Manifest::refresh(dir)?;
     say!(
         "wrote {} ({} steps)",
         dir.join(slosh_cache::MANIFEST_NAME).display(),

@@ -1055,3 +1055,42 @@ fn a_partial_rebake_with_other_settings_writes_nothing() {
     );
     assert_eq!(std::fs::read(cache.join("step-00000.slc")).unwrap(), before);
 }
+
+/// Bakes finishing side by side take turns at the manifest: one that finds the directory's
+/// manifest lock held waits for it, then scans, so the last manifest written has seen every
+/// step file (issue 14, item 5).
+#[test]
+fn manifest_rebuilds_take_turns() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "800", "--steps", "1"]);
+    let cache = dir.path().join("cache");
+    std::fs::create_dir_all(&cache).unwrap();
+    let lock = std::fs::File::create(cache.join(slosh_cache::MANIFEST_LOCK_NAME)).unwrap();
+    lock.lock().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        .args([
+            "bake",
+            case_dir.join("sphere.case").to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--quiet",
+        ])
+        .spawn()
+        .unwrap();
+    // The step is baked, but the manifest waits for the lock.
+    let start = std::time::Instant::now();
+    while !cache.join("step-00000.slc").exists() && start.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the bake did not wait for the lock"
+    );
+    assert!(!cache.join(slosh_cache::MANIFEST_NAME).exists());
+    lock.unlock().unwrap();
+    assert!(child.wait().unwrap().success());
+    let manifest = slosh_cache::Manifest::read(&cache).unwrap();
+    assert_eq!(manifest.steps.len(), 1);
+}

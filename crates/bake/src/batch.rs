@@ -311,8 +311,7 @@ pub fn run_batch(
     });
     let mut report = report.into_inner().unwrap_or_else(|p| p.into_inner());
     report.failed.sort_by_key(|(i, _)| *i);
-    let (manifest, problems) = Manifest::rebuild(&opts.out)?;
-    manifest.write(&opts.out)?;
+    let (_, problems) = Manifest::refresh(&opts.out)?;
     report.manifest_problems = problems
         .into_iter()
         .map(|(p, e)| (p, e.to_string()))

@@ -27,7 +27,9 @@ pub use format::{
     PREAMBLE_LEN, SectionEntry, Source, StepStats, Transform, hex64,
 };
 pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
-pub use manifest::{MANIFEST_NAME, Manifest, ManifestStep, parse_step_file_name, step_file_name};
+pub use manifest::{
+    MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, parse_step_file_name, step_file_name,
+};
 pub use reader::CacheFile;
 pub use step::LoadedStep;
 pub use verify::VerifyReport;

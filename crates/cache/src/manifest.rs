@@ -11,6 +11,8 @@ use crate::format::hex64;
 use crate::reader::CacheFile;
 
 pub const MANIFEST_NAME: &str = "manifest.json";
+/// The file whose lock serialises manifest rebuilds in one directory.
+pub const MANIFEST_LOCK_NAME: &str = ".manifest.lock";
 pub const MANIFEST_FORMAT: &str = "slosh-cache-series";
 
 /// The file name of step `index`.
@@ -132,6 +134,26 @@ impl Manifest {
             },
             failed,
         ))
+    }
+
+    /// Rebuilds the manifest from the step files and writes it, holding the directory's
+    /// manifest lock throughout: of bakes finishing side by side (shards of a job array), the
+    /// last to write also scanned last, so the manifest never misses a step file that was
+    /// renamed into place before it. Returns the manifest and the files left out.
+    pub fn refresh(dir: &Path) -> Result<(Manifest, Vec<(PathBuf, Error)>)> {
+        let lock_path = dir.join(MANIFEST_LOCK_NAME);
+        let lock = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&lock_path)
+            .map_err(|e| slosh_fileio::IoError::new(&lock_path, e))?;
+        lock.lock()
+            .map_err(|e| slosh_fileio::IoError::new(&lock_path, e))?;
+        let (manifest, problems) = Manifest::rebuild(dir)?;
+        manifest.write(dir)?;
+        drop(lock);
+        Ok((manifest, problems))
     }
 
     pub fn write(&self, dir: &Path) -> Result<()> {
