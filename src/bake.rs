@@ -135,17 +135,28 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     for (path, e) in &report.manifest_problems {
         eprintln!("manifest: left out {}: {e}", path.display());
     }
+    for (i, e) in &report.failed {
+        eprintln!("step {i}: {e}");
+    }
+    if let Some(e) = &report.manifest_error {
+        eprintln!("manifest: {e}");
+    }
     if !report.failed.is_empty() {
-        for (i, e) in &report.failed {
-            eprintln!("step {i}: {e}");
-        }
         let list: Vec<String> = report.failed.iter().map(|(i, _)| i.to_string()).collect();
         bail!(
-            "{} of {} steps failed: {}",
+            "{} of {} steps failed: {}{}",
             report.failed.len(),
             report.baked + report.kept + report.failed.len(),
-            list.join(", ")
+            list.join(", "),
+            if report.manifest_error.is_some() {
+                "; and the manifest was not written"
+            } else {
+                ""
+            }
         );
+    }
+    if report.manifest_error.is_some() {
+        bail!("the manifest was not written");
     }
     Ok(())
 }

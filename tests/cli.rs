@@ -1094,3 +1094,49 @@ fn manifest_rebuilds_take_turns() {
     let manifest = slosh_cache::Manifest::read(&cache).unwrap();
     assert_eq!(manifest.steps.len(), 1);
 }
+
+/// A manifest that cannot be written does not hide the failed steps, and a bake with every
+/// step current leaves an up-to-date manifest untouched (so read-only storage is fine)
+/// (issue 14, item 8).
+#[test]
+fn manifest_failures_do_not_hide_step_failures() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "800", "--steps", "3"]);
+    let case = case_dir.join("sphere.case");
+    let cache = dir.path().join("cache");
+    let bake = || {
+        slosh(&[
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--quiet",
+        ])
+    };
+    let (ok, _, err) = bake();
+    assert!(ok, "{err}");
+    let manifest = cache.join(slosh_cache::MANIFEST_NAME);
+    let written = std::fs::metadata(&manifest).unwrap().modified().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    let (ok, out, err) = bake();
+    assert!(ok && out.contains("kept 3"), "{out}{err}");
+    assert_eq!(
+        std::fs::metadata(&manifest).unwrap().modified().unwrap(),
+        written,
+        "an up-to-date manifest was rewritten"
+    );
+    // Step 1's geometry goes missing, and the manifest's place is taken by a directory.
+    std::fs::remove_file(case_dir.join("sphere.geo00001")).unwrap();
+    std::fs::remove_file(cache.join("step-00001.slc")).unwrap();
+    std::fs::remove_file(&manifest).unwrap();
+    std::fs::create_dir(&manifest).unwrap();
+    let (ok, _, err) = bake();
+    assert!(!ok);
+    assert!(
+        err.contains("step 1:") && err.contains("sphere.geo00001"),
+        "{err}"
+    );
+    assert!(err.contains("manifest:"), "{err}");
+    assert!(err.contains("the manifest was not written"), "{err}");
+}

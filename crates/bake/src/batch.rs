@@ -108,6 +108,8 @@ pub struct BatchReport {
     pub wall_seconds: f64,
     /// Step files that failed when the manifest was rebuilt.
     pub manifest_problems: Vec<(PathBuf, String)>,
+    /// Why the manifest could not be rebuilt or written, if it could not.
+    pub manifest_error: Option<String>,
 }
 
 /// The steps this process is responsible for.
@@ -311,11 +313,17 @@ pub fn run_batch(
     });
     let mut report = report.into_inner().unwrap_or_else(|p| p.into_inner());
     report.failed.sort_by_key(|(i, _)| *i);
-    let (_, problems) = Manifest::refresh(&opts.out)?;
-    report.manifest_problems = problems
-        .into_iter()
-        .map(|(p, e)| (p, e.to_string()))
-        .collect();
+    // A manifest that cannot be written is reported beside the steps' own outcomes, which
+    // must not be lost behind it.
+    match Manifest::refresh(&opts.out) {
+        Ok((_, problems)) => {
+            report.manifest_problems = problems
+                .into_iter()
+                .map(|(p, e)| (p, e.to_string()))
+                .collect();
+        }
+        Err(e) => report.manifest_error = Some(e.to_string()),
+    }
     report.wall_seconds = start.elapsed().as_secs_f64();
     Ok(report)
 }

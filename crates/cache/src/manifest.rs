@@ -141,17 +141,24 @@ impl Manifest {
     /// last to write also scanned last, so the manifest never misses a step file that was
     /// renamed into place before it. Returns the manifest and the files left out.
     pub fn refresh(dir: &Path) -> Result<(Manifest, Vec<(PathBuf, Error)>)> {
-        let lock_path = dir.join(MANIFEST_LOCK_NAME);
+        // Where the lock cannot even be created (read-only storage) nobody writes here, and
+        // the scan needs no lock.
         let lock = std::fs::OpenOptions::new()
             .create(true)
             .truncate(false)
             .write(true)
-            .open(&lock_path)
-            .map_err(|e| slosh_fileio::IoError::new(&lock_path, e))?;
-        lock.lock()
-            .map_err(|e| slosh_fileio::IoError::new(&lock_path, e))?;
+            .open(dir.join(MANIFEST_LOCK_NAME))
+            .ok();
+        if let Some(lock) = &lock {
+            let lock_path = dir.join(MANIFEST_LOCK_NAME);
+            lock.lock()
+                .map_err(|e| slosh_fileio::IoError::new(&lock_path, e))?;
+        }
         let (manifest, problems) = Manifest::rebuild(dir)?;
-        manifest.write(dir)?;
+        // A manifest that already says this is left alone (and read-only storage is fine).
+        if Manifest::read(dir).ok().as_ref() != Some(&manifest) {
+            manifest.write(dir)?;
+        }
         drop(lock);
         Ok((manifest, problems))
     }
