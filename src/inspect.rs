@@ -345,12 +345,19 @@ struct DirStep {
     params_hash: String,
     verify: Option<Verification>,
     error: Option<String>,
+    /// Why the step does not belong to the series (checked with --verify).
+    series: Vec<String>,
 }
 
 #[derive(Debug, Serialize)]
 struct DirReport {
     directory: PathBuf,
     manifest: bool,
+    /// Why the manifest is unusable, where it is.
+    manifest_error: Option<String>,
+    /// Problems of the series as a whole (no steps, steps the manifest lists but that are
+    /// gone).
+    series: Vec<String>,
     params_hash: Option<String>,
     steps: Vec<DirStep>,
     total_points: u64,
@@ -367,7 +374,38 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
         })
         .collect();
     files.sort();
-    let manifest = Manifest::read(dir).ok();
+    let (manifest, manifest_error) = match Manifest::read(dir) {
+        Ok(m) => (Some(m), None),
+        Err(slosh_cache::Error::Io(e)) if e.source.kind() == std::io::ErrorKind::NotFound => {
+            (None, None)
+        }
+        Err(e) => (None, Some(e.to_string())),
+    };
+    let mut series = Vec::new();
+    if args.verify {
+        if files.is_empty() {
+            series.push(format!(
+                "{} holds no step files (step-NNNNN.slc)",
+                dir.display()
+            ));
+        }
+        // No manifest at all is a bake interrupted or in progress: the steps are checked one
+        // by one (the header says "manifest missing"); a manifest that is there must be right.
+        match (&manifest, &manifest_error) {
+            (None, None) => {}
+            (None, Some(e)) => series.push(format!("manifest unusable: {e}")),
+            (Some(m), _) => {
+                for entry in &m.steps {
+                    if !files.iter().any(|(i, _)| *i == entry.index) {
+                        series.push(format!(
+                            "the manifest lists {}, which is missing",
+                            entry.file
+                        ));
+                    }
+                }
+            }
+        }
+    }
     let mut steps = Vec::new();
     for (index, path) in files {
         let file_name = path
@@ -384,6 +422,10 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
                 params_hash: f.header().params_hash.clone(),
                 verify: args.verify.then(|| verification(&f)),
                 error: None,
+                series: match (&manifest, args.verify) {
+                    (Some(m), true) => m.step_problems(index, &f),
+                    _ => Vec::new(),
+                },
             }),
             Err(e) => steps.push(DirStep {
                 index,
@@ -394,16 +436,22 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
                 params_hash: String::new(),
                 verify: None,
                 error: Some(e.to_string()),
+                series: Vec::new(),
             }),
         }
     }
     let failed = steps
         .iter()
-        .filter(|s| s.error.is_some() || s.verify.as_ref().is_some_and(|v| !v.ok))
-        .count();
+        .filter(|s| {
+            s.error.is_some() || s.verify.as_ref().is_some_and(|v| !v.ok) || !s.series.is_empty()
+        })
+        .count()
+        + series.len();
     let report = DirReport {
         directory: dir.to_path_buf(),
         manifest: manifest.is_some(),
+        manifest_error,
+        series,
         params_hash: manifest.map(|m| m.params_hash),
         total_points: steps.iter().map(|s| s.points).sum(),
         total_bytes: steps.iter().map(|s| s.bytes).sum(),
@@ -417,15 +465,18 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
             "directory  {} ({} steps, manifest {})\n  step         time     points        bytes  bytes/pt  params            status\n",
             dir.display(),
             report.steps.len(),
-            if report.manifest {
-                "present"
-            } else {
-                "missing"
+            match (&report.manifest_error, report.manifest) {
+                (Some(_), _) => "INVALID",
+                (None, true) => "present",
+                (None, false) => "missing",
             }
         );
         for s in &report.steps {
             let status = match (&s.error, &s.verify) {
                 (Some(e), _) => format!("UNREADABLE: {e}"),
+                (None, _) if !s.series.is_empty() => {
+                    format!("NOT OF THIS SERIES: {}", s.series.join("; "))
+                }
                 (None, Some(Verification { ok: true, .. })) => "verified".into(),
                 (None, Some(Verification { error, .. })) => {
                     format!("FAILED: {}", error.clone().unwrap_or_default())
@@ -441,6 +492,9 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
                 s.bytes as f64 / s.points.max(1) as f64,
                 s.params_hash
             ));
+        }
+        for problem in &report.series {
+            o.push_str(&format!("  SERIES: {problem}\n"));
         }
         o.push_str(&format!(
             "total      {} points, {} bytes ({:.1} bytes per point), {} failed\n",

@@ -202,6 +202,25 @@ fn parse_steps(s: &str) -> Result<Vec<usize>> {
     Ok(steps)
 }
 
+/// A step rendered from a cache directory must belong to its series (the manifest's).
+fn check_belongs(dir: &Path, step: usize, path: &Path, file: &CacheFile) -> Result<()> {
+    if !dir.is_dir() {
+        return Ok(());
+    }
+    if let Ok(manifest) = slosh_cache::Manifest::read(dir) {
+        let problems = manifest.step_problems(step, file);
+        if !problems.is_empty() {
+            bail!(
+                "{}: not step {step} of the series in {}: {}",
+                path.display(),
+                dir.display(),
+                problems.join("; ")
+            );
+        }
+    }
+    Ok(())
+}
+
 /// The validated settings of one `slosh render` run.
 struct RenderConfig {
     steps: Vec<usize>,
@@ -391,6 +410,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     for &step in &config.steps {
         let path = step_path(&args.path, step);
         let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
+        check_belongs(&args.path, step, &path, &file)?;
         let gpu_step = GpuStep::upload(&gpu, &file, args.field.as_deref())?;
         let h = file.header();
         let params = TraceParams {
@@ -452,6 +472,7 @@ fn render_cpu(
     let (width, height) = (camera.width, camera.height);
     let path = step_path(&args.path, step_index);
     let file = CacheFile::open(&path).with_context(|| format!("opening step {step_index}"))?;
+    check_belongs(&args.path, step_index, &path, &file)?;
     let step = LoadedStep::load(&file)?;
     let h = file.header();
     let params = Params {

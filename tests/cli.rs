@@ -1140,3 +1140,77 @@ fn manifest_failures_do_not_hide_step_failures() {
     assert!(err.contains("manifest:"), "{err}");
     assert!(err.contains("the manifest was not written"), "{err}");
 }
+
+/// `inspect --verify DIR` verifies the series as a whole, and `render` refuses a step that
+/// is not of its series (issue 14, item 6).
+#[test]
+fn a_series_is_verified_as_a_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "800", "--steps", "3"]);
+    let case = case_dir.join("sphere.case");
+    let bake = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        let (ok, _, err) = slosh(&args);
+        assert!(ok, "{err}");
+    };
+    let cache = dir.path().join("cache");
+    bake(&cache, &[]);
+    let verify = |d: &Path| slosh(&["inspect", d.to_str().unwrap(), "--verify"]);
+    assert!(verify(&cache).0);
+    let step = |i: usize| cache.join(format!("step-0000{i}.slc"));
+    let original = std::fs::read(step(1)).unwrap();
+
+    // Step 2 copied over step 1.
+    std::fs::copy(step(2), step(1)).unwrap();
+    let (ok, out, _) = verify(&cache);
+    assert!(
+        !ok && out.contains("holds step 2 of its source, not step 1"),
+        "{out}"
+    );
+    let (ok, _, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--cpu",
+        "--size",
+        "16x16",
+        "--out",
+        dir.path().join("x.png").to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("step-00001.slc: not step 1 of the series"),
+        "{err}"
+    );
+
+    // One step baked with other settings among the rest.
+    let other = dir.path().join("other");
+    bake(&other, &["--k", "8"]);
+    std::fs::copy(other.join("step-00001.slc"), step(1)).unwrap();
+    let (ok, out, _) = verify(&cache);
+    assert!(!ok && out.contains("baked with parameter hash"), "{out}");
+    std::fs::write(step(1), &original).unwrap();
+    assert!(verify(&cache).0);
+
+    // A manifest that is not one is invalid, not missing.
+    let manifest = cache.join(slosh_cache::MANIFEST_NAME);
+    let good = std::fs::read(&manifest).unwrap();
+    std::fs::write(&manifest, b"{ not json").unwrap();
+    let (ok, out, _) = verify(&cache);
+    assert!(!ok && out.contains("manifest INVALID"), "{out}");
+    std::fs::write(&manifest, good).unwrap();
+
+    // A directory without steps verifies nothing, so it fails.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let (ok, out, _) = verify(&empty);
+    assert!(!ok && out.contains("holds no step files"), "{out}");
+}

@@ -163,6 +163,53 @@ impl Manifest {
         Ok((manifest, problems))
     }
 
+    /// What is wrong with `file` as step `index` of the series this manifest describes (empty
+    /// when it belongs): its header's step index, settings and source against the file name
+    /// and the manifest; its bytes, checksum, points and time against the manifest's entry.
+    pub fn step_problems(&self, index: usize, file: &CacheFile) -> Vec<String> {
+        let h = file.header();
+        let mut problems = Vec::new();
+        if h.source.step != index {
+            problems.push(format!(
+                "holds step {} of its source, not step {index} as its name says",
+                h.source.step
+            ));
+        }
+        if h.params_hash != self.params_hash {
+            problems.push(format!(
+                "baked with parameter hash {}, the series with {}",
+                h.params_hash, self.params_hash
+            ));
+        }
+        if h.source.path != self.source {
+            problems.push(format!(
+                "baked from {}, the series from {}",
+                h.source.path, self.source
+            ));
+        }
+        match self.steps.iter().find(|s| s.index == index) {
+            None => problems.push("is not in the manifest".into()),
+            Some(entry) => {
+                let checksum = hex64(file.footer_checksum());
+                if entry.bytes != file.file_len() || entry.xxh3 != checksum {
+                    problems.push(format!(
+                        "has {} bytes with checksum {checksum}; the manifest lists {} bytes with {}",
+                        file.file_len(),
+                        entry.bytes,
+                        entry.xxh3
+                    ));
+                }
+                if entry.points != h.points || entry.time != h.source.time {
+                    problems.push(format!(
+                        "has {} points at t = {}; the manifest lists {} at t = {}",
+                        h.points, h.source.time, entry.points, entry.time
+                    ));
+                }
+            }
+        }
+        problems
+    }
+
     pub fn write(&self, dir: &Path) -> Result<()> {
         let path = dir.join(MANIFEST_NAME);
         let json = serde_json::to_vec_pretty(self)

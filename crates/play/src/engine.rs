@@ -83,6 +83,8 @@ pub struct Prepared {
 #[derive(Debug)]
 pub struct GpuSource {
     gpu: Arc<Gpu>,
+    /// The series' manifest, where it has one (a bake in progress may not yet).
+    manifest: Mutex<Option<slosh_cache::Manifest>>,
     staging: StagingPool,
     delay: Option<std::time::Duration>,
     paths: Mutex<HashMap<usize, PathBuf>>,
@@ -115,6 +117,30 @@ impl StepSource for GpuSource {
         }
         let field = self.field();
         let host = HostStep::open(&path, field.as_deref()).map_err(|e| e.to_string())?;
+        // A file must hold the step its name says, and, where the manifest lists the step,
+        // be the file the manifest describes.
+        let manifest = self
+            .manifest
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
+        let header_step = host.file().header().source.step;
+        let problems = match &manifest {
+            Some(m) if m.steps.iter().any(|s| s.index == index) => {
+                m.step_problems(index, host.file())
+            }
+            _ if header_step != index => vec![format!(
+                "holds step {header_step} of its source, not step {index} as its name says"
+            )],
+            _ => Vec::new(),
+        };
+        if !problems.is_empty() {
+            return Err(format!(
+                "{}: not step {index} of this series: {}",
+                path.display(),
+                problems.join("; ")
+            ));
+        }
         let mut encoder = self
             .gpu
             .device
@@ -204,6 +230,7 @@ impl Engine {
         let budget = options.budget.unwrap_or_else(|| default_budget(&gpu));
         let source = Arc::new(GpuSource {
             gpu: gpu.clone(),
+            manifest: Mutex::new(None),
             staging: StagingPool::new(options.loaders + 2),
             delay: options.load_delay,
             paths: Mutex::new(HashMap::new()),
