@@ -82,6 +82,17 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             &cloud
         }
     };
+    // A range that selects none of the series' steps is a mistake, not a bake of nothing.
+    if let Some((a, b)) = opts.steps {
+        let all = source.steps();
+        if !all.iter().any(|(i, _)| (a..=b).contains(i)) {
+            let span = match (all.first(), all.last()) {
+                (Some((f, _)), Some((l, _))) => format!("steps {f}..={l}"),
+                _ => "no steps".into(),
+            };
+            bail!("--steps selects steps {a}..={b}, none of which {label} has (it has {span})");
+        }
+    }
     let bar = if cfg.quiet {
         ProgressBar::hidden()
     } else {

@@ -325,7 +325,7 @@ pub struct BakeArgs {
     /// Output directory for step-NNNNN.slc files and manifest.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Inclusive range of step indices, e.g. 0..49.
+    /// Steps to bake: A..B (B excluded), A..=B (B included) or N, e.g. 0..50.
     #[arg(long)]
     pub steps: Option<String>,
     /// Steps baked at once (each is also parallel inside).
@@ -420,7 +420,8 @@ pub struct RenderArgs {
     pub step: usize,
     /// A range of steps, A..B (B excluded) or A..=B, for a video: --out and --aov then take
     /// a pattern with {} or {:05} for the step number. The camera frames the first step.
-    #[arg(long)]
+    /// Not with --step.
+    #[arg(long, conflicts_with = "step")]
     pub steps: Option<String>,
     /// Camera position X,Y,Z (default: framing the step's bounds).
     #[arg(long, allow_hyphen_values = true)]

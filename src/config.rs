@@ -115,20 +115,34 @@ pub struct BakeConfig {
 }
 
 /// Parses `A..B` (inclusive) or a single step `A`.
+/// The one `--steps` grammar of every subcommand, Rust's: `A..B` (B excluded), `A..=B` (B
+/// included), or `N` (that step alone). Returns the first and last step, both included; an
+/// empty range is an error saying so.
 pub fn parse_step_range(s: &str) -> Result<(usize, usize)> {
     let parse = |v: &str| -> Result<usize> {
-        v.trim()
-            .parse()
-            .with_context(|| format!("--steps {s}: '{v}' is not a step index"))
+        v.trim().parse().with_context(|| {
+            format!("--steps {s}: '{v}' is not a step index (expected A..B, A..=B or N)")
+        })
     };
-    let (a, b) = match s.split_once("..") {
-        Some((a, b)) => (parse(a)?, parse(b.trim_start_matches('='))?),
-        None => (parse(s)?, parse(s)?),
+    let (a, last) = if let Some((a, b)) = s.split_once("..=") {
+        (parse(a)?, parse(b)?)
+    } else if let Some((a, b)) = s.split_once("..") {
+        let (a, b) = (parse(a)?, parse(b)?);
+        if b <= a {
+            bail!(
+                "--steps {s}: the range is empty (A..B excludes B: {a}..{} or {a}..={b} includes step {b})",
+                a + 1
+            );
+        }
+        (a, b - 1)
+    } else {
+        let n = parse(s)?;
+        (n, n)
     };
-    if a > b {
-        bail!("--steps {s}: the range is empty (expected A..B with A ≤ B, both inclusive)");
+    if a > last {
+        bail!("--steps {s}: the range is empty (A..=B needs A ≤ B)");
     }
-    Ok((a, b))
+    Ok((a, last))
 }
 
 fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {

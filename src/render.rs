@@ -180,26 +180,8 @@ fn expand_pattern(pattern: &Path, step: usize) -> PathBuf {
 
 /// "A..B" (B excluded) or "A..=B".
 fn parse_steps(s: &str) -> Result<Vec<usize>> {
-    let bad = || anyhow::anyhow!("--steps {s}: expected A..B or A..=B, e.g. 0..100");
-    let (a, b, inclusive) = if let Some((a, b)) = s.split_once("..=") {
-        (a, b, true)
-    } else {
-        let (a, b) = s.split_once("..").ok_or_else(bad)?;
-        (a, b, false)
-    };
-    let (a, b): (usize, usize) = (
-        a.trim().parse().map_err(|_| bad())?,
-        b.trim().parse().map_err(|_| bad())?,
-    );
-    let steps: Vec<usize> = if inclusive {
-        (a..=b).collect()
-    } else {
-        (a..b).collect()
-    };
-    if steps.is_empty() {
-        return Err(bad());
-    }
-    Ok(steps)
+    let (first, last) = crate::config::parse_step_range(s)?;
+    Ok((first..=last).collect())
 }
 
 /// A step rendered from a cache directory must belong to its series (the manifest's).

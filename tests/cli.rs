@@ -1044,7 +1044,7 @@ fn a_partial_rebake_with_other_settings_writes_nothing() {
         "--out",
         cache.to_str().unwrap(),
         "--steps",
-        "0..0",
+        "0..=0",
         "--k",
         "8",
     ]);
@@ -1213,4 +1213,76 @@ fn a_series_is_verified_as_a_whole() {
     std::fs::create_dir(&empty).unwrap();
     let (ok, out, _) = verify(&empty);
     assert!(!ok && out.contains("holds no step files"), "{out}");
+}
+
+/// One `--steps` grammar for bake and render: `A..B` excludes B, `A..=B` includes it, `N` is
+/// one step; an empty range is an error (issue 14, item 12).
+#[test]
+fn steps_read_the_same_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "600", "--steps", "4"]);
+    let case = case_dir.join("sphere.case");
+    let baked = |range: &str| {
+        let cache = dir
+            .path()
+            .join(format!("c{}", range.replace('.', "_").replace('=', "e")));
+        let (ok, out, err) = slosh(&[
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--steps",
+            range,
+            "--quiet",
+        ]);
+        (ok, format!("{out}{err}"), cache)
+    };
+    let (ok, out, cache) = baked("0..2");
+    assert!(ok && out.contains("baked 2 steps"), "{out}");
+    let (ok, out, _) = baked("1..=3");
+    assert!(ok && out.contains("baked 3 steps"), "{out}");
+    let (ok, out, _) = baked("3");
+    assert!(ok && out.contains("baked 1 steps"), "{out}");
+    let (ok, out, _) = baked("2..2");
+    assert!(!ok && out.contains("the range is empty"), "{out}");
+    let (ok, out, _) = baked("50..60");
+    assert!(!ok && out.contains("it has steps 0..=3"), "{out}");
+    let pattern = dir.path().join("f{:05}.png");
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--cpu",
+        "--size",
+        "8x8",
+        "--steps",
+        "0..2",
+        "--out",
+        pattern.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}{err}");
+    assert!(dir.path().join("f00001.png").exists() && !dir.path().join("f00002.png").exists());
+    let (ok, _, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--cpu",
+        "--steps",
+        "1..1",
+        "--out",
+        pattern.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("the range is empty"), "{err}");
+    // --steps and --step together are refused, not one silently ignored.
+    let (ok, _, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--cpu",
+        "--step",
+        "1",
+        "--steps",
+        "0..2",
+        "--out",
+        pattern.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("cannot be used with"), "{err}");
 }
