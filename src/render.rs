@@ -203,6 +203,18 @@ fn check_belongs(dir: &Path, step: usize, path: &Path, file: &CacheFile) -> Resu
     Ok(())
 }
 
+/// Memory a rendered frame takes per pixel: hits and pixels on the device, their readback
+/// and the hit buffer written out.
+const BYTES_PER_PIXEL: u64 = 120;
+
+/// Bytes of memory available now (`MemAvailable` in /proc/meminfo), where known.
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
 /// The validated settings of one `slosh render` run.
 struct RenderConfig {
     steps: Vec<usize>,
@@ -261,6 +273,19 @@ impl RenderConfig {
             }
         }
         let (width, height) = parse_size(&args.size)?;
+        // A frame holds its hits and pixels on the device and again in memory when read back
+        // (about 120 bytes a pixel): refuse what the machine cannot hold instead of aborting.
+        let needed = u64::from(width) * u64::from(height) * BYTES_PER_PIXEL;
+        if let Some(available) = available_memory()
+            && needed > available
+        {
+            bail!(
+                "--size {}: a {width}×{height} frame needs about {:.1} GB for its buffers; this machine has {:.1} GB available",
+                args.size,
+                needed as f64 / 1e9,
+                available as f64 / 1e9
+            );
+        }
         let (steps, sequence) = match &args.steps {
             Some(range) => (parse_steps(range)?, true),
             None => (vec![args.step], false),

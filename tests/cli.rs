@@ -926,6 +926,10 @@ fn meaningless_or_destructive_render_settings_are_refused() {
     ]);
     assert!(!ok);
     assert!(err.contains("a file of the cache being rendered"), "{err}");
+    // A frame larger than memory is refused by its size, not by running out (about 32 GB at
+    // 16384×16384; the test machines have less available).
+    let (ok, _, err) = slosh(&["render", c, "--cpu", "--size", "16384x16384", "--out", p]);
+    assert!(!ok && err.contains("GB available"), "{err}");
     assert_eq!(
         std::fs::read(&input).unwrap(),
         before,
@@ -1285,4 +1289,32 @@ fn steps_read_the_same_everywhere() {
         pattern.to_str().unwrap(),
     ]);
     assert!(!ok && err.contains("cannot be used with"), "{err}");
+}
+
+/// Inputs that never end or never open (a device, a FIFO) are refused at once, and an OS
+/// error is said once (issue 14, items 10 and 12).
+#[test]
+fn endless_inputs_are_refused_and_errors_said_once() {
+    let (ok, _, err) = slosh(&["info", "/dev/zero"]);
+    assert!(
+        !ok && err.contains("/dev/zero: not a regular file"),
+        "{err}"
+    );
+    assert_eq!(err.matches("not a regular file").count(), 1, "{err}");
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("case.case");
+    if Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success())
+    {
+        let start = std::time::Instant::now();
+        let (ok, _, err) = slosh(&["info", fifo.to_str().unwrap()]);
+        assert!(!ok && err.contains("not a regular file"), "{err}");
+        assert!(start.elapsed().as_secs() < 10);
+    }
+    let missing = dir.path().join("missing.case");
+    let (ok, _, err) = slosh(&["info", missing.to_str().unwrap()]);
+    assert!(!ok);
+    assert_eq!(err.matches("(os error 2)").count(), 1, "{err}");
 }

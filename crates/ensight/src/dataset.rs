@@ -99,7 +99,8 @@ pub struct Case {
 impl Case {
     pub fn open(path: impl AsRef<Path>) -> Result<Case> {
         let path = path.as_ref();
-        let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        // Through FileBytes: a FIFO or device in place of the case is refused, not waited on.
+        let text = source::open(path)?.to_vec();
         let text = String::from_utf8(text).map_err(|e| {
             Error::parse(
                 path,

@@ -39,8 +39,20 @@ enum Data {
 }
 
 impl FileBytes {
-    /// Maps `path` read-only; falls back to reading it (pipes, some network file systems).
+    /// Maps `path` read-only; falls back to reading it (some network file systems). Only
+    /// regular files are taken: a FIFO would block forever and a device (`/dev/zero`) never
+    /// ends, so both are refused before they are opened.
     pub fn open(path: &Path) -> Result<FileBytes, IoError> {
+        let meta = std::fs::metadata(path).map_err(|e| IoError::new(path, e))?;
+        if !meta.is_file() {
+            return Err(IoError::new(
+                path,
+                std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    "not a regular file (a directory, FIFO or device); give a file",
+                ),
+            ));
+        }
         let file = File::open(path).map_err(|e| IoError::new(path, e))?;
         let len = file.metadata().map_err(|e| IoError::new(path, e))?.len();
         // An empty file cannot be mapped on every OS; it has nothing to map anyway.
@@ -164,5 +176,26 @@ mod tests {
             .to_string();
         assert!(err.starts_with("/nonexistent-slosh-dir/out.png:"), "{err}");
         assert!(!err.contains(".tmp-"), "{err}");
+    }
+
+    /// A FIFO (which would block) and a device (which never ends) are refused at once.
+    #[cfg(unix)]
+    #[test]
+    fn only_regular_files_are_read() {
+        let err = FileBytes::open(Path::new("/dev/zero"))
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("/dev/zero") && err.contains("not a regular file"),
+            "{err}"
+        );
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let fifo = dir.path().join("pipe");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            let err = FileBytes::open(&fifo).map(|_| ()).unwrap_err().to_string();
+            assert!(err.contains("not a regular file"), "{err}");
+        }
     }
 }
