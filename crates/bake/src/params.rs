@@ -69,7 +69,7 @@ impl BakeParams {
             "fields": self.fields,
             "compression": match self.compression {
                 Compression::None => "none".to_string(),
-                Compression::Level(l) => format!("zstd-{l}"),
+                Compression::Level(l) => format!("zstd level {l}"),
             },
         })
     }

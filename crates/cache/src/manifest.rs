@@ -122,6 +122,11 @@ impl Manifest {
             });
         }
         let (params_hash, bake, source) = first.unwrap_or_default();
+        // A series of no steps has no extent: zero bounds, not infinities (JSON has none,
+        // and the manifest would not read back).
+        if steps.is_empty() {
+            bounds = [[0.0; 3]; 2];
+        }
         Ok((
             Manifest {
                 format: MANIFEST_FORMAT.into(),
