@@ -146,14 +146,28 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     for (path, e) in &report.manifest_problems {
         eprintln!("manifest: left out {}: {e}", path.display());
     }
-    for (i, e) in &report.failed {
+    // Every failure is said, but a long run of them is summarised (a case that promises a
+    // million steps over three files must not print a million lines).
+    const SHOWN: usize = 20;
+    for (i, e) in report.failed.iter().take(SHOWN) {
         eprintln!("step {i}: {e}");
+    }
+    if report.failed.len() > SHOWN {
+        eprintln!("… and {} more failed steps", report.failed.len() - SHOWN);
     }
     if let Some(e) = &report.manifest_error {
         eprintln!("manifest: {e}");
     }
     if !report.failed.is_empty() {
-        let list: Vec<String> = report.failed.iter().map(|(i, _)| i.to_string()).collect();
+        let mut list: Vec<String> = report
+            .failed
+            .iter()
+            .take(SHOWN)
+            .map(|(i, _)| i.to_string())
+            .collect();
+        if report.failed.len() > SHOWN {
+            list.push(format!("… ({} in all)", report.failed.len()));
+        }
         bail!(
             "{} of {} steps failed: {}{}",
             report.failed.len(),

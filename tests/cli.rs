@@ -1318,3 +1318,42 @@ fn endless_inputs_are_refused_and_errors_said_once() {
     assert!(!ok);
     assert_eq!(err.matches("(os error 2)").count(), 1, "{err}");
 }
+
+/// A case that promises far more steps than it has files fails with a summary, not a line
+/// per missing step (issue 14, item 12).
+#[test]
+fn many_failed_steps_are_summarised() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "300", "--steps", "3"]);
+    let case = case_dir.join("sphere.case");
+    let text = std::fs::read_to_string(&case).unwrap();
+    let times: Vec<String> = (0..500)
+        .map(|i| format!("{}", f64::from(i) * 0.05))
+        .collect();
+    let head = text.split("number of steps").next().unwrap();
+    std::fs::write(
+        &case,
+        format!(
+            "{head}number of steps: 500\nfilename start number: 0\nfilename increment: 1\ntime values:\n{}\n",
+            times.join(" ")
+        ),
+    )
+    .unwrap();
+    let (ok, out, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        dir.path().join("cache").to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(!ok);
+    assert!(
+        out.contains("baked 3 steps") && out.contains("497 failed"),
+        "{out}"
+    );
+    assert!(err.contains("… and 477 more failed steps"), "{err}");
+    assert!(err.contains("(497 in all)"), "{err}");
+    assert!(err.lines().count() < 30, "{} lines", err.lines().count());
+    assert!(err.len() < 8000, "{} bytes", err.len());
+}

@@ -584,7 +584,18 @@ fn build_time_sets(path: &Path, entries: &[Entry]) -> Result<Vec<TimeSet>> {
                 }
                 (None, Some(start)) => {
                     let inc = p.increment.unwrap_or(1);
-                    (0..steps as i64).map(|i| start + i * inc).collect()
+                    // Numbers past i64 are an error, not a wrap-around.
+                    (0..steps as i64)
+                        .map(|i| i.checked_mul(inc).and_then(|d| start.checked_add(d)))
+                        .collect::<Option<Vec<i64>>>()
+                        .ok_or_else(|| {
+                            Error::parse(
+                                path,
+                                at,
+                                format!("file numbers that fit in 64 bits for time set {}", p.id),
+                                format!("start {start}, increment {inc} over {steps} steps"),
+                            )
+                        })?
                 }
                 (None, None) => Vec::new(),
             };
@@ -717,5 +728,18 @@ mod tests {
             assert!(err.contains(found), "{times}: {err}");
         }
         assert!(CaseFile::parse(Path::new("x.case"), &case("0 0.5 1")).is_ok());
+    }
+
+    /// File numbers that would pass 2^63 are an error, not a wrap-around (issue 14, item 12).
+    #[test]
+    fn file_numbers_do_not_wrap() {
+        let text = "FORMAT\ntype: ensight gold\nGEOMETRY\nmodel: 1 g.geo*\nTIME\ntime set: 1\nnumber of steps: 3\nfilename start number: 9223372036854775806\nfilename increment: 1\ntime values: 0 1 2\n";
+        let err = CaseFile::parse(Path::new("big.case"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("big.case") && err.contains("fit in 64 bits"),
+            "{err}"
+        );
     }
 }
