@@ -29,6 +29,18 @@ fn generate(dir: &Path, args: &[&str]) {
     assert!(ok, "slosh gen failed: {err}");
 }
 
+/// `slosh bake CASE --out OUT EXTRA…`.
+fn bake_case(case: &Path, out: &Path, extra: &[&str]) -> (bool, String, String) {
+    let mut args = vec![
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    slosh(&args)
+}
+
 fn in_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| v == "true")
 }
@@ -259,13 +271,7 @@ fn classic_models_convert() {
     // The bunny stands on its base: baked, its cache says y is up (the framing camera's up).
     let cache = dir.path().join("bunny-cache");
     let case = dir.path().join("bunny.obj").join("bunny.case");
-    let (ok, out, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        cache.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, out, err) = bake_case(&case, &cache, &["--quiet"]);
     assert!(ok, "{out}{err}");
     let file = slosh_cache::CacheFile::open(&cache.join("step-00000.slc")).unwrap();
     assert_eq!(file.header().up, Some([0.0, 1.0, 0.0]));
@@ -435,15 +441,7 @@ fn bake_then_inspect_and_render_a_tank() {
     generate(&case_dir, &["tank", "--points", "20000", "--steps", "4"]);
     let case = case_dir.join("tank.case");
     let cache = dir.path().join("cache");
-    let (ok, out, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        cache.to_str().unwrap(),
-        "--fields",
-        "pressure",
-        "--quiet",
-    ]);
+    let (ok, out, err) = bake_case(&case, &cache, &["--fields", "pressure", "--quiet"]);
     assert!(ok, "bake failed: {err}");
     assert!(out.contains("baked 4 steps"), "{out}");
     let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
@@ -558,13 +556,7 @@ fn bake_then_inspect_and_render_a_tank() {
     // A missing step file: the batch goes on, reports it, exits non-zero.
     std::fs::remove_file(case_dir.join("tank.geo00002")).unwrap();
     let cache2 = dir.path().join("cache2");
-    let (ok, out, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        cache2.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, out, err) = bake_case(&case, &cache2, &["--quiet"]);
     assert!(!ok);
     assert!(out.contains("baked 3 steps"), "{out}");
     assert!(
@@ -583,25 +575,11 @@ fn shards_make_the_caches_of_one_run() {
     generate(&case_dir, &["sphere", "--points", "1500", "--steps", "7"]);
     let case = case_dir.join("sphere.case");
     let one = dir.path().join("one");
-    let (ok, _, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        one.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, _, err) = bake_case(&case, &one, &["--quiet"]);
     assert!(ok, "{err}");
     let sharded = dir.path().join("sharded");
     for shard in ["0/3", "1/3", "2/3"] {
-        let (ok, out, err) = slosh(&[
-            "bake",
-            case.to_str().unwrap(),
-            "--out",
-            sharded.to_str().unwrap(),
-            "--shard",
-            shard,
-            "--quiet",
-        ]);
+        let (ok, out, err) = bake_case(&case, &sharded, &["--shard", shard, "--quiet"]);
         assert!(ok, "{err}");
         let expect = if shard == "0/3" {
             "baked 3 steps"
@@ -631,13 +609,7 @@ fn a_killed_bake_leaves_only_valid_caches_and_resumes() {
     generate(&case_dir, &["sphere", "--points", "4000", "--steps", "16"]);
     let case = case_dir.join("sphere.case");
     let reference = dir.path().join("reference");
-    let (ok, _, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        reference.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, _, err) = bake_case(&case, &reference, &["--quiet"]);
     assert!(ok, "{err}");
     let cache = dir.path().join("cache");
     let mut child = Command::new(env!("CARGO_BIN_EXE_slosh"))
@@ -679,13 +651,7 @@ fn a_killed_bake_leaves_only_valid_caches_and_resumes() {
     }
     // A manifest write killed half-way leaves its temporary file (a process long gone).
     std::fs::write(cache.join(".manifest.json.tmp-4194300-0"), b"{\"half\": ").unwrap();
-    let (ok, out, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        cache.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, out, err) = bake_case(&case, &cache, &["--quiet"]);
     assert!(ok, "{err}");
     assert!(
         out.contains(&format!(
@@ -853,14 +819,7 @@ fn absurd_job_counts_are_refused() {
     let case = dir.path().join("case/sphere.case");
     for jobs in ["0", "100000", "18446744073709551615"] {
         let start = std::time::Instant::now();
-        let (ok, _, err) = slosh(&[
-            "bake",
-            case.to_str().unwrap(),
-            "--out",
-            dir.path().join("cache").to_str().unwrap(),
-            "--jobs",
-            jobs,
-        ]);
+        let (ok, _, err) = bake_case(&case, &dir.path().join("cache"), &["--jobs", jobs]);
         assert!(!ok, "--jobs {jobs} was accepted");
         assert!(
             err.contains(&format!("--jobs {jobs}: expected 1 to")),
@@ -884,13 +843,7 @@ fn meaningless_or_destructive_render_settings_are_refused() {
         &["sphere", "--points", "800", "--steps", "1"],
     );
     let cache = dir.path().join("cache");
-    let (ok, _, err) = slosh(&[
-        "bake",
-        dir.path().join("case/sphere.case").to_str().unwrap(),
-        "--out",
-        cache.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, _, err) = bake_case(&dir.path().join("case/sphere.case"), &cache, &["--quiet"]);
     assert!(ok, "{err}");
     let before = std::fs::read(cache.join("step-00000.slc")).unwrap();
     let png = dir.path().join("x.png");
@@ -976,12 +929,7 @@ fn a_bake_never_writes_what_its_verifier_rejects() {
     );
     let cache = dir.path().join("cache");
     for _ in 0..2 {
-        let (ok, out, err) = slosh(&[
-            "bake",
-            case_dir.join("sphere.case").to_str().unwrap(),
-            "--out",
-            cache.to_str().unwrap(),
-        ]);
+        let (ok, out, err) = bake_case(&case_dir.join("sphere.case"), &cache, &[]);
         assert!(!ok, "{out}");
         assert!(
             err.contains("step-00000.slc") && err.contains("not written"),
@@ -998,13 +946,7 @@ fn resume_rebakes_when_the_input_changed() {
     let dir = tempfile::tempdir().unwrap();
     let cache = dir.path().join("cache");
     let bake = |case: &Path| {
-        let (ok, out, err) = slosh(&[
-            "bake",
-            case.to_str().unwrap(),
-            "--out",
-            cache.to_str().unwrap(),
-            "--quiet",
-        ]);
+        let (ok, out, err) = bake_case(case, &cache, &["--quiet"]);
         assert!(ok, "{out}{err}");
         out
     };
@@ -1033,25 +975,10 @@ fn a_partial_rebake_with_other_settings_writes_nothing() {
     generate(&case_dir, &["sphere", "--points", "1500", "--steps", "2"]);
     let case = case_dir.join("sphere.case");
     let cache = dir.path().join("cache");
-    let (ok, _, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        cache.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, _, err) = bake_case(&case, &cache, &["--quiet"]);
     assert!(ok, "{err}");
     let before = std::fs::read(cache.join("step-00000.slc")).unwrap();
-    let (ok, out, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        cache.to_str().unwrap(),
-        "--steps",
-        "0..=0",
-        "--k",
-        "8",
-    ]);
+    let (ok, out, err) = bake_case(&case, &cache, &["--steps", "0..=0", "--k", "8"]);
     assert!(!ok, "{out}");
     assert!(
         err.contains("step-00001.slc") && err.contains("nothing was written"),
@@ -1109,15 +1036,7 @@ fn manifest_failures_do_not_hide_step_failures() {
     generate(&case_dir, &["sphere", "--points", "800", "--steps", "3"]);
     let case = case_dir.join("sphere.case");
     let cache = dir.path().join("cache");
-    let bake = || {
-        slosh(&[
-            "bake",
-            case.to_str().unwrap(),
-            "--out",
-            cache.to_str().unwrap(),
-            "--quiet",
-        ])
-    };
+    let bake = || bake_case(&case, &cache, &["--quiet"]);
     let (ok, _, err) = bake();
     assert!(ok, "{err}");
     let manifest = cache.join(slosh_cache::MANIFEST_NAME);
@@ -1231,15 +1150,7 @@ fn steps_read_the_same_everywhere() {
         let cache = dir
             .path()
             .join(format!("c{}", range.replace('.', "_").replace('=', "e")));
-        let (ok, out, err) = slosh(&[
-            "bake",
-            case.to_str().unwrap(),
-            "--out",
-            cache.to_str().unwrap(),
-            "--steps",
-            range,
-            "--quiet",
-        ]);
+        let (ok, out, err) = bake_case(&case, &cache, &["--steps", range, "--quiet"]);
         (ok, format!("{out}{err}"), cache)
     };
     let (ok, out, cache) = baked("0..2");
@@ -1340,13 +1251,7 @@ fn many_failed_steps_are_summarised() {
         ),
     )
     .unwrap();
-    let (ok, out, err) = slosh(&[
-        "bake",
-        case.to_str().unwrap(),
-        "--out",
-        dir.path().join("cache").to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (ok, out, err) = bake_case(&case, &dir.path().join("cache"), &["--quiet"]);
     assert!(!ok);
     assert!(
         out.contains("baked 3 steps") && out.contains("497 failed"),
