@@ -57,8 +57,12 @@ pub fn gather(case: &Case) -> Info {
     let mut encoding = None;
     let mut byte_order = None;
     let mut parts = Vec::new();
+    // The format is read off the first step whose geometry reads: one missing file does not
+    // make the whole case "unreadable".
+    let first_geometry =
+        (0..case.step_count().max(1)).find_map(|i| case.read_geometry(i, true).ok());
     if file.model.is_some()
-        && let Ok(g) = case.read_geometry(0, true)
+        && let Some(g) = first_geometry
     {
         encoding = Some(g.encoding);
         byte_order = g.byte_order;
@@ -75,7 +79,8 @@ pub fn gather(case: &Case) -> Info {
             .collect();
     }
     if file.measured.is_some()
-        && let Ok(m) = case.read_measured(0, true)
+        && let Some(m) =
+            (0..case.step_count().max(1)).find_map(|i| case.read_measured(i, true).ok())
     {
         encoding = encoding.or(Some(m.encoding));
         byte_order = byte_order.or(m.byte_order);
@@ -163,7 +168,7 @@ pub fn render_human(info: &Info) -> String {
             }
         ),
         Some(Encoding::Ascii) => "ASCII".to_string(),
-        None => "unreadable".to_string(),
+        None => "encoding unknown: no step's files could be read".to_string(),
     };
     let _ = writeln!(out, "case      {}", info.case);
     let _ = writeln!(out, "format    {fmt}, {enc}");

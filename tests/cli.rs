@@ -1262,3 +1262,32 @@ fn many_failed_steps_are_summarised() {
     assert!(err.lines().count() < 30, "{} lines", err.lines().count());
     assert!(err.len() < 8000, "{} bytes", err.len());
 }
+
+/// A case without geometry is refused once, naming what is missing; `info` reads the format
+/// off the first step whose files are there (issue 14, item 12).
+#[test]
+fn cases_without_geometry_or_a_first_step_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(dir.path(), &["sphere", "--points", "300", "--steps", "3"]);
+    let case = dir.path().join("sphere.case");
+    let text = std::fs::read_to_string(&case).unwrap();
+    // Only the geometry of step 0 missing: the format is still known.
+    std::fs::remove_file(dir.path().join("sphere.geo00000")).unwrap();
+    let (_, out, err) = slosh(&["info", case.to_str().unwrap()]);
+    assert!(
+        out.contains("C Binary") && !out.contains("unknown"),
+        "{out}{err}"
+    );
+    // No model: line at all.
+    let bare = dir.path().join("bare.case");
+    let without: String = text
+        .lines()
+        .filter(|l| !l.starts_with("model:"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&bare, without).unwrap();
+    let (ok, _, err) = slosh(&["info", bare.to_str().unwrap()]);
+    assert!(!ok && err.contains("bare.case"), "{err}");
+    assert!(err.contains("\"model:\" or \"measured:\" line"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+}

@@ -115,6 +115,15 @@ impl Case {
     /// Parses case text as if it had been read from `path` (data files are found beside it).
     pub fn from_text(path: &Path, text: &str) -> Result<Case> {
         let file = CaseFile::parse(path, text)?;
+        // Without geometry there are no particles to read, in any step: say so once, here.
+        if file.model.is_none() && file.measured.is_none() {
+            return Err(Error::parse(
+                path,
+                Location::File,
+                "a \"model:\" or \"measured:\" line in the GEOMETRY section",
+                "neither",
+            ));
+        }
         let main_set = file
             .model
             .as_ref()
