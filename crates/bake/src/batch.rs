@@ -152,7 +152,8 @@ fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &s
     input.identity = identity;
     let baked = match bake_step(&input, &opts.params) {
         Ok(b) => b,
-        Err(e) => return Outcome::Failed(e.to_string()),
+        // The report names the step; the error's own "step N:" would say it twice.
+        Err(e) => return Outcome::Failed(e.problem()),
     };
     drop(input);
     let mut header = baked.header;
@@ -326,4 +327,20 @@ pub fn run_batch(
     }
     report.wall_seconds = start.elapsed().as_secs_f64();
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::step::BakeError;
+
+    /// A failed step is reported as "step N: problem", once (issue 14, item 12).
+    #[test]
+    fn failures_do_not_repeat_the_step() {
+        let e = BakeError::Input {
+            step: 3,
+            problem: "no normals read from 'normal'".into(),
+        };
+        assert_eq!(e.to_string(), "step 3: no normals read from 'normal'");
+        assert_eq!(e.problem(), "no normals read from 'normal'");
+    }
 }

@@ -23,6 +23,16 @@ pub enum BakeError {
     },
 }
 
+impl BakeError {
+    /// What went wrong, without the step number (for reports that name the step already).
+    pub fn problem(&self) -> String {
+        match self {
+            BakeError::Input { problem, .. } => problem.clone(),
+            BakeError::Surface { source, .. } => source.to_string(),
+        }
+    }
+}
+
 /// Points per neighbour cluster. Measured on a 100k-point sphere at the default cap of 128:
 /// clusters of 16, 32 and 64 store 16.8, 10.9 and 7.4 candidate ids per point, against 128
 /// per point for separate lists; 32 also matches a GPU subgroup of points.
