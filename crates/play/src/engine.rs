@@ -372,12 +372,7 @@ impl Engine {
         let index = self.shown?;
         let position = self.position(index)?;
         // Looked up without marking it used: reading is not displaying.
-        self.pool_peek(index).map(|s| (position, s))
-    }
-
-    fn pool_peek(&self, index: usize) -> Option<&GpuStep> {
-        // StepPool::get marks use; a shared peek goes through a read-only path.
-        self.pool.peek(index)
+        self.pool.peek(index).map(|s| (position, s))
     }
 
     /// Colours by `field` from now on: loaders load it, resident steps switch when shown.
@@ -546,7 +541,6 @@ impl Engine {
         request: &FrameRequest,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<FrameReport> {
-        let before = self.timeline.current();
         let time_moved = self.timeline.advance(request.seconds);
         let position = self.timeline.current();
         // How fast the position moves, by play or by scrub.
@@ -569,7 +563,7 @@ impl Engine {
         {
             self.moves.pop_front();
         }
-        let scrubbed = position != self.last_position || before != position;
+        let scrubbed = position != self.last_position;
         self.last_position = position;
         let window = self.window();
         let mut report = FrameReport {
