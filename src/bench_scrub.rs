@@ -19,7 +19,7 @@ use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 use crate::cli::ScrubBenchArgs;
-use crate::render::{framing_camera, parse_size};
+use crate::render::parse_size;
 
 /// Percentiles of a sample, in the sample's unit.
 #[derive(Debug, Clone, Copy, Default)]
@@ -346,7 +346,7 @@ fn measure(
     drop((raw, target));
 
     let bounds = manifest.bounds;
-    let camera = framing_camera(&bounds, 40.0, size.0, size.1);
+    let camera = slosh_mls::Camera::framing(&bounds, 40.0, size.0, size.1, [0.0, 0.0, 1.0]);
     let params = TraceParams {
         iterations: 1,
         ..TraceParams::default()

@@ -51,12 +51,6 @@ pub fn parse_size(s: &str) -> Result<(u32, u32)> {
     Ok((w, h))
 }
 
-/// The framing camera of `slosh render` and the benchmarks: z up unless `--up` says
-/// otherwise.
-pub fn framing_camera(bounds: &[[f64; 3]; 2], fov_y: f64, width: u32, height: u32) -> Camera {
-    Camera::framing(bounds, fov_y, width, height, [0.0, 0.0, 1.0])
-}
-
 fn step_path(path: &Path, step: usize) -> PathBuf {
     if path.is_dir() {
         path.join(step_file_name(step))
@@ -184,12 +178,16 @@ fn parse_steps(s: &str) -> Result<Vec<usize>> {
     Ok((first..=last).collect())
 }
 
-/// A step rendered from a cache directory must belong to its series (the manifest's).
-fn check_belongs(dir: &Path, step: usize, path: &Path, file: &CacheFile) -> Result<()> {
-    if !dir.is_dir() {
-        return Ok(());
-    }
-    if let Ok(manifest) = slosh_cache::Manifest::read(dir) {
+/// A step rendered from a cache directory must belong to its series (`manifest`, read once
+/// per run where the directory has one).
+fn check_belongs(
+    manifest: Option<&slosh_cache::Manifest>,
+    dir: &Path,
+    step: usize,
+    path: &Path,
+    file: &CacheFile,
+) -> Result<()> {
+    if let Some(manifest) = manifest {
         let problems = manifest.step_problems(step, file);
         if !problems.is_empty() {
             bail!(
@@ -384,6 +382,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .with_context(|| format!("opening step {}", config.steps[0]))?;
     let camera = camera_for(args, first.header(), config.width, config.height)?;
     drop(first);
+    let manifest = if args.path.is_dir() {
+        slosh_cache::Manifest::read(&args.path).ok()
+    } else {
+        None
+    };
     // Output folders (e.g. frames/ of a sequence) are created as needed.
     for pattern in [&args.out, &args.aov].into_iter().flatten() {
         if let Some(dir) = expand_pattern(pattern, 0).parent()
@@ -401,7 +404,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if args.cpu {
         for &step in &config.steps {
             let (out, aov) = targets(step);
-            render_cpu(args, &camera, step, out.as_deref(), aov.as_deref())?;
+            render_cpu(
+                args,
+                manifest.as_ref(),
+                &camera,
+                step,
+                out.as_deref(),
+                aov.as_deref(),
+            )?;
         }
         return Ok(());
     }
@@ -417,7 +427,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     for &step in &config.steps {
         let path = step_path(&args.path, step);
         let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
-        check_belongs(&args.path, step, &path, &file)?;
+        check_belongs(manifest.as_ref(), &args.path, step, &path, &file)?;
         let gpu_step = GpuStep::upload(&gpu, &file, args.field.as_deref())?;
         let h = file.header();
         let params = TraceParams {
@@ -471,6 +481,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 
 fn render_cpu(
     args: &RenderArgs,
+    manifest: Option<&slosh_cache::Manifest>,
     camera: &Camera,
     step_index: usize,
     out: Option<&Path>,
@@ -479,7 +490,7 @@ fn render_cpu(
     let (width, height) = (camera.width, camera.height);
     let path = step_path(&args.path, step_index);
     let file = CacheFile::open(&path).with_context(|| format!("opening step {step_index}"))?;
-    check_belongs(&args.path, step_index, &path, &file)?;
+    check_belongs(manifest, &args.path, step_index, &path, &file)?;
     let step = LoadedStep::load(&file)?;
     let h = file.header();
     let params = Params {
