@@ -205,8 +205,20 @@ impl<'a> AsciiCursor<'a> {
     /// A count (≥ 0) of items that each hold `values_per_item` numbers further on. Every
     /// number takes at least two bytes (a digit and a separator), so a count the rest of the
     /// file cannot hold is refused before anything is allocated for it.
+    /// A count stands alone on its line, so a token wider than the field is read whole: cutting
+    /// it at the column would report a value the file does not hold.
     pub fn count(&mut self, width: usize, values_per_item: usize, what: &str) -> Result<usize> {
-        let v = self.int(width, what)?;
+        self.refill(what)?;
+        let alone = self.fresh && trim(self.rest).split(u8::is_ascii_whitespace).count() == 1;
+        let v = if alone {
+            let token = trim(self.rest);
+            self.rest = &[];
+            self.fresh = false;
+            parse_i64(token)
+                .ok_or_else(|| self.error(format!("{what} (a count ≥ 0)"), quote(token)))?
+        } else {
+            self.int(width, what)?
+        };
         let n = usize::try_from(v)
             .map_err(|_| self.error(format!("{what} (a count ≥ 0)"), v.to_string()))?;
         let left = self.bytes_left();
@@ -294,6 +306,21 @@ mod tests {
         let mut out = Vec::new();
         c.ints(3, 8, &mut out, "n").unwrap();
         assert_eq!(out, vec![1, 12345678, 1234567]);
+    }
+
+    #[test]
+    fn an_over_long_count_is_reported_whole() {
+        let data = b"123456789012345678901\n";
+        let mut c = AsciiCursor::at(Path::new("g.geo"), data, 0, 0);
+        let e = c.count(10, 12, "number of nodes").unwrap_err().to_string();
+        assert!(e.contains("123456789012345678901"), "{e}");
+        let data = b"  123456789012\n";
+        let mut c = AsciiCursor::at(Path::new("g.geo"), data, 0, 0);
+        let e = c.count(8, 12, "number of nodes").unwrap_err().to_string();
+        assert!(e.contains("123456789012 items"), "{e}");
+        let data = b"      42\n";
+        let mut c = AsciiCursor::at(Path::new("g.geo"), data, 0, 0);
+        assert_eq!(c.count(8, 0, "n").unwrap(), 42);
     }
 
     #[test]
