@@ -3,8 +3,9 @@
 // `expand`: the neighbour masks: which of a point's cluster
 // candidates are its neighbours (clusters.rs: expand_one, the rule docs/algorithm.md gives):
 // within the point's reach, and not a point whose normal opposes the centre's (both valid).
-// Bit b of word w is candidate slot 32 w + b. The refinement loops in mls.wgsl then visit
-// only the set bits.
+// Bit b of word w is candidate slot 32 w + b; words lie in rows of one word per member
+// (step.wgsl: mask_row), so a cluster writes only the words its own candidates need. The
+// refinement loops in mls.wgsl then visit only the set bits.
 //
 // `widen`: the 4-wide tree the trace walk descends (`Wide` in step.wgsl).
 //
@@ -69,9 +70,10 @@ fn expand(
         cluster_count = select(0u, last - first, last > first);
     }
     let first = workgroupUniformLoad(&cluster_first);
-    // Candidates past the mask words are never tested (as the thread per word had none).
+    // Candidates past the largest cluster's words are never tested.
     let count = min(workgroupUniformLoad(&cluster_count), cfg.mask_words * 32u);
     let members = min(size, cfg.point_count - c * size);
+    let row = mask_row(c, first);
     for (var base = 0u; base < count; base += MASK_TILE) {
         let k = base + lid;
         var position = vec4<f32>(0.0);
@@ -127,16 +129,9 @@ fn expand(
                 }
                 bits |= 1u << b;
             }
-            neighbour_masks_set(centre * cfg.mask_words + word, bits);
+            neighbour_masks_set((row + word) * size + pair % members, bits);
         }
         workgroupBarrier();
-    }
-    // Words with no candidates are written too (buffers may be reused).
-    let used = (count + 31u) / 32u;
-    let rest = cfg.mask_words - used;
-    for (var pair = lid; pair < members * rest; pair += MASK_TILE) {
-        let centre = c * size + pair % members;
-        neighbour_masks_set(centre * cfg.mask_words + used + pair / members, 0u);
     }
 }
 

@@ -50,7 +50,7 @@ struct Settings {
     field_min: f32,
     field_max: f32,
     has_field: u32,
-    // Words of neighbour_masks per point.
+    // Words of neighbour mask of the largest cluster.
     mask_words: u32,
     // Entries of bvh_nodes (the blank lead node included) and of bvh_items.
     node_count: u32,
@@ -147,17 +147,26 @@ fn normalized(v: vec3<f32>) -> Unit {
 
 // A ball's neighbours are its cluster's candidates within reach, minus points whose normal
 // opposes the centre's (both valid). expand.wgsl applies that rule once per step and leaves a
-// bit per candidate slot: `mask_words` words per point, bit b of word w for slot 32 w + b.
-// Visiting set bits in order visits the list in index order, as the CPU does.
+// bit per candidate slot: bit b of word w for slot 32 w + b, word w of member m at
+// `(mask_row + w) * cluster_size + m` (step.wgsl). Visiting set bits in order visits the list
+// in index order, as the CPU does.
 struct Neighbourhood {
     first: u32,
+    // Index of the member's word 0, and the distance between its words.
     mask: u32,
+    stride: u32,
     words: u32,
 }
 
 fn neighbourhood(centre: u32) -> Neighbourhood {
-    let c = centre / max(settings.cluster_size, 1u);
-    return Neighbourhood(cluster_start_at(c), centre * settings.mask_words, settings.mask_words);
+    let size = max(settings.cluster_size, 1u);
+    let c = centre / size;
+    let first = cluster_start_at(c);
+    let last = cluster_start_at(c + 1u);
+    let count = select(0u, last - first, last > first);
+    // The largest cluster's words bound any other's.
+    let words = min((count + 31u) / 32u, settings.mask_words);
+    return Neighbourhood(first, mask_row(c, first) * size + centre % size, size, words);
 }
 
 // Where a walk over a neighbourhood stands: the current word and its unvisited bits.
@@ -179,7 +188,7 @@ fn next_neighbour(nb: Neighbourhood, cursor: ptr<function, Cursor>) -> u32 {
         if (*cursor).word >= nb.words {
             return NO_NEIGHBOUR;
         }
-        (*cursor).bits = neighbour_masks_at(nb.mask + (*cursor).word);
+        (*cursor).bits = neighbour_masks_at(nb.mask + (*cursor).word * nb.stride);
     }
     let bits = (*cursor).bits;
     (*cursor).bits = bits & (bits - 1u);

@@ -12,6 +12,15 @@ struct Normal {
     pad: f32,
 }
 
+// The neighbour masks hold a row of `cluster_size` words (one per member) for each word a
+// cluster needs: its candidates over 32, rounded up. Cluster c's rows begin at
+// (first + 31 c) / 32, `first` being its first candidate slot (cluster_start[c]); this bound
+// grows by at least a cluster's rows from one cluster to the next, so no prefix sum is needed,
+// and a word's members lie side by side. Mirrors `slosh_render::mask_row`.
+fn mask_row(cluster: u32, first: u32) -> u32 {
+    return (first + 31u * cluster) / 32u;
+}
+
 // A droplet sphere and a BVH node (mirror `slosh_cache::GpuSphere` and `GpuBvhNode`).
 struct Sphere {
     centre: vec3<f32>,

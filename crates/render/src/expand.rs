@@ -90,7 +90,7 @@ impl Expander {
         })
     }
 
-    /// Records the passes that fill `inputs.masks` (`mask_words` u32s per point),
+    /// Records the passes that fill `inputs.masks` (rows of words, `mask_row`),
     /// `inputs.leaf_spheres` (one per BVH item) and `inputs.wide_nodes` (one per BVH2 node);
     /// `split` when an array spans several ranges.
     pub(crate) fn encode(

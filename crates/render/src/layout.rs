@@ -31,7 +31,7 @@ pub struct GpuSettings {
     pub field_min: f32,
     pub field_max: f32,
     pub has_field: u32,
-    /// Words of the neighbour masks per point.
+    /// Words of neighbour mask of the largest cluster.
     pub mask_words: u32,
     /// Entries of bvh_nodes on the GPU (the blank lead node included) and of bvh_items.
     pub node_count: u32,

@@ -75,7 +75,7 @@ pub struct StepBuffers {
     pub normals: wgpu::Buffer,
     /// Read by the neighbour-mask pass only.
     pub reach: wgpu::Buffer,
-    /// Written by the neighbour-mask pass at upload: `mask_words` u32s per point.
+    /// Written by the neighbour-mask pass at upload: rows of words (see [`mask_row`]).
     pub masks: wgpu::Buffer,
     pub cluster_start: wgpu::Buffer,
     pub cluster_ids: wgpu::Buffer,
@@ -159,8 +159,10 @@ pub struct StepInfo {
     pub item_count: u32,
     /// Entries of the cluster candidate list.
     pub cluster_id_count: u32,
-    /// Words of neighbour mask per point: the most candidates of any cluster, over 32.
+    /// Words of neighbour mask of the largest cluster: its candidates over 32.
     pub mask_words: u32,
+    /// Rows of `cluster_size` mask words that hold every cluster's (see [`mask_row`]).
+    pub mask_rows: u64,
     pub has_normals: bool,
     /// The degree the balls were fitted at, and "mean" or "covariance".
     pub degree: u8,
@@ -175,7 +177,7 @@ pub struct StepInfo {
 impl StepInfo {
     /// Bytes of the neighbour masks, leaf spheres and wide nodes the per-step passes derive.
     pub fn derived_bytes(&self) -> [u64; 3] {
-        let masks = u64::from(self.point_count) * u64::from(self.mask_words) * 4;
+        let masks = self.mask_rows * u64::from(self.cluster_size) * 4;
         let leaves = u64::from(self.item_count) * 16;
         let wide = u64::from(self.node_count - 1) * WIDE_NODE_BYTES;
         [
@@ -371,6 +373,7 @@ impl<'a> HostStep<'a> {
             item_count: count(names::BVH_ITEMS) as u32,
             cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
             mask_words: 0,
+            mask_rows: 0,
             has_normals: f.section(names::NORMALS).is_some(),
             degree: header.mls.degree,
             covariance: header.mls.normals == "covariance",
@@ -394,7 +397,13 @@ impl<'a> HostStep<'a> {
         let items = u64::from(step.info.item_count);
         check_tree(step.section_bytes(slot_of(names::BVH_NODES)), items)
             .map_err(|problem| invalid(step.file(), problem))?;
-        step.info.mask_words = mask_words(step.section_bytes(slot_of(names::CLUSTER_START)));
+        let (words, rows) = mask_layout(
+            step.section_bytes(slot_of(names::CLUSTER_START)),
+            step.info.cluster_size,
+            u64::from(step.info.cluster_id_count),
+        )
+        .map_err(|problem| invalid(step.file(), problem))?;
+        (step.info.mask_words, step.info.mask_rows) = (words, rows);
         step.host_seconds = start.elapsed().as_secs_f64();
         Ok(step)
     }
@@ -486,18 +495,44 @@ fn invalid(file: &CacheFile, problem: String) -> Error {
     }
 }
 
-/// Words of neighbour mask per point: one bit per candidate of the largest cluster.
-fn mask_words(cluster_start: &[u8]) -> u32 {
-    let starts: Vec<u32> = cluster_start
+/// The first row of cluster `cluster`'s neighbour-mask words, `first` being its first
+/// candidate slot: `mask_row` in shaders/step.wgsl, which explains the layout.
+pub fn mask_row(cluster: u64, first: u64) -> u64 {
+    (first + 31 * cluster) / 32
+}
+
+/// The neighbour masks' layout: the most words any cluster needs, and the rows of
+/// `cluster_size` words that hold every cluster's. An error where the cluster offsets are not
+/// monotone from 0 to the candidate count (the shaders rely on it) or the masks would not be
+/// indexable by u32.
+fn mask_layout(
+    cluster_start: &[u8],
+    cluster_size: u32,
+    candidates: u64,
+) -> std::result::Result<(u32, u64), String> {
+    let starts: Vec<u64> = cluster_start
         .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .map(|c| u64::from(u32::from_le_bytes([c[0], c[1], c[2], c[3]])))
         .collect();
-    let most = starts
-        .windows(2)
-        .map(|w| w[1].saturating_sub(w[0]))
-        .max()
-        .unwrap_or(0);
-    most.div_ceil(32)
+    if starts.first().is_some_and(|&s| s != 0)
+        || starts.windows(2).any(|w| w[0] > w[1])
+        || starts.last().is_some_and(|&s| s != candidates)
+    {
+        return Err(format!(
+            "section '{}' is not monotone from 0 to the {candidates} candidates of '{}'",
+            names::CLUSTER_START,
+            names::CLUSTER_NEIGHBOURS
+        ));
+    }
+    let most = starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    let clusters = starts.len().saturating_sub(1) as u64;
+    let rows = mask_row(clusters, starts.last().copied().unwrap_or(0));
+    if rows * u64::from(cluster_size) > u64::from(u32::MAX) {
+        return Err(format!(
+            "{rows} rows of neighbour masks exceed the tracer's 32-bit indices"
+        ));
+    }
+    Ok((most.div_ceil(32) as u32, rows))
 }
 
 /// Finite minimum and maximum of little-endian f32s (0, 0 when there are none).
