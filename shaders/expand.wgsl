@@ -3,8 +3,8 @@
 // `expand`: the neighbour masks: which of a point's cluster
 // candidates are its neighbours (clusters.rs: expand_one, the rule docs/algorithm.md gives):
 // within the point's reach, and not a point whose normal opposes the centre's (both valid).
-// Bit b of word w is candidate slot 32 w + b; words lie in rows of one word per member
-// (step.wgsl: mask_row), so a cluster writes only the words its own candidates need. The
+// Bit b of word w is candidate slot 32 w + b; a cluster writes only the words its own
+// candidates need, each member's side by side (step.wgsl: mask_row). The
 // refinement loops in mls.wgsl then visit only the set bits.
 //
 // `widen`: the 4-wide tree the trace walk descends (`Wide` in step.wgsl).
@@ -73,7 +73,8 @@ fn expand(
     // Candidates past the largest cluster's words are never tested.
     let count = min(workgroupUniformLoad(&cluster_count), cfg.mask_words * 32u);
     let members = min(size, cfg.point_count - c * size);
-    let row = mask_row(c, first);
+    let block = mask_row(c, first) * size;
+    let words = (count + 31u) / 32u;
     for (var base = 0u; base < count; base += MASK_TILE) {
         let k = base + lid;
         var position = vec4<f32>(0.0);
@@ -129,7 +130,7 @@ fn expand(
                 }
                 bits |= 1u << b;
             }
-            neighbour_masks_set((row + word) * size + pair % members, bits);
+            neighbour_masks_set(block + (pair % members) * words + word, bits);
         }
         workgroupBarrier();
     }

@@ -147,14 +147,13 @@ fn normalized(v: vec3<f32>) -> Unit {
 
 // A ball's neighbours are its cluster's candidates within reach, minus points whose normal
 // opposes the centre's (both valid). expand.wgsl applies that rule once per step and leaves a
-// bit per candidate slot: bit b of word w for slot 32 w + b, word w of member m at
-// `(mask_row + w) * cluster_size + m` (step.wgsl). Visiting set bits in order visits the list
-// in index order, as the CPU does.
+// bit per candidate slot: bit b of word w for slot 32 w + b, member m's words at
+// `mask_row * cluster_size + m * words` (step.wgsl). Visiting set bits in order visits the
+// list in index order, as the CPU does.
 struct Neighbourhood {
     first: u32,
-    // Index of the member's word 0, and the distance between its words.
+    // Index of the member's word 0.
     mask: u32,
-    stride: u32,
     words: u32,
 }
 
@@ -166,7 +165,7 @@ fn neighbourhood(centre: u32) -> Neighbourhood {
     let count = select(0u, last - first, last > first);
     // The largest cluster's words bound any other's.
     let words = min((count + 31u) / 32u, settings.mask_words);
-    return Neighbourhood(first, mask_row(c, first) * size + centre % size, size, words);
+    return Neighbourhood(first, mask_row(c, first) * size + (centre % size) * words, words);
 }
 
 // Where a walk over a neighbourhood stands: the current word and its unvisited bits.
@@ -188,7 +187,7 @@ fn next_neighbour(nb: Neighbourhood, cursor: ptr<function, Cursor>) -> u32 {
         if (*cursor).word >= nb.words {
             return NO_NEIGHBOUR;
         }
-        (*cursor).bits = neighbour_masks_at(nb.mask + (*cursor).word * nb.stride);
+        (*cursor).bits = neighbour_masks_at(nb.mask + (*cursor).word);
     }
     let bits = (*cursor).bits;
     (*cursor).bits = bits & (bits - 1u);

@@ -12,11 +12,12 @@ struct Normal {
     pad: f32,
 }
 
-// The neighbour masks hold a row of `cluster_size` words (one per member) for each word a
-// cluster needs: its candidates over 32, rounded up. Cluster c's rows begin at
-// (first + 31 c) / 32, `first` being its first candidate slot (cluster_start[c]); this bound
-// grows by at least a cluster's rows from one cluster to the next, so no prefix sum is needed,
-// and a word's members lie side by side. Mirrors `slosh_render::mask_row`.
+// The neighbour masks give each cluster a block of `cluster_size` rows' worth of words: a
+// member's words (its candidates over 32, rounded up) side by side, member after member.
+// Cluster c's block begins at row (first + 31 c) / 32 (rows of `cluster_size` words), `first`
+// being its first candidate slot (cluster_start[c]); this bound grows by at least a cluster's
+// words per member from one cluster to the next, so no prefix sum is needed. Mirrors
+// `slosh_render::mask_row`.
 fn mask_row(cluster: u32, first: u32) -> u32 {
     return (first + 31u * cluster) / 32u;
 }

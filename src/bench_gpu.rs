@@ -532,7 +532,7 @@ fn write_report(
     }
     let _ = writeln!(
         md,
-        "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, decompression, the tree check), the recording (buffers created, copies into `mapped_at_creation` staging buffers), `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
+        "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree check), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
     );
     let _ = writeln!(
         md,

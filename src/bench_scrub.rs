@@ -294,9 +294,12 @@ fn measure(
             gpu,
             &host,
             &mut copies,
-            Some(&mut passes),
-            stamps.as_ref().map(|(set, _, _)| set),
-            Some(&staging),
+            slosh_render::UploadOptions {
+                passes: Some(&mut passes),
+                timestamps: stamps.as_ref().map(|(set, _, _)| set),
+                staging: Some(&staging),
+                cancelled: None,
+            },
         )?;
         if let Some((set, resolve, readback)) = &stamps {
             passes.resolve_query_set(set, 0..6, resolve, 0);
@@ -602,7 +605,7 @@ fn markdown(
     let _ = writeln!(md, "## A step, and the floors\n");
     let _ = writeln!(
         md,
-        "Host: `HostStep::open` (map, checks, decode of compressed sections in parallel, tree check). Record: `GpuStep::create` (buffers, copies into mapped staging, passes recorded). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
+        "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
     );
     let _ = writeln!(
         md,

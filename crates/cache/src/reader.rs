@@ -346,9 +346,8 @@ impl CacheFile {
         Ok(stored)
     }
 
-    /// Checks the section's checksums, then decodes it into `out` (exactly `entry.raw` bytes,
-    /// e.g. a mapped GPU staging buffer), its chunks in parallel. `scratch` is reused for a
-    /// section of one run.
+    /// Checks the section's checksums, then decodes it into `out` (exactly `entry.raw` bytes),
+    /// its runs in parallel. `scratch` is reused for a section of one run.
     pub fn decode_into(
         &self,
         entry: &SectionEntry,
@@ -366,13 +365,10 @@ impl CacheFile {
                 ),
             ));
         }
-        let stored = self.stored(entry);
-        if entry.chunks.is_empty() {
-            self.check_sum(entry, "section", 0, stored, &entry.xxh3)?;
-            return decode_into(stored, entry.encoding, out, scratch)
-                .map_err(|e| self.section_error(entry, e.to_string()));
-        }
         let spans = entry.chunk_spans();
+        if spans.len() == 1 {
+            return self.decode_run_into(entry, &spans, 0, out, scratch);
+        }
         let mut outs: Vec<&mut [u8]> = Vec::with_capacity(spans.len());
         let mut rest = out;
         for (_, raw) in &spans {
@@ -380,21 +376,42 @@ impl CacheFile {
             outs.push(head);
             rest = tail;
         }
-        spans
-            .par_iter()
-            .zip(&entry.chunks)
-            .zip(outs)
+        outs.into_par_iter()
             .enumerate()
-            .try_for_each_init(Vec::new, |scratch, (k, (((st, _), chunk), out))| {
-                let bytes = &stored[st.clone()];
-                self.check_sum(entry, &format!("chunk {k}"), st.start, bytes, &chunk.xxh3)?;
-                decode_into(bytes, entry.encoding, out, scratch).map_err(|e| {
-                    self.section_error(
-                        entry,
-                        format!("chunk {k} (stored bytes {}..{}): {e}", st.start, st.end),
-                    )
-                })
+            .try_for_each_init(Vec::new, |scratch, (k, out)| {
+                self.decode_run_into(entry, &spans, k, out, scratch)
             })
+    }
+
+    /// Checks run `k` of a section (its chunk, or the whole section where the table has no
+    /// chunks; `spans` from [`SectionEntry::chunk_spans`]) and decodes it into `out`, exactly
+    /// the run's raw bytes. Runs decode independently, so a caller can put each straight
+    /// where it belongs (a GPU staging buffer), on any thread.
+    pub fn decode_run_into(
+        &self,
+        entry: &SectionEntry,
+        spans: &[(std::ops::Range<usize>, std::ops::Range<usize>)],
+        k: usize,
+        out: &mut [u8],
+        scratch: &mut Vec<u8>,
+    ) -> Result<()> {
+        let Some((st, _)) = spans.get(k) else {
+            return Err(self.section_error(entry, format!("no run {k}")));
+        };
+        let bytes = &self.stored(entry)[st.clone()];
+        let (what, sum) = match entry.chunks.get(k) {
+            Some(chunk) => (format!("chunk {k}"), &chunk.xxh3),
+            None => ("section".to_string(), &entry.xxh3),
+        };
+        self.check_sum(entry, &what, st.start, bytes, sum)?;
+        decode_into(bytes, entry.encoding, out, scratch).map_err(|e| {
+            let problem = if entry.chunks.is_empty() {
+                e.to_string()
+            } else {
+                format!("{what} (stored bytes {}..{}): {e}", st.start, st.end)
+            };
+            self.section_error(entry, problem)
+        })
     }
 
     /// One zeroed buffer per section, each the size of its decoded bytes.

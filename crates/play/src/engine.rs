@@ -10,6 +10,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use slosh_mls::Camera;
 use slosh_render::{
     FrameTargets, Gpu, GpuStep, HostField, HostStep, StagingPool, TraceParams, Tracer,
+    UploadOptions,
 };
 
 use crate::error::{Error, Result};
@@ -108,7 +109,11 @@ impl GpuSource {
 impl StepSource for GpuSource {
     type Step = Prepared;
 
-    fn load(&self, index: usize) -> std::result::Result<Prepared, String> {
+    fn load(
+        &self,
+        index: usize,
+        withdrawn: &(dyn Fn() -> bool + Sync),
+    ) -> std::result::Result<Prepared, String> {
         let path = self
             .path(index)
             .ok_or_else(|| format!("step {index} is not in the series"))?;
@@ -147,7 +152,16 @@ impl StepSource for GpuSource {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("step upload"),
             });
-        let step = GpuStep::create(&self.gpu, &host, &mut encoder).map_err(|e| e.to_string())?;
+        if withdrawn() {
+            return Err("withdrawn".into());
+        }
+        let options = UploadOptions {
+            staging: Some(&self.staging),
+            cancelled: Some(withdrawn),
+            ..UploadOptions::default()
+        };
+        let step = GpuStep::create_in(&self.gpu, &host, &mut encoder, options)
+            .map_err(|e| e.to_string())?;
         Ok(Prepared {
             step,
             commands: encoder.finish(),
@@ -215,6 +229,11 @@ pub struct Engine {
     clock: f64,
     last_position: usize,
     scrub_direction: Direction,
+    /// The positions the last frame asked for.
+    last_window: Vec<usize>,
+    /// A position jumped to (outside the last window) and not yet resident: it alone is
+    /// loaded, and loads in flight for other steps are withdrawn, until it arrives.
+    urgent: Option<usize>,
     /// The bake index drawn last.
     shown: Option<usize>,
     /// Mean bytes of a resident step, for how many fit.
@@ -256,6 +275,8 @@ impl Engine {
             clock: 0.0,
             last_position: 0,
             scrub_direction: Direction::Forward,
+            last_window: Vec::new(),
+            urgent: None,
             shown: None,
             step_bytes: 0,
         };
@@ -571,7 +592,23 @@ impl Engine {
             ..FrameReport::default()
         };
         self.admit(&window, &mut report);
-        self.request(&window);
+        let resident_or_failed = |e: &Engine, p: usize| {
+            e.bake_index(p)
+                .is_none_or(|i| e.pool.contains(i) || e.failed.contains_key(&i))
+        };
+        if !self.last_window.contains(&position) && !resident_or_failed(self, position) {
+            self.urgent = Some(position);
+        }
+        if self.urgent != Some(position) || resident_or_failed(self, position) {
+            self.urgent = None;
+        }
+        match self.urgent.and_then(|p| self.bake_index(p)) {
+            Some(index) => {
+                self.prefetch.request_urgent(&[index]);
+            }
+            None => self.request(&window),
+        }
+        self.last_window = window;
         let wanted_index = self.bake_index(position);
         let shown_index = match wanted_index {
             Some(i) if self.pool.contains(i) => Some(i),

@@ -1,6 +1,8 @@
 //! Background threads that run the host half of an upload for the steps the frame loop asks
-//! for. A new request replaces the queue (a jump cancels what is stale); the frame loop
-//! collects finished steps with [`Prefetcher::poll`], which never waits.
+//! for. A new request replaces the queue (a jump cancels what is stale); an urgent one also
+//! withdraws the loads in flight that it does not want, so the step asked for gets the
+//! cores. The frame loop collects finished steps with [`Prefetcher::poll`], which never
+//! waits.
 
 use std::collections::{HashSet, VecDeque};
 use std::sync::mpsc::{Receiver, Sender, channel};
@@ -10,8 +12,14 @@ use std::time::Instant;
 /// Where steps come from: a cache directory, or an instrumented stand-in in tests.
 pub trait StepSource: Send + Sync + 'static {
     type Step: Send + 'static;
-    /// Loads step `index`; the error names the file and what is wrong with it.
-    fn load(&self, index: usize) -> Result<Self::Step, String>;
+    /// Loads step `index`; the error names the file and what is wrong with it. A load may
+    /// ask `withdrawn` as it goes and give up (with any error) once it says `true`: nobody
+    /// wants the step any more.
+    fn load(
+        &self,
+        index: usize,
+        withdrawn: &(dyn Fn() -> bool + Sync),
+    ) -> Result<Self::Step, String>;
 }
 
 /// A finished load.
@@ -28,6 +36,8 @@ pub struct Loaded<T> {
 struct Queue {
     waiting: VecDeque<usize>,
     in_flight: HashSet<usize>,
+    /// Loads in flight that an urgent request withdrew.
+    withdrawn: HashSet<usize>,
     generation: u64,
     shutdown: bool,
 }
@@ -82,6 +92,21 @@ impl<T: Send + 'static> Prefetcher<T> {
             self.shared.wake.notify_all();
         }
         q.generation
+    }
+
+    /// [`Prefetcher::request`], and every load in flight that `wanted` does not hold is
+    /// withdrawn: its result, if it gives up, is dropped unseen.
+    pub fn request_urgent(&self, wanted: &[usize]) -> u64 {
+        let generation = self.request(wanted.iter().copied());
+        let mut q = self.shared.lock();
+        let stale: Vec<usize> = q
+            .in_flight
+            .iter()
+            .copied()
+            .filter(|i| !wanted.contains(i))
+            .collect();
+        q.withdrawn.extend(stale);
+        generation
     }
 
     /// The current request generation.
@@ -140,7 +165,14 @@ fn worker<S: StepSource>(shared: &Shared, source: &S, tx: &Sender<Loaded<S::Step
             }
         };
         let start = Instant::now();
-        let result = source.load(index);
+        let withdrawn = || shared.lock().withdrawn.contains(&index);
+        let result = source.load(index, &withdrawn);
+        if result.is_err() && withdrawn() {
+            let mut q = shared.lock();
+            q.in_flight.remove(&index);
+            q.withdrawn.remove(&index);
+            continue;
+        }
         let loaded = Loaded {
             index,
             generation,
@@ -150,7 +182,11 @@ fn worker<S: StepSource>(shared: &Shared, source: &S, tx: &Sender<Loaded<S::Step
         // The result is sent before the step leaves `in_flight`, so a step is always either
         // pending or in the channel until polled.
         let gone = tx.send(loaded).is_err();
-        shared.lock().in_flight.remove(&index);
+        {
+            let mut q = shared.lock();
+            q.in_flight.remove(&index);
+            q.withdrawn.remove(&index);
+        }
         if gone {
             return;
         }
@@ -171,7 +207,11 @@ mod tests {
 
     impl StepSource for Gated {
         type Step = usize;
-        fn load(&self, index: usize) -> Result<usize, String> {
+        fn load(
+            &self,
+            index: usize,
+            withdrawn: &(dyn Fn() -> bool + Sync),
+        ) -> Result<usize, String> {
             self.loads
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner)
@@ -186,7 +226,9 @@ mod tests {
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner)
                 .recv();
-            if index == 13 {
+            if withdrawn() {
+                Err("withdrawn".into())
+            } else if index == 13 {
                 Err("step 13 is unlucky".into())
             } else {
                 Ok(index * 10)
@@ -233,6 +275,34 @@ mod tests {
             .unwrap_or_else(PoisonError::into_inner)
             .clone();
         assert_eq!(loads, vec![0, 50, 51, 52], "stale requests never loaded");
+    }
+
+    #[test]
+    fn an_urgent_request_withdraws_the_loads_it_does_not_want() {
+        let (source, started, go) = gated();
+        let prefetch = Prefetcher::new(source.clone(), 2);
+        prefetch.request([0, 1]);
+        let mut first = vec![started.recv().ok(), started.recv().ok()];
+        first.sort();
+        assert_eq!(first, vec![Some(0), Some(1)]);
+        // A jump to 40 while 0 and 1 load: 1 is still wanted, 0 is withdrawn.
+        prefetch.request_urgent(&[40, 1]);
+        for _ in 0..3 {
+            go.send(()).ok();
+        }
+        let mut got: Vec<(usize, Result<usize, String>)> = (0..2)
+            .filter_map(|_| prefetch.wait())
+            .map(|l| (l.index, l.result))
+            .collect();
+        got.sort_by_key(|g| g.0);
+        assert_eq!(got, vec![(1, Ok(10)), (40, Ok(400))]);
+        // The withdrawn load gave up and its result never came.
+        let start = Instant::now();
+        while prefetch.pending(0) {
+            assert!(start.elapsed().as_secs() < 5, "step 0 stays pending");
+            std::thread::yield_now();
+        }
+        assert!(prefetch.poll().is_empty());
     }
 
     #[test]

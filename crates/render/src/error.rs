@@ -21,6 +21,9 @@ pub enum Error {
     Readback(String),
     #[error("GPU validation: {0}")]
     Validation(String),
+    /// The caller withdrew the upload ([`crate::UploadOptions::cancelled`]).
+    #[error("upload cancelled")]
+    Cancelled,
     #[error("writing {path}: {problem}")]
     Output { path: PathBuf, problem: String },
 }

@@ -28,5 +28,5 @@ pub use tracer::{
 };
 pub use upload::{
     GpuStep, HostField, HostStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, StepBuffers,
-    StepInfo, UploadStats, mask_row,
+    StepInfo, UploadOptions, UploadStats, mask_row,
 };

@@ -57,6 +57,15 @@ impl StagingPool {
         })
     }
 
+    /// Takes back a buffer from [`StagingPool::take`] that is still mapped (an upload that
+    /// gave up before unmapping it).
+    pub(crate) fn restore(&self, buffer: wgpu::Buffer) {
+        let mut free = self.free.lock().unwrap_or_else(PoisonError::into_inner);
+        if free.len() < self.keep {
+            free.push(buffer);
+        }
+    }
+
     /// Takes `buffer` back once the copies reading it, submitted before this call (or never
     /// to be submitted), are done.
     pub fn recycle(&self, buffer: wgpu::Buffer) {

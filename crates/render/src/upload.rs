@@ -1,10 +1,11 @@
 //! A cache step streamed into GPU storage buffers, in two halves. The host half
-//! ([`HostStep`]) opens and checks the file, decodes its compressed sections in parallel and
-//! checks the tree; it needs no device and runs on any thread. The GPU half
-//! ([`GpuStep::create`]) creates the buffers, puts each section's bytes, unconverted, into a
-//! `mapped_at_creation` staging buffer (raw sections straight from the mapped file), and
-//! records the copies and the per-step passes into the caller's encoder without waiting.
-//! The colour field has its own buffer, so switching fields uploads only the field.
+//! ([`HostStep`]) opens and checks the file, checksums its raw sections, decodes the sections
+//! it reads and checks the tree; it needs no device and runs on any thread. The GPU half
+//! ([`GpuStep::create`]) creates the buffers, fills one `mapped_at_creation` staging buffer in
+//! parallel (raw sections straight from the mapped file, compressed ones decoded run by run
+//! straight into it), and records the copies and the per-step passes into the caller's
+//! encoder without waiting. The colour field has its own buffer, so switching fields uploads
+//! only the field.
 
 use std::path::Path;
 use std::time::Instant;
@@ -75,7 +76,8 @@ pub struct StepBuffers {
     pub normals: wgpu::Buffer,
     /// Read by the neighbour-mask pass only.
     pub reach: wgpu::Buffer,
-    /// Written by the neighbour-mask pass at upload: rows of words (see [`mask_row`]).
+    /// Written by the neighbour-mask pass at upload: a block of words per cluster (see
+    /// [`mask_row`]).
     pub masks: wgpu::Buffer,
     pub cluster_start: wgpu::Buffer,
     pub cluster_ids: wgpu::Buffer,
@@ -127,10 +129,11 @@ pub struct UploadStats {
     pub bytes: u64,
     /// Bytes read from the file (compressed where the section is).
     pub stored_bytes: u64,
-    /// The host half: checksums, decompression and the tree check.
+    /// The host half: checksums of the raw sections, the tree check and the sections it
+    /// reads.
     pub host_seconds: f64,
-    /// The GPU half's recording: buffers created, bytes copied into the mapped staging
-    /// buffers, passes recorded.
+    /// The GPU half's recording: buffers created, the staging buffer filled (compressed
+    /// sections decoded into it), passes recorded.
     pub record_seconds: f64,
     /// Staging to device-local copies and the per-step passes, from submit to completion
     /// (zero where the caller submits).
@@ -161,7 +164,7 @@ pub struct StepInfo {
     pub cluster_id_count: u32,
     /// Words of neighbour mask of the largest cluster: its candidates over 32.
     pub mask_words: u32,
-    /// Rows of `cluster_size` mask words that hold every cluster's (see [`mask_row`]).
+    /// Rows of `cluster_size` mask words that hold every cluster's block (see [`mask_row`]).
     pub mask_rows: u64,
     pub has_normals: bool,
     /// The degree the balls were fitted at, and "mean" or "covariance".
@@ -260,13 +263,57 @@ impl HeldFile<'_> {
     }
 }
 
-/// The host half of an upload: the file checked, its compressed sections decoded, its raw
-/// sections checksummed in place, the tree checked. Needs no device.
+/// How [`GpuStep::create_in`] records and where it takes its memory from.
+#[derive(Default)]
+pub struct UploadOptions<'a> {
+    /// Records the per-step passes here instead of after the copies: submitted in that
+    /// order, the two can be timed apart.
+    pub passes: Option<&'a mut wgpu::CommandEncoder>,
+    /// A timestamp query set of 6: each of the three passes writes its begin and end there
+    /// (masks 0–1, leaves 2–3, widen 4–5).
+    pub timestamps: Option<&'a wgpu::QuerySet>,
+    /// Takes the staging memory from this pool; hand it back with
+    /// [`GpuStep::take_staging`] and [`StagingPool::recycle`] once the copies are submitted.
+    pub staging: Option<&'a StagingPool>,
+    /// Asked between pieces of the staging fill: `true` abandons the upload with
+    /// [`Error::Cancelled`] (a prefetch that a jump made stale).
+    pub cancelled: Option<&'a (dyn Fn() -> bool + Sync)>,
+}
+
+impl std::fmt::Debug for UploadOptions<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("UploadOptions")
+            .field("passes", &self.passes.is_some())
+            .field("timestamps", &self.timestamps)
+            .field("staging", &self.staging)
+            .field("cancelled", &self.cancelled.is_some())
+            .finish()
+    }
+}
+
+/// Where a section's bytes come from when the GPU half copies them.
+#[derive(Debug)]
+enum SectionData {
+    Absent,
+    /// Raw in the file, checksummed in place: copied straight from the map.
+    Stored,
+    /// Decoded by the host half, which reads it (the tree, the cluster offsets).
+    Decoded(Vec<u8>),
+    /// Compressed, decoded run by run straight into the staging memory by the GPU half: a
+    /// run decodes into a cache-sized buffer and is copied on while hot, so the section is
+    /// never written to and read back from main memory in full.
+    Deferred,
+}
+
+/// The host half of an upload: the file checked, the sections it reads decoded (the BVH
+/// nodes, the cluster offsets), its raw sections checksummed in place, the tree checked.
+/// Needs no device. The other compressed sections are checked and decoded in parallel
+/// straight into the staging memory by [`GpuStep::create`].
 #[derive(Debug)]
 pub struct HostStep<'a> {
     file: HeldFile<'a>,
-    /// Decoded bytes of the compressed sections, by `SECTIONS` slot (`None`: raw or absent).
-    decoded: Vec<Option<Vec<u8>>>,
+    /// Each `SECTIONS` slot's bytes, or where they come from.
+    sections: Vec<SectionData>,
     pub field: Option<HostField>,
     pub info: StepInfo,
     pub host_seconds: f64,
@@ -293,12 +340,22 @@ impl<'a> HostStep<'a> {
         self.file.get()
     }
 
-    /// The bytes of `SECTIONS[slot]` (empty where the section is absent).
-    fn section_bytes(&self, slot: usize) -> &[u8] {
-        match (&self.decoded[slot], self.file.get().section(SECTIONS[slot])) {
-            (Some(d), _) => d,
-            (None, Some(e)) => self.file.get().stored(e),
-            (None, None) => &[],
+    /// Where the bytes of `SECTIONS[slot]` come from.
+    fn section_source(&self, slot: usize) -> Source<'_> {
+        let file = self.file.get();
+        match (&self.sections[slot], file.section(SECTIONS[slot])) {
+            (SectionData::Decoded(d), _) => Source::Bytes(d),
+            (SectionData::Stored, Some(e)) => Source::Bytes(file.stored(e)),
+            (SectionData::Deferred, Some(entry)) => Source::Runs { file, entry },
+            _ => Source::Bytes(&[]),
+        }
+    }
+
+    /// The bytes of a section the host half decoded or found raw (empty otherwise).
+    fn host_bytes(&self, slot: usize) -> &[u8] {
+        match self.section_source(slot) {
+            Source::Bytes(b) => b,
+            Source::Runs { .. } => &[],
         }
     }
 
@@ -308,7 +365,9 @@ impl<'a> HostStep<'a> {
         let sections: u64 = (0..SECTIONS.len())
             .map(|slot| {
                 lead(SECTIONS[slot])
-                    + (self.section_bytes(slot).len() as u64)
+                    + self
+                        .section_source(slot)
+                        .len()
                         .max(EMPTY_BINDING)
                         .next_multiple_of(4)
             })
@@ -341,28 +400,33 @@ impl<'a> HostStep<'a> {
         }
         let point_count = u32::try_from(header.points)
             .map_err(|_| invalid(f, format!("{} points exceed u32", header.points)))?;
-        // Compressed sections are decoded and raw ones checksummed in place, all in parallel;
-        // the field alongside.
-        let (decoded, field) = rayon::join(
+        // Raw sections are checksummed in place and those the host reads decoded, all in
+        // parallel; the field alongside.
+        let (sections, field) = rayon::join(
             || {
-                entries
+                SECTIONS
                     .par_iter()
-                    .map(|entry| -> Result<Option<Vec<u8>>> {
+                    .zip(&entries)
+                    .map(|(name, entry)| -> Result<SectionData> {
                         match entry {
-                            Some(e) if e.encoding != Encoding::Raw => {
+                            Some(e) if e.encoding == Encoding::Raw => {
+                                f.checked_stored(e)?;
+                                Ok(SectionData::Stored)
+                            }
+                            Some(e) if HOST_READS.contains(name) => {
                                 let mut out = vec![0u8; e.raw as usize];
                                 f.decode_into(e, &mut out, &mut Vec::new())?;
-                                Ok(Some(out))
+                                Ok(SectionData::Decoded(out))
                             }
-                            Some(e) => f.checked_stored(e).map(|_| None).map_err(Error::from),
-                            None => Ok(None),
+                            Some(_) => Ok(SectionData::Deferred),
+                            None => Ok(SectionData::Absent),
                         }
                     })
                     .collect::<Result<Vec<_>>>()
             },
             || field.map(|name| HostField::read(f, name)).transpose(),
         );
-        let (decoded, field) = (decoded?, field?);
+        let (sections, field) = (sections?, field?);
         let count = |name: &str| f.section(name).map_or(0, |e| e.count);
         let info = StepInfo {
             point_count,
@@ -388,17 +452,17 @@ impl<'a> HostStep<'a> {
                 .map_or(0, |e| e.stored);
         let mut step = HostStep {
             file,
-            decoded,
+            sections,
             field,
             info,
             host_seconds: 0.0,
             stored_bytes,
         };
         let items = u64::from(step.info.item_count);
-        check_tree(step.section_bytes(slot_of(names::BVH_NODES)), items)
+        check_tree(step.host_bytes(slot_of(names::BVH_NODES)), items)
             .map_err(|problem| invalid(step.file(), problem))?;
         let (words, rows) = mask_layout(
-            step.section_bytes(slot_of(names::CLUSTER_START)),
+            step.host_bytes(slot_of(names::CLUSTER_START)),
             step.info.cluster_size,
             u64::from(step.info.cluster_id_count),
         )
@@ -437,6 +501,9 @@ const SECTIONS: [&str; 9] = [
     names::BVH_NODES,
     names::BVH_ITEMS,
 ];
+
+/// The sections the host half reads (the tree check, the mask layout), so decodes itself.
+const HOST_READS: [&str; 2] = [names::BVH_NODES, names::CLUSTER_START];
 
 fn slot_of(name: &str) -> usize {
     SECTIONS.iter().position(|n| *n == name).unwrap_or_default()
@@ -547,28 +614,60 @@ fn finite_range(bytes: &[u8]) -> (f32, f32) {
     if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
 }
 
+/// The bytes of an array the GPU half uploads: in memory (decoded, the field, or raw in the
+/// mapped file), or a compressed section's runs, decoded straight into the staging memory.
+#[derive(Debug, Clone, Copy)]
+enum Source<'a> {
+    Bytes(&'a [u8]),
+    Runs {
+        file: &'a CacheFile,
+        entry: &'a SectionEntry,
+    },
+}
+
+impl Source<'_> {
+    fn len(&self) -> u64 {
+        match self {
+            Source::Bytes(b) => b.len() as u64,
+            Source::Runs { entry, .. } => entry.raw,
+        }
+    }
+}
+
+/// One task of filling the staging buffer: a mapped range and what goes there.
+enum Piece<'a> {
+    Copy(&'a [u8]),
+    Run {
+        file: &'a CacheFile,
+        entry: &'a SectionEntry,
+        spans: std::sync::Arc<Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>>,
+        k: usize,
+    },
+}
+
 /// Device-local storage buffers for `arrays` (label, bytes, blank lead bytes), all filled
-/// through one `mapped_at_creation` staging buffer (one allocation per step, not one per
-/// section), whose pieces are copied in parallel; the copies are recorded into `encoder`.
+/// through one staging buffer (one allocation per step, not one per section), whose pieces
+/// are copied or decoded in parallel; the copies are recorded into `encoder`.
 fn storage_buffers(
     gpu: &Gpu,
-    arrays: &[(&str, &[u8], u64)],
+    arrays: &[(&str, Source<'_>, u64)],
     encoder: &mut wgpu::CommandEncoder,
     pool: Option<&StagingPool>,
+    cancelled: Option<&(dyn Fn() -> bool + Sync)>,
 ) -> Result<(Vec<wgpu::Buffer>, Option<wgpu::Buffer>)> {
     // Each array's place in the staging buffer, 256-byte aligned.
     let mut offsets = Vec::with_capacity(arrays.len());
     let mut total = 0u64;
-    for (_, bytes, _) in arrays {
+    for (_, source, _) in arrays {
         offsets.push(total);
-        total += (bytes.len() as u64).next_multiple_of(256);
+        total += source.len().next_multiple_of(256);
     }
     let targets: Vec<wgpu::Buffer> = arrays
         .iter()
-        .map(|(label, bytes, lead)| {
+        .map(|(label, source, lead)| {
             gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: lead + (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4),
+                size: lead + source.len().max(EMPTY_BINDING).next_multiple_of(4),
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             })
@@ -586,26 +685,73 @@ fn storage_buffers(
             mapped_at_creation: true,
         }),
     };
-    // Every array's pieces, each its own mapped range, copied on rayon's threads.
+    // Every array's pieces, each its own mapped range, filled on rayon's threads.
     let mut pieces = Vec::new();
-    for ((_, bytes, _), &offset) in arrays.iter().zip(&offsets) {
-        for (k, piece) in bytes.chunks(COPY_PIECE).enumerate() {
-            let start = offset + (k * COPY_PIECE) as u64;
-            let end = start + (piece.len() as u64).next_multiple_of(4);
-            let view = staging
-                .slice(start..end)
-                .get_mapped_range_mut()
-                .map_err(|e| Error::Readback(e.to_string()))?;
-            pieces.push((view, piece));
+    let view = |start: u64, len: usize| {
+        let end = start + (len as u64).next_multiple_of(4);
+        staging
+            .slice(start..end)
+            .get_mapped_range_mut()
+            .map_err(|e| Error::Readback(e.to_string()))
+    };
+    for ((_, source, _), &offset) in arrays.iter().zip(&offsets) {
+        match *source {
+            Source::Bytes(bytes) => {
+                for (k, piece) in bytes.chunks(COPY_PIECE).enumerate() {
+                    let at = offset + (k * COPY_PIECE) as u64;
+                    pieces.push((view(at, piece.len())?, Piece::Copy(piece)));
+                }
+            }
+            Source::Runs { file, entry } => {
+                let spans = std::sync::Arc::new(entry.chunk_spans());
+                for (k, (_, raw)) in spans.iter().enumerate() {
+                    let at = offset + raw.start as u64;
+                    let piece = Piece::Run {
+                        file,
+                        entry,
+                        spans: spans.clone(),
+                        k,
+                    };
+                    pieces.push((view(at, raw.len())?, piece));
+                }
+            }
         }
     }
-    pieces
-        .into_par_iter()
-        .for_each(|(mut view, piece)| view.slice(..piece.len()).copy_from_slice(piece));
+    let filled = pieces.into_par_iter().try_for_each_init(
+        || (Vec::new(), Vec::new()),
+        |(run, scratch), (mut view, piece)| -> Result<()> {
+            if cancelled.is_some_and(|c| c()) {
+                return Err(Error::Cancelled);
+            }
+            match piece {
+                Piece::Copy(bytes) => view.slice(..bytes.len()).copy_from_slice(bytes),
+                Piece::Run {
+                    file,
+                    entry,
+                    spans,
+                    k,
+                } => {
+                    // Staging memory may be write-combined: decoding reads its own output
+                    // (matches, the filters), so it decodes here and is copied on once.
+                    run.resize(spans[k].1.len(), 0);
+                    file.decode_run_into(entry, &spans, k, run, scratch)?;
+                    view.slice(..run.len()).copy_from_slice(run);
+                }
+            }
+            Ok(())
+        },
+    );
+    if let Err(e) = filled {
+        // Still mapped and never submitted: ready for the next upload as it is.
+        if let Some(pool) = pool {
+            pool.restore(staging);
+        }
+        return Err(e);
+    }
     staging.unmap();
-    for (((_, bytes, lead), offset), target) in arrays.iter().zip(&offsets).zip(&targets) {
-        if !bytes.is_empty() {
-            let size = (bytes.len() as u64).next_multiple_of(4);
+    for (((_, source, lead), offset), target) in arrays.iter().zip(&offsets).zip(&targets) {
+        if source.len() > 0 {
+            let size = source.len().next_multiple_of(4);
             encoder.copy_buffer_to_buffer(&staging, *offset, target, *lead, size);
         }
     }
@@ -657,23 +803,22 @@ impl GpuStep {
         host: &HostStep<'_>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<GpuStep> {
-        GpuStep::create_in(gpu, host, encoder, None, None, None)
+        GpuStep::create_in(gpu, host, encoder, UploadOptions::default())
     }
 
-    /// [`GpuStep::create`] with the copies recorded into `copies` and the per-step passes
-    /// into `passes` (or `copies` too): submitted in that order, the two can be timed apart.
-    /// With `timestamps` (a timestamp query set of 6), each of the three passes writes its
-    /// begin and end there (masks 0–1, leaves 2–3, widen 4–5). With `staging`, the staging
-    /// memory comes from that pool; hand it back with [`GpuStep::take_staging`] and
-    /// [`StagingPool::recycle`] once the copies are submitted.
+    /// [`GpuStep::create`] with the copies recorded into `copies`, and `options`.
     pub fn create_in(
         gpu: &Gpu,
         host: &HostStep<'_>,
         copies: &mut wgpu::CommandEncoder,
-        passes: Option<&mut wgpu::CommandEncoder>,
-        timestamps: Option<&wgpu::QuerySet>,
-        staging: Option<&StagingPool>,
+        options: UploadOptions<'_>,
     ) -> Result<GpuStep> {
+        let UploadOptions {
+            passes,
+            timestamps,
+            staging,
+            cancelled,
+        } = options;
         let encoder = copies;
         let start = Instant::now();
         let file = host.file();
@@ -681,7 +826,7 @@ impl GpuStep {
         // Every array, sections and the three the passes derive, within RANGES bindings.
         let mut split = false;
         for (slot, name) in SECTIONS.iter().enumerate() {
-            let bytes = lead(name) + host.section_bytes(slot).len() as u64;
+            let bytes = lead(name) + host.section_source(slot).len();
             split |= fits(gpu, file, name, array_of(name), bytes)?;
         }
         if let Some(field) = &host.field {
@@ -702,16 +847,16 @@ impl GpuStep {
             host_seconds: host.host_seconds,
             ..UploadStats::default()
         };
-        let mut arrays: Vec<(&str, &[u8], u64)> = SECTIONS
+        let mut arrays: Vec<(&str, Source<'_>, u64)> = SECTIONS
             .iter()
             .enumerate()
-            .map(|(slot, name)| (*name, host.section_bytes(slot), lead(name)))
+            .map(|(slot, name)| (*name, host.section_source(slot), lead(name)))
             .collect();
         if let Some(f) = &host.field {
-            arrays.push(("field", &f.bytes, 0));
+            arrays.push(("field", Source::Bytes(&f.bytes), 0));
         }
-        stats.bytes = arrays.iter().map(|(_, b, _)| b.len() as u64).sum();
-        let (mut sections, staging) = storage_buffers(gpu, &arrays, encoder, staging)?;
+        stats.bytes = arrays.iter().map(|(_, b, _)| b.len()).sum();
+        let (mut sections, staging) = storage_buffers(gpu, &arrays, encoder, staging, cancelled)?;
         let field_values = match &host.field {
             Some(_) => sections
                 .pop()

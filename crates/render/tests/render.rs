@@ -878,13 +878,13 @@ fn neighbour_masks_equal_the_cpu_lists() {
                 expected[slot / 32] |= 1 << (slot % 32);
             }
             set_bits += list.len();
-            // Word w of member m lies in row mask_row + w, at column m.
+            // Member m's words begin m words-per-member into its cluster's block.
             let row = slosh_render::mask_row(c as u64, u64::from(start[c])) as usize;
             let own_words = candidates.len().div_ceil(32);
             let got: Vec<u32> = (0..words)
                 .map(|w| {
                     if w < own_words {
-                        masks[(row + w) * size + i % size]
+                        masks[row * size + (i % size) * own_words + w]
                     } else {
                         0
                     }
