@@ -127,8 +127,36 @@ fn frame(engine: &mut Engine, request: &FrameRequest) -> Result<FrameReport> {
     Ok(report)
 }
 
+/// The host and record ms of every step the engine's loaders prepared, as they reported
+/// them: under the load of streaming, beside the same halves timed alone.
+#[derive(Default)]
+struct LoadTimes {
+    host_ms: Vec<f64>,
+    record_ms: Vec<f64>,
+}
+
+impl LoadTimes {
+    fn add(&mut self, report: &FrameReport) {
+        let n = report.uploaded.len();
+        for _ in 0..n {
+            self.host_ms.push(report.upload_host_ms / n as f64);
+            self.record_ms.push(report.upload_record_ms / n as f64);
+        }
+    }
+}
+
 /// Frames until `position` is drawn (not a stand-in); the seconds from the request.
 fn show(engine: &mut Engine, request: &mut FrameRequest, position: usize) -> Result<f64> {
+    show_timed(engine, request, position, &mut LoadTimes::default())
+}
+
+/// [`show`], adding the loads that arrived to `loads`.
+fn show_timed(
+    engine: &mut Engine,
+    request: &mut FrameRequest,
+    position: usize,
+    loads: &mut LoadTimes,
+) -> Result<f64> {
     let start = Instant::now();
     engine.timeline_mut().set_current(position);
     let mut last = Instant::now();
@@ -136,6 +164,7 @@ fn show(engine: &mut Engine, request: &mut FrameRequest, position: usize) -> Res
         request.seconds = last.elapsed().as_secs_f64();
         last = Instant::now();
         let report = frame(engine, request)?;
+        loads.add(&report);
         if let Some((p, why)) = report.failures.iter().find(|(p, _)| *p == position) {
             bail!("step {p} failed: {why}");
         }
@@ -220,6 +249,9 @@ struct SeriesReport {
     trace_ms: f64,
     sequential_steps_per_s: f64,
     sequential: Spread,
+    /// Medians of the loaders' host and record ms during sequential playback.
+    streaming_host_ms: f64,
+    streaming_record_ms: f64,
     jumps_pool: Spread,
     jumps_page_cache: Spread,
     codecs: Vec<CodecRow>,
@@ -370,9 +402,10 @@ fn measure(
     let mut engine = Engine::open(gpu.clone(), dir, options(streaming_budget))?;
     show(&mut engine, &mut request, 0)?;
     let mut sequential = Vec::new();
+    let mut loads = LoadTimes::default();
     let start = Instant::now();
     for position in 1..steps {
-        sequential.push(show(&mut engine, &mut request, position)? * 1e3);
+        sequential.push(show_timed(&mut engine, &mut request, position, &mut loads)? * 1e3);
     }
     let sequential_steps_per_s = (steps - 1) as f64 / start.elapsed().as_secs_f64();
     // Trace time alone: the same view drawn again (camera marked moving, so it is redrawn).
@@ -441,6 +474,8 @@ fn measure(
         trace_ms: median(trace),
         sequential_steps_per_s,
         sequential: spread(sequential),
+        streaming_host_ms: median(loads.host_ms),
+        streaming_record_ms: median(loads.record_ms),
         jumps_pool: spread(pool),
         jumps_page_cache: spread(page_cache),
         codecs: codec_table(&paths[0])?,
@@ -605,23 +640,25 @@ fn markdown(
     let _ = writeln!(md, "## A step, and the floors\n");
     let _ = writeln!(
         md,
-        "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
+        "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
     );
     let _ = writeln!(
         md,
-        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | GPU copies ms | per-step passes ms (GPU: masks / leaves / widen) | fs::read ms (GB/s) | write_buffer ms |"
+        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | per-step passes ms (GPU: masks / leaves / widen) | fs::read ms (GB/s) | write_buffer ms |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
     for r in reports {
         let _ = writeln!(
             md,
-            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} | {:.2} ({:.2} / {:.2} / {:.2}) | {:.2} ({:.1}) | {:.2} |",
+            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2} / {:.2} / {:.2}) | {:.2} ({:.1}) | {:.2} |",
             r.label,
             r.section_bytes,
             r.step_gpu_bytes,
             r.stored_bytes,
             r.host_ms,
             r.record_ms,
+            r.streaming_host_ms,
+            r.streaming_record_ms,
             r.copy_ms,
             r.pass_ms,
             r.each_pass_ms[0],
