@@ -824,13 +824,9 @@ fn hit_normal(frame: Frame, p: Poly, x: f32, y: f32) -> vec3<f32> {
     return select(frame.n, n.v, n.ok);
 }
 
-// Hit statuses, numbered as the hit buffer's status channel.
-const STATUS_MISS: u32 = 0u;
-const STATUS_CONVERGED: u32 = 1u;
-const STATUS_ITERATION_LIMIT: u32 = 2u;
-const STATUS_NO_SUPPORT: u32 = 3u;
-const STATUS_DEGENERATE_FIT: u32 = 4u;
-const STATUS_DROPLET: u32 = 5u;
+// Hit statuses, numbered as the hit buffer's status channel: STATUS_MISS, _CONVERGED,
+// _ITERATION_LIMIT, _NO_SUPPORT, _DEGENERATE_FIT, _DROPLET, generated from
+// `slosh_render::status` by shaders.rs (`shared_constants_wgsl`).
 
 struct Outcome {
     status: u32,

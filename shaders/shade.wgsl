@@ -3,11 +3,8 @@
 // coloured by a scalar field when one is bound), 1 normals, 2 status and iteration heat map,
 // 3 back faces flagged. Appended to mls.wgsl and light.wgsl.
 
-
-const MODE_SHADE: u32 = 0u;
-const MODE_NORMALS: u32 = 1u;
-const MODE_STATUS: u32 = 2u;
-const MODE_BACKFACES: u32 = 3u;
+// MODE_SHADE, MODE_NORMALS, MODE_STATUS, MODE_BACKFACES: generated from `ShadeMode` by
+// shaders.rs (`shared_constants_wgsl`).
 
 // Viridis (perceptually uniform), a degree-6 fit of the matplotlib table; t in [0, 1]:
 // fn viridis(t: f32) -> vec3<f32>: generated from crates/render's colormap.rs (one source

@@ -53,9 +53,8 @@ struct Wide {
 // A node as the trace walk stacks it and the wide tree links it: `first` in the low 28 bits
 // and the leaf's item count (0 for an inner node) above, so a pop needs no read of the node
 // itself. The upload refuses trees that do not fit (slosh_render::MAX_LEAF_LINK_COUNT,
-// MAX_LINK_FIRST).
-const LINK_COUNT_SHIFT: u32 = 28u;
-const LINK_FIRST: u32 = 0x0fffffffu;
+// MAX_LINK_FIRST). LINK_COUNT_SHIFT and LINK_FIRST are generated from MAX_LINK_FIRST by
+// shaders.rs (`shared_constants_wgsl`).
 
 fn link(node: BvhNode) -> u32 {
     return node.first | (node.count << LINK_COUNT_SHIFT);

@@ -77,8 +77,8 @@ fn ordered(ta: f32, la: u32, tb: f32, lb: u32) -> Ordered {
     return Ordered(select(ta, tb, swap), select(la, lb, swap), select(tb, ta, swap), select(lb, la, swap));
 }
 
-// Candidates refined per ray before it counts as a miss (tracer.rs: MAX_CANDIDATES).
-const MAX_CANDIDATES: u32 = 16u;
+// MAX_CANDIDATES, the candidates refined per ray before it counts as a miss, is generated
+// from `slosh_mls::MAX_CANDIDATES` by shaders.rs (`shared_constants_wgsl`).
 
 // An initial hit: a ball's baked polynomial inside the ball (iteration 1), or a droplet
 // sphere. Candidates are ordered by the key (t, item), an exact tie going to the lower item.

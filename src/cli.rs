@@ -340,7 +340,7 @@ pub struct BakeArgs {
     /// Radius of trust = distance to the k-th nearest neighbour.
     #[arg(long, default_value_t = 6)]
     pub k: usize,
-    /// h = h-scale × mean radius of trust.
+    /// h = h-scale × the dense fluid's radius of trust (its 25th percentile).
     #[arg(long, default_value_t = 1.5)]
     pub h_scale: f64,
     /// At most this many neighbours per point.
@@ -349,8 +349,8 @@ pub struct BakeArgs {
     /// One h per point (h-scale × its radius) instead of a global h: for uneven sampling.
     #[arg(long)]
     pub per_point_h: bool,
-    /// Clusters with fewer points become droplet spheres (default: the coefficient count of
-    /// the degree, 6 or 10; 0 turns detection off).
+    /// Clusters with fewer points (or no wider than h) are spray, drawn as spheres (default:
+    /// the coefficient count of the degree, 6 or 10; 0 turns detection off).
     #[arg(long)]
     pub droplet_below: Option<usize>,
     /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable

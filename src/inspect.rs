@@ -227,6 +227,10 @@ fn human_file(r: &FileReport) -> String {
         st.radii.min, st.radii.mean, st.radii.max
     ));
     line(format!(
+        "normals    {} reversed to agree with their neighbourhood ({} in {} patches reversed whole)",
+        h.stats.orientation_flipped, h.stats.orientation_patch_points, h.stats.orientation_patches
+    ));
+    line(format!(
         "fits       {} full, {} degraded, {} unfitted; degrees 0/1/2/3: {:?}",
         st.fit_full, st.fit_degraded, st.fit_none, st.degrees
     ));

@@ -37,7 +37,7 @@ pub struct BakeParams {
 }
 
 /// Bumped whenever the bake's output for the same input and parameters changes.
-pub const BAKE_REVISION: u32 = 1;
+pub const BAKE_REVISION: u32 = 2;
 
 impl BakeParams {
     /// Parameters with the MLS defaults and the normals mode matching `normals`.

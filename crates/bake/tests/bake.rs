@@ -11,7 +11,7 @@ use slosh_cache::{
 };
 use slosh_ensight::FieldValues;
 use slosh_fileio::FileBytes;
-use slosh_mls::{Camera, NormalsMode, Params, Surface, TraceHit};
+use slosh_mls::{NormalsMode, Params, Surface};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn scene_input(kind: SceneKind, points: usize, step: usize) -> (Scene, StepInput) {
@@ -39,37 +39,6 @@ fn bake_to_file(input: &StepInput, params: &BakeParams) -> CacheFile {
     CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap()
 }
 
-fn camera_for(points: &[[f64; 3]], size: u32) -> Camera {
-    let (lo, hi) = slosh_mls::bounds(points);
-    let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
-    let r = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt() * 0.5;
-    Camera {
-        eye: [c[0] + 0.9 * r, c[1] - 2.2 * r, c[2] + 1.1 * r],
-        target: c,
-        up: [0.0, 0.0, 1.0],
-        fov_y: 45.0,
-        width: size,
-        height: size,
-    }
-}
-
-/// Pixels whose 4-neighbourhood mixes hits and misses (silhouettes).
-fn silhouette(hits: &[Option<TraceHit>], w: usize, i: usize) -> bool {
-    let (x, y) = (i % w, i / w);
-    let h = hits.len() / w;
-    let me = hits[i].is_some();
-    [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
-        .iter()
-        .any(|(dx, dy)| {
-            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-            nx >= 0
-                && ny >= 0
-                && (nx as usize) < w
-                && (ny as usize) < h
-                && hits[ny as usize * w + nx as usize].is_some() != me
-        })
-}
-
 #[test]
 fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
     for (kind, points, iterations) in [
@@ -83,7 +52,7 @@ fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
         let file = bake_to_file(&input, &p);
         file.verify().unwrap();
         let step = LoadedStep::load(&file).unwrap();
-        let camera = camera_for(&input.positions, 72);
+        let camera = slosh_testkit::framing_camera(&input.positions, 72);
         let f32_params = Params::<f32> {
             degree: 2,
             iterations,
@@ -131,8 +100,10 @@ fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
         );
         let spacing = oracle.spacing;
         let (mut away, mut disagree, mut shared, mut close, mut worst) = (0, 0, 0, 0, 0.0f64);
+        let depth: Vec<Option<f64>> = reference.iter().map(|h| h.map(|h| h.t)).collect();
+        let silhouette = slosh_testkit::silhouette_mask(&depth, 72, None);
         for i in 0..reference.len() {
-            if silhouette(&reference, 72, i) {
+            if silhouette[i] {
                 continue;
             }
             away += 1;
@@ -176,13 +147,21 @@ fn droplets_are_stored_as_spheres_and_hit_as_spheres() {
     let file = bake_to_file(&input, &params());
     file.verify().unwrap();
     let h = file.header();
-    assert_eq!((h.stats.droplets, h.stats.droplet_points), (4, 5));
+    // Spray of fewer than 4 points is drawn particle by particle: five spheres.
+    assert_eq!((h.stats.droplets, h.stats.droplet_points), (5, 5));
     let step = LoadedStep::load(&file).unwrap();
     let mls = Params::<f32> {
         iterations: 3,
         ..Params::new()
     };
-    // A lone particle is a sphere of half a spacing around it.
+    // A lone particle is a sphere of a particle's radius, half the dense spacing, around it.
+    let scale = step.transform.scale;
+    let radius = f64::from(step.surface.spheres[0].radius) * scale;
+    let spacing_here = step.surface.spacing as f64 * scale;
+    assert!(
+        (radius / (0.5 * spacing_here) - 1.0).abs() < 0.1,
+        "sphere radius {radius}, mean spacing {spacing_here}"
+    );
     let to_local = |p: [f64; 3]| step.transform.to_local(p);
     let hit = step
         .surface
@@ -190,7 +169,7 @@ fn droplets_are_stored_as_spheres_and_hit_as_spheres() {
         .map(|h| step.to_world(h))
         .unwrap();
     assert_eq!(hit.status, slosh_mls::HitStatus::Droplet);
-    let expected = 1.0 - 0.5 * step.surface.spacing as f64 * step.transform.scale;
+    let expected = 1.0 - radius;
     assert!(
         (hit.t - expected).abs() < 1e-5 * expected,
         "{} vs {expected}",

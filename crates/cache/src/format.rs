@@ -219,6 +219,11 @@ pub struct StepStats {
     pub dropped_interior: u64,
     /// Points whose neighbour list was cut at the cap.
     pub capped: u64,
+    /// Normals the bake reversed because their neighbourhood contradicted them, in all, and
+    /// the patches reversed as a whole with their points (`docs/algorithm.md`).
+    pub orientation_flipped: u64,
+    pub orientation_patches: u64,
+    pub orientation_patch_points: u64,
     pub fit_full: u64,
     pub fit_degraded: u64,
     pub fit_none: u64,

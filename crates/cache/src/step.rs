@@ -170,6 +170,11 @@ impl LoadedStep {
             neighbours,
             reach,
             capped: header.stats.capped as usize,
+            orientation: slosh_mls::OrientationRepair {
+                flipped_points: header.stats.orientation_flipped as usize,
+                flipped_patches: header.stats.orientation_patches as usize,
+                patch_points: header.stats.orientation_patch_points as usize,
+            },
             balls: points
                 .iter()
                 .zip(&balls)

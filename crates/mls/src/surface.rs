@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use crate::fit::FitStatus;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit};
+use crate::orient::{ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
 use crate::support::NormalsMode;
@@ -20,7 +21,8 @@ use crate::timing::StageClock;
 pub struct SurfaceParams {
     /// Radius of trust ρ_i = distance to the k-th nearest neighbour.
     pub k: usize,
-    /// h = h_scale × mean ρ (thesis §4.1.2: 1.5).
+    /// h = h_scale × ρ of the dense fluid, the 25th percentile of ρ (thesis §4.1.2: 1.5 ×
+    /// mean ρ, which spray inflates).
     pub h_scale: f64,
     /// Neighbour lists reach ρ_i + support × h, where the weight has died out (θ(3h) ≈ 1e-4).
     pub support: f64,
@@ -30,8 +32,9 @@ pub struct SurfaceParams {
     pub normals: NormalsMode,
     /// h_i = h_scale × ρ_i per ball instead of one global h (for uneven sampling).
     pub per_point_h: bool,
-    /// Connected components (points linked within 2h) with fewer points than this become
-    /// spheres instead of MLS patches; 0 turns droplet detection off.
+    /// Connected components (points linked within h) with fewer points than this, or no
+    /// wider than h, are spray, drawn as spheres instead of MLS patches; 0 turns spray
+    /// detection off.
     pub droplet_below: usize,
 }
 
@@ -74,7 +77,7 @@ pub enum BallFit {
     Droplet(u32),
 }
 
-/// A droplet drawn as what it is: a small sphere.
+/// Spray drawn as what it is: a small sphere (a blob or a particle).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sphere<T> {
     pub centre: V3<T>,
@@ -90,7 +93,8 @@ pub struct SurfaceParts<T> {
     pub points: Vec<V3<T>>,
     pub normals: Option<Vec<V3<T>>>,
     pub radii: Vec<T>,
-    /// The global smoothing length h_scale × mean ρ (each ball carries the h it uses).
+    /// The global smoothing length h_scale × the 25th percentile of ρ (each ball carries the h
+    /// it uses).
     pub h: T,
     /// Mean distance to the nearest other point.
     pub spacing: T,
@@ -106,6 +110,9 @@ pub struct SurfaceParts<T> {
     pub ball_fits: Vec<BallFit>,
     /// Droplets; in candidate lists sphere d is item `len() + d`.
     pub spheres: Vec<Sphere<T>>,
+    /// Normals the build reversed before using them (`crate::orient`); zero for parts read
+    /// back from a cache.
+    pub orientation: OrientationRepair,
     pub params: SurfaceParams,
 }
 
@@ -156,34 +163,65 @@ impl<T: Real> Surface<T> {
             .iter()
             .map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]])
             .collect();
-        let unit_normals: Option<Vec<Option<[f64; 3]>>> =
+        let mut unit_normals: Option<Vec<Option<[f64; 3]>>> =
             normals.map(|ns| ns.iter().map(|n| unit(*n)).collect());
 
         let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&rel)
             .map_err(|e| SurfaceError::Index(format!("{e:?}")))?;
         let k = params.k.min(n - 1);
-        let k_query = NonZero::new(k + 1).ok_or(SurfaceError::BadK)?;
-        let (mut radii, nearest): (Vec<f64>, Vec<f64>) = rel
+        // One query serves the radii (the k-th) and, with normals, the orientation check.
+        let orient_with = if unit_normals.is_some() {
+            ORIENT_NEIGHBOURS.min(n - 1)
+        } else {
+            0
+        };
+        let k_query = NonZero::new(k.max(orient_with) + 1).ok_or(SurfaceError::BadK)?;
+        let queried: Vec<(f64, f64, Vec<u32>)> = rel
             .par_iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(i, p)| {
                 let nn = tree
                     .query(p)
                     .nearest_n::<SquaredEuclidean<f64>>(k_query)
                     .execute();
                 let dist = |i: usize| nn.get(i).map_or(0.0, |r| r.distance.sqrt());
-                (dist(nn.len().saturating_sub(1)), dist(1))
+                let around: Vec<u32> = nn
+                    .iter()
+                    .map(|r| r.item)
+                    .filter(|&j| j as usize != i)
+                    .take(orient_with)
+                    .collect();
+                (dist(k.min(nn.len().saturating_sub(1))), dist(1), around)
             })
-            .unzip();
+            .collect();
+        let mut radii: Vec<f64> = queried.iter().map(|q| q.0).collect();
+        let nearest: Vec<f64> = queried.iter().map(|q| q.1).collect();
         let spacing = nearest.iter().sum::<f64>() / n as f64;
         clock.lap("kd-tree and radii (kNN)");
+        let orientation = match unit_normals.as_mut() {
+            Some(ns) => {
+                let around: Vec<Vec<u32>> = queried.into_iter().map(|q| q.2).collect();
+                repair_orientation(&rel, ns, &around)
+            }
+            None => OrientationRepair::default(),
+        };
+        clock.lap("orientation");
         let mean = radii.iter().sum::<f64>() / n as f64;
         // Coincident points give ρ = 0: keep every ball a tenth of the mean radius at least.
         let floor = 0.1 * mean;
         for r in &mut radii {
             *r = r.max(floor);
         }
-        let mean = radii.iter().sum::<f64>() / n as f64;
-        let h = params.h_scale * mean;
+        // h from the dense fluid, not the spray: a low quantile of the radii, which sparse
+        // points (large radii) cannot inflate.
+        let h = params.h_scale * quantile(&radii, H_QUANTILE);
+        let dense_spacing = quantile(&nearest, H_QUANTILE);
+        // A ball is trusted no farther than its data reach: beyond 2h a fit has no weight.
+        if !params.per_point_h {
+            for r in &mut radii {
+                *r = r.min(2.0 * h);
+            }
+        }
         let ball_h = |i: usize| {
             if params.per_point_h {
                 params.h_scale * radii[i]
@@ -312,7 +350,7 @@ impl<T: Real> Surface<T> {
             &neighbour_start,
             &neighbours,
             &ball_h,
-            spacing,
+            dense_spacing,
             params.droplet_below,
             &mut ball_fits,
         );
@@ -331,6 +369,7 @@ impl<T: Real> Surface<T> {
             balls,
             ball_fits,
             spheres,
+            orientation,
             params: params.clone(),
         })?;
         clock.lap("grid");
@@ -411,9 +450,14 @@ impl<T: Real> Surface<T> {
     }
 }
 
-/// Marks the points of components (linked when within 2h) smaller than `below` as droplets
-/// and returns one sphere per such component: the members' centroid, reaching half a spacing
-/// past the farthest member.
+/// Marks the points of spray as droplets and returns the spheres that draw them. Spray is a
+/// component (points linked when within 2h) that cannot support a surface: fewer points than
+/// `below`, or no wider than its smoothing length (every fit in it would span it whole). A
+/// compact component of 4 points or more becomes one blob: its centroid, radius the members'
+/// RMS distance to it plus half the dense spacing (a particle's radius). Otherwise (fewer
+/// points, or a scattered component whose members stand out of that blob by more than a
+/// spacing) each point is a sphere of half the dense spacing: never a sphere that bounds
+/// particles far apart.
 fn droplets<T: Real>(
     points: &[[f64; 3]],
     start: &[u32],
@@ -437,7 +481,7 @@ fn droplets<T: Real>(
         i
     }
     for i in 0..n {
-        let reach = 2.0 * ball_h(i);
+        let reach = ball_h(i);
         for &j in &neighbours[start[i] as usize..start[i + 1] as usize] {
             let (a, b) = (points[i], points[j as usize]);
             let d2 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
@@ -450,47 +494,56 @@ fn droplets<T: Real>(
         }
     }
     let roots: Vec<u32> = (0..n as u32).map(|i| root(&mut parent, i)).collect();
-    let mut size = vec![0usize; n];
-    for &r in &roots {
-        size[r as usize] += 1;
-    }
-    // Spheres numbered in order of their first member, so the result does not depend on threads.
-    let mut sphere_of = vec![u32::MAX; n];
-    let mut members: Vec<Vec<usize>> = Vec::new();
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); n];
     for (i, &r) in roots.iter().enumerate() {
-        if size[r as usize] >= below {
+        members[r as usize].push(i);
+    }
+    let distance = |p: [f64; 3], c: [f64; 3]| {
+        ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()
+    };
+    let particle = 0.5 * spacing;
+    // Spheres numbered in order of their first member, so the result does not depend on threads.
+    let mut spheres = Vec::new();
+    for m in members.iter().filter(|m| !m.is_empty()) {
+        let mut c = [0.0; 3];
+        for &i in m {
+            for a in 0..3 {
+                c[a] += points[i][a] / m.len() as f64;
+            }
+        }
+        let far = m
+            .iter()
+            .map(|&i| distance(points[i], c))
+            .fold(0.0, f64::max);
+        if m.len() >= below && far > ball_h(m[0]) {
             continue;
         }
-        if sphere_of[r as usize] == u32::MAX {
-            sphere_of[r as usize] = members.len() as u32;
-            members.push(Vec::new());
-        }
-        let d = sphere_of[r as usize];
-        members[d as usize].push(i);
-        fits[i] = BallFit::Droplet(d);
-    }
-    members
-        .iter()
-        .map(|m| {
-            let mut c = [0.0; 3];
+        let rms = (m
+            .iter()
+            .map(|&i| distance(points[i], c).powi(2))
+            .sum::<f64>()
+            / m.len() as f64)
+            .sqrt();
+        if m.len() >= 4 && far <= rms + spacing {
+            let d = spheres.len() as u32;
             for &i in m {
-                for a in 0..3 {
-                    c[a] += points[i][a] / m.len() as f64;
-                }
+                fits[i] = BallFit::Droplet(d);
             }
-            let far = m
-                .iter()
-                .map(|&i| {
-                    let p = points[i];
-                    ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()
-                })
-                .fold(0.0, f64::max);
-            Sphere {
+            spheres.push(Sphere {
                 centre: V3::from_f64(c),
-                radius: T::c(far + 0.5 * spacing),
+                radius: T::c(rms + particle),
+            });
+        } else {
+            for &i in m {
+                fits[i] = BallFit::Droplet(spheres.len() as u32);
+                spheres.push(Sphere {
+                    centre: V3::from_f64(points[i]),
+                    radius: T::c(particle),
+                });
             }
-        })
-        .collect()
+        }
+    }
+    spheres
 }
 
 /// Copies the positions (and normals) of `ids` into the scratch vectors.
@@ -525,4 +578,17 @@ pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
         }
     }
     (lo, hi)
+}
+
+/// The radii's quantile that sets h and the spray's particle size: the dense fluid's.
+const H_QUANTILE: f64 = 0.25;
+
+/// The `q` quantile of `values` (nearest rank; 0 for none).
+fn quantile(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mut v = values.to_vec();
+    let k = ((q * v.len() as f64) as usize).min(v.len() - 1);
+    *v.select_nth_unstable_by(k, f64::total_cmp).1
 }

@@ -35,9 +35,12 @@ fn grazing_rays_hit_or_miss_cleanly() {
     let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
     let truth = sc.truth(0.0);
     let p = params(&surface, 2, 5);
-    let mut hits = 0;
+    let (mut hits, mut exact_hits) = (0usize, 0usize);
     // Rays tangent to the sphere at heights 1 ± a few spacings (the sphere's centre moves by
-    // its scene motion; step 0 is at the origin).
+    // its scene motion; step 0 is at the origin). The MLS sphere lies within a few thousandths
+    // of a spacing of the true one, so only rays within a tenth of a spacing of the tangent
+    // may see it differently.
+    let grazing = 0.1 * sc.spacing();
     for k in -20..=20 {
         let z = 1.0 + k as f64 * 0.1 * sc.spacing();
         let origin = [-3.0, 0.0, z];
@@ -47,18 +50,23 @@ fn grazing_rays_hit_or_miss_cleanly() {
             0.0,
             f64::INFINITY,
         );
+        exact_hits += usize::from(exact.is_some());
         if let Some(h) = surface.trace(origin, dir, &p) {
             hits += 1;
             assert!(h.t.is_finite() && h.normal.iter().all(|c| c.is_finite()));
             let d = truth.signed_distance(DVec3::from(h.position)).abs() / sc.spacing();
             assert!(d < 0.5, "grazing hit {d} spacings off at z = {z}");
-        } else {
-            // A miss is only allowed where the truth misses or grazes within a spacing.
             assert!(
-                exact.is_none() || z > 1.0 - sc.spacing(),
-                "missed at z = {z}"
+                exact.is_some() || z < 1.0 + grazing,
+                "a hit above the sphere at z = {z}"
             );
+        } else {
+            assert!(exact.is_none() || z > 1.0 - grazing, "missed at z = {z}");
         }
     }
-    assert!(hits > 5);
+    eprintln!("{hits} hits, {exact_hits} for the truth");
+    assert!(
+        hits.abs_diff(exact_hits) <= 2,
+        "{hits} hits, the truth {exact_hits}"
+    );
 }

@@ -73,6 +73,8 @@ fn nan_and_zero_normals_never_reach_the_output() {
 fn thin_sheet_faces_do_not_mix() {
     let sc = scene(spec(SceneKind::Sheet, 6000));
     let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
+    // The orientation check leaves both faces as they are.
+    assert_eq!(surface.orientation.flipped_points, 0);
     // Neighbour lists never pair the two faces (opposing normals).
     let normals = surface.normals.as_ref().unwrap();
     for i in 0..surface.len() {
@@ -155,5 +157,63 @@ fn cluster_lists_expand_to_the_neighbour_lists() {
         );
         assert_eq!(start, surface.neighbour_start, "{kind:?} cap {cap}");
         assert_eq!(ids, surface.neighbours, "{kind:?} cap {cap}");
+    }
+}
+
+/// Reversed normals are repaired before anything uses them: on the sphere, the torus and the
+/// tank with 10 % and 30 % of normals reversed, traced at 256×256 with 5 iterations, every hit
+/// (none excluded as off-surface) lies as close to the truth as the clean scene's, within
+/// 1.5× its RMS, no droplet sphere appears that the clean scene lacks, and nothing is NaN.
+#[test]
+fn reversed_normals_are_repaired_before_use() {
+    for kind in [SceneKind::Sphere, SceneKind::Torus, SceneKind::Tank] {
+        let measure = |flip: f64| {
+            let mut s = SceneSpec::new(kind, 20_000, 11);
+            s.hard.flip_normals = flip;
+            let sc = scene(s);
+            let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
+            let st = render_stats(
+                &sc,
+                &surface,
+                &framing_camera(&sc, 256),
+                &params(&surface, 2, 5),
+                f64::INFINITY,
+            );
+            (st, surface.spheres.len(), surface.orientation)
+        };
+        let (clean, clean_spheres, clean_repair) = measure(0.0);
+        assert_eq!(clean_repair.flipped_points, 0, "{kind:?}: {clean_repair:?}");
+        assert!(clean.hits > 10_000, "{kind:?}: {clean:?}");
+        for flip in [0.1, 0.3] {
+            let (st, spheres, repair) = measure(flip);
+            eprintln!(
+                "{kind:?} {:.0} % reversed: RMS {:.2e} (clean {:.2e}) spacings, max {:.3}, {} hits \
+                 (clean {}), spheres {spheres} (clean {clean_spheres}), {repair:?}",
+                flip * 100.0,
+                st.rms,
+                clean.rms,
+                st.max,
+                st.hits,
+                clean.hits
+            );
+            assert_eq!(st.non_finite, 0, "{kind:?} {flip}");
+            assert!(
+                st.rms <= 1.5 * clean.rms,
+                "{kind:?} {flip}: RMS {} against clean {}",
+                st.rms,
+                clean.rms
+            );
+            assert!(
+                spheres <= clean_spheres,
+                "{kind:?} {flip}: {spheres} spheres"
+            );
+            assert!(
+                st.hits.abs_diff(clean.hits) <= clean.hits / 200,
+                "{kind:?} {flip}: {} hits against {}",
+                st.hits,
+                clean.hits
+            );
+            assert!(repair.flipped_points > 0, "{kind:?} {flip}: {repair:?}");
+        }
     }
 }

@@ -62,19 +62,11 @@ fn compare<T: Real>(
         })
         .collect();
     let spacing = scene.spacing();
-    let at = |x: i64, y: i64| -> Option<(bool, bool)> {
-        (x >= 0 && y >= 0 && x < size as i64 && y < size as i64).then(|| {
-            let i = (y * size as i64 + x) as usize;
-            (ours[i].is_some(), exact[i].is_some())
-        })
-    };
+    let silhouette = slosh_testkit::silhouette_mask(&exact, size as usize, None);
     let (mut sq, mut max, mut hits, mut disagree, mut compared) = (0.0, 0.0f64, 0, 0, 0);
     for y in 0..size as i64 {
         for x in 0..size as i64 {
-            let silhouette = (-1..=1).any(|dy| {
-                (-1..=1).any(|dx| at(x + dx, y + dy).is_some_and(|(_, e)| e != at(x, y).unwrap().1))
-            });
-            if silhouette {
+            if silhouette[(y * size as i64 + x) as usize] {
                 continue;
             }
             compared += 1;
@@ -114,12 +106,60 @@ fn sphere_torus_and_tank_match_the_truth() {
             r.hits, r.rms, r.max, r.disagree, r.compared
         );
         assert!(r.hits > 200, "{kind:?}: {} hits", r.hits);
-        assert!(r.rms < 0.05, "{kind:?}: RMS {} spacings", r.rms);
+        // Measured 2.3e-3 (torus) or less: twice that.
+        assert!(r.rms < 5e-3, "{kind:?}: RMS {} spacings", r.rms);
         assert!(
             (r.disagree as f64) < 0.01 * r.compared as f64,
             "{kind:?}: {} of {} pixels disagree",
             r.disagree,
             r.compared
         );
+    }
+}
+
+/// The f32 build (what the GPU port computes in) against the f64 oracle on the same scene and
+/// camera: away from silhouettes, nearly every shared hit within 1e-3 spacing, and hardly a
+/// pixel where one hits and the other misses.
+#[test]
+fn f32_matches_the_f64_oracle() {
+    for (kind, n) in [(SceneKind::Sphere, 4000), (SceneKind::Torus, 6000)] {
+        let scene = Scene::new(SceneSpec::new(kind, n, 3)).unwrap();
+        let (pos, nrm) = scene.particles(0).surface_arrays();
+        let params = SurfaceParams::default();
+        let s64 = Surface::<f64>::build(&pos, Some(&nrm), &params).unwrap();
+        let s32 = Surface::<f32>::build(&pos, Some(&nrm), &params).unwrap();
+        let camera = slosh_testkit::framing_camera(&pos, 64);
+        let mut p64 = Params::<f64>::new();
+        p64.iterations = 3;
+        let mut p32 = Params::<f32>::new();
+        p32.iterations = 3;
+        let (a, b) = (s64.render(&camera, &p64), s32.render(&camera, &p32));
+        let depth: Vec<Option<f64>> = a.iter().map(|h| h.map(|h| h.t)).collect();
+        let silhouette = slosh_testkit::silhouette_mask(&depth, 64, None);
+        let spacing = scene.spacing();
+        let (mut compared, mut shared, mut close, mut differ) = (0, 0, 0, 0);
+        for i in 0..a.len() {
+            if silhouette[i] {
+                continue;
+            }
+            compared += 1;
+            match (a[i], b[i]) {
+                (Some(x), Some(y)) => {
+                    shared += 1;
+                    close += usize::from((x.t - y.t).abs() <= 1e-3 * spacing);
+                }
+                (None, None) => {}
+                _ => differ += 1,
+            }
+        }
+        eprintln!(
+            "{kind:?}: {close} of {shared} shared hits within 1e-3 spacing, {differ} of {compared} differ"
+        );
+        assert!(shared > 500, "{kind:?}: {shared} shared hits");
+        assert!(
+            close * 1000 >= shared * 995,
+            "{kind:?}: {close} of {shared}"
+        );
+        assert!(differ * 200 <= compared, "{kind:?}: {differ} of {compared}");
     }
 }

@@ -29,8 +29,8 @@ pub const MAX_BVH_DEPTH: u64 = 62;
 
 /// The traversal stack packs a node as `first | count << 28` (trace.wgsl: `link`), so a
 /// leaf holds at most this many items and `first` stays below 2^28.
-pub const MAX_LEAF_LINK_COUNT: u32 = 15;
 pub const MAX_LINK_FIRST: u32 = (1 << 28) - 1;
+pub const MAX_LEAF_LINK_COUNT: u32 = u32::MAX >> MAX_LINK_FIRST.count_ones();
 
 /// Checks that the `bvh_nodes` section is a tree the trace pass can walk: every node packs
 /// into a stack link, a leaf's items lie in the item list, and an inner node's children come

@@ -148,40 +148,6 @@ fn bake(input: &StepInput, degree: u8) -> (CacheFile, BakeParams) {
     (file, params)
 }
 
-fn camera_for(points: &[[f64; 3]], size: u32) -> Camera {
-    let (lo, hi) = slosh_mls::bounds(points);
-    let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
-    let r = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt() * 0.5;
-    Camera {
-        eye: [c[0] + 0.9 * r, c[1] - 2.2 * r, c[2] + 1.1 * r],
-        target: c,
-        up: [0.0, 0.0, 1.0],
-        fov_y: 45.0,
-        width: size,
-        height: size,
-    }
-}
-
-/// Silhouette pixels of the oracle's image: a 4-neighbour differs in hit/miss, or lies across
-/// an occluding contour (its depth differs by more than 5 %, e.g. a droplet in front of the
-/// surface), where f32 and f64 may legitimately pick different layers.
-fn silhouette(depth: &[Option<f64>], w: usize, i: usize) -> bool {
-    let (x, y) = (i % w, i / w);
-    let h = depth.len() / w;
-    [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
-        .iter()
-        .any(|(dx, dy)| {
-            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-            if nx < 0 || ny < 0 || nx as usize >= w || ny as usize >= h {
-                return false;
-            }
-            match (depth[i], depth[ny as usize * w + nx as usize]) {
-                (Some(a), Some(b)) => (a - b).abs() > 0.05 * a.min(b),
-                (a, b) => a.is_some() != b.is_some(),
-            }
-        })
-}
-
 /// The GPU hit in world units: (t, status).
 fn world_hit(step: &GpuStep, hit: &GpuHit) -> Option<(f64, u32)> {
     (hit.status != status::MISS).then(|| (f64::from(hit.t) * step.info.transform.scale, hit.status))
@@ -214,8 +180,9 @@ fn compare(
         settled_close: 0,
         worst: 0.0,
     };
+    let silhouette = slosh_testkit::silhouette_mask(&depth, w, Some(0.05));
     for i in 0..oracle.len() {
-        if silhouette(&depth, w, i) {
+        if silhouette[i] {
             continue;
         }
         a.away += 1;
@@ -245,7 +212,7 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
     let mut failures = Vec::new();
     for case in cases() {
         let input = input_of(&case.spec);
-        let camera = camera_for(&input.positions, SIZE);
+        let camera = slosh_testkit::framing_camera(&input.positions, SIZE);
         for degree in [2u8, 3] {
             let (file, params) = bake(&input, degree);
             let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
@@ -446,7 +413,7 @@ fn encode_png(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
 fn shaded_frame_matches_the_golden_image() {
     let Some(dev) = device() else { return };
     let input = input_of(&SceneSpec::new(SceneKind::Torus, 4000, 7));
-    let camera = camera_for(&input.positions, 96);
+    let camera = slosh_testkit::framing_camera(&input.positions, 96);
     let (file, _) = bake(&input, 2);
     let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let mut params = TraceParams::for_step(&step, 3);
@@ -474,9 +441,19 @@ fn shaded_frame_matches_the_golden_image() {
         .iter()
         .filter(|h| h.status != status::MISS)
         .count();
-    eprintln!("golden image: mean absolute error {error:.3} of 255 per channel, {lit} hit pixels");
+    // A local defect (a pit, a stray sphere) moves few pixels by a lot: count the pixels off
+    // by more than 8 of 255 in any channel, besides the mean.
+    let off = rgba
+        .chunks_exact(4)
+        .zip(expected.chunks_exact(4))
+        .filter(|(a, b)| a.iter().zip(*b).any(|(x, y)| x.abs_diff(*y) > 8))
+        .count();
+    eprintln!(
+        "golden image: mean absolute error {error:.3} of 255 per channel, {off} pixels off by more than 8, {lit} hit pixels"
+    );
     assert!(lit > 1500, "{lit} hit pixels");
     assert!(error <= 1.0, "mean pixel error {error:.3} > 1.0 of 255");
+    assert!(off <= 10, "{off} pixels off by more than 8 of 255");
 }
 
 /// Linear value of an sRGB8 channel.
@@ -647,7 +624,7 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
         split.split,
         "a 64 KiB limit left the step in single bindings"
     );
-    let mut camera = camera_for(&input.positions, 64);
+    let mut camera = slosh_testkit::framing_camera(&input.positions, 64);
     camera.height = 48;
     for (iterations, mode) in [
         (1, ShadeMode::Shade),
@@ -741,7 +718,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     let baked = bake_step(&input, &params).unwrap();
     let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
     let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
-    let mut camera = camera_for(&input.positions, 64);
+    let mut camera = slosh_testkit::framing_camera(&input.positions, 64);
     camera.height = 48;
     for mode in [ShadeMode::Shade, ShadeMode::Water] {
         let reference_step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();

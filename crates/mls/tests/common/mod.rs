@@ -82,24 +82,10 @@ pub fn render_stats<T: Real>(
     s
 }
 
-/// A camera that frames the scene's particles from a generic direction.
+/// The shared framing camera (`slosh_testkit`) over the scene's particles at step 0.
 pub fn framing_camera(scene: &Scene, size: u32) -> Camera {
-    let p = scene.particles(0);
-    let (lo, hi) = p.positions.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(a, b), q| (a.min(*q), b.max(*q)),
-    );
-    let c = (lo + hi) * 0.5;
-    let r = (hi - lo).length() * 0.5;
-    let eye = c + DVec3::new(0.9, -1.1, 0.8).normalize() * (r * 2.8);
-    Camera {
-        eye: eye.to_array(),
-        target: c.to_array(),
-        up: [0.0, 0.0, 1.0],
-        fov_y: 45.0,
-        width: size,
-        height: size,
-    }
+    let (positions, _) = scene.particles(0).surface_arrays();
+    slosh_testkit::framing_camera(&positions, size)
 }
 
 pub fn scene(spec: SceneSpec) -> Scene {

@@ -1,0 +1,234 @@
+//! Normal orientation repaired before anything uses the normals (`docs/algorithm.md`,
+//! "Orientation"). A reversed normal drops every neighbour as "the other face" and leaves its
+//! point alone, which draws a pit or a stray sphere; so each normal is checked against the
+//! neighbours that lie in its tangent plane, and reversed where they contradict it. The two
+//! faces of a thin sheet stay apart: a neighbour across the sheet lies along the normal, not
+//! in the tangent plane, and weighs little. Then small patches whose whole border contradicts
+//! them are reversed together, which single votes cannot do from inside a patch.
+
+use rayon::prelude::*;
+
+/// Neighbours each normal is checked against: enough for a clear majority at 30 % reversed.
+pub const ORIENT_NEIGHBOURS: usize = 16;
+/// A normal is reversed when the weighted vote of its neighbours is below −this (votes run
+/// from −1, all contradict, to 1, all agree): a margin that keeps a thin sheet's points,
+/// whose vote is near 0, as they are.
+const REVERSE_BELOW: f64 = 0.2;
+/// Voting passes: each sees the repairs of the pass before (a reversed point among reversed
+/// neighbours is outvoted once they are repaired).
+const PASSES: usize = 3;
+/// Tangent weight an edge needs to join two points into a patch or count at its border:
+/// within 60° of the tangent plane.
+const PATCH_WEIGHT: f64 = 0.75;
+/// The largest patch reversed as a whole, as a fraction of the points: a wrong patch is a
+/// local defect; a large one may be a face of a sheet.
+const PATCH_FRACTION: f64 = 0.02;
+
+/// What the repair changed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct OrientationRepair {
+    /// Points whose normal ends reversed against the input, in all.
+    pub flipped_points: usize,
+    /// Patches reversed as a whole, and their points.
+    pub flipped_patches: usize,
+    pub patch_points: usize,
+}
+
+/// How much a neighbour at offset `d` counts for a normal `n`: 1 in the tangent plane, 0
+/// along the normal (sin² of the angle to it), whichever way the normal points.
+fn tangent_weight(n: [f64; 3], d: [f64; 3]) -> f64 {
+    let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    if dd <= 0.0 {
+        return 0.0;
+    }
+    let along = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+    1.0 - along * along / dd
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn neg(a: [f64; 3]) -> [f64; 3] {
+    [-a[0], -a[1], -a[2]]
+}
+
+/// Repairs `normals` (unit or `None`) of `points`, given each point's nearest neighbours
+/// (`nearest[i]`, itself excluded, nearest first).
+pub fn repair_orientation(
+    points: &[[f64; 3]],
+    normals: &mut [Option<[f64; 3]>],
+    nearest: &[Vec<u32>],
+) -> OrientationRepair {
+    let n = points.len();
+    let original: Vec<Option<[f64; 3]>> = normals.to_vec();
+    // Each point's weighted edges to neighbours that have normals (weights from its own
+    // normal's direction, which a reversal does not change).
+    let edges: Vec<Vec<(u32, f64)>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let Some(ni) = original[i] else {
+                return Vec::new();
+            };
+            nearest[i]
+                .iter()
+                .filter(|&&j| original[j as usize].is_some())
+                .map(|&j| {
+                    let p = points[j as usize];
+                    let d = [
+                        p[0] - points[i][0],
+                        p[1] - points[i][1],
+                        p[2] - points[i][2],
+                    ];
+                    (j, tangent_weight(ni, d))
+                })
+                .filter(|&(_, w)| w > 0.0)
+                .collect()
+        })
+        .collect();
+    for _ in 0..PASSES {
+        let current: &[Option<[f64; 3]>] = normals;
+        let reverse: Vec<bool> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let Some(ni) = current[i] else { return false };
+                let (mut vote, mut total) = (0.0, 0.0);
+                for &(j, w) in &edges[i] {
+                    if let Some(nj) = current[j as usize] {
+                        vote += w * dot(ni, nj).signum();
+                        total += w;
+                    }
+                }
+                total > 0.0 && vote < -REVERSE_BELOW * total
+            })
+            .collect();
+        if !reverse.iter().any(|&r| r) {
+            break;
+        }
+        for (normal, r) in normals.iter_mut().zip(reverse) {
+            if r {
+                *normal = normal.map(neg);
+            }
+        }
+    }
+    let (patches, points_in) = reverse_contradicted_patches(normals, &edges);
+    let flipped_points = normals
+        .iter()
+        .zip(&original)
+        .filter(|(now, was)| matches!((now, was), (Some(a), Some(b)) if dot(*a, *b) < 0.0))
+        .count();
+    OrientationRepair {
+        flipped_points,
+        flipped_patches: patches,
+        patch_points: points_in,
+    }
+}
+
+/// Patches: points joined by tangent edges whose normals agree. A patch of at most
+/// `PATCH_FRACTION` of the points whose border edges all contradict it is reversed.
+fn reverse_contradicted_patches(
+    normals: &mut [Option<[f64; 3]>],
+    edges: &[Vec<(u32, f64)>],
+) -> (usize, usize) {
+    let n = normals.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn root(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            parent[i as usize] = parent[parent[i as usize] as usize];
+            i = parent[i as usize];
+        }
+        i
+    }
+    let agree = |normals: &[Option<[f64; 3]>], i: usize, j: usize| match (normals[i], normals[j]) {
+        (Some(a), Some(b)) => dot(a, b) >= 0.0,
+        _ => true,
+    };
+    for (i, list) in edges.iter().enumerate() {
+        for &(j, w) in list {
+            if w >= PATCH_WEIGHT && agree(normals, i, j as usize) {
+                let (a, b) = (root(&mut parent, i as u32), root(&mut parent, j));
+                if a != b {
+                    parent[a.max(b) as usize] = a.min(b);
+                }
+            }
+        }
+    }
+    let roots: Vec<u32> = (0..n as u32).map(|i| root(&mut parent, i)).collect();
+    let mut size = vec![0usize; n];
+    // Border edges of each patch: how many, and how many agree across it.
+    let mut border = vec![(0usize, 0usize); n];
+    for (i, list) in edges.iter().enumerate() {
+        if normals[i].is_none() {
+            continue;
+        }
+        size[roots[i] as usize] += 1;
+        for &(j, w) in list {
+            if w >= PATCH_WEIGHT && roots[j as usize] != roots[i] {
+                let b = &mut border[roots[i] as usize];
+                b.0 += 1;
+                b.1 += usize::from(agree(normals, i, j as usize));
+            }
+        }
+    }
+    let largest = ((n as f64 * PATCH_FRACTION) as usize).max(1);
+    let reversed: Vec<bool> = (0..n)
+        .map(|r| size[r] > 0 && size[r] <= largest && border[r].0 > 0 && border[r].1 == 0)
+        .collect();
+    let (mut patches, mut points_in) = (0, 0);
+    for r in 0..n {
+        if reversed[r] {
+            patches += 1;
+            points_in += size[r];
+        }
+    }
+    for (i, normal) in normals.iter_mut().enumerate() {
+        if reversed[roots[i] as usize] {
+            *normal = normal.map(neg);
+        }
+    }
+    (patches, points_in)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A plane grid with normals +z, some reversed singly and one 5×5 patch reversed.
+    #[test]
+    fn single_reversals_and_a_patch_are_repaired() {
+        let side = 40usize;
+        let points: Vec<[f64; 3]> = (0..side * side)
+            .map(|k| [(k % side) as f64, (k / side) as f64, 0.0])
+            .collect();
+        let tree: kiddo::ImmutableKdTree<f64, 3> =
+            kiddo::ImmutableKdTree::new_from_slice(&points).unwrap();
+        let nearest: Vec<Vec<u32>> = points
+            .iter()
+            .map(|p| {
+                tree.query(p)
+                    .nearest_n::<kiddo::SquaredEuclidean<f64>>(
+                        std::num::NonZero::new(ORIENT_NEIGHBOURS + 1).unwrap(),
+                    )
+                    .execute()
+                    .into_iter()
+                    .skip(1)
+                    .map(|r| r.item)
+                    .collect()
+            })
+            .collect();
+        let mut normals: Vec<Option<[f64; 3]>> = vec![Some([0.0, 0.0, 1.0]); points.len()];
+        let singles = [5 * side + 5, 20 * side + 31, 33 * side + 2];
+        for &i in &singles {
+            normals[i] = Some([0.0, 0.0, -1.0]);
+        }
+        let patch: Vec<usize> = (0..25).map(|k| (10 + k / 5) * side + 20 + k % 5).collect();
+        for &i in &patch {
+            normals[i] = Some([0.0, 0.0, -1.0]);
+        }
+        let repair = repair_orientation(&points, &mut normals, &nearest);
+        assert!(normals.iter().all(|n| *n == Some([0.0, 0.0, 1.0])));
+        assert_eq!(repair.flipped_points, singles.len() + patch.len());
+        // Votes wear the patch down from its corners; what is left goes back whole.
+        assert_eq!(repair.flipped_patches, 1, "{repair:?}");
+    }
+}

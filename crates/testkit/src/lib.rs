@@ -1,0 +1,77 @@
+//! What the test suites and the accuracy harness share, defined once: the camera that frames
+//! a point set, and the mask of silhouette pixels that comparisons leave out.
+
+use slosh_mls::Camera;
+
+/// A square camera that frames `points` from a generic direction (front left, above): the
+/// bounding box's centre, from 2.5 bounding radii away, 45° vertical field of view, z up.
+pub fn framing_camera(points: &[[f64; 3]], size: u32) -> Camera {
+    let (lo, hi) = slosh_mls::bounds(points);
+    let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+    let r = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt() * 0.5;
+    Camera {
+        eye: [c[0] + 0.9 * r, c[1] - 2.2 * r, c[2] + 1.1 * r],
+        target: c,
+        up: [0.0, 0.0, 1.0],
+        fov_y: 45.0,
+        width: size,
+        height: size,
+    }
+}
+
+/// Silhouette pixels of an image of depths (`None`: a miss), `width` pixels wide: a pixel
+/// whose 3×3 neighbourhood mixes hits and misses, or, with `depth_jump`, holds depths that
+/// differ by more than that fraction (an occluding contour, such as a droplet in front of the
+/// surface). There two tracers may pick different layers, or one may hit where the other
+/// just misses, and both be right.
+pub fn silhouette_mask(depth: &[Option<f64>], width: usize, depth_jump: Option<f64>) -> Vec<bool> {
+    let height = depth.len() / width.max(1);
+    (0..depth.len())
+        .map(|i| {
+            let (x, y) = ((i % width) as i64, (i / width) as i64);
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dx| {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx as usize >= width || ny as usize >= height {
+                        return false;
+                    }
+                    match (depth[i], depth[ny as usize * width + nx as usize]) {
+                        (Some(a), Some(b)) => {
+                            depth_jump.is_some_and(|f| (a - b).abs() > f * a.min(b))
+                        }
+                        (a, b) => a.is_some() != b.is_some(),
+                    }
+                })
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn silhouettes_ring_the_edge_of_a_disc_and_a_depth_step() {
+        // 7×7: a hit block in columns 2..5, depth 1, except column 4 at depth 2.
+        let w = 7;
+        let depth: Vec<Option<f64>> = (0..49)
+            .map(|i| {
+                let x = i % w;
+                match x {
+                    2 | 3 => Some(1.0),
+                    4 => Some(2.0),
+                    _ => None,
+                }
+            })
+            .collect();
+        let plain = silhouette_mask(&depth, w, None);
+        let jumps = silhouette_mask(&depth, w, Some(0.05));
+        let row: Vec<bool> = (0..w).map(|x| plain[3 * w + x]).collect();
+        assert_eq!(row, [false, true, true, false, true, true, false]);
+        // Column 3 lies beside column 4's depth step.
+        assert!(jumps[3 * w + 3]);
+        let inner = silhouette_mask(&[Some(1.0); 9], 3, Some(0.05));
+        assert!(inner.iter().all(|s| !s));
+    }
+}
