@@ -268,7 +268,7 @@ pub fn run(args: &AccuracyArgs) -> Result<()> {
 
     let _ = writeln!(
         out,
-        "## Iterations and degree (mean normals, h = 1.5 × ρ₂₅, f64)\n"
+        "## Iterations and degree (mean normals, h = 1.5 × ρ₅₀, f64)\n"
     );
     out += HEADER;
     for c in &cases {
@@ -325,7 +325,7 @@ pub fn run(args: &AccuracyArgs) -> Result<()> {
 
     let _ = writeln!(
         out,
-        "\n## Smoothing length h = scale × ρ₂₅ (25th percentile of ρ), degree 2, 3 iterations\n"
+        "\n## Smoothing length h = scale × ρ₅₀ (the median ρ), degree 2, 3 iterations\n"
     );
     out += HEADER;
     for c in cases.iter().filter(|c| c.noise == 0.0) {

@@ -340,7 +340,7 @@ pub struct BakeArgs {
     /// Radius of trust = distance to the k-th nearest neighbour.
     #[arg(long, default_value_t = 6)]
     pub k: usize,
-    /// h = h-scale × the dense fluid's radius of trust (its 25th percentile).
+    /// h = h-scale × the dense fluid's radius of trust (its median).
     #[arg(long, default_value_t = 1.5)]
     pub h_scale: f64,
     /// At most this many neighbours per point.

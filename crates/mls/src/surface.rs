@@ -21,7 +21,7 @@ use crate::timing::StageClock;
 pub struct SurfaceParams {
     /// Radius of trust ρ_i = distance to the k-th nearest neighbour.
     pub k: usize,
-    /// h = h_scale × ρ of the dense fluid, the 25th percentile of ρ (thesis §4.1.2: 1.5 ×
+    /// h = h_scale × ρ of the dense fluid, the median of ρ (thesis §4.1.2: 1.5 ×
     /// mean ρ, which spray inflates).
     pub h_scale: f64,
     /// Neighbour lists reach ρ_i + support × h, where the weight has died out (θ(3h) ≈ 1e-4).
@@ -93,7 +93,7 @@ pub struct SurfaceParts<T> {
     pub points: Vec<V3<T>>,
     pub normals: Option<Vec<V3<T>>>,
     pub radii: Vec<T>,
-    /// The global smoothing length h_scale × the 25th percentile of ρ (each ball carries the h
+    /// The global smoothing length h_scale × the median of ρ (each ball carries the h
     /// it uses).
     pub h: T,
     /// Mean distance to the nearest other point.
@@ -212,8 +212,8 @@ impl<T: Real> Surface<T> {
         for r in &mut radii {
             *r = r.max(floor);
         }
-        // h from the dense fluid, not the spray: a low quantile of the radii, which sparse
-        // points (large radii) cannot inflate.
+        // h from the dense fluid, not the spray: the median radius, which sparse points
+        // (large radii) cannot inflate while they are fewer than half.
         let h = params.h_scale * quantile(&radii, H_QUANTILE);
         let dense_spacing = quantile(&nearest, H_QUANTILE);
         // A ball is trusted no farther than its data reach: beyond 2h a fit has no weight.
@@ -580,8 +580,10 @@ pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     (lo, hi)
 }
 
-/// The radii's quantile that sets h and the spray's particle size: the dense fluid's.
-const H_QUANTILE: f64 = 0.25;
+/// The quantile of the radii that sets h, and of the nearest distances that sets the spray's
+/// particle size: the median. A lower one (0.25 was tried) resists more spray but makes cubic
+/// fits on noisy data ill-conditioned in f32 (`docs/accuracy.md`, f32 against f64).
+const H_QUANTILE: f64 = 0.5;
 
 /// The `q` quantile of `values` (nearest rank; 0 for none).
 fn quantile(values: &[f64], q: f64) -> f64 {
