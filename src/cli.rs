@@ -231,6 +231,20 @@ pub struct AccuracyArgs {
     /// A small, fast run (fewer scenes and configurations) to check the harness itself.
     #[arg(long)]
     pub quick: bool,
+    /// Real SPH cases to compare with splashsurf: a directory of case directories, each from
+    /// `scripts/sph_reference.py` (particles.ply, splashsurf.ply, meta.json).
+    #[arg(long)]
+    pub sph: Option<PathBuf>,
+    /// Only the SPH comparison (needs --sph).
+    #[arg(long, requires = "sph")]
+    pub sph_only: bool,
+    /// Also write the measurements as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write each SPH case as a small fixture under this directory (particles, meta and the
+    /// reference's ray depths instead of its mesh), then stop.
+    #[arg(long, requires = "sph")]
+    pub sph_fixture: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -357,8 +371,9 @@ pub struct BakeArgs {
     /// `surface` if the case has one, else all).
     #[arg(long)]
     pub surface: Option<String>,
-    /// Normals: a vector variable's name or `pca` (default: `normal` or `normals` if present,
-    /// else pca).
+    /// Normals: a vector variable's name, `pca` (none: support planes from the covariance) or
+    /// `estimate` (outward, from the neighbourhoods of all particles; for SPH output). Default:
+    /// `normal` or `normals` if present, else estimate with --surface estimate, else pca.
     #[arg(long)]
     pub normals: Option<String>,
     /// Variables to store per point, comma separated.

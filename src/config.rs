@@ -213,9 +213,13 @@ impl BakeConfig {
             let cloud = crate::import::read_point_cloud(&a.input)?;
             let normals = match a.normals.as_deref() {
                 Some("pca") => NormalSource::Pca,
+                Some("estimate") => NormalSource::Estimate,
                 None if cloud.normals.is_some() => NormalSource::Variable("normals".into()),
+                None if surface == SurfaceSelect::Estimate => NormalSource::Estimate,
                 None => NormalSource::Pca,
-                Some(v) => bail!("--normals {v}: a point cloud has only its own normals (or pca)"),
+                Some(v) => bail!(
+                    "--normals {v}: a point cloud has only its own normals (or pca, or estimate)"
+                ),
             };
             (BakeInput::PointCloud(cloud), surface, normals)
         } else {
@@ -255,8 +259,16 @@ impl BakeConfig {
                 None => ["normal", "normals"]
                     .into_iter()
                     .find(|n| has(n, VarType::Vector))
-                    .map_or(NormalSource::Pca, |n| NormalSource::Variable(n.into())),
+                    .map_or(
+                        if surface == SurfaceSelect::Estimate {
+                            NormalSource::Estimate
+                        } else {
+                            NormalSource::Pca
+                        },
+                        |n| NormalSource::Variable(n.into()),
+                    ),
                 Some("pca") => NormalSource::Pca,
+                Some("estimate") => NormalSource::Estimate,
                 Some(v) => {
                     if !has(v, VarType::Vector) {
                         bail!(

@@ -15,6 +15,7 @@ mod inspect;
 mod output;
 mod play;
 mod render;
+mod sph;
 
 use anyhow::Result;
 use clap::Parser;

@@ -380,13 +380,14 @@ fn vtk_reads_what_we_write() {
     }
 }
 
-/// `slosh bench accuracy --quick` writes its report and plot, and the clean sphere meets the
-/// accuracy goals it reports against.
+/// `slosh bench accuracy --quick` writes its report and plot; the measurements it writes as
+/// JSON meet this test's own bounds (not the report's verdicts) on the clean sphere.
 #[test]
 fn accuracy_harness_reports_goals() {
     let dir = tempfile::tempdir().unwrap();
     let md = dir.path().join("accuracy.md");
     let png = dir.path().join("img/accuracy.png");
+    let json = dir.path().join("accuracy.json");
     let (ok, _, err) = slosh(&[
         "bench",
         "accuracy",
@@ -395,25 +396,63 @@ fn accuracy_harness_reports_goals() {
         md.to_str().unwrap(),
         "--plot",
         png.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
     let report = std::fs::read_to_string(&md).unwrap();
-    let goals: Vec<&str> = report
-        .lines()
-        .filter(|l| {
-            l.starts_with("| converged")
-                || l.starts_with("| 1 iteration")
-                || l.starts_with("| f32 vs f64")
-        })
-        .collect();
-    assert_eq!(goals.len(), 3, "{report}");
-    for g in goals {
-        assert!(
-            g.ends_with("| yes |"),
-            "goal not met on the clean sphere: {g}"
-        );
-    }
+    assert!(report.contains("## Reversed normals"), "{report}");
+    let m: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let get = |k: &str| m[k].as_f64().unwrap_or_else(|| panic!("{k} missing: {m}"));
+    // The clean sphere (5000 points, 32×32): RMS in spacings, f32 agreement in %.
+    assert!(get("worst_converged_rms") <= 0.01, "{m}");
+    assert!(get("worst_one_iteration_rms") <= 0.05, "{m}");
+    assert!(get("f32_within_pct") >= 99.9, "{m}");
+    assert!(get("worst_reversed_rms_ratio") <= 1.5, "{m}");
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+}
+
+/// Real SPH data (the fixture: SPlisHSPlasH's dam break, 6859 particles at t = 1 s, and
+/// splashsurf's ray depths through the same camera) against the bounds slosh measured when
+/// the fixture was made (holes 6.06 %, false surface 2.15 %, p90 |Δt| 1.26 spacings; the
+/// goals are 1 %, 5 % and 1.5): a change that opens holes, stretches sheets or moves the
+/// surface fails here.
+#[test]
+fn sph_dam_break_stays_close_to_splashsurf() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("sph.json");
+    let fixture = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/sph");
+    let (ok, _, err) = slosh(&[
+        "bench",
+        "accuracy",
+        "--sph",
+        fixture,
+        "--sph-only",
+        "--out",
+        dir.path().join("sph.md").to_str().unwrap(),
+        "--plot",
+        dir.path().join("accuracy.png").to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let m: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let case = &m[0];
+    let get = |k: &str| {
+        case[k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{k} missing: {m}"))
+    };
+    assert!(get("reference_hits") > 3000.0, "{m}");
+    assert!(get("holes_pct") <= 7.0, "{m}");
+    assert!(get("false_pct") <= 3.0, "{m}");
+    assert!(get("dt_p90") <= 1.4, "{m}");
+    assert!(get("far_pct") <= 2.5, "{m}");
+    assert!(
+        std::fs::read(dir.path().join("sph-coarse.png"))
+            .unwrap()
+            .starts_with(b"\x89PNG")
+    );
 }
 
 fn step_sums(dir: &Path) -> Vec<(String, Vec<String>)> {

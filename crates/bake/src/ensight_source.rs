@@ -23,7 +23,7 @@ impl EnsightSource {
             parts: None,
             normals: match &params.normals {
                 NormalSource::Variable(v) => Some(v.clone()),
-                NormalSource::Pca => None,
+                NormalSource::Pca | NormalSource::Estimate => None,
             },
             fields: params.fields.clone(),
             surface: match &params.surface {

@@ -17,5 +17,7 @@ pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use ensight_source::EnsightSource;
 pub use order::morton_order;
 pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
-pub use select::{ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface};
+pub use select::{
+    ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
+};
 pub use step::{BakeError, BakedStep, bake_step};

@@ -24,6 +24,10 @@ pub enum NormalSource {
     Variable(String),
     /// None: support planes from the weighted covariance (PCA).
     Pca,
+    /// Estimated from the particles (SPH output has none): outward, away from the centroid
+    /// of each particle's neighbours among all particles of the step
+    /// (`select::estimate_surface_normals`); support planes from the weighted mean normal.
+    Estimate,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -44,7 +48,7 @@ impl BakeParams {
     pub fn new(surface: SurfaceSelect, normals: NormalSource) -> BakeParams {
         let mls = SurfaceParams {
             normals: match normals {
-                NormalSource::Variable(_) => NormalsMode::Mean,
+                NormalSource::Variable(_) | NormalSource::Estimate => NormalsMode::Mean,
                 NormalSource::Pca => NormalsMode::Covariance,
             },
             ..SurfaceParams::default()

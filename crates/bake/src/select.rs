@@ -35,15 +35,26 @@ pub const ESTIMATE_THRESHOLD: f64 = 0.25;
 /// same idea as the SPH free-surface detectors based on the kernel-gradient sum; this form
 /// needs no kernel. It flags every boundary of the fluid body, walls included.
 pub fn estimate_surface(points: &[[f64; 3]]) -> Vec<bool> {
+    estimate_surface_normals(points)
+        .into_iter()
+        .map(|(surface, _)| surface)
+        .collect()
+}
+
+/// [`estimate_surface`], with each particle's outward normal: away from the centroid of its
+/// neighbours, the direction in which the particle indicator (the colour field) falls, as its
+/// negated gradient does. A zero vector where the neighbours surround the particle evenly.
+pub fn estimate_surface_normals(points: &[[f64; 3]]) -> Vec<(bool, [f64; 3])> {
+    let none = || vec![(true, [0.0; 3]); points.len()];
     if points.len() <= ESTIMATE_NEIGHBOURS {
-        return vec![true; points.len()];
+        return none();
     }
     let tree: ImmutableKdTree<f64, 3> = match ImmutableKdTree::new_from_slice(points) {
         Ok(t) => t,
-        Err(_) => return vec![true; points.len()],
+        Err(_) => return none(),
     };
     let Some(k) = NonZero::new(ESTIMATE_NEIGHBOURS + 1) else {
-        return vec![true; points.len()];
+        return none();
     };
     points
         .par_iter()
@@ -64,7 +75,12 @@ pub fn estimate_surface(points: &[[f64; 3]]) -> Vec<bool> {
                 mean_dist += r.distance.sqrt() / m;
             }
             let offset = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            offset > ESTIMATE_THRESHOLD * mean_dist
+            let outward = if offset > 0.0 {
+                c.map(|v| -v / offset)
+            } else {
+                [0.0; 3]
+            };
+            (offset > ESTIMATE_THRESHOLD * mean_dist, outward)
         })
         .collect()
 }

@@ -9,7 +9,7 @@ use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, FitStatus, StageClock, Surface, SurfaceError};
 
 use crate::params::{BakeParams, SurfaceSelect};
-use crate::select::{StepInput, estimate_surface};
+use crate::select::{StepInput, estimate_surface_normals};
 
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
@@ -71,6 +71,8 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         .filter(|&i| input.positions[i as usize].iter().all(|c| c.is_finite()))
         .collect();
     let dropped_non_finite = n_in - finite.len();
+    // The surface estimate and its normals, from all finite particles, once.
+    let mut estimated: Option<Vec<(bool, [f64; 3])>> = None;
     let surface_of_finite: Vec<bool> = match &params.surface {
         SurfaceSelect::All => vec![true; finite.len()],
         SurfaceSelect::Variable(name) => {
@@ -86,7 +88,11 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             }
             finite.iter().map(|&i| flags[i as usize]).collect()
         }
-        SurfaceSelect::Estimate => estimate_surface(&permute(&input.positions, &finite)),
+        SurfaceSelect::Estimate => estimated
+            .get_or_insert_with(|| estimate_surface_normals(&permute(&input.positions, &finite)))
+            .iter()
+            .map(|e| e.0)
+            .collect(),
     };
     let kept: Vec<u32> = finite
         .iter()
@@ -119,6 +125,20 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     let source_index: Vec<u32> = order.iter().map(|&o| kept[o as usize]).collect();
     let normals: Option<Vec<[f64; 3]>> = match &params.normals {
         crate::params::NormalSource::Pca => None,
+        crate::params::NormalSource::Estimate => {
+            // From all finite particles (the interior shapes the surface's normals), then
+            // the kept ones, in the spatial order.
+            let all = estimated.get_or_insert_with(|| {
+                estimate_surface_normals(&permute(&input.positions, &finite))
+            });
+            // `finite` is ascending, so a source index finds its estimate by search.
+            Some(
+                source_index
+                    .iter()
+                    .map(|i| finite.binary_search(i).map_or([0.0; 3], |k| all[k].1))
+                    .collect(),
+            )
+        }
         crate::params::NormalSource::Variable(name) => {
             let ns = input
                 .normals

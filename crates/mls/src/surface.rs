@@ -347,9 +347,9 @@ impl<T: Real> Surface<T> {
         clock.lap("initial fits");
         let spheres = droplets(
             &rel,
-            &neighbour_start,
-            &neighbours,
+            (&neighbour_start, &neighbours),
             &ball_h,
+            &nearest,
             dense_spacing,
             params.droplet_below,
             &mut ball_fits,
@@ -460,9 +460,9 @@ impl<T: Real> Surface<T> {
 /// particles far apart.
 fn droplets<T: Real>(
     points: &[[f64; 3]],
-    start: &[u32],
-    neighbours: &[u32],
+    (start, neighbours): (&[u32], &[u32]),
     ball_h: &(dyn Fn(usize) -> f64 + Sync),
+    nearest: &[f64],
     spacing: f64,
     below: usize,
     fits: &mut [BallFit],
@@ -515,7 +515,10 @@ fn droplets<T: Real>(
             .iter()
             .map(|&i| distance(points[i], c))
             .fold(0.0, f64::max);
-        if m.len() >= below && far > ball_h(m[0]) {
+        // A surface: enough points, wider than h, and sampled about as densely as the fluid
+        // (spray spread thin is not a sheet to stretch across its gaps).
+        let mean_gap = m.iter().map(|&i| nearest[i]).sum::<f64>() / m.len() as f64;
+        if m.len() >= below && far > ball_h(m[0]) && mean_gap <= SPRAY_GAP * spacing {
             continue;
         }
         let rms = (m
@@ -524,7 +527,10 @@ fn droplets<T: Real>(
             .sum::<f64>()
             / m.len() as f64)
             .sqrt();
-        if m.len() >= 4 && far <= rms + spacing {
+        // A blob only where the particles fill it: no wider than their own volume's
+        // sphere (N particles of radius s / 2 fill one of radius (s / 2)·∛N), with slack.
+        let filled = rms <= 1.25 * particle * (m.len() as f64).cbrt();
+        if m.len() >= 4 && far <= rms + spacing && filled {
             let d = spheres.len() as u32;
             for &i in m {
                 fits[i] = BallFit::Droplet(d);
@@ -579,6 +585,10 @@ pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     }
     (lo, hi)
 }
+
+/// A component whose points lie farther apart on average than this many dense spacings is
+/// spray, whatever its size.
+const SPRAY_GAP: f64 = 1.5;
 
 /// The quantile of the radii that sets h, and of the nearest distances that sets the spray's
 /// particle size: the median. A lower one (0.25 was tried) resists more spray but makes cubic
