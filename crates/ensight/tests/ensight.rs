@@ -428,7 +428,8 @@ fn bad_input_names_file_and_place() {
 
 #[test]
 fn fuzz_corpus_files_never_panic() {
-    // Every prefix of valid files of each flavour: truncation at any byte is an error, not a panic.
+    // Every prefix of valid files of each flavour: truncation at any byte is an error that
+    // names the file, never a panic and never a silently shorter step.
     let dir = tempfile::tempdir().unwrap();
     for format in [
         WriteFormat::E6Ascii,
@@ -440,9 +441,36 @@ fn fuzz_corpus_files_never_panic() {
         let mut w = CaseWriter::create(&sub, "f", format, Placement::PointPart, &[]).unwrap();
         let (pos, _, _) = sample(4, 9);
         w.write_step(0.0, &pos, &[]).unwrap();
-        let bytes = std::fs::read(sub.join("f.geo00000")).unwrap();
+        let geo = sub.join("f.geo00000");
+        let bytes = std::fs::read(&geo).unwrap();
+        let case_path = w.case_path().to_path_buf();
+        let full = Case::open(&case_path)
+            .and_then(|c| c.read_step(0, &StepRequest::default()))
+            .unwrap()
+            .positions;
         for cut in 0..bytes.len() {
             fuzzing::geometry(&bytes[..cut]);
+            // Through the reader: an error naming the file (or the case, where the cut
+            // leaves a well-formed geometry without particles), unless the cut only took
+            // trailing whitespace, which leaves the same points.
+            std::fs::write(&geo, &bytes[..cut]).unwrap();
+            match Case::open(&case_path).and_then(|c| c.read_step(0, &StepRequest::default())) {
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(
+                        e.contains("f.geo00000") || e.contains("f.case"),
+                        "{format:?} cut at {cut}: {e}"
+                    );
+                }
+                Ok(step) => {
+                    assert!(
+                        bytes[cut..].iter().all(u8::is_ascii_whitespace),
+                        "{format:?} cut at {cut} of {} read without an error",
+                        bytes.len()
+                    );
+                    assert_eq!(step.positions, full, "{format:?} cut at {cut}");
+                }
+            }
         }
         fuzzing::case(std::fs::read(w.case_path()).unwrap().as_slice());
     }
