@@ -255,8 +255,9 @@ fn sph_section(root: &Path, plot: &Path) -> Result<(String, String, Vec<crate::s
         out,
         "\n## Real SPH data against splashsurf\n\n\
          SPlisHSPlasH's dam break (pysplishsplash, `scripts/sph_reference.py`), the particles at one time, baked as a user \
-         bakes SPH output (`--surface estimate`, no normals: the covariance), traced with 3 iterations; and splashsurf \
-         (pysplashsurf 0.14.1: particle radius r, smoothing length 2r, cubes 0.5r, iso 0.6, absolute lengths) reconstructing \
+         bakes SPH output (`--surface estimate`, normals estimated from all particles: `docs/bake.md`), traced with 3 iterations; \
+         and splashsurf (pysplashsurf 0.14.1: particle radius r, smoothing length 2r, cubes 0.5r, iso 0.6, given in particle \
+         radii, which its output shows it takes, though its docstring says absolute lengths) reconstructing \
          the same particles, its mesh cast with the same rays ({}×{}, the product's framing, y up). Away from the reference's \
          silhouettes: *holes* are reference hits slosh misses (% of the reference's hits), *false* slosh hits the reference \
          misses (% of slosh's hits), |Δt| in particle spacings (2r) where both hit, *far* slosh's hits more than 4r from every \

@@ -29,6 +29,10 @@ pub const ESTIMATE_NEIGHBOURS: usize = 24;
 /// than this fraction of their mean distance.
 pub const ESTIMATE_THRESHOLD: f64 = 0.25;
 
+/// A neighbourhood is flat, a sheet one particle thick, when the spread across it (the
+/// smallest eigenvalue of its covariance) is below this fraction of the next.
+pub const ESTIMATE_FLAT: f64 = 0.05;
+
 /// Free-surface estimate for solvers that flag nothing (SPH): inside the fluid a particle's
 /// nearest neighbours surround it and their centroid is close to it; at the surface they all
 /// lie on one side, pulling the centroid inward by a sizeable fraction of their distance. The
@@ -75,12 +79,27 @@ pub fn estimate_surface_normals(points: &[[f64; 3]]) -> Vec<(bool, [f64; 3])> {
                 mean_dist += r.distance.sqrt() / m;
             }
             let offset = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            let outward = if offset > 0.0 {
-                c.map(|v| -v / offset)
-            } else {
-                [0.0; 3]
-            };
-            (offset > ESTIMATE_THRESHOLD * mean_dist, outward)
+            let one_sided = offset > ESTIMATE_THRESHOLD * mean_dist;
+            if one_sided {
+                return (true, c.map(|v| -v / offset));
+            }
+            // A sheet one particle thick surrounds its particles within its plane, so the
+            // centroid test misses it; its neighbourhood is flat. Both faces are surface and
+            // neither is outward: no normal (the support plane then comes from the
+            // covariance).
+            let mut cov = [[0.0f64; 3]; 3];
+            for r in others {
+                let q = points[r.item as usize];
+                let d: [f64; 3] = std::array::from_fn(|a| q[a] - p[a] - c[a]);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        cov[i][j] += d[i] * d[j] / m;
+                    }
+                }
+            }
+            let (mut values, _) = slosh_mls::jacobi_eigen(cov);
+            values.sort_by(f64::total_cmp);
+            (values[0] <= ESTIMATE_FLAT * values[1], [0.0; 3])
         })
         .collect()
 }
