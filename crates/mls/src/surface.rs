@@ -588,7 +588,7 @@ pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
 
 /// A component whose points lie farther apart on average than this many dense spacings is
 /// spray, whatever its size.
-const SPRAY_GAP: f64 = 1.5;
+const SPRAY_GAP: f64 = 1.25;
 
 /// The quantile of the radii that sets h, and of the nearest distances that sets the spray's
 /// particle size: the median. A lower one (0.25 was tried) resists more spray but makes cubic
