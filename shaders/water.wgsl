@@ -6,11 +6,8 @@
 // (iteration 1): they only colour, so refining them would cost without showing. Appended to
 // mls.wgsl, trace.wgsl and light.wgsl.
 
-
-const WATER_IOR: f32 = 1.33;
-// Fraction of light absorbed per unit of path through the fluid, per channel, in scene
-// extents: water's red absorption, exaggerated to read at the scale of a tank.
-const ABSORPTION: vec3<f32> = vec3<f32>(0.9, 0.25, 0.12);
+// The stage and optics (WATER_FLOOR_BELOW, WATER_IOR, WATER_ABSORPTION, …) are generated
+// from crates/render's water.rs, their one source, by shaders.rs.
 
 // The floor and the scale of the scene, from the BVH's root box (everything it holds).
 struct Stage {
@@ -19,13 +16,13 @@ struct Stage {
     square: f32,
 }
 
-// The floor lies 2 % of the scene's extent below its lowest point; checker squares are an
-// eighth of the extent (slosh_render::WaterStage mirrors this).
+// The floor lies a fraction of the scene's extent below its lowest point, under checker
+// squares of a fraction of the extent (slosh_render::water).
 fn stage() -> Stage {
     let root = node(0u);
     let size = root.hi - root.lo;
     let extent = max(max(size.x, size.y), max(size.z, 1e-6));
-    return Stage(root.lo.z - 0.02 * extent, extent, extent / 8.0);
+    return Stage(root.lo.z - WATER_FLOOR_BELOW * extent, extent, extent / WATER_SQUARES_PER_EXTENT);
 }
 
 // Whether anything of the fluid lies along the ray (its first candidate, iteration 1).
@@ -40,17 +37,17 @@ fn environment(origin: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec3<f32> {
         let t = (st.floor_z - origin.z) / dir.z;
         let p = origin + dir * t;
         let cell = vec2<i32>(floor(p.xy / st.square));
-        let light = select(0.8, 0.3, ((cell.x + cell.y) & 1) == 0);
+        let light = select(WATER_CHECKER_LIGHT, WATER_CHECKER_DARK, ((cell.x + cell.y) & 1) == 0);
         // Grazing rays see a greyer floor, so the horizon does not alias.
         let fade = clamp(-dir.z * 4.0, 0.0, 1.0);
-        var lit = 0.25 + 0.75 * settings.key_light.z;
+        var lit = WATER_FLOOR_AMBIENT + (1.0 - WATER_FLOOR_AMBIENT) * settings.key_light.z;
         if blocked(p + vec3<f32>(0.0, 0.0, 1e-4 * st.extent), settings.key_light) {
-            lit = 0.25;
+            lit = WATER_FLOOR_AMBIENT;
         }
         return mix(vec3<f32>(0.45), vec3<f32>(light), fade) * lit;
     }
     let up = clamp(dir.z, 0.0, 1.0);
-    return mix(vec3<f32>(0.55, 0.62, 0.7), vec3<f32>(0.18, 0.32, 0.55), up);
+    return mix(WATER_SKY_HORIZON, WATER_SKY_ZENITH, up);
 }
 
 // The surface along a ray from inside the fluid or from its surface: where it is met (t)
@@ -106,13 +103,13 @@ fn water_colour(p: vec3<f32>, n_in: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec
             if dot(out, out) == 0.0 {
                 out = reflect(into, -m);
             }
-            let tint = exp(-ABSORPTION * (exit.t / st.extent));
+            let tint = exp(-WATER_ABSORPTION * (exit.t / st.extent));
             refracted = environment(q, normalize(out), st) * tint;
         }
     }
     let view = -dir;
     let half_vector = normalize(settings.key_light + view);
-    var spec = 0.8 * pow(max(dot(n, half_vector), 0.0), 120.0);
+    var spec = WATER_HIGHLIGHT * pow(max(dot(n, half_vector), 0.0), WATER_HIGHLIGHT_EXPONENT);
     if blocked(p + n * eps, settings.key_light) {
         spec = 0.0;
     }

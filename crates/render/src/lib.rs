@@ -16,6 +16,7 @@ pub mod shaders;
 mod staging;
 mod tracer;
 mod upload;
+pub mod water;
 
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};

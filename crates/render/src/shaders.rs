@@ -187,7 +187,8 @@ pub fn ranged_wgsl(arrays: &[RangedArray], limit: u64, split: bool) -> String {
 /// The constants the shaders share with Rust, written from the Rust definitions so that each
 /// has one source: the hit statuses ([`crate::status`]), the shade modes
 /// ([`crate::ShadeMode`]), the candidates a ray refines ([`slosh_mls::MAX_CANDIDATES`]) and
-/// the stack-link packing ([`crate::MAX_LINK_FIRST`]). Prepended to every module.
+/// the stack-link packing ([`crate::MAX_LINK_FIRST`]), and the water pass's stage
+/// ([`crate::water`]). Prepended to every module.
 pub fn shared_constants_wgsl() -> String {
     use crate::{ShadeMode, status};
     let mut out =
@@ -212,7 +213,7 @@ pub fn shared_constants_wgsl() -> String {
     ] {
         constant(name, value);
     }
-    out
+    out + &crate::water::water_wgsl()
 }
 
 /// The trace module (trace, water) with a traversal stack of `entries`.

@@ -478,19 +478,17 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
     let (file, _) = bake(&input, 2);
     let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let loaded = slosh_cache::LoadedStep::load(&file).unwrap();
-    // The stage as water.wgsl sets it: the floor 2 % of the extent under the BVH root box,
-    // squares of an eighth of the extent, the key light toward normalize(0.4, −0.3, 0.85).
+    // The stage from its one source (slosh_render::water, which water.wgsl is generated
+    // from): the floor under the BVH root box, the checker squares, the key light. What the
+    // pass draws on it is predicted here from first principles.
+    use slosh_render::water;
     let root = loaded.bvh.nodes[0];
     let extent = (0..3)
         .map(|a| f64::from(root.hi[a]) - f64::from(root.lo[a]))
         .fold(1e-6, f64::max);
-    let floor_z = f64::from(root.lo[2]) - 0.02 * extent;
-    let square = extent / 8.0;
-    let key = {
-        let k = [0.4, -0.3, 0.85];
-        let l: f64 = k[0] * k[0] + k[1] * k[1] + k[2] * k[2];
-        k.map(|c| c / l.sqrt())
-    };
+    let floor_z = f64::from(root.lo[2]) - f64::from(water::FLOOR_BELOW) * extent;
+    let square = extent / f64::from(water::SQUARES_PER_EXTENT);
+    let key = slosh_render::DEFAULT_KEY_LIGHT.map(f64::from);
     // Straight down from above, wide enough to see the shadow beside the sphere.
     const SIZE: u32 = 96;
     const FOV: f64 = 32.0;
@@ -518,9 +516,14 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
     let r = radius / t.scale;
     let spacing = step.info.spacing / t.scale;
     let eye = t.to_local(camera.eye);
-    // Linear floor values: checker square (light 0.8, dark 0.3) × lit (0.25 + 0.75 key.z) or
-    // shadowed (0.25), seen straight down.
-    let lit = 0.25 + 0.75 * key[2];
+    // Linear floor values: checker square × lit (ambient plus the rest times key.z) or
+    // shadowed (ambient), seen straight down.
+    let ambient = f64::from(water::FLOOR_AMBIENT);
+    let (light, dark) = (
+        f64::from(water::CHECKER_LIGHT),
+        f64::from(water::CHECKER_DARK),
+    );
+    let lit = ambient + (1.0 - ambient) * key[2];
     let (mut checked, mut agree, mut shadowed) = (0usize, 0usize, 0usize);
     for (i, hit) in frame.hits.iter().enumerate() {
         if hit.status != status::MISS {
@@ -549,7 +552,8 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
         let in_shadow = along > 0.0 && d < r;
         let light_square =
             ((p[0] / square).floor() as i64 + (p[1] / square).floor() as i64).rem_euclid(2) == 1;
-        let expected = if light_square { 0.8 } else { 0.3 } * if in_shadow { 0.25 } else { lit };
+        let expected =
+            if light_square { light } else { dark } * if in_shadow { ambient } else { lit };
         let rgba = frame.rgba[i].to_le_bytes();
         let got = linear(rgba[0]);
         checked += 1;
@@ -564,19 +568,20 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
         "too few floor pixels to judge"
     );
     assert!(agree * 100 >= checked * 99, "{agree} of {checked} agree");
-    // Looking straight down at the sphere's top: Fresnel reflection r0 = ((1 − 1.33)/2.33)²
+    // Looking straight down at the sphere's top: Fresnel reflection r0 = ((1 − n)/(1 + n))²
     // of the sky's zenith, and refraction straight through (normal incidence, no bending) to
     // the floor under the centre, which the sphere shadows, tinted by 2 r of water; plus the
     // key light's highlight.
     let centre_pixel = (SIZE / 2) * SIZE + SIZE / 2;
     // (The hit buffer is in the cache's local coordinates, as c is.)
     assert_ne!(frame.hits[centre_pixel as usize].status, status::MISS);
-    let r0 = ((1.0f64 - 1.33) / 2.33).powi(2);
-    let zenith = [0.18, 0.32, 0.55];
+    let ior = f64::from(water::WATER_IOR);
+    let r0 = ((1.0 - ior) / (1.0 + ior)).powi(2);
+    let zenith = water::SKY_ZENITH.map(f64::from);
     let below_light =
         ((c[0] / square).floor() as i64 + (c[1] / square).floor() as i64).rem_euclid(2) == 1;
-    let floor_value = if below_light { 0.8 } else { 0.3 } * 0.25;
-    let absorption = [0.9, 0.25, 0.12];
+    let floor_value = if below_light { light } else { dark } * ambient;
+    let absorption = water::ABSORPTION.map(f64::from);
     // The highlight with the true normal where the pixel's ray meets the sphere (half a pixel
     // off the top, which tilts it by about a degree).
     let top = frame.hits[centre_pixel as usize].position.map(f64::from);
@@ -591,7 +596,7 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
         let l = h.iter().map(|x| x * x).sum::<f64>().sqrt();
         (0..3).map(|a| normal[a] * h[a] / l).sum::<f64>()
     };
-    let highlight = 0.8 * half.powf(120.0);
+    let highlight = f64::from(water::HIGHLIGHT) * half.powf(f64::from(water::HIGHLIGHT_EXPONENT));
     let rgba = frame.rgba[centre_pixel as usize].to_le_bytes();
     for channel in 0..3 {
         let tint = (-absorption[channel] * 2.0 * r / extent).exp();
