@@ -20,9 +20,12 @@ const PASSES: usize = 3;
 /// Tangent weight an edge needs to join two points into a patch or count at its border:
 /// within 60° of the tangent plane.
 const PATCH_WEIGHT: f64 = 0.75;
-/// The largest patch reversed as a whole, as a fraction of the points: a wrong patch is a
-/// local defect; a large one may be a face of a sheet.
-const PATCH_FRACTION: f64 = 0.02;
+/// The largest patch reversed as a whole, as a fraction of the points, and at most this
+/// fraction of the largest patch it borders: a wrong patch is a minority inside a surface;
+/// the two faces of a sheet, which contradict each other across their whole border, are
+/// alike in size and stay as they are.
+const PATCH_FRACTION: f64 = 0.25;
+const PATCH_MINORITY: f64 = 0.5;
 
 /// What the repair changed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -155,24 +158,36 @@ fn reverse_contradicted_patches(
     }
     let roots: Vec<u32> = (0..n as u32).map(|i| root(&mut parent, i)).collect();
     let mut size = vec![0usize; n];
-    // Border edges of each patch: how many, and how many agree across it.
-    let mut border = vec![(0usize, 0usize); n];
+    for (i, &r) in roots.iter().enumerate() {
+        size[r as usize] += usize::from(normals[i].is_some());
+    }
+    // Border edges of each patch: how many, how many agree across it, and the largest patch
+    // across it.
+    let mut border = vec![(0usize, 0usize, 0usize); n];
     for (i, list) in edges.iter().enumerate() {
         if normals[i].is_none() {
             continue;
         }
-        size[roots[i] as usize] += 1;
         for &(j, w) in list {
-            if w >= PATCH_WEIGHT && roots[j as usize] != roots[i] {
-                let b = &mut border[roots[i] as usize];
+            let (ri, rj) = (roots[i] as usize, roots[j as usize] as usize);
+            if w >= PATCH_WEIGHT && rj != ri {
+                let b = &mut border[ri];
                 b.0 += 1;
                 b.1 += usize::from(agree(normals, i, j as usize));
+                b.2 = b.2.max(size[rj]);
             }
         }
     }
     let largest = ((n as f64 * PATCH_FRACTION) as usize).max(1);
     let reversed: Vec<bool> = (0..n)
-        .map(|r| size[r] > 0 && size[r] <= largest && border[r].0 > 0 && border[r].1 == 0)
+        .map(|r| {
+            let (edges, agreeing, beside) = border[r];
+            size[r] > 0
+                && size[r] <= largest
+                && (size[r] as f64) <= PATCH_MINORITY * beside as f64
+                && edges > 0
+                && agreeing == 0
+        })
         .collect();
     let (mut patches, mut points_in) = (0, 0);
     for r in 0..n {

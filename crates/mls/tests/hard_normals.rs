@@ -217,3 +217,31 @@ fn reversed_normals_are_repaired_before_use() {
         }
     }
 }
+
+/// A whole region reversed (a cap of the sphere, about 10 % of its points, every normal in it
+/// pointing inward): votes cannot turn a patch from inside, so the patch goes back whole.
+#[test]
+fn a_reversed_patch_is_turned_back_whole() {
+    let sc = scene(spec(SceneKind::Sphere, 20_000));
+    let (pos, mut nrm) = sc.particles(0).surface_arrays();
+    let top = pos.iter().map(|p| p[2]).fold(f64::MIN, f64::max);
+    let mut reversed = 0;
+    for (p, n) in pos.iter().zip(nrm.iter_mut()) {
+        if p[2] > top - 0.2 {
+            *n = n.map(|c| -c);
+            reversed += 1;
+        }
+    }
+    let surface = Surface::<f64>::build(&pos, Some(&nrm), &SurfaceParams::default()).unwrap();
+    eprintln!("{reversed} reversed: {:?}", surface.orientation);
+    assert_eq!(surface.orientation.flipped_points, reversed);
+    let clean = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
+    let normals = surface.normals.as_ref().unwrap();
+    let clean_normals = clean.normals.as_ref().unwrap();
+    assert!(
+        normals
+            .iter()
+            .zip(clean_normals)
+            .all(|(a, b)| a.dot(*b) > 0.0)
+    );
+}
