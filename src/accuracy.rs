@@ -87,24 +87,7 @@ fn case_reversed(
     let t = scene.time(step);
     let p = scene.particles(step);
     let (positions, normals) = p.surface_arrays();
-    let (eye, target) = match kind {
-        SceneKind::Tank => ([1.0, -1.2, 1.4], [1.0, 0.5, 0.45]),
-        _ => {
-            let c = positions
-                .iter()
-                .fold([0.0; 3], |a, q| [a[0] + q[0], a[1] + q[1], a[2] + q[2]])
-                .map(|v| v / positions.len() as f64);
-            ([c[0] + 2.2, c[1] - 2.6, c[2] + 1.8], c)
-        }
-    };
-    let camera = Camera {
-        eye,
-        target,
-        up: [0.0, 0.0, 1.0],
-        fov_y: 40.0,
-        width: size,
-        height: size,
-    };
+    let camera = slosh_testkit::analytic_camera(&positions, kind == SceneKind::Tank, size);
     let truth = scene.truth(t);
     let exact: Vec<Option<(f64, DVec3)>> = (0..size * size)
         .map(|i| {

@@ -32,18 +32,7 @@ fn compare<T: Real>(
     };
     let surface = Surface::<T>::build(&pos, Some(&nrm), &params).unwrap();
     let truth = scene.truth(0.0);
-    let (eye, target) = match kind {
-        SceneKind::Tank => ([1.0, -1.2, 1.4], [1.0, 0.5, 0.45]),
-        _ => ([2.2, -2.6, 1.8], [0.0, 0.0, 0.0]),
-    };
-    let camera = Camera {
-        eye,
-        target,
-        up: [0.0, 0.0, 1.0],
-        fov_y: 40.0,
-        width: size,
-        height: size,
-    };
+    let camera = slosh_testkit::analytic_camera(&pos, kind == SceneKind::Tank, size);
     let mut tp = Params::new();
     tp.degree = degree;
     tp.iterations = iterations;
@@ -106,8 +95,8 @@ fn sphere_torus_and_tank_match_the_truth() {
             r.hits, r.rms, r.max, r.disagree, r.compared
         );
         assert!(r.hits > 200, "{kind:?}: {} hits", r.hits);
-        // Measured 2.3e-3 (torus) or less: twice that.
-        assert!(r.rms < 5e-3, "{kind:?}: RMS {} spacings", r.rms);
+        // Measured 4.1e-3 (torus) or less: 1.5 times that.
+        assert!(r.rms < 6e-3, "{kind:?}: RMS {} spacings", r.rms);
         assert!(
             (r.disagree as f64) < 0.01 * r.compared as f64,
             "{kind:?}: {} of {} pixels disagree",

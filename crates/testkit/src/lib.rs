@@ -1,4 +1,4 @@
-//! What the test suites and the accuracy harness share, defined once: the camera that frames
+//! What the test suites and the accuracy harness share, defined once: the cameras that frame
 //! a point set, and the mask of silhouette pixels that comparisons leave out.
 
 use slosh_mls::Camera;
@@ -14,6 +14,30 @@ pub fn framing_camera(points: &[[f64; 3]], size: u32) -> Camera {
         target: c,
         up: [0.0, 0.0, 1.0],
         fov_y: 45.0,
+        width: size,
+        height: size,
+    }
+}
+
+/// The camera of the comparisons against analytic truth (the CPU tracer's tests and `slosh
+/// bench accuracy`), square, 40° field of view, z up: the tank scene from its fixed viewpoint
+/// over the fluid, anything else from the front left, above the particles' centroid.
+pub fn analytic_camera(points: &[[f64; 3]], tank: bool, size: u32) -> Camera {
+    let (eye, target) = if tank {
+        ([1.0, -1.2, 1.4], [1.0, 0.5, 0.45])
+    } else {
+        let n = points.len().max(1) as f64;
+        let c = points
+            .iter()
+            .fold([0.0; 3], |a, q| [a[0] + q[0], a[1] + q[1], a[2] + q[2]])
+            .map(|v| v / n);
+        ([c[0] + 2.2, c[1] - 2.6, c[2] + 1.8], c)
+    };
+    Camera {
+        eye,
+        target,
+        up: [0.0, 0.0, 1.0],
+        fov_y: 40.0,
         width: size,
         height: size,
     }
