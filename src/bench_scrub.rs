@@ -274,6 +274,30 @@ fn measure(
             dir.display()
         );
     }
+    // Warm-up: a GPU that was idle runs its first seconds of work at low clocks (the first
+    // series of a cold run traced its frames 3 times slower), so frames run for a while
+    // before anything is measured, as in `bench gpu`.
+    {
+        let camera =
+            slosh_mls::Camera::framing(&manifest.bounds, 40.0, size.0, size.1, [0.0, 0.0, 1.0]);
+        let mut request = FrameRequest {
+            seconds: 0.0,
+            camera,
+            params: TraceParams::default(),
+            camera_moving: true,
+        };
+        let options = EngineOptions {
+            loaders: args.loaders.unwrap_or_else(slosh_play::default_loaders),
+            ..EngineOptions::default()
+        };
+        let mut engine = Engine::open(gpu.clone(), dir, options)?;
+        show(&mut engine, &mut request, 0)?;
+        let warm_up = Instant::now();
+        let seconds = if args.quick { 0.2 } else { 2.0 };
+        while warm_up.elapsed().as_secs_f64() < seconds {
+            frame(&mut engine, &request)?;
+        }
+    }
     // Floors. First a read of every file, so that all come from the page cache.
     for p in &paths {
         std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
@@ -562,7 +586,7 @@ fn markdown(
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "# Scrubbing: the streaming engine\n\nWritten by `slosh bench scrub{}` on {} ({cores} host cores). Frames of {}×{} at 1 iteration (the baked polynomial), shaded; every file read from the page cache. {} loader threads; sequential playback and page-cache jumps stream through a pool of {} steps, pool jumps use a pool that holds the whole series. Latency is from the request (the timeline set to the step) to the frame that shows it finished on the GPU; frames run back to back meanwhile, each submitted and waited for.\n",
+        "# Scrubbing: the streaming engine\n\nWritten by `slosh bench scrub{}` on {} ({cores} host cores). Frames of {}×{} at 1 iteration (the baked polynomial), shaded; every file read from the page cache. {} loader threads; sequential playback and page-cache jumps stream through a pool of {} steps, pool jumps use a pool that holds the whole series. Latency is from the request (the timeline set to the step) to the frame that shows it finished on the GPU; frames run back to back meanwhile, each submitted and waited for. Each series starts with 2 s of frames, so that the GPU has left its idle clocks.\n",
         if args.quick { " --quick" } else { "" },
         gpu.describe(),
         size.0,
