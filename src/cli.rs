@@ -345,7 +345,8 @@ pub struct BakeArgs {
     /// Steps baked at once (each is also parallel inside).
     #[arg(long, default_value_t = 2)]
     pub jobs: usize,
-    /// Bake only shard I of N (0-based), e.g. 2/8 for task 2 of a job array.
+    /// Bake only shard I of N (0-based), e.g. 2/8 for task 2 of a job array, or `slurm`: this
+    /// task's shard of a SLURM job array (docs/slurm.md).
     #[arg(long)]
     pub shard: Option<String>,
     /// Polynomial degree of the fits.

@@ -145,8 +145,38 @@ pub fn parse_step_range(s: &str) -> Result<(usize, usize)> {
     Ok((a, last))
 }
 
+/// `--shard slurm`: this task's place in a SLURM job array, from the variables SLURM sets
+/// (`SLURM_ARRAY_TASK_ID` − `SLURM_ARRAY_TASK_MIN` of `SLURM_ARRAY_TASK_COUNT`). The array's
+/// ids must be consecutive (`--array=0-15`, not `0-15:4`).
+fn slurm_shard(var: impl Fn(&str) -> Option<String>) -> Result<slosh_bake::Shard> {
+    let get = |name: &str| -> Result<usize> {
+        let v = var(name).with_context(|| {
+            format!("--shard slurm: ${name} is not set (run inside a SLURM job array: sbatch --array=0-N)")
+        })?;
+        v.trim()
+            .parse()
+            .with_context(|| format!("--shard slurm: ${name} is '{v}', expected a number"))
+    };
+    let (id, count) = (get("SLURM_ARRAY_TASK_ID")?, get("SLURM_ARRAY_TASK_COUNT")?);
+    let min = if var("SLURM_ARRAY_TASK_MIN").is_some() {
+        get("SLURM_ARRAY_TASK_MIN")?
+    } else {
+        0
+    };
+    let index = id.checked_sub(min).filter(|i| *i < count).with_context(|| {
+        format!(
+            "--shard slurm: task {id} of an array from {min} with {count} tasks; the array's ids \
+             must be consecutive (--array=A-B, no step)"
+        )
+    })?;
+    Ok(slosh_bake::Shard { index, count })
+}
+
 fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {
-    let bad = || anyhow::anyhow!("--shard {s}: expected I/N with 0 ≤ I < N, e.g. 0/3");
+    if s == "slurm" {
+        return slurm_shard(|name| std::env::var(name).ok());
+    }
+    let bad = || anyhow::anyhow!("--shard {s}: expected I/N with 0 ≤ I < N, e.g. 0/3, or slurm");
     let (i, n) = s.split_once('/').ok_or_else(bad)?;
     let (index, count): (usize, usize) = (
         i.trim().parse().map_err(|_| bad())?,
@@ -327,5 +357,41 @@ impl BakeConfig {
             },
             quiet: a.quiet,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn env(pairs: &'static [(&'static str, &'static str)]) -> impl Fn(&str) -> Option<String> {
+        move |name: &str| {
+            pairs
+                .iter()
+                .find(|(k, _)| *k == name)
+                .map(|(_, v)| v.to_string())
+        }
+    }
+
+    #[test]
+    fn shards_come_from_a_slurm_array() {
+        let s = slurm_shard(env(&[
+            ("SLURM_ARRAY_TASK_ID", "6"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "4"),
+        ]))
+        .unwrap();
+        assert_eq!((s.index, s.count), (2, 4));
+        let e = slurm_shard(env(&[("SLURM_ARRAY_TASK_COUNT", "4")])).unwrap_err();
+        assert!(
+            format!("{e:#}").contains("SLURM_ARRAY_TASK_ID is not set"),
+            "{e:#}"
+        );
+        let e = slurm_shard(env(&[
+            ("SLURM_ARRAY_TASK_ID", "12"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ]))
+        .unwrap_err();
+        assert!(format!("{e:#}").contains("consecutive"), "{e:#}");
     }
 }

@@ -1330,3 +1330,48 @@ fn cases_without_geometry_or_a_first_step_say_so() {
     assert!(err.contains("\"model:\" or \"measured:\" line"), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
 }
+
+/// A real SLURM on this machine (`scripts/slurm/test.sh`: munged, slurmctld and slurmd with a
+/// private configuration): a 4-task job array bakes a series whose every section equals a
+/// single-process bake, a dependent job rebuilds the manifest, and a task cancelled mid-way
+/// resumes when the array is resubmitted, keeping the steps it finished. The daemons need
+/// root and Debian's slurm-wlm and munge (`.ci/run` installs them); required when CI=true.
+#[test]
+fn slurm_job_arrays_bake_like_one_process_and_resume() {
+    let has = |tool: &str| {
+        Command::new("sh")
+            .args(["-c", &format!("command -v {tool}")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    let root = Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+    let tools = ["slurmctld", "slurmd", "sbatch", "munged", "python3"]
+        .iter()
+        .all(|t| has(t));
+    if !(tools && root) {
+        assert!(
+            !in_ci(),
+            "CI=true but SLURM cannot run here (root: {root}, slurm-wlm and munge installed: \
+             {tools}; .ci/run installs them)"
+        );
+        eprintln!("skipping: SLURM needs root and slurm-wlm, munge");
+        return;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/slurm/test.sh");
+    let out = Command::new("bash")
+        .arg(&script)
+        .env("SLOSH", env!("CARGO_BIN_EXE_slosh"))
+        .output()
+        .expect("run scripts/slurm/test.sh");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    eprintln!("{stdout}");
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("every section identical to the single-process bake"));
+    assert!(stdout.contains("== SLURM test passed"));
+}
