@@ -93,6 +93,11 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             bail!("--steps selects steps {a}..={b}, none of which {label} has (it has {span})");
         }
     }
+    if let Some(why) = &cfg.jobs_chosen
+        && !cfg.quiet
+    {
+        say!("{why}");
+    }
     let bar = if cfg.quiet {
         ProgressBar::hidden()
     } else {
@@ -100,18 +105,30 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     };
     bar.set_style(
         ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} steps, ETA {eta} {msg}",
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} steps, ETA {eta}, {msg}",
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar.enable_steady_tick(Duration::from_millis(250));
+    // Throughput for the bar: points baked so far over the time since the bake started.
+    let baked_points = std::sync::atomic::AtomicU64::new(0);
+    let started = std::time::Instant::now();
     let report = run_batch(source, opts, &|event| match event {
         Event::Planned { steps } => bar.set_length(steps as u64),
         Event::Done { index, outcome } => {
             match outcome {
                 Outcome::Baked {
                     points, seconds, ..
-                } => bar.set_message(format!("step {index}: {points} points in {seconds:.2} s")),
+                } => {
+                    let total = baked_points
+                        .fetch_add(points, std::sync::atomic::Ordering::Relaxed)
+                        + points;
+                    let rate = total as f64 / started.elapsed().as_secs_f64().max(1e-9);
+                    bar.set_message(format!(
+                        "{:.0}k points/s; step {index}: {points} points, {seconds:.1} s",
+                        rate / 1e3
+                    ));
+                }
                 Outcome::Kept => bar.set_message(format!("step {index}: kept")),
                 Outcome::Failed(e) => bar.println(format!("step {index} failed: {e}")),
             }

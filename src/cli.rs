@@ -342,9 +342,10 @@ pub struct BakeArgs {
     /// Steps to bake: A..B (B excluded), A..=B (B included) or N, e.g. 0..50.
     #[arg(long)]
     pub steps: Option<String>,
-    /// Steps baked at once (each is also parallel inside).
-    #[arg(long, default_value_t = 2)]
-    pub jobs: usize,
+    /// Steps baked at once (each is also parallel inside). Default: a quarter of the cores,
+    /// within three quarters of the memory available, for the first step's size.
+    #[arg(long)]
+    pub jobs: Option<usize>,
     /// Bake only shard I of N (0-based), e.g. 2/8 for task 2 of a job array, or `slurm`: this
     /// task's shard of a SLURM job array (docs/slurm.md).
     #[arg(long)]

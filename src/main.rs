@@ -12,6 +12,7 @@ mod generate;
 mod import;
 mod info;
 mod inspect;
+mod machine;
 mod output;
 mod play;
 mod render;

@@ -205,14 +205,6 @@ fn check_belongs(
 /// and the hit buffer written out.
 const BYTES_PER_PIXEL: u64 = 120;
 
-/// Bytes of memory available now (`MemAvailable` in /proc/meminfo), where known.
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 /// The validated settings of one `slosh render` run.
 struct RenderConfig {
     steps: Vec<usize>,
@@ -274,7 +266,7 @@ impl RenderConfig {
         // A frame holds its hits and pixels on the device and again in memory when read back
         // (about 120 bytes a pixel): refuse what the machine cannot hold instead of aborting.
         let needed = u64::from(width) * u64::from(height) * BYTES_PER_PIXEL;
-        if let Some(available) = available_memory()
+        if let Some(available) = crate::machine::available_memory()
             && needed > available
         {
             bail!(

@@ -872,6 +872,25 @@ fn absurd_job_counts_are_refused() {
     }
 }
 
+/// Without `--jobs`, the bake says how many steps it bakes at once and why: from the cores
+/// and the memory the first step needs.
+#[test]
+fn the_jobs_default_comes_from_cores_and_memory() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(
+        &dir.path().join("case"),
+        &["sphere", "--points", "500", "--steps", "2"],
+    );
+    let case = dir.path().join("case/sphere.case");
+    let (ok, out, err) = bake_case(&case, &dir.path().join("cache"), &[]);
+    assert!(ok, "{err}");
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let expected = format!("baking {} steps at once ({cores} cores", (cores / 4).max(1));
+    assert!(out.contains(&expected), "{out}");
+    assert!(out.contains("a step of 500 points needs about"), "{out}");
+    assert!(out.contains("baked 2 steps"), "{out}");
+}
+
 /// Render settings without a meaning, or that would destroy the input, are refused by name
 /// (issue 14, item 11).
 #[test]
