@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{CacheFile, Compression, Encoding, LoadedStep, encode_bytes, encode_step};
 use slosh_fileio::FileBytes;
@@ -24,16 +24,74 @@ const THESIS: [(usize, f64, f64, f64); 3] = [
     (100_000, 2.730, 3.341, 14.176),
 ];
 
-fn input(points: usize) -> StepInput {
+/// The sphere step of `points` points, and its mean particle spacing.
+fn input(points: usize) -> (StepInput, f64) {
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))
         .unwrap_or_else(|_| unreachable!("sphere scenes of a positive size always build"));
     let (positions, normals) = scene.particles(0).surface_arrays();
-    StepInput {
+    let input = StepInput {
         source: format!("sphere {points}"),
         positions,
         normals: Some(normals),
         ..StepInput::default()
+    };
+    (input, scene.spacing())
+}
+
+/// The peer on the same particles and cores: splashsurf (pysplashsurf 0.14.1) reconstructing
+/// a mesh with particle radius half the spacing, smoothing length 2r, cubes 0.5r and iso 0.6
+/// (given in particle radii, as pysplashsurf takes them). Median seconds of `runs`, with the
+/// mesh's triangle count; `Ok(None)` where python3 cannot import pysplashsurf.
+fn splashsurf_seconds(
+    positions: &[[f64; 3]],
+    radius: f64,
+    runs: usize,
+) -> Result<Option<(f64, u64)>> {
+    const SCRIPT: &str = "import sys, time, numpy as np, pysplashsurf
+p = np.fromfile(sys.argv[1], dtype='<f4').reshape(-1, 3)
+r, runs = float(sys.argv[2]), int(sys.argv[3])
+times = []
+for _ in range(runs):
+    t = time.perf_counter()
+    m = pysplashsurf.reconstruct_surface(p, particle_radius=r, smoothing_length=2.0,
+                                         cube_size=0.5, iso_surface_threshold=0.6)
+    times.append(time.perf_counter() - t)
+times.sort()
+print(times[len(times) // 2], len(m.mesh.triangles))
+";
+    let available = std::process::Command::new("python3")
+        .args(["-c", "import pysplashsurf"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !available {
+        return Ok(None);
     }
+    let file = tempfile::NamedTempFile::new()?;
+    let bytes: Vec<u8> = positions
+        .iter()
+        .flat_map(|p| p.iter().flat_map(|&c| (c as f32).to_le_bytes()))
+        .collect();
+    std::fs::write(file.path(), bytes)?;
+    let out = std::process::Command::new("python3")
+        .args(["-c", SCRIPT])
+        .arg(file.path())
+        .arg(radius.to_string())
+        .arg(runs.max(1).to_string())
+        .output()?;
+    if !out.status.success() {
+        anyhow::bail!(
+            "pysplashsurf failed: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut words = text.split_whitespace();
+    let seconds: f64 = words
+        .next()
+        .and_then(|w| w.parse().ok())
+        .with_context(|| format!("pysplashsurf printed '{}'", text.trim()))?;
+    let triangles: u64 = words.next().and_then(|w| w.parse().ok()).unwrap_or(0);
+    Ok(Some((seconds, triangles)))
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -88,9 +146,10 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         .unwrap_or(&10_000);
     let mut encodings_step = None;
     let mut size_rows = String::new();
+    let mut peer_rows = String::new();
     let mut load_rows = String::new();
     for &n in &sizes {
-        let inp = input(n);
+        let (inp, spacing) = input(n);
         let runs = if n >= 1_000_000 { 1 } else { args.runs };
         // The bare baseline: kiddo kNN, neighbour lists and fits, nothing else.
         let bare_params = SurfaceParams {
@@ -131,6 +190,24 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         };
         let total = median(totals);
         let bare = median(bares);
+        let peer = splashsurf_seconds(&inp.positions, 0.5 * spacing, runs)?;
+        let rate = |s: f64| format!("{:.0}k", n as f64 / s / 1e3);
+        match peer {
+            Some((seconds, triangles)) => writeln!(
+                peer_rows,
+                "| {n} | {:.3} s | {} | {seconds:.3} s ({triangles} triangles) | {} | {:.2}× |",
+                total,
+                rate(total),
+                rate(seconds),
+                seconds / total
+            )?,
+            None => writeln!(
+                peer_rows,
+                "| {n} | {:.3} s | {} | not run: python3 cannot import pysplashsurf (pip install pysplashsurf==0.14.1) | — | — |",
+                total,
+                rate(total)
+            )?,
+        }
         let ms = |s: f64| format!("{:.1} ms", s * 1e3);
         let thesis = THESIS.iter().find(|t| t.0 == n);
         writeln!(
@@ -226,6 +303,16 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
          The thesis's rows are its table 4.7 (sloshing tank, 50 nearest neighbours, quadratic; 2012 CPU), \
          its *total* including its OptiX scene graph and context compilation, which slosh does not need: \
          a slosh step is ready when its sections are decoded (next table).\n"
+    )?;
+    writeln!(
+        md,
+        "## Beside the peer: splashsurf on the same particles and cores\n\n\
+         splashsurf (pysplashsurf 0.14.1, the field's standard SPH surface reconstruction) turns the same sphere particles \
+         into a triangle mesh on the same machine and threads: particle radius half the mean spacing, smoothing length 2r, \
+         marching-cubes cells 0.5r, iso 0.6 (given in particle radii, which pysplashsurf takes despite its docstring). The \
+         jobs differ (a memory-mappable cache of MLS balls and a BVH against a mesh), but each is the step that turns a \
+         step's particles into a viewable surface. Medians as above; the peer runs in its own process after slosh.\n\n\
+         | points | slosh bake | slosh points/s | splashsurf | splashsurf points/s | slosh faster by |\n|---|---|---|---|---|---|\n{peer_rows}"
     )?;
     writeln!(
         md,
