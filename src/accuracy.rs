@@ -162,7 +162,8 @@ fn reference(case: &Case, cfg: &Config) -> Result<Render> {
     render_as::<f64>(case, cfg, 40, 1e-10)
 }
 
-fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
+/// The `q` quantile of `v` (nearest rank), NaN for none.
+pub(crate) fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }

@@ -544,7 +544,7 @@ pub fn run(args: &ScrubBenchArgs) -> Result<()> {
         adapter: args.adapter.clone(),
     };
     let gpu = Arc::new(Gpu::new(args.adapter.as_deref())?);
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cores = crate::machine::cores();
     say!("scrub benchmark on {} ({cores} cores)", gpu.describe());
     let root = args
         .dir

@@ -21,6 +21,8 @@ use slosh_cache::{CacheFile, LoadedStep, encode_step};
 use slosh_fileio::FileBytes;
 use slosh_mls::{Camera, Params, TraceHit};
 
+use crate::accuracy::percentile;
+
 /// Image size of every comparison.
 pub const SPH_WIDTH: u32 = 320;
 pub const SPH_HEIGHT: u32 = 240;
@@ -205,21 +207,18 @@ pub fn sph_camera(particles: &[[f64; 3]]) -> Camera {
     Camera::framing(&[lo, hi], 40.0, SPH_WIDTH, SPH_HEIGHT, [0.0, 1.0, 0.0])
 }
 
-fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
+/// A light over the camera's shoulder, unit length.
+fn shoulder_light(camera: &Camera) -> [f64; 3] {
+    let b = camera.basis();
+    let l: [f64; 3] = std::array::from_fn(|a| -b.forward[a] + 0.3 * b.up[a]);
+    let len = l.iter().map(|c| c * c).sum::<f64>().sqrt();
+    l.map(|c| c / len)
 }
 
-/// Grey by the angle to a light over the camera's shoulder; a miss black.
-fn shade(normal: Option<[f64; 3]>, camera: &Camera) -> [u8; 3] {
+/// Grey by the angle to `light`; a miss black.
+fn shade(normal: Option<[f64; 3]>, light: [f64; 3]) -> [u8; 3] {
     let Some(n) = normal else { return [0, 0, 0] };
-    let b = camera.basis();
-    let l: Vec<f64> = (0..3).map(|a| -b.forward[a] + 0.3 * b.up[a]).collect();
-    let len = l.iter().map(|c| c * c).sum::<f64>().sqrt();
-    let lit = (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).abs() / len;
+    let lit = (n[0] * light[0] + n[1] * light[1] + n[2] * light[2]).abs();
     let g = (40.0 + 200.0 * lit) as u8;
     [g, g, g]
 }
@@ -302,14 +301,15 @@ pub fn compare_case(dir: &Path, image: Option<&Path>) -> Result<SphResult> {
     }
     if let Some(path) = image {
         let w = camera.width as usize;
+        let light = shoulder_light(&camera);
         let mut rgb = Vec::with_capacity(3 * w * 3 * camera.height as usize);
         for y in 0..camera.height as usize {
             for panel in 0..3 {
                 for x in 0..w {
                     let i = y * w + x;
                     let px = match panel {
-                        0 => shade(ours[i].map(|h| h.normal), &camera),
-                        1 => shade(reference[i].map(|r| r.1), &camera),
+                        0 => shade(ours[i].map(|h| h.normal), light),
+                        1 => shade(reference[i].map(|r| r.1), light),
                         _ => match (reference[i], ours[i]) {
                             (Some(_), None) => [220, 40, 40],
                             (None, Some(_)) => [40, 90, 230],

@@ -29,7 +29,7 @@ pub use intersect::{
     Ball, HitStatus, InitialHit, Outcome, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
 };
-pub use orient::{ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
+pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};

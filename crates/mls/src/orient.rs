@@ -56,39 +56,48 @@ fn neg(a: [f64; 3]) -> [f64; 3] {
     [-a[0], -a[1], -a[2]]
 }
 
-/// Repairs `normals` (unit or `None`) of `points`, given each point's nearest neighbours
-/// (`nearest[i]`, itself excluded, nearest first).
+/// A point's nearest neighbours for the check, itself excluded, nearest first; `NO_POINT`
+/// fills the slots a small set leaves empty.
+pub type Around = [u32; ORIENT_NEIGHBOURS];
+pub const NO_POINT: u32 = u32::MAX;
+
+/// The weighted edges from each point to its neighbours that have normals, computed where
+/// they are walked rather than stored: the weight comes from the point's input normal's
+/// direction (which a reversal does not change) and the offset.
+struct Edges<'a> {
+    points: &'a [[f64; 3]],
+    original: &'a [Option<[f64; 3]>],
+    nearest: &'a [Around],
+}
+
+impl Edges<'_> {
+    fn of(&self, i: usize) -> impl Iterator<Item = (u32, f64)> + '_ {
+        let own = self.original[i];
+        self.nearest[i]
+            .iter()
+            .filter(move |&&j| own.is_some() && j != NO_POINT)
+            .filter(|&&j| self.original[j as usize].is_some())
+            .filter_map(move |&j| {
+                let (p, q) = (self.points[i], self.points[j as usize]);
+                let w = tangent_weight(own?, [q[0] - p[0], q[1] - p[1], q[2] - p[2]]);
+                (w > 0.0).then_some((j, w))
+            })
+    }
+}
+
+/// Repairs `normals` (unit or `None`) of `points`, given each point's nearest neighbours.
 pub fn repair_orientation(
     points: &[[f64; 3]],
     normals: &mut [Option<[f64; 3]>],
-    nearest: &[Vec<u32>],
+    nearest: &[Around],
 ) -> OrientationRepair {
     let n = points.len();
     let original: Vec<Option<[f64; 3]>> = normals.to_vec();
-    // Each point's weighted edges to neighbours that have normals (weights from its own
-    // normal's direction, which a reversal does not change).
-    let edges: Vec<Vec<(u32, f64)>> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let Some(ni) = original[i] else {
-                return Vec::new();
-            };
-            nearest[i]
-                .iter()
-                .filter(|&&j| original[j as usize].is_some())
-                .map(|&j| {
-                    let p = points[j as usize];
-                    let d = [
-                        p[0] - points[i][0],
-                        p[1] - points[i][1],
-                        p[2] - points[i][2],
-                    ];
-                    (j, tangent_weight(ni, d))
-                })
-                .filter(|&(_, w)| w > 0.0)
-                .collect()
-        })
-        .collect();
+    let edges = Edges {
+        points,
+        original: &original,
+        nearest,
+    };
     for _ in 0..PASSES {
         let current: &[Option<[f64; 3]>] = normals;
         let reverse: Vec<bool> = (0..n)
@@ -96,7 +105,7 @@ pub fn repair_orientation(
             .map(|i| {
                 let Some(ni) = current[i] else { return false };
                 let (mut vote, mut total) = (0.0, 0.0);
-                for &(j, w) in &edges[i] {
+                for (j, w) in edges.of(i) {
                     if let Some(nj) = current[j as usize] {
                         vote += w * dot(ni, nj).signum();
                         total += w;
@@ -129,10 +138,7 @@ pub fn repair_orientation(
 
 /// Patches: points joined by tangent edges whose normals agree. A patch of at most
 /// `PATCH_FRACTION` of the points whose border edges all contradict it is reversed.
-fn reverse_contradicted_patches(
-    normals: &mut [Option<[f64; 3]>],
-    edges: &[Vec<(u32, f64)>],
-) -> (usize, usize) {
+fn reverse_contradicted_patches(normals: &mut [Option<[f64; 3]>], edges: &Edges) -> (usize, usize) {
     let n = normals.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
     fn root(parent: &mut [u32], mut i: u32) -> u32 {
@@ -146,8 +152,8 @@ fn reverse_contradicted_patches(
         (Some(a), Some(b)) => dot(a, b) >= 0.0,
         _ => true,
     };
-    for (i, list) in edges.iter().enumerate() {
-        for &(j, w) in list {
+    for i in 0..n {
+        for (j, w) in edges.of(i) {
             if w >= PATCH_WEIGHT && agree(normals, i, j as usize) {
                 let (a, b) = (root(&mut parent, i as u32), root(&mut parent, j));
                 if a != b {
@@ -164,11 +170,11 @@ fn reverse_contradicted_patches(
     // Border edges of each patch: how many, how many agree across it, and the largest patch
     // across it.
     let mut border = vec![(0usize, 0usize, 0usize); n];
-    for (i, list) in edges.iter().enumerate() {
+    for i in 0..n {
         if normals[i].is_none() {
             continue;
         }
-        for &(j, w) in list {
+        for (j, w) in edges.of(i) {
             let (ri, rj) = (roots[i] as usize, roots[j as usize] as usize);
             if w >= PATCH_WEIGHT && rj != ri {
                 let b = &mut border[ri];
@@ -217,18 +223,23 @@ mod tests {
             .collect();
         let tree: kiddo::ImmutableKdTree<f64, 3> =
             kiddo::ImmutableKdTree::new_from_slice(&points).unwrap();
-        let nearest: Vec<Vec<u32>> = points
+        let nearest: Vec<Around> = points
             .iter()
             .map(|p| {
-                tree.query(p)
+                let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
+                for (slot, r) in tree
+                    .query(p)
                     .nearest_n::<kiddo::SquaredEuclidean<f64>>(
                         std::num::NonZero::new(ORIENT_NEIGHBOURS + 1).unwrap(),
                     )
                     .execute()
                     .into_iter()
                     .skip(1)
-                    .map(|r| r.item)
-                    .collect()
+                    .enumerate()
+                {
+                    around[slot] = r.item;
+                }
+                around
             })
             .collect();
         let mut normals: Vec<Option<[f64; 3]>> = vec![Some([0.0, 0.0, 1.0]); points.len()];

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::fit::FitStatus;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit};
-use crate::orient::{ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
+use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
 use crate::support::NormalsMode;
@@ -176,7 +176,7 @@ impl<T: Real> Surface<T> {
             0
         };
         let k_query = NonZero::new(k.max(orient_with) + 1).ok_or(SurfaceError::BadK)?;
-        let queried: Vec<(f64, f64, Vec<u32>)> = rel
+        let queried: Vec<(f64, f64, Around)> = rel
             .par_iter()
             .enumerate()
             .map(|(i, p)| {
@@ -185,12 +185,11 @@ impl<T: Real> Surface<T> {
                     .nearest_n::<SquaredEuclidean<f64>>(k_query)
                     .execute();
                 let dist = |i: usize| nn.get(i).map_or(0.0, |r| r.distance.sqrt());
-                let around: Vec<u32> = nn
-                    .iter()
-                    .map(|r| r.item)
-                    .filter(|&j| j as usize != i)
-                    .take(orient_with)
-                    .collect();
+                let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
+                let others = nn.iter().map(|r| r.item).filter(|&j| j as usize != i);
+                for (slot, j) in around.iter_mut().zip(others.take(orient_with)) {
+                    *slot = j;
+                }
                 (dist(k.min(nn.len().saturating_sub(1))), dist(1), around)
             })
             .collect();
@@ -200,7 +199,7 @@ impl<T: Real> Surface<T> {
         clock.lap("kd-tree and radii (kNN)");
         let orientation = match unit_normals.as_mut() {
             Some(ns) => {
-                let around: Vec<Vec<u32>> = queried.into_iter().map(|q| q.2).collect();
+                let around: Vec<Around> = queried.into_iter().map(|q| q.2).collect();
                 repair_orientation(&rel, ns, &around)
             }
             None => OrientationRepair::default(),

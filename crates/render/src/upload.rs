@@ -640,7 +640,7 @@ enum Piece<'a> {
     Run {
         file: &'a CacheFile,
         entry: &'a SectionEntry,
-        spans: std::sync::Arc<Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>>,
+        spans: &'a [(std::ops::Range<usize>, std::ops::Range<usize>)],
         k: usize,
     },
 }
@@ -685,7 +685,15 @@ fn storage_buffers(
             mapped_at_creation: true,
         }),
     };
-    // Every array's pieces, each its own mapped range, filled on rayon's threads.
+    // Each compressed array's runs, and every array's pieces, each its own mapped range,
+    // filled on rayon's threads.
+    let spans: Vec<Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>> = arrays
+        .iter()
+        .map(|(_, source, _)| match source {
+            Source::Runs { entry, .. } => entry.chunk_spans(),
+            Source::Bytes(_) => Vec::new(),
+        })
+        .collect();
     let mut pieces = Vec::new();
     let view = |start: u64, len: usize| {
         let end = start + (len as u64).next_multiple_of(4);
@@ -694,7 +702,7 @@ fn storage_buffers(
             .get_mapped_range_mut()
             .map_err(|e| Error::Readback(e.to_string()))
     };
-    for ((_, source, _), &offset) in arrays.iter().zip(&offsets) {
+    for (((_, source, _), &offset), spans) in arrays.iter().zip(&offsets).zip(&spans) {
         match *source {
             Source::Bytes(bytes) => {
                 for (k, piece) in bytes.chunks(COPY_PIECE).enumerate() {
@@ -703,13 +711,12 @@ fn storage_buffers(
                 }
             }
             Source::Runs { file, entry } => {
-                let spans = std::sync::Arc::new(entry.chunk_spans());
                 for (k, (_, raw)) in spans.iter().enumerate() {
                     let at = offset + raw.start as u64;
                     let piece = Piece::Run {
                         file,
                         entry,
-                        spans: spans.clone(),
+                        spans,
                         k,
                     };
                     pieces.push((view(at, raw.len())?, piece));
@@ -734,7 +741,7 @@ fn storage_buffers(
                     // Staging memory may be write-combined: decoding reads its own output
                     // (matches, the filters), so it decodes here and is copied on once.
                     run.resize(spans[k].1.len(), 0);
-                    file.decode_run_into(entry, &spans, k, run, scratch)?;
+                    file.decode_run_into(entry, spans, k, run, scratch)?;
                     view.slice(..run.len()).copy_from_slice(run);
                 }
             }
