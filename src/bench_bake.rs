@@ -8,7 +8,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
+use slosh_bake::{
+    BakeParams, BatchOptions, NormalSource, Shard, StepInput, StepSource, SurfaceSelect, bake_step,
+    run_batch,
+};
 use slosh_cache::{CacheFile, Compression, Encoding, LoadedStep, encode_bytes, encode_step};
 use slosh_fileio::FileBytes;
 use slosh_mls::{Surface, SurfaceParams};
@@ -112,7 +115,9 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> f64 {
 }
 
 pub fn run(args: &BakeBenchArgs) -> Result<()> {
-    let sizes: Vec<usize> = if args.quick {
+    let sizes: Vec<usize> = if !args.points.is_empty() {
+        args.points.clone()
+    } else if args.quick {
         vec![2_500, 10_000]
     } else {
         vec![2_500, 10_000, 100_000, 1_000_000]
@@ -296,6 +301,7 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
             encodings_step = Some(baked);
         }
     }
+    let (scaling, series) = scaling_and_series(args, &sizes, &params)?;
     writeln!(
         md,
         "\n*bare* is `Surface::build` alone (kiddo kNN and radii, neighbour lists, initial fits) in the same run; \
@@ -314,6 +320,8 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
          step's particles into a viewable surface. Medians as above; the peer runs in its own process after slosh.\n\n\
          | points | slosh bake | slosh points/s | splashsurf | splashsurf points/s | slosh faster by |\n|---|---|---|---|---|---|\n{peer_rows}"
     )?;
+    md += &scaling;
+    md += &series;
     writeln!(
         md,
         "## Stored bytes per point\n\n| points | total B/pt | per section: stored (raw) B/pt |\n|---|---|---|\n{size_rows}"
@@ -366,4 +374,183 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
     slosh_fileio::atomic_write(&args.out, md.as_bytes())?;
     say!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// The stages a row of the scaling table shows, in pipeline order: (heading, stage laps
+/// summed into it).
+const STAGE_COLUMNS: [(&str, &[&str]); 9] = [
+    ("select + order", &["select", "recentre", "morton order"]),
+    ("kNN + radii", &["kd-tree and radii (kNN)"]),
+    ("orientation", &["orientation"]),
+    ("neighbour lists", &["neighbour lists"]),
+    ("initial fits", &["initial fits"]),
+    ("droplets", &["droplets"]),
+    ("BVH", &["bvh"]),
+    ("sections", &["sections"]),
+    ("encode", &["encode"]),
+];
+
+/// One step baked and encoded: wall seconds and the seconds of each stage.
+fn bake_and_encode(input: &StepInput, params: &BakeParams) -> Result<(f64, Vec<(String, f64)>)> {
+    let t = Instant::now();
+    let baked = bake_step(input, params)?;
+    let t_enc = Instant::now();
+    encode_step(baked.header.clone(), &baked.sections, params.compression)?;
+    let mut stages = baked.header.stats.stage_seconds.clone();
+    stages.push(("encode".into(), t_enc.elapsed().as_secs_f64()));
+    Ok((t.elapsed().as_secs_f64(), stages))
+}
+
+/// A moving sphere series generated in memory: the batch driver's input without files.
+struct SceneSteps {
+    scene: Scene,
+    steps: usize,
+}
+
+impl StepSource for SceneSteps {
+    fn steps(&self) -> Vec<(usize, f64)> {
+        (0..self.steps).map(|i| (i, i as f64)).collect()
+    }
+
+    fn read(&self, index: usize) -> std::result::Result<StepInput, String> {
+        let (positions, normals) = self.scene.particles(index).surface_arrays();
+        Ok(StepInput {
+            index,
+            time: index as f64,
+            source: "bench series".into(),
+            positions,
+            normals: Some(normals),
+            ..StepInput::default()
+        })
+    }
+}
+
+/// The scaling table (each size on pools of each thread count, stage by stage) and the series
+/// table (the batch driver with its default `--jobs` against one step alone), as Markdown.
+fn scaling_and_series(
+    args: &BakeBenchArgs,
+    sizes: &[usize],
+    params: &BakeParams,
+) -> Result<(String, String)> {
+    let cores = crate::machine::cores();
+    let mut threads: Vec<usize> = if args.threads.is_empty() {
+        vec![1, 2, cores]
+    } else {
+        args.threads.clone()
+    };
+    threads.retain(|&t| t >= 1);
+    threads.sort_unstable();
+    threads.dedup();
+    let mut scaling = String::new();
+    writeln!(
+        scaling,
+        "## Scaling with threads\n\nEach step baked and encoded on a rayon pool of that many threads \
+         ({cores} cores here); medians of {} runs (1 at 1M points and above). Speed-up is against \
+         the fewest threads of the same size.\n",
+        args.runs
+    )?;
+    let heads: Vec<&str> = STAGE_COLUMNS.iter().map(|c| c.0).collect();
+    writeln!(
+        scaling,
+        "| points | threads | {} | **total** | points/s | speed-up |\n|{}",
+        heads.join(" | "),
+        "---|".repeat(heads.len() + 5)
+    )?;
+    let mut one_step: Vec<(usize, f64)> = Vec::new();
+    for &n in sizes {
+        let (inp, _) = input(n);
+        let runs = if n >= 1_000_000 { 1 } else { args.runs.max(1) };
+        let mut first_total = None;
+        for &t in &threads {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build()?;
+            let mut totals = Vec::new();
+            let mut stage_runs = Vec::new();
+            for _ in 0..runs {
+                let (total, stages) = pool.install(|| bake_and_encode(&inp, params))?;
+                totals.push(total);
+                stage_runs.push(stages);
+            }
+            let total = median(totals);
+            let base = *first_total.get_or_insert(total);
+            if t == cores {
+                one_step.push((n, total));
+            }
+            let cells: Vec<String> = STAGE_COLUMNS
+                .iter()
+                .map(|(_, names)| {
+                    let s = median(
+                        stage_runs
+                            .iter()
+                            .map(|laps: &Vec<(String, f64)>| {
+                                laps.iter()
+                                    .filter(|(l, _)| names.contains(&l.as_str()))
+                                    .map(|(_, v)| v)
+                                    .sum()
+                            })
+                            .collect(),
+                    );
+                    format!("{:.1} ms", s * 1e3)
+                })
+                .collect();
+            writeln!(
+                scaling,
+                "| {n} | {t} | {} | **{:.1} ms** | {:.0}k | {:.2}× |",
+                cells.join(" | "),
+                total * 1e3,
+                n as f64 / total / 1e3,
+                base / total
+            )?;
+            eprintln!("{n} points on {t} threads: {total:.3} s");
+        }
+    }
+    let mut series = String::new();
+    if args.series == 0 {
+        return Ok((scaling, series));
+    }
+    writeln!(
+        series,
+        "\n## A series against one step alone\n\n{} steps of the moving sphere baked by the batch driver \
+         as `slosh bake` runs it (generated in memory instead of read; compressed, verified and written \
+         to a temporary directory), with the `--jobs` it would choose here, on all {cores} cores. \
+         *One step* is the same size's step alone on all cores from the scaling table (baked and encoded, \
+         not verified or written).\n\n| points | jobs | wall | per step | points/s | one step | per step / one step |\n|---|---|---|---|---|---|---|",
+        args.series
+    )?;
+    for &n in sizes {
+        let Some(&(_, alone)) = one_step.iter().find(|(m, _)| *m == n) else {
+            continue;
+        };
+        let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, n, 1))?;
+        let source = SceneSteps {
+            scene,
+            steps: args.series,
+        };
+        let (jobs, _) =
+            crate::config::default_jobs(cores, crate::machine::available_memory(), Some(n));
+        let dir = tempfile::tempdir()?;
+        let opts = BatchOptions {
+            out: dir.path().to_path_buf(),
+            steps: None,
+            jobs,
+            shard: Shard::WHOLE,
+            params: params.clone(),
+        };
+        let t = Instant::now();
+        let report = run_batch(&source, &opts, &|_| {})?;
+        let wall = t.elapsed().as_secs_f64();
+        if !report.failed.is_empty() {
+            anyhow::bail!("the series bake failed: {:?}", report.failed);
+        }
+        let per = wall / args.series as f64;
+        writeln!(
+            series,
+            "| {n} | {jobs} | {wall:.2} s | {:.1} ms | {:.0}k | {:.1} ms | {:.2}× |",
+            per * 1e3,
+            n as f64 / per / 1e3,
+            alone * 1e3,
+            per / alone
+        )?;
+        eprintln!("{n} points, series of {}: {per:.3} s per step", args.series);
+    }
+    Ok((scaling, series))
 }

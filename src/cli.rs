@@ -215,6 +215,17 @@ pub struct BakeBenchArgs {
     /// Only 2.5k and 10k points.
     #[arg(long)]
     pub quick: bool,
+    /// Point counts to bake (default 2500,10000,100000,1000000; --quick 2500,10000).
+    #[arg(long, value_delimiter = ',')]
+    pub points: Vec<usize>,
+    /// Thread counts of the scaling table: each size baked on a pool of each (default 1, 2
+    /// and every core).
+    #[arg(long, value_delimiter = ',')]
+    pub threads: Vec<usize>,
+    /// Steps of the series baked through the batch driver per size, against one step alone
+    /// (0 skips it).
+    #[arg(long, default_value_t = 8)]
+    pub series: usize,
 }
 
 #[derive(Debug, Args)]

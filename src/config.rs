@@ -125,7 +125,11 @@ const BAKE_BASE_BYTES: u64 = 64 << 20;
 /// Steps baked at once by default: a quarter of the cores (a step is parallel inside, but its
 /// neighbour lists scale poorly past a few threads: on 16 cores 4 jobs baked a series fastest
 /// of 1, 2 and 4), no more than three quarters of the memory available hold, at least one.
-fn default_jobs(cores: usize, available: Option<u64>, points: Option<usize>) -> (usize, String) {
+pub fn default_jobs(
+    cores: usize,
+    available: Option<u64>,
+    points: Option<usize>,
+) -> (usize, String) {
     let by_cores = (cores / 4).max(1);
     let per_job = points.map(|p| BAKE_BASE_BYTES + p as u64 * BAKE_BYTES_PER_POINT);
     let by_memory = match (available, per_job) {

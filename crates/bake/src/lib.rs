@@ -4,7 +4,6 @@
 mod batch;
 mod bvh;
 mod ensight_source;
-mod order;
 mod params;
 mod select;
 mod step;
@@ -15,9 +14,9 @@ pub use batch::{
 };
 pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use ensight_source::EnsightSource;
-pub use order::morton_order;
 pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
 pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
 };
+pub use slosh_mls::morton_order;
 pub use step::{BakeError, BakedStep, bake_step};

@@ -1,12 +1,12 @@
 //! One step in, one cache out: select → recentre and scale → Morton order → kNN, radii,
-//! neighbour lists, initial fits, droplets (`slosh_mls::Surface::build`) → BVH → sections.
+//! neighbour lists, initial fits, droplets (`slosh_mls::SurfaceParts::build`) → BVH → sections.
 
 use slosh_cache::{
     BallState, Element, Encoding, GpuBall, GpuNormal, GpuPoint, GpuSphere, Header, MlsSettings,
     SectionInput, Source, StepStats, Transform, names,
 };
 use slosh_ensight::FieldValues;
-use slosh_mls::{BallFit, FitStatus, StageClock, Surface, SurfaceError};
+use slosh_mls::{BallFit, FitStatus, StageClock, SurfaceError, SurfaceParts};
 
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::select::{StepInput, estimate_surface_normals};
@@ -120,7 +120,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     clock.lap("recentre");
 
     // 3. Spatial order, carried through every per-point array below.
-    let order = crate::order::morton_order(&local);
+    let order = slosh_mls::morton_order(&local);
     let local = permute(&local, &order);
     let source_index: Vec<u32> = order.iter().map(|&o| kept[o as usize]).collect();
     let normals: Option<Vec<[f64; 3]>> = match &params.normals {
@@ -162,14 +162,8 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         .and_then(|ns| slosh_mls::guess_up(&local, ns));
 
     // 4–7. kNN, radii, neighbour lists, initial fits, droplets.
-    let surface = Surface::<f64>::build(&local, normals.as_deref(), &params.mls)
+    let (surface, build_laps) = SurfaceParts::<f64>::build(&local, normals.as_deref(), &params.mls)
         .map_err(|source| BakeError::Surface { step, source })?;
-    let build_laps: Vec<_> = surface
-        .build_seconds
-        .iter()
-        .copied()
-        .filter(|(name, _)| *name != "grid")
-        .collect();
     clock.extend(&build_laps);
 
     // 8. BVH over fitted balls and droplet spheres.

@@ -12,6 +12,8 @@ mod fit;
 mod frame;
 mod grid;
 mod intersect;
+mod lists;
+mod order;
 mod orient;
 mod poly;
 mod real;
@@ -29,6 +31,7 @@ pub use intersect::{
     Ball, HitStatus, InitialHit, Outcome, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
 };
+pub use order::morton_order;
 pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};

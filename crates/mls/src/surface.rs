@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use crate::fit::FitStatus;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit};
+use crate::lists::{NeighbourLists, neighbour_lists};
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
@@ -134,11 +135,30 @@ impl<T> std::ops::Deref for Surface<T> {
 }
 
 impl<T: Real> Surface<T> {
+    /// The parts ([`SurfaceParts::build`]) and the grid over them; "grid" is the last lap.
     pub fn build(
         points: &[[f64; 3]],
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
     ) -> Result<Surface<T>, SurfaceError> {
+        let (parts, mut laps) = SurfaceParts::build(points, normals, params)?;
+        let start = std::time::Instant::now();
+        let mut surface = Surface::from_parts(parts)?;
+        laps.push(("grid", start.elapsed().as_secs_f64()));
+        surface.build_seconds = laps;
+        Ok(surface)
+    }
+}
+
+impl<T: Real> SurfaceParts<T> {
+    /// Everything a cache stores, from particles: kNN and radii, orientation, neighbour
+    /// lists, initial fits and droplets, with the seconds each stage took.
+    #[allow(clippy::type_complexity)]
+    pub fn build(
+        points: &[[f64; 3]],
+        normals: Option<&[[f64; 3]]>,
+        params: &SurfaceParams,
+    ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
         if points.len() < 2 {
             return Err(SurfaceError::TooFew(points.len()));
         }
@@ -230,63 +250,22 @@ impl<T: Real> Surface<T> {
         };
         let cap = NonZero::new(params.neighbour_cap.max(1)).ok_or(SurfaceError::BadK)?;
 
-        let lists: Vec<(Vec<u32>, f64, bool)> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let reach = radii[i] + params.support * ball_h(i);
-                // Everything within reach, then the nearest `cap` of it: cheaper than a bounded
-                // heap when, as usual, the reach holds little more than the cap (0.48 s
-                // against 0.62 s for the lists of 100k points here).
-                let mut found = tree
-                    .query(&rel[i])
-                    .within::<SquaredEuclidean<f64>>(reach * reach)
-                    .unsorted()
-                    .execute();
-                let capped = found.len() >= cap.get();
-                if found.len() > cap.get() {
-                    found.select_nth_unstable_by(cap.get() - 1, |a, b| {
-                        a.distance.total_cmp(&b.distance)
-                    });
-                    found.truncate(cap.get());
-                }
-                // A cut list reaches only as far as its farthest member: the radius that
-                // reproduces it as a distance filter (`crate::clusters::expand`).
-                let reach = if capped {
-                    // Rounded up so that squaring it again cannot fall below the farthest d².
-                    let far = found.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt();
-                    far.next_up().next_up()
-                } else {
-                    reach
-                };
-                let own = unit_normals.as_ref().and_then(|ns| ns[i]);
-                let mut list: Vec<u32> = found
-                    .iter()
-                    .map(|r| r.item)
-                    .filter(|&j| {
-                        // Thin sheets: a neighbour whose normal opposes the centre's is the other side.
-                        match (own, unit_normals.as_ref().and_then(|ns| ns[j as usize])) {
-                            (Some(a), Some(b)) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= 0.0,
-                            _ => true,
-                        }
-                    })
-                    .collect();
-                // Index order: the order the GPU reads them in, and small deltas in the cache.
-                list.sort_unstable();
-                (list, reach, capped)
-            })
+        let reach_wanted: Vec<f64> = (0..n)
+            .map(|i| radii[i] + params.support * ball_h(i))
             .collect();
+        let NeighbourLists {
+            start: neighbour_start,
+            ids: neighbours,
+            reach,
+            capped,
+        } = neighbour_lists(
+            &tree,
+            &rel,
+            &reach_wanted,
+            cap.get(),
+            unit_normals.as_deref(),
+        );
         clock.lap("neighbour lists");
-        let mut neighbour_start = Vec::with_capacity(n + 1);
-        let mut neighbours = Vec::new();
-        let mut capped = 0;
-        let mut reach = Vec::with_capacity(n);
-        neighbour_start.push(0u32);
-        for (list, r, c) in &lists {
-            reach.push(*r);
-            neighbours.extend_from_slice(list);
-            neighbour_start.push(neighbours.len() as u32);
-            capped += usize::from(*c);
-        }
 
         let to_t = |p: [f64; 3]| V3::<T>::from_f64(p);
         let pts: Vec<V3<T>> = rel.iter().map(|p| to_t(*p)).collect();
@@ -354,7 +333,7 @@ impl<T: Real> Surface<T> {
             &mut ball_fits,
         );
         clock.lap("droplets");
-        let mut surface = Surface::from_parts(SurfaceParts {
+        let parts = SurfaceParts {
             origin,
             points: pts,
             normals: nrm,
@@ -370,12 +349,24 @@ impl<T: Real> Surface<T> {
             spheres,
             orientation,
             params: params.clone(),
-        })?;
-        clock.lap("grid");
-        surface.build_seconds = clock.laps;
-        Ok(surface)
+        };
+        Ok((parts, clock.laps))
     }
 
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    pub fn neighbours_of(&self, i: usize) -> &[u32] {
+        &self.neighbours[self.neighbour_start[i] as usize..self.neighbour_start[i + 1] as usize]
+    }
+}
+
+impl<T: Real> Surface<T> {
     /// A surface from stored parts (a cache); checks that they fit together and builds the grid.
     pub fn from_parts(parts: SurfaceParts<T>) -> Result<Surface<T>, SurfaceError> {
         let n = parts.points.len();
@@ -435,18 +426,6 @@ impl<T: Real> Surface<T> {
     pub fn into_parts(self) -> SurfaceParts<T> {
         self.parts
     }
-
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
-
-    pub fn neighbours_of(&self, i: usize) -> &[u32] {
-        &self.neighbours[self.neighbour_start[i] as usize..self.neighbour_start[i + 1] as usize]
-    }
 }
 
 /// Marks the points of spray as droplets and returns the spheres that draw them. Spray is a
@@ -470,6 +449,35 @@ fn droplets<T: Real>(
         return Vec::new();
     }
     let n = points.len();
+    let d2 = |a: [f64; 3], b: [f64; 3]| {
+        (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
+    };
+    let list = |i: usize| &neighbours[start[i] as usize..start[i + 1] as usize];
+    // Links, found in parallel: j in i's list within h_i. A link j → i (j < i) that j's own
+    // list also makes is left to j, so each is joined once.
+    let links: Vec<Vec<(u32, u32)>> = (0..n)
+        .into_par_iter()
+        .chunks(4096)
+        .map(|chunk| {
+            let mut out = Vec::new();
+            for i in chunk {
+                let reach2 = ball_h(i).powi(2);
+                for &j in list(i) {
+                    let ju = j as usize;
+                    if ju == i || d2(points[i], points[ju]) > reach2 {
+                        continue;
+                    }
+                    let made_by_j = ju < i
+                        && list(ju).binary_search(&(i as u32)).is_ok()
+                        && d2(points[ju], points[i]) <= ball_h(ju).powi(2);
+                    if !made_by_j {
+                        out.push((i as u32, j));
+                    }
+                }
+            }
+            out
+        })
+        .collect();
     let mut parent: Vec<u32> = (0..n as u32).collect();
     fn root(parent: &mut [u32], mut i: u32) -> u32 {
         while parent[i as usize] != i {
@@ -479,31 +487,39 @@ fn droplets<T: Real>(
         }
         i
     }
-    for i in 0..n {
-        let reach = ball_h(i);
-        for &j in &neighbours[start[i] as usize..start[i + 1] as usize] {
-            let (a, b) = (points[i], points[j as usize]);
-            let d2 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
-            if d2 <= reach * reach {
-                let (ri, rj) = (root(&mut parent, i as u32), root(&mut parent, j));
-                if ri != rj {
-                    parent[ri.max(rj) as usize] = ri.min(rj);
-                }
-            }
+    for &(i, j) in links.iter().flatten() {
+        let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
+        if ri != rj {
+            parent[ri.max(rj) as usize] = ri.min(rj);
         }
     }
+    // Members grouped by component (each root is its component's smallest index), in one
+    // array: components in order of their first member, members in index order.
     let roots: Vec<u32> = (0..n as u32).map(|i| root(&mut parent, i)).collect();
-    let mut members: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for (i, &r) in roots.iter().enumerate() {
-        members[r as usize].push(i);
+    let mut first = vec![0u32; n + 1];
+    for &r in &roots {
+        first[r as usize + 1] += 1;
     }
+    for k in 0..n {
+        first[k + 1] += first[k];
+    }
+    let mut fill = first.clone();
+    let mut order = vec![0usize; n];
+    for (i, &r) in roots.iter().enumerate() {
+        order[fill[r as usize] as usize] = i;
+        fill[r as usize] += 1;
+    }
+    let members = (0..n).filter_map(|r| {
+        let m = &order[first[r] as usize..first[r + 1] as usize];
+        (!m.is_empty()).then_some(m)
+    });
     let distance = |p: [f64; 3], c: [f64; 3]| {
         ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()
     };
     let particle = 0.5 * spacing;
     // Spheres numbered in order of their first member, so the result does not depend on threads.
     let mut spheres = Vec::new();
-    for m in members.iter().filter(|m| !m.is_empty()) {
+    for m in members {
         let mut c = [0.0; 3];
         for &i in m {
             for a in 0..3 {

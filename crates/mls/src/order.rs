@@ -1,6 +1,8 @@
 //! Spatial order: points sorted by their Morton (Z-order) code, so that neighbours in space
 //! are near in memory (coherent GPU reads) and neighbour indices are small deltas.
 
+use rayon::prelude::*;
+
 /// Spreads the low 21 bits of `v` to every third bit.
 fn spread(v: u64) -> u64 {
     let mut x = v & 0x1f_ffff;
@@ -14,7 +16,7 @@ fn spread(v: u64) -> u64 {
 /// The permutation that sorts `points` by 63-bit Morton code over their bounding box
 /// (ties keep input order).
 pub fn morton_order(points: &[[f64; 3]]) -> Vec<u32> {
-    let (lo, hi) = slosh_mls::bounds(points);
+    let (lo, hi) = crate::surface::bounds(points);
     let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
     let scale = if extent > 0.0 {
         ((1u64 << 21) - 1) as f64 / extent
@@ -22,7 +24,7 @@ pub fn morton_order(points: &[[f64; 3]]) -> Vec<u32> {
         0.0
     };
     let mut keyed: Vec<(u64, u32)> = points
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(i, p)| {
             let q = |a: usize| ((p[a] - lo[a]) * scale) as u64;
@@ -32,6 +34,6 @@ pub fn morton_order(points: &[[f64; 3]]) -> Vec<u32> {
             )
         })
         .collect();
-    keyed.sort_unstable();
-    keyed.into_iter().map(|(_, i)| i).collect()
+    keyed.par_sort_unstable();
+    keyed.into_par_iter().map(|(_, i)| i).collect()
 }
