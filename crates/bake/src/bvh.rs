@@ -5,6 +5,7 @@
 use std::time::Duration;
 
 use glam::Vec3A;
+use rayon::prelude::*;
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
@@ -29,7 +30,7 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
         return Bvh::default();
     }
     let boxes: Vec<Aabb> = items
-        .iter()
+        .par_iter()
         .map(|(_, c, r)| {
             Aabb::new(
                 Vec3A::new(down(c[0] - r), down(c[1] - r), down(c[2] - r)),

@@ -5,6 +5,7 @@ use slosh_cache::{
     BallState, Element, Encoding, GpuBall, GpuNormal, GpuPoint, GpuSphere, Header, MlsSettings,
     SectionInput, Source, StepStats, Transform, names,
 };
+use rayon::prelude::*;
 use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, FitStatus, StageClock, SurfaceError, SurfaceParts};
 
@@ -45,8 +46,8 @@ pub struct BakedStep {
     pub sections: Vec<SectionInput>,
 }
 
-fn permute<T: Copy>(values: &[T], order: &[u32]) -> Vec<T> {
-    order.iter().map(|&i| values[i as usize]).collect()
+fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
+    order.par_iter().map(|&i| values[i as usize]).collect()
 }
 
 pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
@@ -116,7 +117,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     let half = (0..3).map(|a| 0.5 * (hi[a] - lo[a])).fold(0.0, f64::max);
     let scale = if half > 0.0 { half } else { 1.0 };
     let transform = Transform { origin, scale };
-    let local: Vec<[f64; 3]> = world.iter().map(|p| transform.to_local(*p)).collect();
+    let local: Vec<[f64; 3]> = world.par_iter().map(|p| transform.to_local(*p)).collect();
     clock.lap("recentre");
 
     // 3. Spatial order, carried through every per-point array below.
@@ -169,6 +170,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     // 8. BVH over fitted balls and droplet spheres.
     let n = surface.len();
     let mut candidates: Vec<(u32, [f64; 3], f64)> = (0..n)
+        .into_par_iter()
         .filter(|&i| matches!(surface.ball_fits[i], BallFit::Fitted(_)))
         .map(|i| {
             let c = surface.points[i];
@@ -188,6 +190,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     // Sections, in the GPU layouts.
     let f32x3 = |v: slosh_mls::V3<f64>| [v.x as f32, v.y as f32, v.z as f32];
     let points: Vec<GpuPoint> = (0..n)
+        .into_par_iter()
         .map(|i| GpuPoint {
             position: f32x3(surface.points[i]),
             radius: surface.radii[i] as f32,
@@ -206,26 +209,23 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         bvh_depth: bvh.depth().unwrap_or(0) as u64,
         ..StepStats::default()
     };
+    for fit in &surface.ball_fits {
+        match fit {
+            BallFit::Fitted(FitStatus::Full) => stats.fit_full += 1,
+            BallFit::Fitted(FitStatus::Degraded { .. }) => stats.fit_degraded += 1,
+            BallFit::Fitted(FitStatus::Failed) | BallFit::None => stats.fit_none += 1,
+            BallFit::Droplet(_) => stats.droplet_points += 1,
+        }
+    }
     let balls: Vec<GpuBall> = (0..n)
+        .into_par_iter()
         .map(|i| {
             let b = &surface.balls[i];
             let (kind, sphere) = match surface.ball_fits[i] {
-                BallFit::Fitted(FitStatus::Full) => {
-                    stats.fit_full += 1;
-                    (BallState::Full, 0)
-                }
-                BallFit::Fitted(FitStatus::Degraded { .. }) => {
-                    stats.fit_degraded += 1;
-                    (BallState::Degraded, 0)
-                }
-                BallFit::Fitted(FitStatus::Failed) | BallFit::None => {
-                    stats.fit_none += 1;
-                    (BallState::Unfitted, 0)
-                }
-                BallFit::Droplet(d) => {
-                    stats.droplet_points += 1;
-                    (BallState::Droplet, d)
-                }
+                BallFit::Fitted(FitStatus::Full) => (BallState::Full, 0),
+                BallFit::Fitted(FitStatus::Degraded { .. }) => (BallState::Degraded, 0),
+                BallFit::Fitted(FitStatus::Failed) | BallFit::None => (BallState::Unfitted, 0),
+                BallFit::Droplet(d) => (BallState::Droplet, d),
             };
             GpuBall {
                 normal: f32x3(b.normal),
@@ -246,10 +246,11 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     // The reach as f32, raised where needed so that the expansion, which measures distances
     // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
     let stored: Vec<slosh_mls::V3<f32>> = points
-        .iter()
+        .par_iter()
         .map(|p| slosh_mls::V3::new(p.position[0], p.position[1], p.position[2]))
         .collect();
     let reach: Vec<f32> = (0..n)
+        .into_par_iter()
         .map(|i| {
             let far2 = surface
                 .neighbours_of(i)

@@ -31,30 +31,32 @@ pub struct Fit<T> {
 /// Fits a polynomial of degree ≤ `degree` at reference point `r` in `frame`, from `points`
 /// weighted by θ(|p − r|) with smoothing length `h`.
 pub fn fit<T: Real>(r: V3<T>, frame: &Frame<T>, points: &[V3<T>], h: T, degree: u8) -> Fit<T> {
-    let degree = degree.min(3);
-    let n = coefficient_count(degree);
-    let inv_h = T::one() / h;
     let h2 = h * h;
-    let mut a = [[T::zero(); 10]; 10];
-    let mut b = [T::zero(); 10];
-    let mut total = T::zero();
-    for &p in points {
-        let q = p - r;
-        let w = weight(q.length_squared(), h2);
-        if !(w > T::zero()) {
-            continue;
-        }
-        let l = frame.to_local(q) * inv_h;
-        let m = monomials(l.x, l.y);
-        total = total + w;
-        for i in 0..n {
-            let wm = w * m[i];
-            b[i] = b[i] + wm * l.z;
-            for j in i..n {
-                a[i][j] = a[i][j] + wm * m[j];
-            }
-        }
-    }
+    fit_weighted(r, frame, points, h, degree, |_, q| {
+        weight(q.length_squared(), h2)
+    })
+}
+
+/// [`fit`] with the weight of point j (offset q = p_j − r) from `weight_of`: a caller that
+/// already has the weights (the support plane computed them) passes them on.
+pub(crate) fn fit_weighted<T: Real>(
+    r: V3<T>,
+    frame: &Frame<T>,
+    points: &[V3<T>],
+    h: T,
+    degree: u8,
+    weight_of: impl Fn(usize, V3<T>) -> T,
+) -> Fit<T> {
+    let degree = degree.min(3);
+    let inv_h = T::one() / h;
+    // The coefficient count as a constant, so that the sums below unroll.
+    let (mut a, mut b, total) = match coefficient_count(degree) {
+        1 => normal_equations::<T, 1>(r, frame, points, inv_h, &weight_of),
+        3 => normal_equations::<T, 3>(r, frame, points, inv_h, &weight_of),
+        6 => normal_equations::<T, 6>(r, frame, points, inv_h, &weight_of),
+        _ => normal_equations::<T, 10>(r, frame, points, inv_h, &weight_of),
+    };
+    let n = coefficient_count(degree);
     if !(total > T::zero()) {
         return Fit {
             poly: Poly::zero(0),
@@ -141,4 +143,36 @@ fn ldlt<T: Real>(a: &[[T; 10]; 10], n: usize) -> ([[T; 10]; 10], [T; 10], usize)
         }
     }
     (l, d, n)
+}
+
+/// The weighted sums of the normal equations (upper triangle of A, b) and the total weight,
+/// for `N` monomials.
+fn normal_equations<T: Real, const N: usize>(
+    r: V3<T>,
+    frame: &Frame<T>,
+    points: &[V3<T>],
+    inv_h: T,
+    weight_of: &impl Fn(usize, V3<T>) -> T,
+) -> ([[T; 10]; 10], [T; 10], T) {
+    let mut a = [[T::zero(); 10]; 10];
+    let mut b = [T::zero(); 10];
+    let mut total = T::zero();
+    for (k, &p) in points.iter().enumerate() {
+        let q = p - r;
+        let w = weight_of(k, q);
+        if !(w > T::zero()) {
+            continue;
+        }
+        let l = frame.to_local(q) * inv_h;
+        let m = monomials(l.x, l.y);
+        total = total + w;
+        for i in 0..N {
+            let wm = w * m[i];
+            b[i] = b[i] + wm * l.z;
+            for j in i..N {
+                a[i][j] = a[i][j] + wm * m[j];
+            }
+        }
+    }
+    (a, b, total)
 }

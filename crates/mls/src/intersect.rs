@@ -1,12 +1,12 @@
 //! Iterative ray–MLS surface intersection (Adamson & Alexa 2003; thesis §2.2, §3.3.3) from a
 //! ball's precomputed initial polynomial.
 
-use crate::fit::{Fit, FitStatus, fit};
+use crate::fit::{Fit, FitStatus, fit, fit_weighted};
 use crate::frame::Frame;
 use crate::poly::Poly;
 use crate::real::{Real, V3};
 use crate::roots::first_root_in;
-use crate::support::{NormalsMode, support_normal};
+use crate::support::{NormalsMode, support_normal, support_weighted, weight};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ray<T> {
@@ -178,9 +178,24 @@ pub fn initial_fit<T: Real>(
     params: &Params<T>,
     toward: V3<T>,
 ) -> Option<(V3<T>, Fit<T>)> {
-    let support = support_normal(centre, neighbours, normals, h, params.normals, toward)?;
+    // The support plane and the fit weigh the same points from the same centre: once.
+    let h2 = h * h;
+    let weights: Vec<T> = neighbours
+        .iter()
+        .map(|&p| weight((p - centre).length_squared(), h2))
+        .collect();
+    let weight_of = |j: usize, _| weights[j];
+    let support = support_weighted(
+        centre,
+        neighbours,
+        normals,
+        h,
+        params.normals,
+        toward,
+        weight_of,
+    )?;
     let frame = Frame::from_normal(support.normal);
-    let f = fit(centre, &frame, neighbours, h, params.degree);
+    let f = fit_weighted(centre, &frame, neighbours, h, params.degree, weight_of);
     (f.status != FitStatus::Failed).then_some((support.normal, f))
 }
 

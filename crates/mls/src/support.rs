@@ -55,11 +55,27 @@ pub fn support_normal<T: Real>(
     toward: V3<T>,
 ) -> Option<Support<T>> {
     let h2 = h * h;
+    support_weighted(r, points, normals, h, mode, toward, |_, q| {
+        weight(q.length_squared(), h2)
+    })
+}
+
+/// [`support_normal`] with the weight of point j (offset q = p_j − r) from `weight_of`, so
+/// that a caller fitting at the same point computes each weight once.
+pub(crate) fn support_weighted<T: Real>(
+    r: V3<T>,
+    points: &[V3<T>],
+    normals: Option<&[V3<T>]>,
+    h: T,
+    mode: NormalsMode,
+    toward: V3<T>,
+    weight_of: impl Fn(usize, V3<T>) -> T,
+) -> Option<Support<T>> {
     let mut weight_sum = T::zero();
     let mut mean = V3::zero();
     let mut magnitude = T::zero();
     for (j, &p) in points.iter().enumerate() {
-        let w = weight((p - r).length_squared(), h2);
+        let w = weight_of(j, p - r);
         weight_sum = weight_sum + w;
         if let Some(n) = normals
             .and_then(|ns| ns.get(j))
@@ -82,13 +98,13 @@ pub fn support_normal<T: Real>(
             });
         }
     }
-    let (normal, ambiguity) = covariance_normal(r, points, h2, weight_sum);
+    let (normal, ambiguity) = covariance_normal(r, points, h * h, weight_sum, &weight_of);
     // Orientation: the weighted majority of the data normals, else toward the ray origin.
     let mut vote = T::zero();
     if let Some(ns) = normals {
-        for (&p, n) in points.iter().zip(ns) {
+        for (j, (&p, n)) in points.iter().zip(ns).enumerate() {
             if let Some(n) = n.normalized() {
-                let w = weight((p - r).length_squared(), h2);
+                let w = weight_of(j, p - r);
                 vote = vote + w * n.dot(normal).signum();
             }
         }
@@ -112,12 +128,18 @@ pub fn support_normal<T: Real>(
 }
 
 /// Smallest-eigenvalue eigenvector of B = Σθ (p−r)(p−r)ᵀ / (h² Σθ), and λ₀/λ₁.
-fn covariance_normal<T: Real>(r: V3<T>, points: &[V3<T>], h2: T, weight_sum: T) -> (V3<T>, T) {
+fn covariance_normal<T: Real>(
+    r: V3<T>,
+    points: &[V3<T>],
+    h2: T,
+    weight_sum: T,
+    weight_of: &impl Fn(usize, V3<T>) -> T,
+) -> (V3<T>, T) {
     let mut b = [[T::zero(); 3]; 3];
     let scale = T::one() / (h2 * weight_sum);
-    for &p in points {
+    for (j, &p) in points.iter().enumerate() {
         let q = p - r;
-        let w = weight(q.length_squared(), h2) * scale;
+        let w = weight_of(j, q) * scale;
         let c = [q.x, q.y, q.z];
         for k in 0..3 {
             for l in k..3 {
