@@ -5,10 +5,10 @@
 use std::time::Duration;
 
 use glam::Vec3A;
-use rayon::prelude::*;
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
+use rayon::prelude::*;
 use slosh_cache::{Bvh, GpuBvhNode};
 
 /// Up to this many items share a leaf (obvhs collapses by SAH cost below it).

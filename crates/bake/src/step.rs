@@ -1,11 +1,11 @@
 //! One step in, one cache out: select → recentre and scale → Morton order → kNN, radii,
 //! neighbour lists, initial fits, droplets (`slosh_mls::SurfaceParts::build`) → BVH → sections.
 
+use rayon::prelude::*;
 use slosh_cache::{
     BallState, Element, Encoding, GpuBall, GpuNormal, GpuPoint, GpuSphere, Header, MlsSettings,
     SectionInput, Source, StepStats, Transform, names,
 };
-use rayon::prelude::*;
 use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, FitStatus, StageClock, SurfaceError, SurfaceParts};
 

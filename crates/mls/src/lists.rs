@@ -9,9 +9,9 @@
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
-/// Points per query. Larger runs query farther beyond each member's reach; 32 measured
-/// fastest of 16, 32 and 64 on a 100k-point sphere.
-const RUN: usize = 32;
+/// Points per query. Larger runs query farther beyond each member's reach, smaller ones query
+/// more often; 16 measured fastest of 8, 16 and 32 on a 100k-point sphere (2 cores).
+const RUN: usize = 16;
 
 /// Every point's neighbour list (CSR), the reach each list records, and how many lists the
 /// cap cut.
@@ -50,9 +50,12 @@ pub(crate) fn neighbour_lists(
     struct Scratch {
         /// The run's candidates' coordinates, one array per axis (the distance loop vectorises).
         axes: [Vec<f64>; 3],
-        /// (d², position in the run's candidates) of one member's points within reach.
-        within: Vec<(f64, u32)>,
-        kept: Vec<bool>,
+        /// Their unit normals, zero where a point has none (a zero normal opposes nothing).
+        normal_axes: [Vec<f64>; 3],
+        /// One member's squared distance to each candidate.
+        d2: Vec<f64>,
+        /// The bits of the d² within reach (non-negative floats order as their bits).
+        keys: Vec<u64>,
     }
     // Runs of consecutive points in space, whatever order the points come in (a bake's are
     // already in this order, and then the runs are consecutive indices).
@@ -86,13 +89,21 @@ pub(crate) fn neighbour_lists(
                 .collect();
             // Index order: a position in `found` orders as the index it holds.
             found.sort_unstable();
-            let Scratch { axes, within, kept } = scratch;
+            let Scratch {
+                axes,
+                normal_axes,
+                d2,
+                keys,
+            } = scratch;
             for (a, axis) in axes.iter_mut().enumerate() {
                 axis.clear();
                 axis.extend(found.iter().map(|&j| points[j as usize][a]));
             }
-            kept.clear();
-            kept.resize(found.len(), false);
+            let normal_of = |i: usize| normals.and_then(|ns| ns[i]).unwrap_or([0.0; 3]);
+            for (a, axis) in normal_axes.iter_mut().enumerate() {
+                axis.clear();
+                axis.extend(found.iter().map(|&j| normal_of(j as usize)[a]));
+            }
             let size = run_points.len();
             let mut run = Run {
                 members: members.clone().collect(),
@@ -104,55 +115,56 @@ pub(crate) fn neighbour_lists(
             for i in members {
                 let p = points[i];
                 let r2 = reach[i] * reach[i];
-                within.clear();
-                for (k, ((x, y), z)) in axes[0].iter().zip(&axes[1]).zip(&axes[2]).enumerate() {
-                    let d2 = distance2(p, [*x, *y, *z]);
-                    if d2 <= r2 {
-                        within.push((d2, k as u32));
+                d2.clear();
+                d2.extend(
+                    axes[0]
+                        .iter()
+                        .zip(&axes[1])
+                        .zip(&axes[2])
+                        .map(|((x, y), z)| distance2(p, [*x, *y, *z])),
+                );
+                let within = d2.iter().filter(|&&d| d <= r2).count();
+                let capped = within >= cap;
+                // Kept: d² below `limit`, and d² equal to it while `ties` last (in index
+                // order): within reach, or the nearest `cap` by (d², index) where the cap cuts.
+                let (limit, mut ties) = if within > cap {
+                    keys.clear();
+                    keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
+                    let (below, &mut last, _) = keys.select_nth_unstable(cap - 1);
+                    let less = below.iter().filter(|&&k| k < last).count();
+                    (f64::from_bits(last), cap - less)
+                } else {
+                    (r2, usize::MAX)
+                };
+                let own = normal_of(i);
+                let mut far = 0.0f64;
+                let before = run.ids.len();
+                for (k, &d) in d2.iter().enumerate() {
+                    if d > limit || (d == limit && ties == 0) {
+                        continue;
                     }
-                }
-                let capped = within.len() >= cap;
-                if within.len() > cap {
-                    within.select_nth_unstable_by(cap - 1, |a, b| {
-                        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
-                    });
-                    within.truncate(cap);
-                    // Back to index order.
-                    for &(_, k) in within.iter() {
-                        kept[k as usize] = true;
+                    if d == limit {
+                        ties -= 1;
                     }
-                    within.clear();
-                    for (position, flag) in kept.iter_mut().enumerate() {
-                        if std::mem::take(flag) {
-                            within.push((0.0, position as u32));
-                        }
+                    far = far.max(d);
+                    // Thin sheets: a neighbour whose normal opposes the centre's is the other
+                    // side.
+                    let dot = own[0] * normal_axes[0][k]
+                        + own[1] * normal_axes[1][k]
+                        + own[2] * normal_axes[2][k];
+                    if dot < 0.0 {
+                        continue;
                     }
+                    run.ids.push(found[k]);
                 }
                 // A cut list reaches only as far as its farthest member: the radius that
                 // reproduces it as a distance filter (`crate::clusters::expand`), rounded up
                 // so that squaring it again cannot fall below the farthest d².
                 let list_reach = if capped {
-                    let far = within
-                        .iter()
-                        .map(|&(_, k)| distance2(p, points[found[k as usize] as usize]))
-                        .fold(0.0, f64::max);
                     far.sqrt().next_up().next_up()
                 } else {
                     reach[i]
                 };
-                let own = normals.and_then(|ns| ns[i]);
-                let before = run.ids.len();
-                for &(_, k) in within.iter() {
-                    let j = found[k as usize];
-                    // Thin sheets: a neighbour whose normal opposes the centre's is the other
-                    // side.
-                    if let (Some(a), Some(b)) = (own, normals.and_then(|ns| ns[j as usize]))
-                        && a[0] * b[0] + a[1] * b[1] + a[2] * b[2] < 0.0
-                    {
-                        continue;
-                    }
-                    run.ids.push(j);
-                }
                 run.counts.push((run.ids.len() - before) as u32);
                 run.reach.push(list_reach);
                 run.capped += usize::from(capped);
