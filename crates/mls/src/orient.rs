@@ -72,15 +72,21 @@ struct Edges<'a> {
 
 impl Edges<'_> {
     fn of(&self, i: usize) -> impl Iterator<Item = (u32, f64)> + '_ {
+        self.slots(i).map(|(_, j, w)| (j, w))
+    }
+
+    /// The edges with the slot of `nearest[i]` each comes from.
+    fn slots(&self, i: usize) -> impl Iterator<Item = (usize, u32, f64)> + '_ {
         let own = self.original[i];
         self.nearest[i]
             .iter()
-            .filter(move |&&j| own.is_some() && j != NO_POINT)
-            .filter(|&&j| self.original[j as usize].is_some())
-            .filter_map(move |&j| {
+            .enumerate()
+            .filter(move |&(_, &j)| own.is_some() && j != NO_POINT)
+            .filter(|&(_, &j)| self.original[j as usize].is_some())
+            .filter_map(move |(k, &j)| {
                 let (p, q) = (self.points[i], self.points[j as usize]);
                 let w = tangent_weight(own?, [q[0] - p[0], q[1] - p[1], q[2] - p[2]]);
-                (w > 0.0).then_some((j, w))
+                (w > 0.0).then_some((k, j, w))
             })
     }
 }
@@ -152,9 +158,35 @@ fn reverse_contradicted_patches(normals: &mut [Option<[f64; 3]>], edges: &Edges)
         (Some(a), Some(b)) => dot(a, b) >= 0.0,
         _ => true,
     };
+    // Each point's patch edges (tangent weight ≥ PATCH_WEIGHT), found in parallel: bit k is
+    // its k-th neighbour.
+    let strong: Vec<u32> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            edges
+                .slots(i)
+                .filter(|&(_, _, w)| w >= PATCH_WEIGHT)
+                .fold(0u32, |mask, (k, _, _)| mask | 1 << k)
+        })
+        .collect();
+    let strong_of = |i: usize| {
+        let (mask, around) = (strong[i], &edges.nearest[i]);
+        (0..ORIENT_NEIGHBOURS)
+            .filter(move |k| mask >> k & 1 == 1)
+            .map(move |k| around[k])
+    };
+    // Agreeing patch edges join patches, so a patch's border is made of contradicting ones:
+    // where no patch edge contradicts, no patch has a border and none is reversed.
+    let current: &[Option<[f64; 3]>] = normals;
+    let contradicted = (0..n)
+        .into_par_iter()
+        .any(|i| strong_of(i).any(|j| !agree(current, i, j as usize)));
+    if !contradicted {
+        return (0, 0);
+    }
     for i in 0..n {
-        for (j, w) in edges.of(i) {
-            if w >= PATCH_WEIGHT && agree(normals, i, j as usize) {
+        for j in strong_of(i) {
+            if agree(normals, i, j as usize) {
                 let (a, b) = (root(&mut parent, i as u32), root(&mut parent, j));
                 if a != b {
                     parent[a.max(b) as usize] = a.min(b);
@@ -174,9 +206,9 @@ fn reverse_contradicted_patches(normals: &mut [Option<[f64; 3]>], edges: &Edges)
         if normals[i].is_none() {
             continue;
         }
-        for (j, w) in edges.of(i) {
+        for j in strong_of(i) {
             let (ri, rj) = (roots[i] as usize, roots[j as usize] as usize);
-            if w >= PATCH_WEIGHT && rj != ri {
+            if rj != ri {
                 let b = &mut border[ri];
                 b.0 += 1;
                 b.1 += usize::from(agree(normals, i, j as usize));

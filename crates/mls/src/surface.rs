@@ -281,7 +281,7 @@ impl<T: Real> SurfaceParts<T> {
             normals: params.normals,
             h_factor: T::one(),
         };
-        let fits: Vec<(Ball<T>, BallFit)> = (0..n)
+        let (balls, mut ball_fits): (Vec<Ball<T>>, Vec<BallFit>) = (0..n)
             .into_par_iter()
             .map_init(
                 || (Vec::new(), Vec::new()),
@@ -320,8 +320,7 @@ impl<T: Real> SurfaceParts<T> {
                     }
                 },
             )
-            .collect();
-        let (balls, mut ball_fits): (Vec<_>, Vec<_>) = fits.into_iter().unzip();
+            .unzip();
         clock.lap("initial fits");
         let spheres = droplets(
             &rel,
