@@ -24,6 +24,7 @@ use clap::Parser;
 use crate::cli::{Cli, Command};
 
 fn main() -> std::process::ExitCode {
+    machine::keep_freed_memory();
     let result = run(Cli::parse());
     // Output that could not be written is an error too, once the work is done.
     let result = result.and_then(|()| match output::stdout_error() {

@@ -200,7 +200,12 @@ pub(crate) fn neighbour_lists(
     }
     let by_run: Vec<Vec<&mut [u32]>> = runs
         .iter()
-        .map(|run| run.members.iter().filter_map(|&i| slots[i].take()).collect())
+        .map(|run| {
+            run.members
+                .iter()
+                .filter_map(|&i| slots[i].take())
+                .collect()
+        })
         .collect();
     by_run
         .into_par_iter()
