@@ -123,13 +123,12 @@ pub(crate) fn neighbour_lists(
                         .zip(&axes[2])
                         .map(|((x, y), z)| distance2(p, [*x, *y, *z])),
                 );
-                let within = d2.iter().filter(|&&d| d <= r2).count();
-                let capped = within >= cap;
+                keys.clear();
+                keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
+                let capped = keys.len() >= cap;
                 // Kept: d² below `limit`, and d² equal to it while `ties` last (in index
                 // order): within reach, or the nearest `cap` by (d², index) where the cap cuts.
-                let (limit, mut ties) = if within > cap {
-                    keys.clear();
-                    keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
+                let (limit, mut ties) = if keys.len() > cap {
                     let (below, &mut last, _) = keys.select_nth_unstable(cap - 1);
                     let less = below.iter().filter(|&&k| k < last).count();
                     (f64::from_bits(last), cap - less)
