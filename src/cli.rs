@@ -353,7 +353,7 @@ pub struct BakeArgs {
     /// Steps to bake: A..B (B excluded), A..=B (B included) or N, e.g. 0..50.
     #[arg(long)]
     pub steps: Option<String>,
-    /// Steps baked at once (each is also parallel inside). Default: a quarter of the cores,
+    /// Steps baked at once (each is also parallel inside). Default: half the cores,
     /// within three quarters of the memory available, for the first step's size.
     #[arg(long)]
     pub jobs: Option<usize>,
