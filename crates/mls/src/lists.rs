@@ -276,7 +276,7 @@ mod tests {
                 }
             }
         }
-        lattice.extend_from_slice(&lattice[..40].to_vec());
+        lattice.extend_from_within(..40);
         // A fixed shuffle: multiplication by a prime that does not divide the count (904).
         let n = lattice.len();
         assert_ne!(n % 7919, 0);
