@@ -153,6 +153,8 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
     let mut size_rows = String::new();
     let mut peer_rows = String::new();
     let mut load_rows = String::new();
+    // Each size's step alone on every core, for the series table.
+    let mut one_step: Vec<(usize, f64)> = Vec::new();
     for &n in &sizes {
         let (inp, spacing) = input(n);
         let runs = if n >= 1_000_000 { 1 } else { args.runs };
@@ -194,6 +196,7 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
             )
         };
         let total = median(totals);
+        one_step.push((n, total));
         let bare = median(bares);
         let peer = splashsurf_seconds(&inp.positions, 0.5 * spacing, runs)?;
         let rate = |s: f64| format!("{:.0}k", n as f64 / s / 1e3);
@@ -301,7 +304,7 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
             encodings_step = Some(baked);
         }
     }
-    let (scaling, series) = scaling_and_series(args, &sizes, &params)?;
+    let (scaling, series) = scaling_and_series(args, &sizes, &params, &one_step)?;
     writeln!(
         md,
         "\n*bare* is `Surface::build` alone (kiddo kNN and radii, neighbour lists, initial fits) in the same run; \
@@ -431,6 +434,7 @@ fn scaling_and_series(
     args: &BakeBenchArgs,
     sizes: &[usize],
     params: &BakeParams,
+    one_step: &[(usize, f64)],
 ) -> Result<(String, String)> {
     let cores = crate::machine::cores();
     let mut threads: Vec<usize> = if args.threads.is_empty() {
@@ -456,7 +460,6 @@ fn scaling_and_series(
         heads.join(" | "),
         "---|".repeat(heads.len() + 5)
     )?;
-    let mut one_step: Vec<(usize, f64)> = Vec::new();
     for &n in sizes {
         let (inp, _) = input(n);
         let runs = if n >= 1_000_000 { 1 } else { args.runs.max(1) };
@@ -472,9 +475,6 @@ fn scaling_and_series(
             }
             let total = median(totals);
             let base = *first_total.get_or_insert(total);
-            if t == cores {
-                one_step.push((n, total));
-            }
             let cells: Vec<String> = STAGE_COLUMNS
                 .iter()
                 .map(|(_, names)| {
@@ -512,7 +512,7 @@ fn scaling_and_series(
         "\n## A series against one step alone\n\n{} steps of the moving sphere baked by the batch driver \
          as `slosh bake` runs it (generated in memory instead of read; compressed, verified and written \
          to a temporary directory), with the `--jobs` it would choose here, on all {cores} cores. \
-         *One step* is the same size's step alone on all cores from the scaling table (baked and encoded, \
+         *One step* is the same size's step alone on all cores, from the first table (baked and encoded, \
          not verified or written).\n\n| points | jobs | wall | per step | points/s | one step | per step / one step |\n|---|---|---|---|---|---|---|",
         args.series
     )?;
