@@ -9,8 +9,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use slosh_bake::{
-    BakeParams, BatchOptions, NormalSource, Shard, StepInput, StepSource, SurfaceSelect, bake_step,
-    run_batch,
+    BakeParams, BakedStep, BatchOptions, NormalSource, Shard, StepInput, StepSource, SurfaceSelect,
+    bake_step, run_batch,
 };
 use slosh_cache::{CacheFile, Compression, Encoding, LoadedStep, encode_bytes, encode_step};
 use slosh_fileio::FileBytes;
@@ -173,16 +173,11 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
             bares.push(time(1, || {
                 Surface::<f64>::build(&inp.positions, inp.normals.as_deref(), &bare_params)
             }));
-            let t = Instant::now();
-            let baked = bake_step(&inp, &params)?;
-            let t_enc = Instant::now();
-            encoded = encode_step(baked.header.clone(), &baked.sections, params.compression)?;
-            let enc = t_enc.elapsed().as_secs_f64();
-            totals.push(t.elapsed().as_secs_f64());
-            let mut stages = baked.header.stats.stage_seconds.clone();
-            stages.push(("encode".into(), enc));
-            stage_runs.push(stages);
-            last_baked = Some(baked);
+            let step = bake_and_encode(&inp, &params)?;
+            totals.push(step.seconds);
+            stage_runs.push(step.stages);
+            encoded = step.encoded;
+            last_baked = Some(step.baked);
         }
         let Some(baked) = last_baked else {
             unreachable!("at least one run per size")
@@ -393,15 +388,29 @@ const STAGE_COLUMNS: [(&str, &[&str]); 9] = [
     ("encode", &["encode"]),
 ];
 
-/// One step baked and encoded: wall seconds and the seconds of each stage.
-fn bake_and_encode(input: &StepInput, params: &BakeParams) -> Result<(f64, Vec<(String, f64)>)> {
+/// One step baked and encoded.
+struct TimedStep {
+    baked: BakedStep,
+    encoded: Vec<u8>,
+    /// Wall seconds, bake and encoding.
+    seconds: f64,
+    /// Seconds of each stage, "encode" last.
+    stages: Vec<(String, f64)>,
+}
+
+fn bake_and_encode(input: &StepInput, params: &BakeParams) -> Result<TimedStep> {
     let t = Instant::now();
     let baked = bake_step(input, params)?;
     let t_enc = Instant::now();
-    encode_step(baked.header.clone(), &baked.sections, params.compression)?;
+    let encoded = encode_step(baked.header.clone(), &baked.sections, params.compression)?;
     let mut stages = baked.header.stats.stage_seconds.clone();
     stages.push(("encode".into(), t_enc.elapsed().as_secs_f64()));
-    Ok((t.elapsed().as_secs_f64(), stages))
+    Ok(TimedStep {
+        baked,
+        encoded,
+        seconds: t.elapsed().as_secs_f64(),
+        stages,
+    })
 }
 
 /// A moving sphere series generated in memory: the batch driver's input without files.
@@ -469,9 +478,9 @@ fn scaling_and_series(
             let mut totals = Vec::new();
             let mut stage_runs = Vec::new();
             for _ in 0..runs {
-                let (total, stages) = pool.install(|| bake_and_encode(&inp, params))?;
-                totals.push(total);
-                stage_runs.push(stages);
+                let step = pool.install(|| bake_and_encode(&inp, params))?;
+                totals.push(step.seconds);
+                stage_runs.push(step.stages);
             }
             let total = median(totals);
             let base = *first_total.get_or_insert(total);

@@ -40,7 +40,6 @@ pub(crate) fn neighbour_lists(
     let n = points.len();
     let cap = cap.max(1);
     struct Run {
-        members: Vec<usize>,
         counts: Vec<u32>,
         ids: Vec<u32>,
         reach: Vec<f64>,
@@ -66,13 +65,7 @@ pub(crate) fn neighbour_lists(
             let members = run_points.iter().map(|&i| i as usize);
             // The run's box centre, and a radius holding every member's reach (with slack far
             // above rounding, so that no point within reach is missed).
-            let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-            for p in members.clone().map(|i| points[i]) {
-                for a in 0..3 {
-                    lo[a] = lo[a].min(p[a]);
-                    hi[a] = hi[a].max(p[a]);
-                }
-            }
+            let (lo, hi) = crate::surface::bounds(members.clone().map(|i| &points[i]));
             let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
             let radius = members
                 .clone()
@@ -106,7 +99,6 @@ pub(crate) fn neighbour_lists(
             }
             let size = run_points.len();
             let mut run = Run {
-                members: members.clone().collect(),
                 counts: Vec::with_capacity(size),
                 ids: Vec::with_capacity(size * cap.min(found.len())),
                 reach: Vec::with_capacity(size),
@@ -177,11 +169,11 @@ pub(crate) fn neighbour_lists(
     let mut start = vec![0u32; n + 1];
     let mut reach_out = vec![0.0; n];
     let mut capped = 0;
-    for run in &runs {
-        for (&i, &c) in run.members.iter().zip(&run.counts) {
+    // Run r's members are `order`'s r-th chunk.
+    let members = || order.chunks(RUN).map(|c| c.iter().map(|&i| i as usize));
+    for (run, members) in runs.iter().zip(members()) {
+        for ((i, &c), &r) in members.zip(&run.counts).zip(&run.reach) {
             start[i + 1] = c;
-        }
-        for (&i, &r) in run.members.iter().zip(&run.reach) {
             reach_out[i] = r;
         }
         capped += run.capped;
@@ -197,14 +189,8 @@ pub(crate) fn neighbour_lists(
         slots.push(Some(slot));
         rest = tail;
     }
-    let by_run: Vec<Vec<&mut [u32]>> = runs
-        .iter()
-        .map(|run| {
-            run.members
-                .iter()
-                .filter_map(|&i| slots[i].take())
-                .collect()
-        })
+    let by_run: Vec<Vec<&mut [u32]>> = members()
+        .map(|members| members.filter_map(|i| slots[i].take()).collect())
         .collect();
     by_run
         .into_par_iter()

@@ -512,9 +512,7 @@ fn droplets<T: Real>(
         let m = &order[first[r] as usize..first[r + 1] as usize];
         (!m.is_empty()).then_some(m)
     });
-    let distance = |p: [f64; 3], c: [f64; 3]| {
-        ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt()
-    };
+    let distance = |p: [f64; 3], c: [f64; 3]| d2(p, c).sqrt();
     let particle = 0.5 * spacing;
     // Spheres numbered in order of their first member, so the result does not depend on threads.
     let mut spheres = Vec::new();
@@ -588,7 +586,7 @@ fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
 }
 
 /// The axis-aligned bounding box (lo, hi) of `points`; infinite and empty for no points.
-pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+pub fn bounds<'a>(points: impl IntoIterator<Item = &'a [f64; 3]>) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in points {
