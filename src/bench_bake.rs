@@ -342,11 +342,16 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         if s.bytes.is_empty() {
             continue;
         }
-        for enc in [
+        let by_element = Encoding::shuffled_elements(s.element.size());
+        let mut encodings = vec![
             Encoding::Zstd,
             Encoding::Shuffle4Zstd,
             Encoding::Delta4Shuffle4Zstd,
-        ] {
+        ];
+        if !encodings.contains(&by_element) {
+            encodings.push(by_element);
+        }
+        for enc in encodings {
             let mut packed = Vec::new();
             let c = time(5, || {
                 packed = encode_bytes(&s.bytes, enc, 1).unwrap_or_default();

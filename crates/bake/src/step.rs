@@ -272,15 +272,22 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             radius: s.radius as f32,
         })
         .collect();
+    // Structs shuffled by their own size: a field's sign and exponent bytes side by side, a
+    // padding or unused field one run of zeros (`docs/cache-format.md`).
+    let by_element = |element: Element| Encoding::shuffled_elements(element.size());
     let mut sections = vec![
         SectionInput::new(
             names::POINTS,
             Element::Point,
             &points,
-            Encoding::Shuffle4Zstd,
+            by_element(Element::Point),
         ),
-        // Plain zstd: as small as shuffled here (2.31× vs 2.36×) and decodes 1.7× faster.
-        SectionInput::new(names::BALLS, Element::Ball, &balls, Encoding::Zstd),
+        SectionInput::new(
+            names::BALLS,
+            Element::Ball,
+            &balls,
+            by_element(Element::Ball),
+        ),
         SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
         SectionInput::new(
             names::CLUSTER_START,
@@ -298,13 +305,13 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             names::SPHERES,
             Element::Sphere,
             &spheres,
-            Encoding::Shuffle4Zstd,
+            by_element(Element::Sphere),
         ),
         SectionInput::new(
             names::BVH_NODES,
             Element::BvhNode,
             &bvh.nodes,
-            Encoding::Shuffle4Zstd,
+            by_element(Element::BvhNode),
         ),
         SectionInput::new(
             names::BVH_ITEMS,
@@ -327,7 +334,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                 names::NORMALS,
                 Element::Normal,
                 &normals,
-                Encoding::Shuffle4Zstd,
+                by_element(Element::Normal),
             ),
         );
     }
@@ -354,7 +361,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                         [x[0], x[1], x[2], 0.0]
                     })
                     .collect();
-                SectionInput::new(&section, Element::Vec4, &vec4, Encoding::Shuffle4Zstd)
+                SectionInput::new(&section, Element::Vec4, &vec4, by_element(Element::Vec4))
             }
         });
     }

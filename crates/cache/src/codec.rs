@@ -3,13 +3,31 @@
 
 use crate::format::Encoding;
 
-/// Encodes `raw` (a multiple of 4 bytes for the shuffled encodings).
+/// Encodes `raw` (a multiple of the shuffle width for the shuffled encodings).
 pub fn encode(raw: &[u8], encoding: Encoding, level: i32) -> std::io::Result<Vec<u8>> {
+    if let Some(width) = encoding.shuffle_width()
+        && !raw.len().is_multiple_of(width)
+    {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "{} bytes are not whole {width}-byte elements for {}",
+                raw.len(),
+                encoding.name()
+            ),
+        ));
+    }
     match encoding {
         Encoding::Raw => Ok(raw.to_vec()),
         Encoding::Zstd => zstd::bulk::compress(raw, level),
-        Encoding::Shuffle4Zstd => zstd::bulk::compress(&shuffle4(raw), level),
         Encoding::Delta4Shuffle4Zstd => zstd::bulk::compress(&shuffle4(&delta4(raw)), level),
+        Encoding::Shuffle4Zstd
+        | Encoding::Shuffle16Zstd
+        | Encoding::Shuffle32Zstd
+        | Encoding::Shuffle64Zstd => {
+            let width = encoding.shuffle_width().unwrap_or(4);
+            zstd::bulk::compress(&shuffle(raw, width), level)
+        }
     }
 }
 
@@ -45,8 +63,13 @@ pub fn decode_into(
                 return Err(size(n));
             }
         }
-        Encoding::Shuffle4Zstd | Encoding::Delta4Shuffle4Zstd => {
-            if !expected.is_multiple_of(4) {
+        Encoding::Shuffle4Zstd
+        | Encoding::Delta4Shuffle4Zstd
+        | Encoding::Shuffle16Zstd
+        | Encoding::Shuffle32Zstd
+        | Encoding::Shuffle64Zstd => {
+            let width = encoding.shuffle_width().unwrap_or(4);
+            if !expected.is_multiple_of(width) {
                 return Err(size(expected));
             }
             scratch.clear();
@@ -55,7 +78,7 @@ pub fn decode_into(
             if n != expected {
                 return Err(size(n));
             }
-            unshuffle4_into(scratch, out);
+            unshuffle_into(scratch, out, width);
             if encoding == Encoding::Delta4Shuffle4Zstd {
                 undelta4_in_place(out);
             }
@@ -73,21 +96,81 @@ fn unzstd(stored: &[u8], out: &mut [u8]) -> Result<usize, DecodeError> {
 
 /// Regroups bytes by their position within each 4-byte word.
 pub fn shuffle4(raw: &[u8]) -> Vec<u8> {
-    let words = raw.len() / 4;
+    shuffle(raw, 4)
+}
+
+/// Regroups bytes by their position within each `width`-byte element: byte 0 of every
+/// element, then byte 1, … (`raw` holds whole elements).
+pub fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
+    match width {
+        4 => shuffle_fixed::<4>(raw),
+        16 => shuffle_fixed::<16>(raw),
+        32 => shuffle_fixed::<32>(raw),
+        64 => shuffle_fixed::<64>(raw),
+        _ => shuffle_any(raw, width),
+    }
+}
+
+/// Elements per block of the transposes: a block's elements (at most 4 KiB) stay in L1 while
+/// every byte plane is read or written along them.
+const BLOCK: usize = 64;
+
+fn shuffle_fixed<const W: usize>(raw: &[u8]) -> Vec<u8> {
+    let count = raw.len() / W;
     let mut out = vec![0u8; raw.len()];
-    for (w, chunk) in raw.chunks_exact(4).enumerate() {
-        for (b, &byte) in chunk.iter().enumerate() {
-            out[b * words + w] = byte;
+    for first in (0..count).step_by(BLOCK) {
+        let block = BLOCK.min(count - first);
+        let elements = &raw[first * W..(first + block) * W];
+        for b in 0..W {
+            let plane = &mut out[b * count + first..b * count + first + block];
+            for (slot, element) in plane.iter_mut().zip(elements.chunks_exact(W)) {
+                *slot = element[b];
+            }
         }
     }
     out
 }
 
-fn unshuffle4_into(shuffled: &[u8], out: &mut [u8]) {
-    let words = out.len() / 4;
-    let planes: [&[u8]; 4] = std::array::from_fn(|b| &shuffled[b * words..(b + 1) * words]);
-    for (w, chunk) in out.chunks_exact_mut(4).enumerate() {
-        chunk.copy_from_slice(&[planes[0][w], planes[1][w], planes[2][w], planes[3][w]]);
+fn shuffle_any(raw: &[u8], width: usize) -> Vec<u8> {
+    let count = raw.len() / width;
+    let mut out = vec![0u8; raw.len()];
+    for (e, element) in raw.chunks_exact(width).enumerate() {
+        for (b, &byte) in element.iter().enumerate() {
+            out[b * count + e] = byte;
+        }
+    }
+    out
+}
+
+/// The inverse of [`shuffle`], into `out` (as long as `shuffled`).
+fn unshuffle_into(shuffled: &[u8], out: &mut [u8], width: usize) {
+    match width {
+        4 => unshuffle_fixed::<4>(shuffled, out),
+        16 => unshuffle_fixed::<16>(shuffled, out),
+        32 => unshuffle_fixed::<32>(shuffled, out),
+        64 => unshuffle_fixed::<64>(shuffled, out),
+        _ => {
+            let count = out.len() / width;
+            for (e, element) in out.chunks_exact_mut(width).enumerate() {
+                for (b, byte) in element.iter_mut().enumerate() {
+                    *byte = shuffled[b * count + e];
+                }
+            }
+        }
+    }
+}
+
+fn unshuffle_fixed<const W: usize>(shuffled: &[u8], out: &mut [u8]) {
+    let count = out.len() / W;
+    for first in (0..count).step_by(BLOCK) {
+        let block = BLOCK.min(count - first);
+        let elements = &mut out[first * W..(first + block) * W];
+        for b in 0..W {
+            let plane = &shuffled[b * count + first..b * count + first + block];
+            for (element, &byte) in elements.chunks_exact_mut(W).zip(plane) {
+                element[b] = byte;
+            }
+        }
     }
 }
 

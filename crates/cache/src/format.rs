@@ -9,7 +9,7 @@ pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
 /// Footer magic.
 pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files with a larger major version; minor versions only add.
-pub const MAJOR: u16 = 2;
+pub const MAJOR: u16 = 3;
 pub const MINOR: u16 = 0;
 /// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
@@ -96,6 +96,17 @@ pub enum Encoding {
     /// from 0), then shuffled and compressed as `shuffle4+zstd`. For sorted index lists.
     #[serde(rename = "delta4+shuffle4+zstd")]
     Delta4Shuffle4Zstd,
+    /// Bytes regrouped by position within each 16-byte element (byte 0 of every element, then
+    /// byte 1, …), then zstd: each field's sign and exponent bytes end up side by side, and a
+    /// padding word becomes one run of zeros. Format 3.
+    #[serde(rename = "shuffle16+zstd")]
+    Shuffle16Zstd,
+    /// As `shuffle16+zstd`, within each 32-byte element. Format 3.
+    #[serde(rename = "shuffle32+zstd")]
+    Shuffle32Zstd,
+    /// As `shuffle16+zstd`, within each 64-byte element. Format 3.
+    #[serde(rename = "shuffle64+zstd")]
+    Shuffle64Zstd,
 }
 
 impl Encoding {
@@ -105,6 +116,31 @@ impl Encoding {
             Encoding::Zstd => "zstd",
             Encoding::Shuffle4Zstd => "shuffle4+zstd",
             Encoding::Delta4Shuffle4Zstd => "delta4+shuffle4+zstd",
+            Encoding::Shuffle16Zstd => "shuffle16+zstd",
+            Encoding::Shuffle32Zstd => "shuffle32+zstd",
+            Encoding::Shuffle64Zstd => "shuffle64+zstd",
+        }
+    }
+
+    /// The width bytes are regrouped within, for the shuffled encodings.
+    pub fn shuffle_width(self) -> Option<usize> {
+        match self {
+            Encoding::Raw | Encoding::Zstd => None,
+            Encoding::Shuffle4Zstd | Encoding::Delta4Shuffle4Zstd => Some(4),
+            Encoding::Shuffle16Zstd => Some(16),
+            Encoding::Shuffle32Zstd => Some(32),
+            Encoding::Shuffle64Zstd => Some(64),
+        }
+    }
+
+    /// The byte shuffle within whole elements of `size` bytes, then zstd (`shuffle4+zstd`
+    /// for sizes without their own encoding).
+    pub fn shuffled_elements(size: usize) -> Encoding {
+        match size {
+            16 => Encoding::Shuffle16Zstd,
+            32 => Encoding::Shuffle32Zstd,
+            64 => Encoding::Shuffle64Zstd,
+            _ => Encoding::Shuffle4Zstd,
         }
     }
 }

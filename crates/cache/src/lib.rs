@@ -20,7 +20,9 @@ mod writer;
 pub use bvh::Bvh;
 /// The section codecs by themselves (for measuring encodings); readers use
 /// [`CacheFile::decode_into`].
-pub use codec::{DecodeError, decode_into as decode_bytes, encode as encode_bytes, shuffle4};
+pub use codec::{
+    DecodeError, decode_into as decode_bytes, encode as encode_bytes, shuffle, shuffle4,
+};
 pub use error::{Error, Result};
 pub use format::{
     ALIGN, CHUNK_RAW, ChunkEntry, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings,

@@ -28,9 +28,9 @@ pub struct CacheFile {
     skip_checksums: bool,
 }
 
-/// The chunk table of a section: none in format 1; in format 2, one chunk per `chunk_raw`
-/// raw bytes (a positive multiple of 4), their stored sizes adding up to the section's, each
-/// raw chunk stored as it is.
+/// The chunk table of a section: none in format 1; from format 2, one chunk per `chunk_raw`
+/// raw bytes (a positive multiple of 4 and of the encoding's shuffle width), their stored
+/// sizes adding up to the section's, each raw chunk stored as it is.
 fn check_chunks(s: &SectionEntry, major: u16) -> std::result::Result<(), String> {
     if major < 2 {
         return if s.chunks.is_empty() && s.chunk_raw == 0 {
@@ -39,10 +39,13 @@ fn check_chunks(s: &SectionEntry, major: u16) -> std::result::Result<(), String>
             Err("a format 1 file has a chunk table".into())
         };
     }
-    if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(4) {
+    let width = s.encoding.shuffle_width().unwrap_or(4) as u64;
+    if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(4) || !s.chunk_raw.is_multiple_of(width) {
         return Err(format!(
-            "chunks of {} raw bytes (a positive multiple of 4 expected)",
-            s.chunk_raw
+            "chunks of {} raw bytes (a positive multiple of 4 and of {width}, the {} width, \
+             expected)",
+            s.chunk_raw,
+            s.encoding.name()
         ));
     }
     let expected = s.raw.div_ceil(s.chunk_raw);
@@ -123,7 +126,11 @@ impl CacheFile {
             });
         }
         if preamble.major == 0 {
-            return Err(format(8, "major version 1 or 2", "0".into()));
+            return Err(format(
+                8,
+                &format!("major version 1 to {MAJOR}"),
+                "0".into(),
+            ));
         }
         let foot = len - FOOTER_LEN;
         if bytes[foot..foot + 8] != FOOTER_MAGIC {

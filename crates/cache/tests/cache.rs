@@ -105,9 +105,9 @@ fn truncation_at_any_length_is_a_clear_error() {
 #[test]
 fn a_newer_major_version_is_refused_by_name() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8] = 3;
+    bytes[8] = 4;
     let err = open(bytes).unwrap_err().to_string();
-    assert!(err.contains("newer") && err.contains("3.0"), "{err}");
+    assert!(err.contains("newer") && err.contains("4.0"), "{err}");
 }
 
 #[test]
@@ -120,6 +120,36 @@ fn the_wrong_file_is_named_as_such() {
 fn shuffle_groups_bytes_by_position() {
     let words: Vec<u8> = vec![1, 2, 3, 4, 5, 6, 7, 8];
     assert_eq!(shuffle4(&words), vec![1, 5, 2, 6, 3, 7, 4, 8]);
+    // Two 16-byte elements: byte k of each, side by side.
+    let elements: Vec<u8> = (0..32).collect();
+    let want: Vec<u8> = (0..16).flat_map(|k| [k, k + 16]).collect();
+    assert_eq!(shuffle(&elements, 16), want);
+}
+
+/// Element shuffles of every width round-trip at counts that are not whole transpose blocks,
+/// and refuse bytes that are not whole elements.
+#[test]
+fn element_shuffles_round_trip_whole_elements_only() {
+    for (encoding, width) in [
+        (Encoding::Shuffle4Zstd, 4),
+        (Encoding::Shuffle16Zstd, 16),
+        (Encoding::Shuffle32Zstd, 32),
+        (Encoding::Shuffle64Zstd, 64),
+    ] {
+        assert_eq!(encoding.shuffle_width(), Some(width));
+        assert_eq!(Encoding::shuffled_elements(width), encoding);
+        for count in [0usize, 1, 63, 64, 65, 1000] {
+            let raw: Vec<u8> = (0..count * width).map(|i| (i * 7 % 251) as u8).collect();
+            let stored = encode_bytes(&raw, encoding, 1).unwrap();
+            let mut out = vec![0u8; raw.len()];
+            decode_bytes(&stored, encoding, &mut out, &mut Vec::new()).unwrap();
+            assert!(out == raw, "{} at {count} elements", encoding.name());
+        }
+        if width > 4 {
+            let err = encode_bytes(&[0u8; 20], encoding, 1).unwrap_err();
+            assert!(err.to_string().contains("whole"), "{err}");
+        }
+    }
 }
 
 /// Sections of several chunks: every encoding round-trips, and a flip in any chunk is caught
@@ -134,6 +164,24 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
         SectionInput::new("floats", Element::F32, &floats, Encoding::Shuffle4Zstd),
         SectionInput::new("plain", Element::F32, &floats, Encoding::Zstd),
         SectionInput::new("raw", Element::F32, &floats, Encoding::Raw),
+        SectionInput::new(
+            "points",
+            Element::Point,
+            bytemuck::cast_slice::<f32, [f32; 4]>(&floats[..n / 4 * 4]),
+            Encoding::Shuffle16Zstd,
+        ),
+        SectionInput::new(
+            "nodes",
+            Element::BvhNode,
+            bytemuck::cast_slice::<f32, [f32; 8]>(&floats[..n / 8 * 8]),
+            Encoding::Shuffle32Zstd,
+        ),
+        SectionInput::new(
+            "balls",
+            Element::Ball,
+            bytemuck::cast_slice::<f32, [f32; 16]>(&floats[..n / 16 * 16]),
+            Encoding::Shuffle64Zstd,
+        ),
     ];
     let bytes = encode_step(header(), &sections, Compression::Level(1)).unwrap();
     let file = open(bytes.clone()).unwrap();
