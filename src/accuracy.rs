@@ -12,14 +12,14 @@ use slosh_scenes::{DVec3, Ray as TrueRay, Scene, SceneKind, SceneSpec, Truth};
 use crate::cli::AccuracyArgs;
 
 /// One scene at one time, rendered once by the exact truth.
-struct Case {
-    name: String,
+pub(crate) struct Case {
+    pub(crate) name: String,
     noise: f64,
-    spacing: f64,
+    pub(crate) spacing: f64,
     truth: Truth,
-    camera: Camera,
-    positions: Vec<[f64; 3]>,
-    normals: Vec<[f64; 3]>,
+    pub(crate) camera: Camera,
+    pub(crate) positions: Vec<[f64; 3]>,
+    pub(crate) normals: Vec<[f64; 3]>,
     /// Exact hit (t, outward normal) per pixel.
     exact: Vec<Option<(f64, DVec3)>>,
     /// Pixels whose 3 × 3 neighbourhood has both truth hits and misses.
@@ -47,7 +47,7 @@ impl Config {
     }
 }
 
-struct Render {
+pub(crate) struct Render {
     hits: Vec<Option<TraceHit>>,
     us_per_ray: f64,
     /// Droplet spheres of the surface, and the normals its build reversed.
@@ -56,18 +56,24 @@ struct Render {
 }
 
 #[derive(Debug, Default, Clone, Copy)]
-struct Metrics {
-    rms: f64,
-    p99: f64,
+pub(crate) struct Metrics {
+    pub(crate) rms: f64,
+    pub(crate) p99: f64,
     max: f64,
-    angle_mean: f64,
+    pub(crate) angle_mean: f64,
     solver_rms: f64,
     solver_p99: f64,
     disagree_pct: f64,
     us_per_ray: f64,
 }
 
-fn case(kind: SceneKind, points: usize, step: usize, noise: f64, size: u32) -> Result<Case> {
+pub(crate) fn case(
+    kind: SceneKind,
+    points: usize,
+    step: usize,
+    noise: f64,
+    size: u32,
+) -> Result<Case> {
     case_reversed(kind, points, step, noise, 0.0, size)
 }
 
@@ -118,6 +124,18 @@ fn case_reversed(
         exact,
         silhouette,
     })
+}
+
+impl Render {
+    /// Hits traced elsewhere (a cache), with no cost or surface figures.
+    pub(crate) fn from_hits(hits: Vec<Option<TraceHit>>) -> Render {
+        Render {
+            hits,
+            us_per_ray: 0.0,
+            spheres: 0,
+            orientation: slosh_mls::OrientationRepair::default(),
+        }
+    }
 }
 
 fn render_as<T: Real>(case: &Case, cfg: &Config, iterations: u32, epsilon: f64) -> Result<Render> {
@@ -171,7 +189,7 @@ pub(crate) fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
     v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
 }
 
-fn metrics(case: &Case, r: &Render, reference: &Render) -> Metrics {
+pub(crate) fn metrics(case: &Case, r: &Render, reference: &Render) -> Metrics {
     let (mut dist, mut angles, mut solver) = (Vec::new(), Vec::new(), Vec::new());
     let (mut compared, mut disagree) = (0usize, 0usize);
     for (i, h) in r.hits.iter().enumerate() {

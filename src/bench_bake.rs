@@ -144,11 +144,14 @@ pub fn run(args: &BakeBenchArgs) -> Result<()> {
         md,
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     )?;
-    let encodings_size = *sizes
+    // The largest size up to 100k, or the smallest where every size is larger.
+    let encodings_size = sizes
         .iter()
-        .filter(|&&s| s <= 100_000)
+        .copied()
+        .filter(|&s| s <= 100_000)
         .max()
-        .unwrap_or(&10_000);
+        .or_else(|| sizes.iter().copied().min())
+        .unwrap_or(10_000);
     let mut encodings_step = None;
     let mut size_rows = String::new();
     let mut peer_rows = String::new();

@@ -5,6 +5,7 @@ mod accuracy;
 mod bake;
 mod bench_bake;
 mod bench_gpu;
+mod bench_precision;
 mod bench_scrub;
 mod cli;
 mod config;
@@ -62,6 +63,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
         Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
         Command::Bench(cli::BenchCommand::Bake(args)) => bench_bake::run(&args),
+        Command::Bench(cli::BenchCommand::Precision(args)) => bench_precision::run(&args),
         Command::Bench(cli::BenchCommand::Gpu(args)) => bench_gpu::run(&args),
         Command::Bench(cli::BenchCommand::Scrub(args)) => bench_scrub::run(&args),
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),

@@ -14,7 +14,7 @@ pub use batch::{
 };
 pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use ensight_source::EnsightSource;
-pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
+pub use params::{BAKE_REVISION, BakeParams, DEFAULT_MANTISSA_BITS, NormalSource, SurfaceSelect};
 pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
 };

@@ -217,6 +217,8 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             BallFit::Droplet(_) => stats.droplet_points += 1,
         }
     }
+    // Fits and normals at the stored precision (`docs/cache-format.md`, "Stored precision").
+    let rounded = |v: f32| slosh_cache::round_mantissa(v, params.mantissa_bits);
     let balls: Vec<GpuBall> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -228,9 +230,9 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                 BallFit::Droplet(d) => (BallState::Droplet, d),
             };
             GpuBall {
-                normal: f32x3(b.normal),
+                normal: f32x3(b.normal).map(rounded),
                 h: b.h as f32,
-                coeffs: b.poly.c.map(|c| c as f32),
+                coeffs: b.poly.c.map(|c| rounded(c as f32)),
                 degree: u32::from(b.poly.degree),
                 state: GpuBall::state_word(kind, sphere),
             }
@@ -324,7 +326,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         let normals: Vec<GpuNormal> = ns
             .iter()
             .map(|v| GpuNormal {
-                normal: f32x3(*v),
+                normal: f32x3(*v).map(rounded),
                 pad: 0.0,
             })
             .collect();

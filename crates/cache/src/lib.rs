@@ -12,6 +12,7 @@ pub mod fuzzing;
 mod layout;
 mod manifest;
 pub mod names;
+mod precision;
 mod reader;
 mod step;
 mod verify;
@@ -32,6 +33,7 @@ pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, G
 pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, parse_step_file_name, step_file_name,
 };
+pub use precision::{F32_MANTISSA_BITS, round_mantissa};
 pub use reader::CacheFile;
 pub use step::LoadedStep;
 pub use verify::VerifyReport;
