@@ -45,8 +45,12 @@ pub(crate) fn neighbour_lists(
         reach: Vec<f64>,
         capped: usize,
     }
-    #[derive(Default)]
     struct Scratch {
+        /// kiddo's traversal stack, reused by every query of the thread.
+        query:
+            kiddo::QueryScratch<kiddo::stem_strategies::eytzinger::EytzingerFlexPf<0, 1>, f64, 3>,
+        /// The run's candidates: every point within the run's query ball, in index order.
+        found: Vec<u32>,
         /// The run's candidates' coordinates, one array per axis (the distance loop vectorises).
         axes: [Vec<f64>; 3],
         /// Their unit normals, zero where a point has none (a zero normal opposes nothing).
@@ -61,111 +65,124 @@ pub(crate) fn neighbour_lists(
     let order = crate::order::morton_order(points);
     let runs: Vec<Run> = order
         .par_chunks(RUN)
-        .map_init(Scratch::default, |scratch, run_points| {
-            let members = run_points.iter().map(|&i| i as usize);
-            // The run's box centre, and a radius holding every member's reach (with slack far
-            // above rounding, so that no point within reach is missed).
-            let (lo, hi) = crate::surface::bounds(members.clone().map(|i| &points[i]));
-            let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
-            let radius = members
-                .clone()
-                .map(|i| distance2(points[i], centre).sqrt() + reach[i])
-                .fold(0.0, f64::max)
-                * (1.0 + 1e-9);
-            let mut found: Vec<u32> = tree
-                .query(&centre)
-                .within::<SquaredEuclidean<f64>>(radius * radius)
-                .unsorted()
-                .execute()
-                .into_iter()
-                .map(|f| f.item)
-                .collect();
-            // Index order: a position in `found` orders as the index it holds.
-            found.sort_unstable();
-            let Scratch {
-                axes,
-                normal_axes,
-                d2,
-                keys,
-            } = scratch;
-            for (a, axis) in axes.iter_mut().enumerate() {
-                axis.clear();
-                axis.extend(found.iter().map(|&j| points[j as usize][a]));
-            }
-            let normal_of = |i: usize| normals.and_then(|ns| ns[i]).unwrap_or([0.0; 3]);
-            for (a, axis) in normal_axes.iter_mut().enumerate() {
-                axis.clear();
-                axis.extend(found.iter().map(|&j| normal_of(j as usize)[a]));
-            }
-            let size = run_points.len();
-            let mut run = Run {
-                counts: Vec::with_capacity(size),
-                ids: Vec::with_capacity(size * cap.min(found.len())),
-                reach: Vec::with_capacity(size),
-                capped: 0,
-            };
-            for i in members {
-                let p = points[i];
-                let r2 = reach[i] * reach[i];
-                d2.clear();
-                d2.extend(
-                    axes[0]
-                        .iter()
-                        .zip(&axes[1])
-                        .zip(&axes[2])
-                        .map(|((x, y), z)| distance2(p, [*x, *y, *z])),
-                );
-                keys.clear();
-                keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
-                let capped = keys.len() >= cap;
-                // Kept: d² below `limit`, and d² equal to it while `ties` last (in index
-                // order): within reach, or the nearest `cap` by (d², index) where the cap cuts.
-                let (limit, mut ties) = if keys.len() > cap {
-                    let (below, &mut last, _) = keys.select_nth_unstable(cap - 1);
-                    let less = below.iter().filter(|&&k| k < last).count();
-                    (f64::from_bits(last), cap - less)
-                } else {
-                    (r2, usize::MAX)
-                };
-                let own = normal_of(i);
-                let mut far = 0.0f64;
-                let before = run.ids.len();
-                for (k, &d) in d2.iter().enumerate() {
-                    if d > limit || (d == limit && ties == 0) {
-                        continue;
-                    }
-                    if d == limit {
-                        ties -= 1;
-                    }
-                    far = far.max(d);
-                    // Thin sheets: a neighbour whose normal opposes the centre's is the other
-                    // side.
-                    let dot = own[0] * normal_axes[0][k]
-                        + own[1] * normal_axes[1][k]
-                        + own[2] * normal_axes[2][k];
-                    if dot < 0.0 {
-                        continue;
-                    }
-                    run.ids.push(found[k]);
+        .map_init(
+            || Scratch {
+                query: tree.create_scratch::<SquaredEuclidean<f64>>(),
+                found: Vec::new(),
+                axes: Default::default(),
+                normal_axes: Default::default(),
+                d2: Vec::new(),
+                keys: Vec::new(),
+            },
+            |scratch, run_points| {
+                let members = run_points.iter().map(|&i| i as usize);
+                // The run's box centre, and a radius holding every member's reach (with slack far
+                // above rounding, so that no point within reach is missed).
+                let (lo, hi) = crate::surface::bounds(members.clone().map(|i| &points[i]));
+                let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+                let radius = members
+                    .clone()
+                    .map(|i| distance2(points[i], centre).sqrt() + reach[i])
+                    .fold(0.0, f64::max)
+                    * (1.0 + 1e-9);
+                let Scratch {
+                    query,
+                    found,
+                    axes,
+                    normal_axes,
+                    d2,
+                    keys,
+                } = scratch;
+                // Visited into the thread's buffer: no result vector per run.
+                found.clear();
+                tree.query(&centre)
+                    .within::<SquaredEuclidean<f64>>(radius * radius)
+                    .unsorted()
+                    .without_distances()
+                    .with_scratch(query)
+                    .visit(|f| found.push(f.item));
+                // Index order: a position in `found` orders as the index it holds.
+                found.sort_unstable();
+                for (a, axis) in axes.iter_mut().enumerate() {
+                    axis.clear();
+                    axis.extend(found.iter().map(|&j| points[j as usize][a]));
                 }
-                // A cut list reaches only as far as its farthest member: the radius that
-                // reproduces it as a distance filter (`crate::clusters::expand`), rounded up
-                // so that squaring it again cannot fall below the farthest d².
-                let list_reach = if capped {
-                    far.sqrt().next_up().next_up()
-                } else {
-                    reach[i]
+                let normal_of = |i: usize| normals.and_then(|ns| ns[i]).unwrap_or([0.0; 3]);
+                for (a, axis) in normal_axes.iter_mut().enumerate() {
+                    axis.clear();
+                    axis.extend(found.iter().map(|&j| normal_of(j as usize)[a]));
+                }
+                let size = run_points.len();
+                let mut run = Run {
+                    counts: Vec::with_capacity(size),
+                    ids: Vec::with_capacity(size * cap.min(found.len())),
+                    reach: Vec::with_capacity(size),
+                    capped: 0,
                 };
-                run.counts.push((run.ids.len() - before) as u32);
-                run.reach.push(list_reach);
-                run.capped += usize::from(capped);
-            }
-            run
-        })
+                for i in members {
+                    let p = points[i];
+                    let r2 = reach[i] * reach[i];
+                    d2.clear();
+                    d2.extend(
+                        axes[0]
+                            .iter()
+                            .zip(&axes[1])
+                            .zip(&axes[2])
+                            .map(|((x, y), z)| distance2(p, [*x, *y, *z])),
+                    );
+                    keys.clear();
+                    keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
+                    let capped = keys.len() >= cap;
+                    // Kept: d² below `limit`, and d² equal to it while `ties` last (in index
+                    // order): within reach, or the nearest `cap` by (d², index) where the cap cuts.
+                    let (limit, mut ties) = if keys.len() > cap {
+                        let (below, &mut last, _) = keys.select_nth_unstable(cap - 1);
+                        let less = below.iter().filter(|&&k| k < last).count();
+                        (f64::from_bits(last), cap - less)
+                    } else {
+                        (r2, usize::MAX)
+                    };
+                    let own = normal_of(i);
+                    let mut far = 0.0f64;
+                    let before = run.ids.len();
+                    for (k, &d) in d2.iter().enumerate() {
+                        if d > limit || (d == limit && ties == 0) {
+                            continue;
+                        }
+                        if d == limit {
+                            ties -= 1;
+                        }
+                        far = far.max(d);
+                        // Thin sheets: a neighbour whose normal opposes the centre's is the other
+                        // side.
+                        let dot = own[0] * normal_axes[0][k]
+                            + own[1] * normal_axes[1][k]
+                            + own[2] * normal_axes[2][k];
+                        if dot < 0.0 {
+                            continue;
+                        }
+                        run.ids.push(found[k]);
+                    }
+                    // A cut list reaches only as far as its farthest member: the radius that
+                    // reproduces it as a distance filter (`crate::clusters::expand`), rounded up
+                    // so that squaring it again cannot fall below the farthest d².
+                    let list_reach = if capped {
+                        far.sqrt().next_up().next_up()
+                    } else {
+                        reach[i]
+                    };
+                    run.counts.push((run.ids.len() - before) as u32);
+                    run.reach.push(list_reach);
+                    run.capped += usize::from(capped);
+                }
+                run
+            },
+        )
         .collect();
     // Back to point order: counts, then offsets, then each run's lists copied into place, in
-    // parallel (each point's slot handed to its run first: the lists of a 1M-point step are
-    // half a gigabyte).
+    // parallel (the lists of a 1M-point step are half a gigabyte, so they are neither zeroed
+    // first nor handed out point by point where the runs are consecutive indices, as a
+    // bake's are).
     let mut start = vec![0u32; n + 1];
     let mut reach_out = vec![0.0; n];
     let mut capped = 0;
@@ -181,27 +198,46 @@ pub(crate) fn neighbour_lists(
     for i in 0..n {
         start[i + 1] += start[i];
     }
-    let mut ids = vec![0u32; start[n] as usize];
-    let mut slots: Vec<Option<&mut [u32]>> = Vec::with_capacity(n);
-    let mut rest = ids.as_mut_slice();
-    for i in 0..n {
-        let (slot, tail) = rest.split_at_mut((start[i + 1] - start[i]) as usize);
-        slots.push(Some(slot));
-        rest = tail;
-    }
-    let by_run: Vec<Vec<&mut [u32]>> = members()
-        .map(|members| members.filter_map(|i| slots[i].take()).collect())
-        .collect();
-    by_run
-        .into_par_iter()
-        .zip(&runs)
-        .for_each(|(member_slots, run)| {
-            let mut from = 0;
-            for slot in member_slots {
-                slot.copy_from_slice(&run.ids[from..from + slot.len()]);
-                from += slot.len();
+    let total = start[n] as usize;
+    let mut ids: Vec<u32> = Vec::with_capacity(total);
+    let mut rest = &mut ids.spare_capacity_mut()[..total];
+    // Each run's destination pieces, in its members' order: one piece per run where its
+    // members are consecutive indices (their lists are then adjacent), else one per member.
+    let consecutive = order.par_iter().enumerate().all(|(k, &i)| i as usize == k);
+    let pieces: Vec<Vec<&mut [std::mem::MaybeUninit<u32>]>> = if consecutive {
+        runs.iter()
+            .map(|run| {
+                let len = run.ids.len();
+                let (piece, tail) = std::mem::take(&mut rest).split_at_mut(len);
+                rest = tail;
+                vec![piece]
+            })
+            .collect()
+    } else {
+        let mut slots: Vec<Option<&mut [std::mem::MaybeUninit<u32>]>> = Vec::with_capacity(n);
+        for i in 0..n {
+            let (slot, tail) =
+                std::mem::take(&mut rest).split_at_mut((start[i + 1] - start[i]) as usize);
+            slots.push(Some(slot));
+            rest = tail;
+        }
+        members()
+            .map(|members| members.filter_map(|i| slots[i].take()).collect())
+            .collect()
+    };
+    pieces.into_par_iter().zip(&runs).for_each(|(pieces, run)| {
+        let mut from = 0;
+        for piece in pieces {
+            for (slot, &id) in piece.iter_mut().zip(&run.ids[from..]) {
+                slot.write(id);
             }
-        });
+            from += piece.len();
+        }
+    });
+    // SAFETY: the pieces partition the first `total` elements of the spare capacity (each
+    // point's slot, or each run's adjacent slots, in order, lengths summing to `total`), and
+    // every piece was written in full from its run's lists just above.
+    unsafe { ids.set_len(total) };
     NeighbourLists {
         start,
         ids,
@@ -251,7 +287,8 @@ mod tests {
 
     /// A lattice (every distance tied many times, so the cap cuts through ties), shuffled so
     /// that the runs are not index runs, with duplicates, opposing normals and a point whose
-    /// normal is unusable; and scattered points in index order.
+    /// normal is unusable; scattered points in index order; and the same in Morton order,
+    /// whose runs are consecutive indices.
     #[test]
     fn lists_equal_point_by_point_queries() {
         let mut lattice: Vec<[f64; 3]> = Vec::new();
@@ -278,7 +315,22 @@ mod tests {
         for _ in 0..3000 {
             scattered.push([rand(), rand(), 0.1 * rand()]);
         }
-        for (points, base_reach, cap) in [(shuffled, 2.2, 40), (scattered, 0.06, 24)] {
+        // The scattered points in Morton order: every run is consecutive indices, as in a bake.
+        let in_order: Vec<[f64; 3]> = crate::order::morton_order(&scattered)
+            .iter()
+            .map(|&i| scattered[i as usize])
+            .collect();
+        assert!(
+            crate::order::morton_order(&in_order)
+                .iter()
+                .enumerate()
+                .all(|(k, &i)| i as usize == k)
+        );
+        for (points, base_reach, cap) in [
+            (shuffled, 2.2, 40),
+            (scattered, 0.06, 24),
+            (in_order, 0.06, 24),
+        ] {
             let n = points.len();
             let normals: Vec<Option<[f64; 3]>> = (0..n)
                 .map(|i| match i % 11 {
