@@ -72,8 +72,9 @@ pub fn decode_into(
             if !expected.is_multiple_of(width) {
                 return Err(size(expected));
             }
+            // Decompressed straight into the scratch's capacity: no zero-fill first.
             scratch.clear();
-            scratch.resize(expected, 0);
+            scratch.reserve(expected);
             let n = unzstd(stored, scratch)?;
             if n != expected {
                 return Err(size(n));
@@ -87,11 +88,26 @@ pub fn decode_into(
     Ok(())
 }
 
-fn unzstd(stored: &[u8], out: &mut [u8]) -> Result<usize, DecodeError> {
-    // A frame that claims more than `out` holds is an error, never an allocation.
-    let mut dec = zstd::bulk::Decompressor::new().map_err(|e| DecodeError::Zstd(e.to_string()))?;
-    dec.decompress_to_buffer(stored, out)
-        .map_err(|e| DecodeError::Zstd(e.to_string()))
+fn unzstd<C: zstd::zstd_safe::WriteBuf + ?Sized>(
+    stored: &[u8],
+    out: &mut C,
+) -> Result<usize, DecodeError> {
+    thread_local! {
+        /// One decompression context per thread: a step decodes up to hundreds of chunks.
+        static DECOMPRESSOR: std::cell::RefCell<Option<zstd::bulk::Decompressor<'static>>> =
+            const { std::cell::RefCell::new(None) };
+    }
+    DECOMPRESSOR.with_borrow_mut(|slot| {
+        let dec = match slot {
+            Some(dec) => dec,
+            None => slot.insert(
+                zstd::bulk::Decompressor::new().map_err(|e| DecodeError::Zstd(e.to_string()))?,
+            ),
+        };
+        // A frame that claims more than `out` holds is an error, never an allocation.
+        dec.decompress_to_buffer(stored, out)
+            .map_err(|e| DecodeError::Zstd(e.to_string()))
+    })
 }
 
 /// Regroups bytes by their position within each 4-byte word.
