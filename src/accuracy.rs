@@ -48,7 +48,7 @@ impl Config {
 }
 
 pub(crate) struct Render {
-    hits: Vec<Option<TraceHit>>,
+    pub(crate) hits: Vec<Option<TraceHit>>,
     us_per_ray: f64,
     /// Droplet spheres of the surface, and the normals its build reversed.
     spheres: usize,

@@ -10,20 +10,20 @@ use anyhow::Result;
 use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{CacheFile, LoadedStep, encode_step};
 use slosh_fileio::FileBytes;
-use slosh_mls::{NormalsMode, Params, TraceHit};
+use slosh_mls::{NormalsMode, Params};
 use slosh_scenes::SceneKind;
 
 use crate::accuracy::{Case, Render, case, metrics, percentile};
 use crate::cli::PrecisionBenchArgs;
 use crate::output::say;
 
-/// One cache traced: its hits and its size.
-struct Traced {
-    hits: Vec<Option<TraceHit>>,
+/// One scene baked at one precision and read back: the step and its file's size.
+struct Baked {
+    step: LoadedStep,
     bytes_per_point: f64,
 }
 
-fn bake_and_trace(case: &Case, bits: u32, iterations: u32) -> Result<Traced> {
+fn bake(case: &Case, bits: u32) -> Result<Baked> {
     let input = StepInput {
         source: case.name.clone(),
         positions: case.positions.clone(),
@@ -37,8 +37,14 @@ fn bake_and_trace(case: &Case, bits: u32, iterations: u32) -> Result<Traced> {
     let bytes_per_point = bytes.len() as f64 / case.positions.len() as f64;
     let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("precision.slc"), bytes))?;
     file.verify()?;
-    let step = LoadedStep::load(&file)?;
-    let hits = step.render(
+    Ok(Baked {
+        step: LoadedStep::load(&file)?,
+        bytes_per_point,
+    })
+}
+
+fn trace(case: &Case, baked: &Baked, iterations: u32) -> Render {
+    Render::from_hits(baked.step.render(
         &case.camera,
         &Params::<f32> {
             degree: 2,
@@ -47,11 +53,7 @@ fn bake_and_trace(case: &Case, bits: u32, iterations: u32) -> Result<Traced> {
             normals: NormalsMode::Mean,
             h_factor: 1.0,
         },
-    );
-    Ok(Traced {
-        hits,
-        bytes_per_point,
-    })
+    ))
 }
 
 pub fn run(args: &PrecisionBenchArgs) -> Result<()> {
@@ -64,27 +66,34 @@ pub fn run(args: &PrecisionBenchArgs) -> Result<()> {
     let mut table = String::new();
     for (kind, noise) in scenes {
         let case = case(kind, args.points, 3, noise, args.size)?;
+        // Each precision baked once, traced at every iteration count.
+        let exact = bake(&case, slosh_cache::F32_MANTISSA_BITS)?;
+        let rounded: Vec<(u32, Option<Baked>)> = args
+            .bits
+            .iter()
+            .map(|&bits| {
+                let baked = (bits != slosh_cache::F32_MANTISSA_BITS)
+                    .then(|| bake(&case, bits))
+                    .transpose()?;
+                Ok((bits, baked))
+            })
+            .collect::<Result<_>>()?;
         for iterations in [1, 3] {
-            let exact = bake_and_trace(&case, slosh_cache::F32_MANTISSA_BITS, iterations)?;
-            let exact_render = Render::from_hits(exact.hits.clone());
-            for &bits in &args.bits {
-                let traced = if bits == slosh_cache::F32_MANTISSA_BITS {
-                    Traced {
-                        hits: exact.hits.clone(),
-                        bytes_per_point: exact.bytes_per_point,
+            let exact_render = trace(&case, &exact, iterations);
+            for (bits, baked) in &rounded {
+                let own;
+                let (traced, bytes_per_point) = match baked {
+                    Some(b) => {
+                        own = trace(&case, b, iterations);
+                        (&own, b.bytes_per_point)
                     }
-                } else {
-                    bake_and_trace(&case, bits, iterations)?
+                    None => (&exact_render, exact.bytes_per_point),
                 };
-                let m = metrics(
-                    &case,
-                    &Render::from_hits(traced.hits.clone()),
-                    &exact_render,
-                );
+                let m = metrics(&case, traced, &exact_render);
                 // Against the exact cache, pixel by pixel (silhouettes included).
                 let mut moved = Vec::new();
                 let mut differ = 0usize;
-                for (a, b) in traced.hits.iter().zip(&exact.hits) {
+                for (a, b) in traced.hits.iter().zip(&exact_render.hits) {
                     match (a, b) {
                         (Some(a), Some(b)) => moved.push((a.t - b.t).abs() / case.spacing),
                         (None, None) => {}
@@ -94,9 +103,8 @@ pub fn run(args: &PrecisionBenchArgs) -> Result<()> {
                 let max = moved.iter().copied().fold(0.0, f64::max);
                 let _ = writeln!(
                     table,
-                    "| {} | {noise} | {iterations} | {bits} | {:.1} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {differ} of {} |",
+                    "| {} | {noise} | {iterations} | {bits} | {bytes_per_point:.1} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {differ} of {} |",
                     case.name,
-                    traced.bytes_per_point,
                     m.rms,
                     m.p99,
                     m.angle_mean,

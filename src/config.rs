@@ -396,14 +396,18 @@ impl BakeConfig {
         // per core only cost memory and threads.
         let cores = crate::machine::cores();
         let most_jobs = (4 * cores).max(8);
-        let (jobs, jobs_chosen) = match a.jobs {
-            Some(jobs) if jobs == 0 || jobs > most_jobs => bail!(
+        if let Some(jobs) = a.jobs
+            && (jobs == 0 || jobs > most_jobs)
+        {
+            bail!(
                 "--jobs {jobs}: expected 1 to {most_jobs} (steps baked at once, each parallel inside; this machine has {cores} cores)"
-            ),
+            );
+        }
+        let steps = a.steps.as_deref().map(parse_step_range).transpose()?;
+        let (jobs, jobs_chosen) = match a.jobs {
             Some(jobs) => (jobs, None),
             None => {
-                let first = a.steps.as_deref().map(parse_step_range).transpose()?;
-                let points = first_step_points(&input, first.map_or(0, |(f, _)| f));
+                let points = first_step_points(&input, steps.map_or(0, |(f, _)| f));
                 let (jobs, why) = default_jobs(cores, crate::machine::available_memory(), points);
                 (jobs, Some(why))
             }
@@ -413,7 +417,7 @@ impl BakeConfig {
             input_path: a.input.clone(),
             options: slosh_bake::BatchOptions {
                 out,
-                steps: a.steps.as_deref().map(parse_step_range).transpose()?,
+                steps,
                 jobs,
                 shard: a
                     .shard

@@ -118,42 +118,14 @@ pub fn shuffle4(raw: &[u8]) -> Vec<u8> {
 /// Regroups bytes by their position within each `width`-byte element: byte 0 of every
 /// element, then byte 1, … (`raw` holds whole elements).
 pub fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
+    let mut out = vec![0u8; raw.len()];
+    // The encodings' widths as constants, so that each gets its own unrolled transpose.
     match width {
-        4 => shuffle_fixed::<4>(raw),
-        16 => shuffle_fixed::<16>(raw),
-        32 => shuffle_fixed::<32>(raw),
-        64 => shuffle_fixed::<64>(raw),
-        _ => shuffle_any(raw, width),
-    }
-}
-
-/// Elements per block of the transposes: a block's elements (at most 4 KiB) stay in L1 while
-/// every byte plane is read or written along them.
-const BLOCK: usize = 64;
-
-fn shuffle_fixed<const W: usize>(raw: &[u8]) -> Vec<u8> {
-    let count = raw.len() / W;
-    let mut out = vec![0u8; raw.len()];
-    for first in (0..count).step_by(BLOCK) {
-        let block = BLOCK.min(count - first);
-        let elements = &raw[first * W..(first + block) * W];
-        for b in 0..W {
-            let plane = &mut out[b * count + first..b * count + first + block];
-            for (slot, element) in plane.iter_mut().zip(elements.chunks_exact(W)) {
-                *slot = element[b];
-            }
-        }
-    }
-    out
-}
-
-fn shuffle_any(raw: &[u8], width: usize) -> Vec<u8> {
-    let count = raw.len() / width;
-    let mut out = vec![0u8; raw.len()];
-    for (e, element) in raw.chunks_exact(width).enumerate() {
-        for (b, &byte) in element.iter().enumerate() {
-            out[b * count + e] = byte;
-        }
+        4 => transpose(raw, &mut out, 4, Direction::Shuffle),
+        16 => transpose(raw, &mut out, 16, Direction::Shuffle),
+        32 => transpose(raw, &mut out, 32, Direction::Shuffle),
+        64 => transpose(raw, &mut out, 64, Direction::Shuffle),
+        _ => transpose(raw, &mut out, width, Direction::Shuffle),
     }
     out
 }
@@ -161,30 +133,52 @@ fn shuffle_any(raw: &[u8], width: usize) -> Vec<u8> {
 /// The inverse of [`shuffle`], into `out` (as long as `shuffled`).
 fn unshuffle_into(shuffled: &[u8], out: &mut [u8], width: usize) {
     match width {
-        4 => unshuffle_fixed::<4>(shuffled, out),
-        16 => unshuffle_fixed::<16>(shuffled, out),
-        32 => unshuffle_fixed::<32>(shuffled, out),
-        64 => unshuffle_fixed::<64>(shuffled, out),
-        _ => {
-            let count = out.len() / width;
-            for (e, element) in out.chunks_exact_mut(width).enumerate() {
-                for (b, byte) in element.iter_mut().enumerate() {
-                    *byte = shuffled[b * count + e];
-                }
-            }
-        }
+        4 => transpose(shuffled, out, 4, Direction::Unshuffle),
+        16 => transpose(shuffled, out, 16, Direction::Unshuffle),
+        32 => transpose(shuffled, out, 32, Direction::Unshuffle),
+        64 => transpose(shuffled, out, 64, Direction::Unshuffle),
+        _ => transpose(shuffled, out, width, Direction::Unshuffle),
     }
 }
 
-fn unshuffle_fixed<const W: usize>(shuffled: &[u8], out: &mut [u8]) {
-    let count = out.len() / W;
+/// Elements per block of the transposes: a block's elements (at most 4 KiB) stay in L1 while
+/// every byte plane is read or written along them.
+const BLOCK: usize = 64;
+
+#[derive(Clone, Copy, PartialEq)]
+enum Direction {
+    /// Elements in `from`, byte planes out.
+    Shuffle,
+    /// Byte planes in `from`, elements out.
+    Unshuffle,
+}
+
+/// Between whole `width`-byte elements and their byte planes, a block of elements at a time.
+#[inline(always)]
+fn transpose(from: &[u8], to: &mut [u8], width: usize, direction: Direction) {
+    let count = from.len() / width;
     for first in (0..count).step_by(BLOCK) {
         let block = BLOCK.min(count - first);
-        let elements = &mut out[first * W..(first + block) * W];
-        for b in 0..W {
-            let plane = &shuffled[b * count + first..b * count + first + block];
-            for (element, &byte) in elements.chunks_exact_mut(W).zip(plane) {
-                element[b] = byte;
+        let elements = first * width..(first + block) * width;
+        for b in 0..width {
+            let plane = b * count + first..b * count + first + block;
+            match direction {
+                Direction::Shuffle => {
+                    for (slot, element) in to[plane]
+                        .iter_mut()
+                        .zip(from[elements.clone()].chunks_exact(width))
+                    {
+                        *slot = element[b];
+                    }
+                }
+                Direction::Unshuffle => {
+                    for (element, &byte) in to[elements.clone()]
+                        .chunks_exact_mut(width)
+                        .zip(&from[plane])
+                    {
+                        element[b] = byte;
+                    }
+                }
             }
         }
     }

@@ -40,7 +40,8 @@ fn check_chunks(s: &SectionEntry, major: u16) -> std::result::Result<(), String>
         };
     }
     let width = s.encoding.shuffle_width().unwrap_or(4) as u64;
-    if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(4) || !s.chunk_raw.is_multiple_of(width) {
+    // Every shuffle width is a multiple of 4.
+    if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(width) {
         return Err(format!(
             "chunks of {} raw bytes (a positive multiple of 4 and of {width}, the {} width, \
              expected)",

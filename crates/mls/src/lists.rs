@@ -180,9 +180,8 @@ pub(crate) fn neighbour_lists(
         )
         .collect();
     // Back to point order: counts, then offsets, then each run's lists copied into place, in
-    // parallel (the lists of a 1M-point step are half a gigabyte, so they are neither zeroed
-    // first nor handed out point by point where the runs are consecutive indices, as a
-    // bake's are).
+    // parallel (each point's slot handed to its run first: the lists of a 1M-point step are
+    // half a gigabyte).
     let mut start = vec![0u32; n + 1];
     let mut reach_out = vec![0.0; n];
     let mut capped = 0;
@@ -198,46 +197,27 @@ pub(crate) fn neighbour_lists(
     for i in 0..n {
         start[i + 1] += start[i];
     }
-    let total = start[n] as usize;
-    let mut ids: Vec<u32> = Vec::with_capacity(total);
-    let mut rest = &mut ids.spare_capacity_mut()[..total];
-    // Each run's destination pieces, in its members' order: one piece per run where its
-    // members are consecutive indices (their lists are then adjacent), else one per member.
-    let consecutive = order.par_iter().enumerate().all(|(k, &i)| i as usize == k);
-    let pieces: Vec<Vec<&mut [std::mem::MaybeUninit<u32>]>> = if consecutive {
-        runs.iter()
-            .map(|run| {
-                let len = run.ids.len();
-                let (piece, tail) = std::mem::take(&mut rest).split_at_mut(len);
-                rest = tail;
-                vec![piece]
-            })
-            .collect()
-    } else {
-        let mut slots: Vec<Option<&mut [std::mem::MaybeUninit<u32>]>> = Vec::with_capacity(n);
-        for i in 0..n {
-            let (slot, tail) =
-                std::mem::take(&mut rest).split_at_mut((start[i + 1] - start[i]) as usize);
-            slots.push(Some(slot));
-            rest = tail;
-        }
-        members()
-            .map(|members| members.filter_map(|i| slots[i].take()).collect())
-            .collect()
-    };
-    pieces.into_par_iter().zip(&runs).for_each(|(pieces, run)| {
-        let mut from = 0;
-        for piece in pieces {
-            for (slot, &id) in piece.iter_mut().zip(&run.ids[from..]) {
-                slot.write(id);
+    let mut ids = vec![0u32; start[n] as usize];
+    let mut slots: Vec<Option<&mut [u32]>> = Vec::with_capacity(n);
+    let mut rest = ids.as_mut_slice();
+    for i in 0..n {
+        let (slot, tail) = rest.split_at_mut((start[i + 1] - start[i]) as usize);
+        slots.push(Some(slot));
+        rest = tail;
+    }
+    let by_run: Vec<Vec<&mut [u32]>> = members()
+        .map(|members| members.filter_map(|i| slots[i].take()).collect())
+        .collect();
+    by_run
+        .into_par_iter()
+        .zip(&runs)
+        .for_each(|(member_slots, run)| {
+            let mut from = 0;
+            for slot in member_slots {
+                slot.copy_from_slice(&run.ids[from..from + slot.len()]);
+                from += slot.len();
             }
-            from += piece.len();
-        }
-    });
-    // SAFETY: the pieces partition the first `total` elements of the spare capacity (each
-    // point's slot, or each run's adjacent slots, in order, lengths summing to `total`), and
-    // every piece was written in full from its run's lists just above.
-    unsafe { ids.set_len(total) };
+        });
     NeighbourLists {
         start,
         ids,
