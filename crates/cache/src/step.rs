@@ -170,6 +170,7 @@ impl LoadedStep {
             neighbours,
             reach,
             capped: header.stats.capped as usize,
+            run_unions: None,
             orientation: slosh_mls::OrientationRepair {
                 flipped_points: header.stats.orientation_flipped as usize,
                 flipped_patches: header.stats.orientation_patches as usize,

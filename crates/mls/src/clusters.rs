@@ -6,6 +6,7 @@
 
 use rayon::prelude::*;
 
+use crate::lists::RunUnions;
 use crate::real::{Real, V3};
 
 /// Union of the lists of each run of `size` consecutive points: CSR offsets (one per cluster
@@ -35,10 +36,59 @@ pub fn cluster_lists(start: &[u32], neighbours: &[u32], size: usize) -> (Vec<u32
             },
         )
         .collect();
-    let mut offsets = Vec::with_capacity(unions.len() + 1);
-    let mut ids = Vec::with_capacity(unions.iter().map(Vec::len).sum());
+    concatenate(unions)
+}
+
+/// The same cluster lists as [`cluster_lists`], merged from the unions of runs of `run`
+/// consecutive points (`size` a multiple of `run`): each cluster's runs' unions are sorted
+/// already, so a cluster's list is their merge, without reading its members' lists.
+pub fn cluster_lists_from_runs(
+    unions: &RunUnions,
+    run: usize,
+    size: usize,
+) -> (Vec<u32>, Vec<u32>) {
+    let runs = unions.lists.len();
+    let per_cluster = (size / run.max(1)).max(1);
+    let union = |r: usize| unions.lists[r].as_slice();
+    let merged: Vec<Vec<u32>> = (0..runs.div_ceil(per_cluster))
+        .into_par_iter()
+        .map(|c| {
+            let mut list: Vec<u32> = Vec::new();
+            let mut other: Vec<u32> = Vec::new();
+            for r in c * per_cluster..((c + 1) * per_cluster).min(runs) {
+                let (mut a, b) = (list.iter().peekable(), union(r));
+                other.clear();
+                other.reserve(list.len() + b.len());
+                let mut b = b.iter().peekable();
+                // A two-way merge of sorted lists, each id once.
+                loop {
+                    let next = match (a.peek(), b.peek()) {
+                        (Some(&&x), Some(&&y)) if x < y => a.next(),
+                        (Some(&&x), Some(&&y)) if y < x => b.next(),
+                        (Some(_), Some(_)) => {
+                            b.next();
+                            a.next()
+                        }
+                        (Some(_), None) => a.next(),
+                        (None, Some(_)) => b.next(),
+                        (None, None) => break,
+                    };
+                    other.extend(next);
+                }
+                std::mem::swap(&mut list, &mut other);
+            }
+            list
+        })
+        .collect();
+    concatenate(merged)
+}
+
+/// Per-cluster lists as CSR offsets and ids.
+fn concatenate(lists: Vec<Vec<u32>>) -> (Vec<u32>, Vec<u32>) {
+    let mut offsets = Vec::with_capacity(lists.len() + 1);
+    let mut ids = Vec::with_capacity(lists.iter().map(Vec::len).sum());
     offsets.push(0u32);
-    for u in unions {
+    for u in lists {
         ids.extend_from_slice(&u);
         offsets.push(ids.len() as u32);
     }

@@ -13,14 +13,26 @@ use rayon::prelude::*;
 /// more often; 16 measured fastest of 8, 16 and 32 on a 100k-point sphere (2 cores).
 const RUN: usize = 16;
 
-/// Every point's neighbour list (CSR), the reach each list records, and how many lists the
-/// cap cut.
+/// Every point's neighbour list (CSR), the reach each list records, how many lists the cap
+/// cut, and the union of each run's lists where the runs were consecutive indices.
 pub(crate) struct NeighbourLists {
     pub start: Vec<u32>,
     pub ids: Vec<u32>,
     pub reach: Vec<f64>,
     pub capped: usize,
+    pub run_unions: Option<RunUnions>,
 }
+
+/// The union of the lists of each run of [`RUN`] consecutive points (each in index order):
+/// what the lists stage finds anyway, and from which the clusters of any multiple of [`RUN`]
+/// points merge their candidate lists without reading every point's list again.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunUnions {
+    pub lists: Vec<Vec<u32>>,
+}
+
+/// Points per run of the lists stage (and per union in [`RunUnions`]).
+pub const LIST_RUN: usize = RUN;
 
 /// kiddo's squared Euclidean distance, summed in its order, so that a list is the set its
 /// `within` query would return.
@@ -44,6 +56,8 @@ pub(crate) fn neighbour_lists(
         ids: Vec<u32>,
         reach: Vec<f64>,
         capped: usize,
+        /// Every id some member kept, in index order.
+        union: Vec<u32>,
     }
     struct Scratch {
         /// kiddo's traversal stack, reused by every query of the thread.
@@ -59,6 +73,8 @@ pub(crate) fn neighbour_lists(
         d2: Vec<f64>,
         /// The bits of the d² within reach (non-negative floats order as their bits).
         keys: Vec<u64>,
+        /// Which candidates some member kept.
+        kept: Vec<bool>,
     }
     // Runs of consecutive points in space, whatever order the points come in (a bake's are
     // already in this order, and then the runs are consecutive indices).
@@ -73,6 +89,7 @@ pub(crate) fn neighbour_lists(
                 normal_axes: Default::default(),
                 d2: Vec::new(),
                 keys: Vec::new(),
+                kept: Vec::new(),
             },
             |scratch, run_points| {
                 let members = run_points.iter().map(|&i| i as usize);
@@ -92,6 +109,7 @@ pub(crate) fn neighbour_lists(
                     normal_axes,
                     d2,
                     keys,
+                    kept,
                 } = scratch;
                 // Visited into the thread's buffer: no result vector per run.
                 found.clear();
@@ -112,12 +130,15 @@ pub(crate) fn neighbour_lists(
                     axis.clear();
                     axis.extend(found.iter().map(|&j| normal_of(j as usize)[a]));
                 }
+                kept.clear();
+                kept.resize(found.len(), false);
                 let size = run_points.len();
                 let mut run = Run {
                     counts: Vec::with_capacity(size),
                     ids: Vec::with_capacity(size * cap.min(found.len())),
                     reach: Vec::with_capacity(size),
                     capped: 0,
+                    union: Vec::new(),
                 };
                 for i in members {
                     let p = points[i];
@@ -162,6 +183,7 @@ pub(crate) fn neighbour_lists(
                             continue;
                         }
                         run.ids.push(found[k]);
+                        kept[k] = true;
                     }
                     // A cut list reaches only as far as its farthest member: the radius that
                     // reproduces it as a distance filter (`crate::clusters::expand`), rounded up
@@ -175,54 +197,72 @@ pub(crate) fn neighbour_lists(
                     run.reach.push(list_reach);
                     run.capped += usize::from(capped);
                 }
+                run.union.extend(
+                    found
+                        .iter()
+                        .zip(kept.iter())
+                        .filter_map(|(&j, &k)| k.then_some(j)),
+                );
                 run
             },
         )
         .collect();
-    // Back to point order: counts, then offsets, then each run's lists copied into place, in
-    // parallel (each point's slot handed to its run first: the lists of a 1M-point step are
-    // half a gigabyte).
+    // Back to point order. Each point's list is found in its run's output, then copied into
+    // place by blocks of points in parallel: the lists of a 1M-point step are half a gigabyte,
+    // which one thread would take longer to zero and fault in than the runs took to find.
     let mut start = vec![0u32; n + 1];
     let mut reach_out = vec![0.0; n];
+    // (run, offset into its ids) of each point's list.
+    let mut source = vec![(0u32, 0u32); n];
     let mut capped = 0;
     // Run r's members are `order`'s r-th chunk.
-    let members = || order.chunks(RUN).map(|c| c.iter().map(|&i| i as usize));
-    for (run, members) in runs.iter().zip(members()) {
-        for ((i, &c), &r) in members.zip(&run.counts).zip(&run.reach) {
-            start[i + 1] = c;
-            reach_out[i] = r;
+    for (r, (run, members)) in runs.iter().zip(order.chunks(RUN)).enumerate() {
+        let mut from = 0;
+        for ((&i, &count), &reach) in members.iter().zip(&run.counts).zip(&run.reach) {
+            let i = i as usize;
+            start[i + 1] = count;
+            reach_out[i] = reach;
+            source[i] = (r as u32, from);
+            from += count;
         }
         capped += run.capped;
     }
     for i in 0..n {
         start[i + 1] += start[i];
     }
-    let mut ids = vec![0u32; start[n] as usize];
-    let mut slots: Vec<Option<&mut [u32]>> = Vec::with_capacity(n);
+    let total = start[n] as usize;
+    let mut ids: Vec<u32> = Vec::with_capacity(total);
+    ids.par_extend(rayon::iter::repeat_n(0, total));
+    const BLOCK: usize = 1024;
+    let mut blocks: Vec<(std::ops::Range<usize>, &mut [u32])> =
+        Vec::with_capacity(n.div_ceil(BLOCK));
     let mut rest = ids.as_mut_slice();
-    for i in 0..n {
-        let (slot, tail) = rest.split_at_mut((start[i + 1] - start[i]) as usize);
-        slots.push(Some(slot));
+    for first in (0..n).step_by(BLOCK) {
+        let last = (first + BLOCK).min(n);
+        let (block, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
+        blocks.push((first..last, block));
         rest = tail;
     }
-    let by_run: Vec<Vec<&mut [u32]>> = members()
-        .map(|members| members.filter_map(|i| slots[i].take()).collect())
-        .collect();
-    by_run
-        .into_par_iter()
-        .zip(&runs)
-        .for_each(|(member_slots, run)| {
-            let mut from = 0;
-            for slot in member_slots {
-                slot.copy_from_slice(&run.ids[from..from + slot.len()]);
-                from += slot.len();
-            }
-        });
+    blocks.into_par_iter().for_each(|(points, block)| {
+        let mut at = 0;
+        for i in points {
+            let (r, from) = (source[i].0 as usize, source[i].1 as usize);
+            let len = (start[i + 1] - start[i]) as usize;
+            block[at..at + len].copy_from_slice(&runs[r].ids[from..from + len]);
+            at += len;
+        }
+    });
+    // Runs of consecutive indices (the points came in spatial order) keep their unions.
+    let index_runs = order.iter().enumerate().all(|(k, &i)| i as usize == k);
+    let run_unions = index_runs.then(|| RunUnions {
+        lists: runs.into_iter().map(|run| run.union).collect(),
+    });
     NeighbourLists {
         start,
         ids,
         reach: reach_out,
         capped,
+        run_unions,
     }
 }
 
@@ -306,10 +346,10 @@ mod tests {
                 .enumerate()
                 .all(|(k, &i)| i as usize == k)
         );
-        for (points, base_reach, cap) in [
-            (shuffled, 2.2, 40),
-            (scattered, 0.06, 24),
-            (in_order, 0.06, 24),
+        for (points, base_reach, cap, index_runs) in [
+            (shuffled, 2.2, 40, false),
+            (scattered, 0.06, 24, false),
+            (in_order, 0.06, 24, true),
         ] {
             let n = points.len();
             let normals: Vec<Option<[f64; 3]>> = (0..n)
@@ -336,6 +376,17 @@ mod tests {
                 "the cap must cut lists here ({capped} of {n})"
             );
             assert!(lists.capped >= capped);
+            // Clusters merged from the runs' unions are the unions of their members' lists.
+            assert_eq!(lists.run_unions.is_some(), index_runs);
+            if let Some(unions) = &lists.run_unions {
+                for size in [RUN, 2 * RUN, 4 * RUN] {
+                    assert_eq!(
+                        crate::clusters::cluster_lists_from_runs(unions, RUN, size),
+                        crate::clusters::cluster_lists(&lists.start, &lists.ids, size),
+                        "clusters of {size}"
+                    );
+                }
+            }
         }
     }
 }

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::fit::FitStatus;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit};
-use crate::lists::{NeighbourLists, neighbour_lists};
+use crate::lists::{LIST_RUN, NeighbourLists, RunUnions, neighbour_lists};
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
@@ -107,6 +107,9 @@ pub struct SurfaceParts<T> {
     pub reach: Vec<T>,
     /// Points whose neighbour list was cut at the cap.
     pub capped: usize,
+    /// The union of the lists of each run of [`crate::LIST_RUN`] consecutive points, where the
+    /// build's points came in spatial order (none for parts read back from a cache).
+    pub run_unions: Option<RunUnions>,
     pub balls: Vec<Ball<T>>,
     pub ball_fits: Vec<BallFit>,
     /// Droplets; in candidate lists sphere d is item `len() + d`.
@@ -258,6 +261,7 @@ impl<T: Real> SurfaceParts<T> {
             ids: neighbours,
             reach,
             capped,
+            run_unions,
         } = neighbour_lists(
             &tree,
             &rel,
@@ -281,57 +285,81 @@ impl<T: Real> SurfaceParts<T> {
             normals: params.normals,
             h_factor: T::one(),
         };
-        let (balls, mut ball_fits): (Vec<Ball<T>>, Vec<BallFit>) = (0..n)
-            .into_par_iter()
-            .map_init(
-                || (Vec::new(), Vec::new()),
-                |(np, nn), i| {
-                    gather(
-                        &pts,
-                        nrm.as_deref(),
-                        &neighbours[neighbour_start[i] as usize..neighbour_start[i + 1] as usize],
-                        np,
-                        nn,
-                    );
-                    let centre = pts[i];
-                    // Without data normals the plane faces away from the set's centre.
-                    let toward = centre * T::c(2.0);
-                    let hi = T::c(ball_h(i));
-                    let ball = |normal, poly| Ball {
-                        centre,
-                        radius: T::c(radii[i]),
-                        h: hi,
-                        normal,
-                        poly,
-                    };
-                    match initial_fit(
-                        centre,
-                        np,
-                        nrm.as_ref().map(|_| nn.as_slice()),
-                        hi,
-                        &fit_params,
-                        toward,
-                    ) {
-                        Some((normal, f)) => (ball(normal, f.poly), BallFit::Fitted(f.status)),
-                        None => (
-                            ball(V3::new(T::zero(), T::zero(), T::one()), Poly::zero(0)),
-                            BallFit::None,
-                        ),
-                    }
-                },
+        let initial_fits = || -> (Vec<Ball<T>>, Vec<BallFit>) {
+            (0..n)
+                .into_par_iter()
+                .map_init(
+                    || (Vec::new(), Vec::new()),
+                    |(np, nn), i| {
+                        gather(
+                            &pts,
+                            nrm.as_deref(),
+                            &neighbours
+                                [neighbour_start[i] as usize..neighbour_start[i + 1] as usize],
+                            np,
+                            nn,
+                        );
+                        let centre = pts[i];
+                        // Without data normals the plane faces away from the set's centre.
+                        let toward = centre * T::c(2.0);
+                        let hi = T::c(ball_h(i));
+                        let ball = |normal, poly| Ball {
+                            centre,
+                            radius: T::c(radii[i]),
+                            h: hi,
+                            normal,
+                            poly,
+                        };
+                        match initial_fit(
+                            centre,
+                            np,
+                            nrm.as_ref().map(|_| nn.as_slice()),
+                            hi,
+                            &fit_params,
+                            toward,
+                        ) {
+                            Some((normal, f)) => (ball(normal, f.poly), BallFit::Fitted(f.status)),
+                            None => (
+                                ball(V3::new(T::zero(), T::zero(), T::one()), Poly::zero(0)),
+                                BallFit::None,
+                            ),
+                        }
+                    },
+                )
+                .unzip()
+        };
+        // Spray is found from the lists alone: beside the fits, whose cores it shares.
+        let find_droplets = || {
+            droplets::<T>(
+                &rel,
+                (&neighbour_start, &neighbours),
+                &ball_h,
+                &nearest,
+                dense_spacing,
+                params.droplet_below,
             )
-            .unzip();
-        clock.lap("initial fits");
-        let spheres = droplets(
-            &rel,
-            (&neighbour_start, &neighbours),
-            &ball_h,
-            &nearest,
-            dense_spacing,
-            params.droplet_below,
-            &mut ball_fits,
-        );
-        clock.lap("droplets");
+        };
+        let ((balls, mut ball_fits, fits_seconds), (spheres, droplet_of, droplets_seconds)) =
+            rayon::join(
+                || {
+                    let start = std::time::Instant::now();
+                    let (balls, fits) = initial_fits();
+                    (balls, fits, start.elapsed().as_secs_f64())
+                },
+                || {
+                    let start = std::time::Instant::now();
+                    let (spheres, marks) = find_droplets();
+                    (spheres, marks, start.elapsed().as_secs_f64())
+                },
+            );
+        for &(i, d) in &droplet_of {
+            ball_fits[i as usize] = BallFit::Droplet(d);
+        }
+        // Each side's own wall time: the two ran at once.
+        clock.extend(&[
+            ("initial fits", fits_seconds),
+            ("droplets", droplets_seconds),
+        ]);
         let parts = SurfaceParts {
             origin,
             points: pts,
@@ -343,6 +371,7 @@ impl<T: Real> SurfaceParts<T> {
             neighbours,
             reach: reach.iter().map(|&r| T::c(r)).collect(),
             capped,
+            run_unions,
             balls,
             ball_fits,
             spheres,
@@ -362,6 +391,18 @@ impl<T: Real> SurfaceParts<T> {
 
     pub fn neighbours_of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.neighbour_start[i] as usize..self.neighbour_start[i + 1] as usize]
+    }
+
+    /// The union of the lists of each cluster of `size` consecutive points (CSR): merged from
+    /// the runs' unions where the build kept them and `size` is a multiple of the run, else
+    /// from every point's list.
+    pub fn cluster_lists(&self, size: usize) -> (Vec<u32>, Vec<u32>) {
+        match &self.run_unions {
+            Some(unions) if size > 0 && size.is_multiple_of(LIST_RUN) => {
+                crate::clusters::cluster_lists_from_runs(unions, LIST_RUN, size)
+            }
+            _ => crate::clusters::cluster_lists(&self.neighbour_start, &self.neighbours, size),
+        }
     }
 }
 
@@ -427,7 +468,7 @@ impl<T: Real> Surface<T> {
     }
 }
 
-/// Marks the points of spray as droplets and returns the spheres that draw them. Spray is a
+/// The spheres that draw spray, and (point, sphere) for each point of it. Spray is a
 /// component (points linked when within 2h) that cannot support a surface: fewer points than
 /// `below`, or no wider than its smoothing length (every fit in it would span it whole). A
 /// compact component of 4 points or more becomes one blob: its centroid, radius the members'
@@ -442,10 +483,9 @@ fn droplets<T: Real>(
     nearest: &[f64],
     spacing: f64,
     below: usize,
-    fits: &mut [BallFit],
-) -> Vec<Sphere<T>> {
+) -> (Vec<Sphere<T>>, Vec<(u32, u32)>) {
     if below <= 1 {
-        return Vec::new();
+        return (Vec::new(), Vec::new());
     }
     let n = points.len();
     let d2 = |a: [f64; 3], b: [f64; 3]| {
@@ -516,6 +556,7 @@ fn droplets<T: Real>(
     let particle = 0.5 * spacing;
     // Spheres numbered in order of their first member, so the result does not depend on threads.
     let mut spheres = Vec::new();
+    let mut marks = Vec::new();
     for m in members {
         let mut c = [0.0; 3];
         for &i in m {
@@ -544,16 +585,14 @@ fn droplets<T: Real>(
         let filled = rms <= 1.25 * particle * (m.len() as f64).cbrt();
         if m.len() >= 4 && far <= rms + spacing && filled {
             let d = spheres.len() as u32;
-            for &i in m {
-                fits[i] = BallFit::Droplet(d);
-            }
+            marks.extend(m.iter().map(|&i| (i as u32, d)));
             spheres.push(Sphere {
                 centre: V3::from_f64(c),
                 radius: T::c(rms + particle),
             });
         } else {
             for &i in m {
-                fits[i] = BallFit::Droplet(spheres.len() as u32);
+                marks.push((i as u32, spheres.len() as u32));
                 spheres.push(Sphere {
                     centre: V3::from_f64(points[i]),
                     radius: T::c(particle),
@@ -561,7 +600,7 @@ fn droplets<T: Real>(
             }
         }
     }
-    spheres
+    (spheres, marks)
 }
 
 /// Copies the positions (and normals) of `ids` into the scratch vectors.
