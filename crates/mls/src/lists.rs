@@ -14,13 +14,17 @@ use rayon::prelude::*;
 const RUN: usize = 16;
 
 /// Every point's neighbour list (CSR), the reach each list records, how many lists the cap
-/// cut, and the union of each run's lists where the runs were consecutive indices.
+/// cut, the union of each run's lists where the runs were consecutive indices, and the links
+/// asked for (per run).
 pub(crate) struct NeighbourLists {
     pub start: Vec<u32>,
     pub ids: Vec<u32>,
     pub reach: Vec<f64>,
     pub capped: usize,
     pub run_unions: Option<RunUnions>,
+    /// (i, j) for every j ≠ i in i's list within the link distance of i, in no useful order
+    /// (a pair may come both ways).
+    pub links: Vec<Vec<(u32, u32)>>,
 }
 
 /// The union of the lists of each run of [`RUN`] consecutive points (each in index order):
@@ -48,6 +52,7 @@ pub(crate) fn neighbour_lists(
     reach: &[f64],
     cap: usize,
     normals: Option<&[Option<[f64; 3]>]>,
+    link_distance2: Option<&(dyn Fn(usize) -> f64 + Sync)>,
 ) -> NeighbourLists {
     let n = points.len();
     let cap = cap.max(1);
@@ -58,6 +63,7 @@ pub(crate) fn neighbour_lists(
         capped: usize,
         /// Every id some member kept, in index order.
         union: Vec<u32>,
+        links: Vec<(u32, u32)>,
     }
     struct Scratch {
         /// kiddo's traversal stack, reused by every query of the thread.
@@ -139,6 +145,7 @@ pub(crate) fn neighbour_lists(
                     reach: Vec::with_capacity(size),
                     capped: 0,
                     union: Vec::new(),
+                    links: Vec::new(),
                 };
                 for i in members {
                     let p = points[i];
@@ -164,6 +171,8 @@ pub(crate) fn neighbour_lists(
                         (r2, usize::MAX)
                     };
                     let own = normal_of(i);
+                    // No link is asked for: nothing is within a negative d².
+                    let link2 = link_distance2.map_or(-1.0, |f| f(i));
                     let mut far = 0.0f64;
                     let before = run.ids.len();
                     for (k, &d) in d2.iter().enumerate() {
@@ -184,6 +193,9 @@ pub(crate) fn neighbour_lists(
                         }
                         run.ids.push(found[k]);
                         kept[k] = true;
+                        if d <= link2 && found[k] as usize != i {
+                            run.links.push((i as u32, found[k]));
+                        }
                     }
                     // A cut list reaches only as far as its farthest member: the radius that
                     // reproduces it as a distance filter (`crate::clusters::expand`), rounded up
@@ -254,15 +266,20 @@ pub(crate) fn neighbour_lists(
     });
     // Runs of consecutive indices (the points came in spatial order) keep their unions.
     let index_runs = order.iter().enumerate().all(|(k, &i)| i as usize == k);
-    let run_unions = index_runs.then(|| RunUnions {
-        lists: runs.into_iter().map(|run| run.union).collect(),
-    });
+    let mut links = Vec::with_capacity(runs.len());
+    let mut unions = Vec::with_capacity(runs.len());
+    for run in runs {
+        links.push(run.links);
+        unions.push(run.union);
+    }
+    let run_unions = index_runs.then_some(RunUnions { lists: unions });
     NeighbourLists {
         start,
         ids,
         reach: reach_out,
         capped,
         run_unions,
+        links,
     }
 }
 
@@ -363,7 +380,15 @@ mod tests {
                 .map(|i| base_reach * (1.0 + (i % 5) as f64 * 0.1))
                 .collect();
             let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points).unwrap();
-            let lists = neighbour_lists(&tree, &points, &reach, cap, Some(&normals));
+            let link = 0.5 * base_reach;
+            let lists = neighbour_lists(
+                &tree,
+                &points,
+                &reach,
+                cap,
+                Some(&normals),
+                Some(&|_| link * link),
+            );
             let want = reference(&tree, &points, &reach, cap, &normals);
             let mut capped = 0;
             for i in 0..n {
@@ -376,6 +401,19 @@ mod tests {
                 "the cap must cut lists here ({capped} of {n})"
             );
             assert!(lists.capped >= capped);
+            // Links: every j ≠ i in i's list within the link distance, each once.
+            let mut links: Vec<(u32, u32)> = lists.links.concat();
+            links.sort_unstable();
+            let mut want_links: Vec<(u32, u32)> = (0..n)
+                .flat_map(|i| want[i].iter().map(move |&j| (i as u32, j)))
+                .filter(|&(i, j)| {
+                    let (p, q) = (points[i as usize], points[j as usize]);
+                    i != j && distance2(p, q) <= link * link
+                })
+                .collect();
+            want_links.sort_unstable();
+            assert!(want_links.len() > n, "links must be found here");
+            assert_eq!(links, want_links);
             // Clusters merged from the runs' unions are the unions of their members' lists.
             assert_eq!(lists.run_unions.is_some(), index_runs);
             if let Some(unions) = &lists.run_unions {

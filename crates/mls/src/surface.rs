@@ -262,12 +262,15 @@ impl<T: Real> SurfaceParts<T> {
             reach,
             capped,
             run_unions,
+            links,
         } = neighbour_lists(
             &tree,
             &rel,
             &reach_wanted,
             cap.get(),
             unit_normals.as_deref(),
+            // The links that join spray into components, found with the lists.
+            (params.droplet_below > 1).then_some(&|i: usize| ball_h(i).powi(2)),
         );
         clock.lap("neighbour lists");
 
@@ -332,7 +335,7 @@ impl<T: Real> SurfaceParts<T> {
         let find_droplets = || {
             droplets::<T>(
                 &rel,
-                (&neighbour_start, &neighbours),
+                &links,
                 &ball_h,
                 &nearest,
                 dense_spacing,
@@ -469,7 +472,8 @@ impl<T: Real> Surface<T> {
 }
 
 /// The spheres that draw spray, and (point, sphere) for each point of it. Spray is a
-/// component (points linked when within 2h) that cannot support a surface: fewer points than
+/// component (points linked where one is in the other's list within its h, the `links` the
+/// lists stage found) that cannot support a surface: fewer points than
 /// `below`, or no wider than its smoothing length (every fit in it would span it whole). A
 /// compact component of 4 points or more becomes one blob: its centroid, radius the members'
 /// RMS distance to it plus half the dense spacing (a particle's radius). Otherwise (fewer
@@ -478,7 +482,7 @@ impl<T: Real> Surface<T> {
 /// particles far apart.
 fn droplets<T: Real>(
     points: &[[f64; 3]],
-    (start, neighbours): (&[u32], &[u32]),
+    links: &[Vec<(u32, u32)>],
     ball_h: &(dyn Fn(usize) -> f64 + Sync),
     nearest: &[f64],
     spacing: f64,
@@ -491,32 +495,6 @@ fn droplets<T: Real>(
     let d2 = |a: [f64; 3], b: [f64; 3]| {
         (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
     };
-    let list = |i: usize| &neighbours[start[i] as usize..start[i + 1] as usize];
-    // Links, found in parallel: j in i's list within h_i. A link j → i (j < i) that j's own
-    // list also makes is left to j, so each is joined once.
-    let links: Vec<Vec<(u32, u32)>> = (0..n)
-        .into_par_iter()
-        .chunks(4096)
-        .map(|chunk| {
-            let mut out = Vec::new();
-            for i in chunk {
-                let reach2 = ball_h(i).powi(2);
-                for &j in list(i) {
-                    let ju = j as usize;
-                    if ju == i || d2(points[i], points[ju]) > reach2 {
-                        continue;
-                    }
-                    let made_by_j = ju < i
-                        && list(ju).binary_search(&(i as u32)).is_ok()
-                        && d2(points[ju], points[i]) <= ball_h(ju).powi(2);
-                    if !made_by_j {
-                        out.push((i as u32, j));
-                    }
-                }
-            }
-            out
-        })
-        .collect();
     let mut parent: Vec<u32> = (0..n as u32).collect();
     fn root(parent: &mut [u32], mut i: u32) -> u32 {
         while parent[i as usize] != i {
