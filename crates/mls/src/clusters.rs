@@ -47,40 +47,61 @@ pub fn cluster_lists_from_runs(
     run: usize,
     size: usize,
 ) -> (Vec<u32>, Vec<u32>) {
-    let runs = unions.lists.len();
+    let runs = unions.len();
     let per_cluster = (size / run.max(1)).max(1);
-    let union = |r: usize| unions.lists[r].as_slice();
-    let merged: Vec<Vec<u32>> = (0..runs.div_ceil(per_cluster))
+    let union = |r: usize| unions.union(r);
+    let clusters = runs.div_ceil(per_cluster);
+    // Clusters merged by blocks, each block's lists in one buffer (one small buffer per
+    // cluster costs more in the allocator than the merge).
+    const CLUSTERS_PER_BLOCK: usize = 64;
+    let blocks: Vec<(Vec<u32>, Vec<u32>)> = (0..clusters.div_ceil(CLUSTERS_PER_BLOCK))
         .into_par_iter()
-        .map(|c| {
+        .map(|block| {
+            let first = block * CLUSTERS_PER_BLOCK;
+            let last = (first + CLUSTERS_PER_BLOCK).min(clusters);
+            let (mut counts, mut ids) = (Vec::with_capacity(last - first), Vec::new());
             let mut list: Vec<u32> = Vec::new();
             let mut other: Vec<u32> = Vec::new();
-            for r in c * per_cluster..((c + 1) * per_cluster).min(runs) {
-                let (mut a, b) = (list.iter().peekable(), union(r));
-                other.clear();
-                other.reserve(list.len() + b.len());
-                let mut b = b.iter().peekable();
-                // A two-way merge of sorted lists, each id once.
-                loop {
-                    let next = match (a.peek(), b.peek()) {
-                        (Some(&&x), Some(&&y)) if x < y => a.next(),
-                        (Some(&&x), Some(&&y)) if y < x => b.next(),
-                        (Some(_), Some(_)) => {
-                            b.next();
-                            a.next()
-                        }
-                        (Some(_), None) => a.next(),
-                        (None, Some(_)) => b.next(),
-                        (None, None) => break,
-                    };
-                    other.extend(next);
+            for c in first..last {
+                list.clear();
+                for r in c * per_cluster..((c + 1) * per_cluster).min(runs) {
+                    let (mut a, b) = (list.iter().peekable(), union(r));
+                    other.clear();
+                    other.reserve(list.len() + b.len());
+                    let mut b = b.iter().peekable();
+                    // A two-way merge of sorted lists, each id once.
+                    loop {
+                        let next = match (a.peek(), b.peek()) {
+                            (Some(&&x), Some(&&y)) if x < y => a.next(),
+                            (Some(&&x), Some(&&y)) if y < x => b.next(),
+                            (Some(_), Some(_)) => {
+                                b.next();
+                                a.next()
+                            }
+                            (Some(_), None) => a.next(),
+                            (None, Some(_)) => b.next(),
+                            (None, None) => break,
+                        };
+                        other.extend(next);
+                    }
+                    std::mem::swap(&mut list, &mut other);
                 }
-                std::mem::swap(&mut list, &mut other);
+                counts.push(list.len() as u32);
+                ids.extend_from_slice(&list);
             }
-            list
+            (counts, ids)
         })
         .collect();
-    concatenate(merged)
+    let mut offsets = Vec::with_capacity(clusters + 1);
+    let mut ids = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
+    offsets.push(0u32);
+    for (counts, block_ids) in blocks {
+        for count in counts {
+            offsets.push(offsets[offsets.len() - 1] + count);
+        }
+        ids.extend_from_slice(&block_ids);
+    }
+    (offsets, ids)
 }
 
 /// Per-cluster lists as CSR offsets and ids.

@@ -13,6 +13,12 @@ use rayon::prelude::*;
 /// more often; 16 measured fastest of 8, 16 and 32 on a 100k-point sphere (2 cores).
 const RUN: usize = 16;
 
+/// Runs per parallel task. A task's lists go into one buffer: with one buffer per run, the
+/// tens of thousands of small allocations that a 1M-point step keeps alive grew the
+/// allocator's per-thread heaps piece by piece, and 16 threads spent more time in the kernel
+/// than in the runs.
+const RUNS_PER_BLOCK: usize = 32;
+
 /// Every point's neighbour list (CSR), the reach each list records, how many lists the cap
 /// cut, the union of each run's lists where the runs were consecutive indices, and the links
 /// asked for (per run).
@@ -23,16 +29,36 @@ pub(crate) struct NeighbourLists {
     pub capped: usize,
     pub run_unions: Option<RunUnions>,
     /// (i, j) for every j ≠ i in i's list within the link distance of i, in no useful order
-    /// (a pair may come both ways).
+    /// (a pair may come both ways), in pieces.
     pub links: Vec<Vec<(u32, u32)>>,
 }
 
 /// The union of the lists of each run of [`RUN`] consecutive points (each in index order):
 /// what the lists stage finds anyway, and from which the clusters of any multiple of [`RUN`]
-/// points merge their candidate lists without reading every point's list again.
+/// points merge their candidate lists without reading every point's list again. Kept as the
+/// lists stage's blocks made them (CSR per block of runs).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RunUnions {
-    pub lists: Vec<Vec<u32>>,
+    runs: usize,
+    blocks: Vec<(Vec<u32>, Vec<u32>)>,
+}
+
+impl RunUnions {
+    /// How many runs.
+    pub fn len(&self) -> usize {
+        self.runs
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.runs == 0
+    }
+
+    /// Run r's union, in index order.
+    pub fn union(&self, r: usize) -> &[u32] {
+        let (start, ids) = &self.blocks[r / RUNS_PER_BLOCK];
+        let k = r % RUNS_PER_BLOCK;
+        &ids[start[k] as usize..start[k + 1] as usize]
+    }
 }
 
 /// Points per run of the lists stage (and per union in [`RunUnions`]).
@@ -56,13 +82,15 @@ pub(crate) fn neighbour_lists(
 ) -> NeighbourLists {
     let n = points.len();
     let cap = cap.max(1);
-    struct Run {
+    /// The output of one block of runs, each list and union in one buffer.
+    struct Block {
         counts: Vec<u32>,
         ids: Vec<u32>,
         reach: Vec<f64>,
         capped: usize,
-        /// Every id some member kept, in index order.
-        union: Vec<u32>,
+        /// Every id some member of each run kept, in index order (CSR over the block's runs).
+        union_start: Vec<u32>,
+        union_ids: Vec<u32>,
         links: Vec<(u32, u32)>,
     }
     struct Scratch {
@@ -85,8 +113,8 @@ pub(crate) fn neighbour_lists(
     // Runs of consecutive points in space, whatever order the points come in (a bake's are
     // already in this order, and then the runs are consecutive indices).
     let order = crate::order::morton_order(points);
-    let runs: Vec<Run> = order
-        .par_chunks(RUN)
+    let blocks: Vec<Block> = order
+        .par_chunks(RUN * RUNS_PER_BLOCK)
         .map_init(
             || Scratch {
                 query: tree.create_scratch::<SquaredEuclidean<f64>>(),
@@ -97,147 +125,157 @@ pub(crate) fn neighbour_lists(
                 keys: Vec::new(),
                 kept: Vec::new(),
             },
-            |scratch, run_points| {
-                let members = run_points.iter().map(|&i| i as usize);
-                // The run's box centre, and a radius holding every member's reach (with slack far
-                // above rounding, so that no point within reach is missed).
-                let (lo, hi) = crate::surface::bounds(members.clone().map(|i| &points[i]));
-                let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
-                let radius = members
-                    .clone()
-                    .map(|i| distance2(points[i], centre).sqrt() + reach[i])
-                    .fold(0.0, f64::max)
-                    * (1.0 + 1e-9);
-                let Scratch {
-                    query,
-                    found,
-                    axes,
-                    normal_axes,
-                    d2,
-                    keys,
-                    kept,
-                } = scratch;
-                // Visited into the thread's buffer: no result vector per run.
-                found.clear();
-                tree.query(&centre)
-                    .within::<SquaredEuclidean<f64>>(radius * radius)
-                    .unsorted()
-                    .without_distances()
-                    .with_scratch(query)
-                    .visit(|f| found.push(f.item));
-                // Index order: a position in `found` orders as the index it holds.
-                found.sort_unstable();
-                for (a, axis) in axes.iter_mut().enumerate() {
-                    axis.clear();
-                    axis.extend(found.iter().map(|&j| points[j as usize][a]));
-                }
-                let normal_of = |i: usize| normals.and_then(|ns| ns[i]).unwrap_or([0.0; 3]);
-                for (a, axis) in normal_axes.iter_mut().enumerate() {
-                    axis.clear();
-                    axis.extend(found.iter().map(|&j| normal_of(j as usize)[a]));
-                }
-                kept.clear();
-                kept.resize(found.len(), false);
-                let size = run_points.len();
-                let mut run = Run {
+            |scratch, block_points| {
+                let size = block_points.len();
+                let mut block = Block {
                     counts: Vec::with_capacity(size),
-                    ids: Vec::with_capacity(size * cap.min(found.len())),
+                    ids: Vec::with_capacity(size * cap.min(256)),
                     reach: Vec::with_capacity(size),
                     capped: 0,
-                    union: Vec::new(),
+                    union_start: Vec::with_capacity(RUNS_PER_BLOCK + 1),
+                    union_ids: Vec::new(),
                     links: Vec::new(),
                 };
-                for i in members {
-                    let p = points[i];
-                    let r2 = reach[i] * reach[i];
-                    d2.clear();
-                    d2.extend(
-                        axes[0]
-                            .iter()
-                            .zip(&axes[1])
-                            .zip(&axes[2])
-                            .map(|((x, y), z)| distance2(p, [*x, *y, *z])),
-                    );
-                    keys.clear();
-                    keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
-                    let capped = keys.len() >= cap;
-                    // Kept: d² below `limit`, and d² equal to it while `ties` last (in index
-                    // order): within reach, or the nearest `cap` by (d², index) where the cap cuts.
-                    let (limit, mut ties) = if keys.len() > cap {
-                        let (below, &mut last, _) = keys.select_nth_unstable(cap - 1);
-                        let less = below.iter().filter(|&&k| k < last).count();
-                        (f64::from_bits(last), cap - less)
-                    } else {
-                        (r2, usize::MAX)
-                    };
-                    let own = normal_of(i);
-                    // No link is asked for: nothing is within a negative d².
-                    let link2 = link_distance2.map_or(-1.0, |f| f(i));
-                    let mut far = 0.0f64;
-                    let before = run.ids.len();
-                    for (k, &d) in d2.iter().enumerate() {
-                        if d > limit || (d == limit && ties == 0) {
-                            continue;
-                        }
-                        if d == limit {
-                            ties -= 1;
-                        }
-                        far = far.max(d);
-                        // Thin sheets: a neighbour whose normal opposes the centre's is the other
-                        // side.
-                        let dot = own[0] * normal_axes[0][k]
-                            + own[1] * normal_axes[1][k]
-                            + own[2] * normal_axes[2][k];
-                        if dot < 0.0 {
-                            continue;
-                        }
-                        run.ids.push(found[k]);
-                        kept[k] = true;
-                        if d <= link2 && found[k] as usize != i {
-                            run.links.push((i as u32, found[k]));
-                        }
+                block.union_start.push(0);
+                for run_points in block_points.chunks(RUN) {
+                    let members = run_points.iter().map(|&i| i as usize);
+                    // The run's box centre, and a radius holding every member's reach (with
+                    // slack far above rounding, so that no point within reach is missed).
+                    let (lo, hi) = crate::surface::bounds(members.clone().map(|i| &points[i]));
+                    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+                    let radius = members
+                        .clone()
+                        .map(|i| distance2(points[i], centre).sqrt() + reach[i])
+                        .fold(0.0, f64::max)
+                        * (1.0 + 1e-9);
+                    let Scratch {
+                        query,
+                        found,
+                        axes,
+                        normal_axes,
+                        d2,
+                        keys,
+                        kept,
+                    } = scratch;
+                    // Visited into the thread's buffer: no result vector per run.
+                    found.clear();
+                    tree.query(&centre)
+                        .within::<SquaredEuclidean<f64>>(radius * radius)
+                        .unsorted()
+                        .without_distances()
+                        .with_scratch(query)
+                        .visit(|f| found.push(f.item));
+                    // Index order: a position in `found` orders as the index it holds.
+                    found.sort_unstable();
+                    for (a, axis) in axes.iter_mut().enumerate() {
+                        axis.clear();
+                        axis.extend(found.iter().map(|&j| points[j as usize][a]));
                     }
-                    // A cut list reaches only as far as its farthest member: the radius that
-                    // reproduces it as a distance filter (`crate::clusters::expand`), rounded up
-                    // so that squaring it again cannot fall below the farthest d².
-                    let list_reach = if capped {
-                        far.sqrt().next_up().next_up()
-                    } else {
-                        reach[i]
-                    };
-                    run.counts.push((run.ids.len() - before) as u32);
-                    run.reach.push(list_reach);
-                    run.capped += usize::from(capped);
+                    let normal_of = |i: usize| normals.and_then(|ns| ns[i]).unwrap_or([0.0; 3]);
+                    for (a, axis) in normal_axes.iter_mut().enumerate() {
+                        axis.clear();
+                        axis.extend(found.iter().map(|&j| normal_of(j as usize)[a]));
+                    }
+                    kept.clear();
+                    kept.resize(found.len(), false);
+                    for i in members {
+                        let p = points[i];
+                        let r2 = reach[i] * reach[i];
+                        d2.clear();
+                        d2.extend(
+                            axes[0]
+                                .iter()
+                                .zip(&axes[1])
+                                .zip(&axes[2])
+                                .map(|((x, y), z)| distance2(p, [*x, *y, *z])),
+                        );
+                        keys.clear();
+                        keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
+                        let capped = keys.len() >= cap;
+                        // Kept: d² below `limit`, and d² equal to it while `ties` last (in
+                        // index order): within reach, or the nearest `cap` by (d², index) where
+                        // the cap cuts.
+                        let (limit, mut ties) = if keys.len() > cap {
+                            let (below, &mut last, _) = keys.select_nth_unstable(cap - 1);
+                            let less = below.iter().filter(|&&k| k < last).count();
+                            (f64::from_bits(last), cap - less)
+                        } else {
+                            (r2, usize::MAX)
+                        };
+                        let own = normal_of(i);
+                        // No link is asked for: nothing is within a negative d².
+                        let link2 = link_distance2.map_or(-1.0, |f| f(i));
+                        let mut far = 0.0f64;
+                        let before = block.ids.len();
+                        for (k, &d) in d2.iter().enumerate() {
+                            if d > limit || (d == limit && ties == 0) {
+                                continue;
+                            }
+                            if d == limit {
+                                ties -= 1;
+                            }
+                            far = far.max(d);
+                            // Thin sheets: a neighbour whose normal opposes the centre's is the
+                            // other side.
+                            let dot = own[0] * normal_axes[0][k]
+                                + own[1] * normal_axes[1][k]
+                                + own[2] * normal_axes[2][k];
+                            if dot < 0.0 {
+                                continue;
+                            }
+                            block.ids.push(found[k]);
+                            kept[k] = true;
+                            if d <= link2 && found[k] as usize != i {
+                                block.links.push((i as u32, found[k]));
+                            }
+                        }
+                        // A cut list reaches only as far as its farthest member: the radius
+                        // that reproduces it as a distance filter (`crate::clusters::expand`),
+                        // rounded up so that squaring it again cannot fall below the farthest d².
+                        let list_reach = if capped {
+                            far.sqrt().next_up().next_up()
+                        } else {
+                            reach[i]
+                        };
+                        block.counts.push((block.ids.len() - before) as u32);
+                        block.reach.push(list_reach);
+                        block.capped += usize::from(capped);
+                    }
+                    block.union_ids.extend(
+                        found
+                            .iter()
+                            .zip(kept.iter())
+                            .filter_map(|(&j, &k)| k.then_some(j)),
+                    );
+                    block.union_start.push(block.union_ids.len() as u32);
                 }
-                run.union.extend(
-                    found
-                        .iter()
-                        .zip(kept.iter())
-                        .filter_map(|(&j, &k)| k.then_some(j)),
-                );
-                run
+                block
             },
         )
         .collect();
-    // Back to point order. Each point's list is found in its run's output, then copied into
+    // Back to point order. Each point's list is found in its block's output, then copied into
     // place by blocks of points in parallel: the lists of a 1M-point step are half a gigabyte,
     // which one thread would take longer to zero and fault in than the runs took to find.
     let mut start = vec![0u32; n + 1];
     let mut reach_out = vec![0.0; n];
-    // (run, offset into its ids) of each point's list.
+    // (block, offset into its ids) of each point's list.
     let mut source = vec![(0u32, 0u32); n];
     let mut capped = 0;
-    // Run r's members are `order`'s r-th chunk.
-    for (r, (run, members)) in runs.iter().zip(order.chunks(RUN)).enumerate() {
+    // Block b's members are `order`'s b-th chunk.
+    for (b, (block, members)) in blocks
+        .iter()
+        .zip(order.chunks(RUN * RUNS_PER_BLOCK))
+        .enumerate()
+    {
         let mut from = 0;
-        for ((&i, &count), &reach) in members.iter().zip(&run.counts).zip(&run.reach) {
+        for ((&i, &count), &reach) in members.iter().zip(&block.counts).zip(&block.reach) {
             let i = i as usize;
             start[i + 1] = count;
             reach_out[i] = reach;
-            source[i] = (r as u32, from);
+            source[i] = (b as u32, from);
             from += count;
         }
-        capped += run.capped;
+        capped += block.capped;
     }
     for i in 0..n {
         start[i + 1] += start[i];
@@ -245,34 +283,37 @@ pub(crate) fn neighbour_lists(
     let total = start[n] as usize;
     let mut ids: Vec<u32> = Vec::with_capacity(total);
     ids.par_extend(rayon::iter::repeat_n(0, total));
-    const BLOCK: usize = 1024;
-    let mut blocks: Vec<(std::ops::Range<usize>, &mut [u32])> =
-        Vec::with_capacity(n.div_ceil(BLOCK));
+    const POINTS_PER_COPY: usize = 1024;
+    let mut pieces: Vec<(std::ops::Range<usize>, &mut [u32])> =
+        Vec::with_capacity(n.div_ceil(POINTS_PER_COPY));
     let mut rest = ids.as_mut_slice();
-    for first in (0..n).step_by(BLOCK) {
-        let last = (first + BLOCK).min(n);
-        let (block, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
-        blocks.push((first..last, block));
+    for first in (0..n).step_by(POINTS_PER_COPY) {
+        let last = (first + POINTS_PER_COPY).min(n);
+        let (piece, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
+        pieces.push((first..last, piece));
         rest = tail;
     }
-    blocks.into_par_iter().for_each(|(points, block)| {
+    pieces.into_par_iter().for_each(|(points, piece)| {
         let mut at = 0;
         for i in points {
-            let (r, from) = (source[i].0 as usize, source[i].1 as usize);
+            let (b, from) = (source[i].0 as usize, source[i].1 as usize);
             let len = (start[i + 1] - start[i]) as usize;
-            block[at..at + len].copy_from_slice(&runs[r].ids[from..from + len]);
+            piece[at..at + len].copy_from_slice(&blocks[b].ids[from..from + len]);
             at += len;
         }
     });
     // Runs of consecutive indices (the points came in spatial order) keep their unions.
     let index_runs = order.iter().enumerate().all(|(k, &i)| i as usize == k);
-    let mut links = Vec::with_capacity(runs.len());
-    let mut unions = Vec::with_capacity(runs.len());
-    for run in runs {
-        links.push(run.links);
-        unions.push(run.union);
+    let mut links = Vec::with_capacity(blocks.len());
+    let mut unions = Vec::with_capacity(blocks.len());
+    for block in blocks {
+        links.push(block.links);
+        unions.push((block.union_start, block.union_ids));
     }
-    let run_unions = index_runs.then_some(RunUnions { lists: unions });
+    let run_unions = index_runs.then_some(RunUnions {
+        runs: n.div_ceil(RUN),
+        blocks: unions,
+    });
     NeighbourLists {
         start,
         ids,
