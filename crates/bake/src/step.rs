@@ -123,7 +123,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     // 3. Spatial order, carried through every per-point array below.
     let order = slosh_mls::morton_order(&local);
     let local = permute(&local, &order);
-    let source_index: Vec<u32> = order.iter().map(|&o| kept[o as usize]).collect();
+    let source_index: Vec<u32> = order.par_iter().map(|&o| kept[o as usize]).collect();
     let normals: Option<Vec<[f64; 3]>> = match &params.normals {
         crate::params::NormalSource::Pca => None,
         crate::params::NormalSource::Estimate => {
@@ -293,7 +293,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         ];
         if let Some(ns) = &surface.normals {
             let normals: Vec<GpuNormal> = ns
-                .iter()
+                .par_iter()
                 .map(|v| GpuNormal {
                     normal: f32x3(*v).map(rounded),
                     pad: 0.0,
