@@ -109,6 +109,8 @@ pub(crate) fn neighbour_lists(
         keys: Vec<u64>,
         /// Which candidates some member kept.
         kept: Vec<bool>,
+        /// Positions in `found` of one member's candidates within reach, ascending.
+        near: Vec<u32>,
     }
     // Runs of consecutive points in space, whatever order the points come in (a bake's are
     // already in this order, and then the runs are consecutive indices).
@@ -124,6 +126,7 @@ pub(crate) fn neighbour_lists(
                 d2: Vec::new(),
                 keys: Vec::new(),
                 kept: Vec::new(),
+                near: Vec::new(),
             },
             |scratch, block_points| {
                 let size = block_points.len();
@@ -156,6 +159,7 @@ pub(crate) fn neighbour_lists(
                         d2,
                         keys,
                         kept,
+                        near,
                     } = scratch;
                     // Visited into the thread's buffer: no result vector per run.
                     found.clear();
@@ -189,8 +193,19 @@ pub(crate) fn neighbour_lists(
                                 .zip(&axes[2])
                                 .map(|((x, y), z)| distance2(p, [*x, *y, *z])),
                         );
-                        keys.clear();
-                        keys.extend(d2.iter().filter(|&&d| d <= r2).map(|d| d.to_bits()));
+                        // The candidates within reach, compacted without a branch (whether a
+                        // candidate is within reach is a coin toss the predictor loses): every
+                        // slot is written, and the length moves on only past those within.
+                        keys.resize(d2.len(), 0);
+                        near.resize(d2.len(), 0);
+                        let mut within = 0;
+                        for (k, &d) in d2.iter().enumerate() {
+                            keys[within] = d.to_bits();
+                            near[within] = k as u32;
+                            within += usize::from(d <= r2);
+                        }
+                        keys.truncate(within);
+                        near.truncate(within);
                         let capped = keys.len() >= cap;
                         // Kept: d² below `limit`, and d² equal to it while `ties` last (in
                         // index order): within reach, or the nearest `cap` by (d², index) where
@@ -207,7 +222,9 @@ pub(crate) fn neighbour_lists(
                         let link2 = link_distance2.map_or(-1.0, |f| f(i));
                         let mut far = 0.0f64;
                         let before = block.ids.len();
-                        for (k, &d) in d2.iter().enumerate() {
+                        // Only those within reach, in index order.
+                        for &k in near.iter() {
+                            let (k, d) = (k as usize, d2[k as usize]);
                             if d > limit || (d == limit && ties == 0) {
                                 continue;
                             }
