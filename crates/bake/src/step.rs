@@ -191,6 +191,9 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         (bvh, start.elapsed().as_secs_f64())
     };
 
+    // Structs shuffled by their own size: a field's sign and exponent bytes side by side, a
+    // padding or unused field one run of zeros (`docs/cache-format.md`).
+    let by_element = |element: Element| Encoding::shuffled_elements(element.size());
     // Sections, in the GPU layouts (the BVH's are added once it is built).
     let prepare_sections = || -> Result<_, BakeError> {
         let start = std::time::Instant::now();
@@ -255,9 +258,6 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                 radius: s.radius as f32,
             })
             .collect();
-        // Structs shuffled by their own size: a field's sign and exponent bytes side by side, a
-        // padding or unused field one run of zeros (`docs/cache-format.md`).
-        let by_element = |element: Element| Encoding::shuffled_elements(element.size());
         let mut sections = vec![
             SectionInput::new(
                 names::POINTS,
@@ -341,7 +341,6 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     };
     let ((bvh, bvh_seconds), prepared) = rayon::join(build_bvh, prepare_sections);
     let (mut sections, fields, sections_seconds) = prepared?;
-    let by_element = |element: Element| Encoding::shuffled_elements(element.size());
     // After the spheres, before the fields: the order every cache has had.
     sections.push(SectionInput::new(
         names::BVH_NODES,

@@ -119,25 +119,24 @@ pub fn shuffle4(raw: &[u8]) -> Vec<u8> {
 /// element, then byte 1, … (`raw` holds whole elements).
 pub fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
     let mut out = vec![0u8; raw.len()];
-    // The encodings' widths as constants, so that each gets its own unrolled transpose.
-    match width {
-        4 => transpose(raw, &mut out, 4, Direction::Shuffle),
-        16 => transpose(raw, &mut out, 16, Direction::Shuffle),
-        32 => transpose(raw, &mut out, 32, Direction::Shuffle),
-        64 => transpose(raw, &mut out, 64, Direction::Shuffle),
-        _ => transpose(raw, &mut out, width, Direction::Shuffle),
-    }
+    transpose_width(raw, &mut out, width, Direction::Shuffle);
     out
 }
 
 /// The inverse of [`shuffle`], into `out` (as long as `shuffled`).
 fn unshuffle_into(shuffled: &[u8], out: &mut [u8], width: usize) {
+    transpose_width(shuffled, out, width, Direction::Unshuffle);
+}
+
+/// [`transpose`] with the encodings' widths as constants, so that each gets its own unrolled
+/// loop.
+fn transpose_width(from: &[u8], to: &mut [u8], width: usize, direction: Direction) {
     match width {
-        4 => transpose(shuffled, out, 4, Direction::Unshuffle),
-        16 => transpose(shuffled, out, 16, Direction::Unshuffle),
-        32 => transpose(shuffled, out, 32, Direction::Unshuffle),
-        64 => transpose(shuffled, out, 64, Direction::Unshuffle),
-        _ => transpose(shuffled, out, width, Direction::Unshuffle),
+        4 => transpose(from, to, 4, direction),
+        16 => transpose(from, to, 16, direction),
+        32 => transpose(from, to, 32, direction),
+        64 => transpose(from, to, 64, direction),
+        _ => transpose(from, to, width, direction),
     }
 }
 

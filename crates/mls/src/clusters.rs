@@ -6,7 +6,7 @@
 
 use rayon::prelude::*;
 
-use crate::lists::RunUnions;
+use crate::lists::{LIST_RUN, RunUnions};
 use crate::real::{Real, V3};
 
 /// Union of the lists of each run of `size` consecutive points: CSR offsets (one per cluster
@@ -36,19 +36,15 @@ pub fn cluster_lists(start: &[u32], neighbours: &[u32], size: usize) -> (Vec<u32
             },
         )
         .collect();
-    concatenate(unions)
+    concatenate(unions.into_iter().map(|u| ([u.len() as u32], u)).collect())
 }
 
-/// The same cluster lists as [`cluster_lists`], merged from the unions of runs of `run`
-/// consecutive points (`size` a multiple of `run`): each cluster's runs' unions are sorted
-/// already, so a cluster's list is their merge, without reading its members' lists.
-pub fn cluster_lists_from_runs(
-    unions: &RunUnions,
-    run: usize,
-    size: usize,
-) -> (Vec<u32>, Vec<u32>) {
+/// The same cluster lists as [`cluster_lists`], merged from the unions of runs of
+/// [`LIST_RUN`] consecutive points (`size` a multiple of it): each cluster's runs' unions are
+/// sorted already, so a cluster's list is their merge, without reading its members' lists.
+pub(crate) fn cluster_lists_from_runs(unions: &RunUnions, size: usize) -> (Vec<u32>, Vec<u32>) {
     let runs = unions.len();
-    let per_cluster = (size / run.max(1)).max(1);
+    let per_cluster = (size / LIST_RUN).max(1);
     let union = |r: usize| unions.union(r);
     let clusters = runs.div_ceil(per_cluster);
     // Clusters merged by blocks, each block's lists in one buffer (one small buffer per
@@ -92,26 +88,19 @@ pub fn cluster_lists_from_runs(
             (counts, ids)
         })
         .collect();
-    let mut offsets = Vec::with_capacity(clusters + 1);
+    concatenate(blocks)
+}
+
+/// Blocks of cluster lists (each block: its lists' lengths, and their ids one after another)
+/// as CSR offsets and ids.
+fn concatenate<C: IntoIterator<Item = u32>>(blocks: Vec<(C, Vec<u32>)>) -> (Vec<u32>, Vec<u32>) {
+    let mut offsets = vec![0u32];
     let mut ids = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
-    offsets.push(0u32);
     for (counts, block_ids) in blocks {
         for count in counts {
             offsets.push(offsets[offsets.len() - 1] + count);
         }
         ids.extend_from_slice(&block_ids);
-    }
-    (offsets, ids)
-}
-
-/// Per-cluster lists as CSR offsets and ids.
-fn concatenate(lists: Vec<Vec<u32>>) -> (Vec<u32>, Vec<u32>) {
-    let mut offsets = Vec::with_capacity(lists.len() + 1);
-    let mut ids = Vec::with_capacity(lists.iter().map(Vec::len).sum());
-    offsets.push(0u32);
-    for u in lists {
-        ids.extend_from_slice(&u);
-        offsets.push(ids.len() as u32);
     }
     (offsets, ids)
 }

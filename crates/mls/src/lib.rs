@@ -24,14 +24,14 @@ mod timing;
 mod tracer;
 mod up;
 
-pub use clusters::{cluster_lists, cluster_lists_from_runs, expand as expand_clusters, expand_one};
+pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use frame::Frame;
 pub use intersect::{
     Ball, HitStatus, InitialHit, Outcome, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
 };
-pub use lists::{LIST_RUN, RunUnions};
+pub use lists::RunUnions;
 pub use order::morton_order;
 pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 pub use poly::{Poly, coefficient_count, monomials};

@@ -62,7 +62,7 @@ impl RunUnions {
 }
 
 /// Points per run of the lists stage (and per union in [`RunUnions`]).
-pub const LIST_RUN: usize = RUN;
+pub(crate) const LIST_RUN: usize = RUN;
 
 /// kiddo's squared Euclidean distance, summed in its order, so that a list is the set its
 /// `within` query would return.
@@ -477,7 +477,7 @@ mod tests {
             if let Some(unions) = &lists.run_unions {
                 for size in [RUN, 2 * RUN, 4 * RUN] {
                     assert_eq!(
-                        crate::clusters::cluster_lists_from_runs(unions, RUN, size),
+                        crate::clusters::cluster_lists_from_runs(unions, size),
                         crate::clusters::cluster_lists(&lists.start, &lists.ids, size),
                         "clusters of {size}"
                     );

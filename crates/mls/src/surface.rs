@@ -107,7 +107,7 @@ pub struct SurfaceParts<T> {
     pub reach: Vec<T>,
     /// Points whose neighbour list was cut at the cap.
     pub capped: usize,
-    /// The union of the lists of each run of [`crate::LIST_RUN`] consecutive points, where the
+    /// The union of the lists of each run of consecutive points of the lists stage, where the
     /// build's points came in spatial order (none for parts read back from a cache).
     pub run_unions: Option<RunUnions>,
     pub balls: Vec<Ball<T>>,
@@ -406,7 +406,7 @@ impl<T: Real> SurfaceParts<T> {
     pub fn cluster_lists(&self, size: usize) -> (Vec<u32>, Vec<u32>) {
         match &self.run_unions {
             Some(unions) if size > 0 && size.is_multiple_of(LIST_RUN) => {
-                crate::clusters::cluster_lists_from_runs(unions, LIST_RUN, size)
+                crate::clusters::cluster_lists_from_runs(unions, size)
             }
             _ => crate::clusters::cluster_lists(&self.neighbour_start, &self.neighbours, size),
         }
