@@ -7,7 +7,7 @@ use slosh_cache::{
     SectionInput, Source, StepStats, Transform, names,
 };
 use slosh_ensight::FieldValues;
-use slosh_mls::{BallFit, FitStatus, StageClock, SurfaceError, SurfaceParts};
+use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
 
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::select::{StepInput, estimate_surface_normals};
@@ -44,6 +44,30 @@ pub const NEIGHBOUR_CLUSTER: u32 = 32;
 pub struct BakedStep {
     pub header: Header,
     pub sections: Vec<SectionInput>,
+}
+
+/// The BVH over every ball that `is_candidate` keeps (in index order), then the droplet
+/// spheres (ids after the balls').
+fn build_bvh(
+    is_candidate: impl Fn(usize) -> bool + Sync,
+    centre: impl Fn(usize) -> [f64; 3] + Sync,
+    radii: &[f64],
+    spheres: &[Sphere<f64>],
+) -> slosh_cache::Bvh {
+    let n = radii.len();
+    let mut candidates: Vec<(u32, [f64; 3], f64)> = (0..n)
+        .into_par_iter()
+        .filter(|&i| is_candidate(i))
+        .map(|i| (i as u32, centre(i), radii[i]))
+        .collect();
+    for (d, s) in spheres.iter().enumerate() {
+        candidates.push((
+            (n + d) as u32,
+            [s.centre.x, s.centre.y, s.centre.z],
+            s.radius,
+        ));
+    }
+    crate::bvh::build(&candidates)
 }
 
 fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
@@ -87,7 +111,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                     flags.len()
                 )));
             }
-            finite.iter().map(|&i| flags[i as usize]).collect()
+            finite.par_iter().map(|&i| flags[i as usize]).collect()
         }
         SurfaceSelect::Estimate => estimated
             .get_or_insert_with(|| estimate_surface_normals(&permute(&input.positions, &finite)))
@@ -135,7 +159,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             // `finite` is ascending, so a source index finds its estimate by search.
             Some(
                 source_index
-                    .iter()
+                    .par_iter()
                     .map(|i| finite.binary_search(i).map_or([0.0; 3], |k| all[k].1))
                     .collect(),
             )
@@ -162,33 +186,43 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         .as_deref()
         .and_then(|ns| slosh_mls::guess_up(&local, ns));
 
-    // 4–7. kNN, radii, neighbour lists, initial fits, droplets.
-    let (surface, build_laps) = SurfaceParts::<f64>::build(&local, normals.as_deref(), &params.mls)
-        .map_err(|source| BakeError::Surface { step, source })?;
-    clock.extend(&build_laps);
-
-    // 8. BVH over fitted balls and droplet spheres, built beside the sections below: obvhs
-    // leaves cores idle that the sections' parallel loops take.
-    let n = surface.len();
-    let build_bvh = || {
+    // 4–8. kNN, radii, neighbour lists, initial fits, droplets, and the BVH over fitted balls
+    // and droplet spheres, built beside the fits: obvhs leaves cores idle that the fits take.
+    // It is built before the fits are known, on the guess that every ball outside the spray
+    // gets one; the rare step where some ball has none builds it again.
+    let speculative_bvh = |beside: BesideFits<'_, f64>| {
         let start = std::time::Instant::now();
-        let mut candidates: Vec<(u32, [f64; 3], f64)> = (0..n)
-            .into_par_iter()
-            .filter(|&i| matches!(surface.ball_fits[i], BallFit::Fitted(_)))
-            .map(|i| {
-                let c = surface.points[i];
-                (i as u32, [c.x, c.y, c.z], surface.radii[i])
-            })
-            .collect();
-        for (d, s) in surface.spheres.iter().enumerate() {
-            candidates.push((
-                (n + d) as u32,
-                [s.centre.x, s.centre.y, s.centre.z],
-                s.radius,
-            ));
+        let mut spray = vec![false; beside.points.len()];
+        for &(i, _) in beside.droplet_of {
+            spray[i as usize] = true;
         }
-        let bvh = crate::bvh::build(&candidates);
+        let bvh = build_bvh(
+            |i| !spray[i],
+            |i| beside.points[i],
+            beside.radii,
+            beside.spheres,
+        );
         (bvh, start.elapsed().as_secs_f64())
+    };
+    let (surface, build_laps, (bvh, bvh_seconds)) =
+        SurfaceParts::<f64>::build_with(&local, normals.as_deref(), &params.mls, speculative_bvh)
+            .map_err(|source| BakeError::Surface { step, source })?;
+    clock.extend(&build_laps);
+    let n = surface.len();
+    let (bvh, bvh_seconds) = if surface.ball_fits.par_iter().any(|f| *f == BallFit::None) {
+        let start = std::time::Instant::now();
+        let bvh = build_bvh(
+            |i| matches!(surface.ball_fits[i], BallFit::Fitted(_)),
+            |i| {
+                let c = surface.points[i];
+                [c.x, c.y, c.z]
+            },
+            &surface.radii,
+            &surface.spheres,
+        );
+        (bvh, bvh_seconds + start.elapsed().as_secs_f64())
+    } else {
+        (bvh, bvh_seconds)
     };
 
     // Structs shuffled by their own size: a field's sign and exponent bytes side by side, a
@@ -327,7 +361,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                 ),
                 FieldValues::Vector(v) => {
                     let vec4: Vec<[f32; 4]> = source_index
-                        .iter()
+                        .par_iter()
                         .map(|&i| {
                             let x = v[i as usize];
                             [x[0], x[1], x[2], 0.0]
@@ -339,8 +373,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         }
         Ok((sections, fields, start.elapsed().as_secs_f64()))
     };
-    let ((bvh, bvh_seconds), prepared) = rayon::join(build_bvh, prepare_sections);
-    let (mut sections, fields, sections_seconds) = prepared?;
+    let (mut sections, fields, sections_seconds) = prepare_sections()?;
     // After the spheres, before the fields: the order every cache has had.
     sections.push(SectionInput::new(
         names::BVH_NODES,
@@ -376,7 +409,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
             BallFit::Droplet(_) => stats.droplet_points += 1,
         }
     }
-    // Each side's own wall time: the two ran at once.
+    // The BVH's own wall time: it ran beside the fits.
     clock.extend(&[("bvh", bvh_seconds), ("sections", sections_seconds)]);
     stats.stage_seconds = clock
         .laps

@@ -1,6 +1,8 @@
 //! Full verification of a step file: the footer checksum over every byte, each section's
 //! checksum and decoding, and the structural invariants the tracer relies on.
 
+use rayon::prelude::*;
+
 use crate::bvh::Bvh;
 use crate::error::{Error, Result};
 use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere};
@@ -99,7 +101,12 @@ impl CacheFile {
                 start.len()
             ));
         }
-        if let Some(i) = reach.iter().position(|r| !(r.is_finite() && *r >= 0.0)) {
+        // The per-element checks run in parallel and report the first offender, as a serial
+        // scan would: at 1M points they were a tenth of a second on one core after every bake.
+        if let Some(i) = reach
+            .par_iter()
+            .position_first(|r| !(r.is_finite() && *r >= 0.0))
+        {
             return Err(format!("point {i} has an invalid reach {}", reach[i]));
         }
         for entry in &header.sections {
@@ -113,8 +120,8 @@ impl CacheFile {
             }
         }
         if let Some(i) = points
-            .iter()
-            .position(|p| !(p.position.iter().all(|c| c.is_finite()) && p.radius > 0.0))
+            .par_iter()
+            .position_first(|p| !(p.position.iter().all(|c| c.is_finite()) && p.radius > 0.0))
         {
             return Err(format!("point {i} is not finite or has no positive radius"));
         }
@@ -124,26 +131,23 @@ impl CacheFile {
         {
             return Err("cluster offsets are not monotone from 0 to the list length".into());
         }
-        for i in 0..clusters {
+        if let Some(i) = (0..clusters).into_par_iter().position_first(|i| {
             let list = &neighbours[start[i] as usize..start[i + 1] as usize];
-            if list.windows(2).any(|w| w[0] >= w[1])
-                || list.last().is_some_and(|&j| j as usize >= n)
-            {
-                return Err(format!(
-                    "the candidate list of cluster {i} is not sorted, distinct and in range"
-                ));
-            }
+            list.windows(2).any(|w| w[0] >= w[1]) || list.last().is_some_and(|&j| j as usize >= n)
+        }) {
+            return Err(format!(
+                "the candidate list of cluster {i} is not sorted, distinct and in range"
+            ));
         }
-        for (i, b) in balls.iter().enumerate() {
+        if let Some(i) = balls.par_iter().position_first(|b| {
             let finite = b.normal.iter().chain(&b.coeffs).all(|c| c.is_finite()) && b.h > 0.0;
             let sphere_ok = b.sphere().is_none_or(|s| (s as usize) < spheres.len());
-            if !finite
+            !finite
                 || b.degree > 3
                 || !sphere_ok
                 || (b.state >> 2 != 0 && b.kind() != BallState::Droplet)
-            {
-                return Err(format!("ball {i} is invalid: {b:?}"));
-            }
+        }) {
+            return Err(format!("ball {i} is invalid: {:?}", balls[i]));
         }
         if let Some(d) = spheres
             .iter()
@@ -181,15 +185,14 @@ impl CacheFile {
                 }
             }
         }
-        for (i, b) in balls.iter().enumerate() {
-            let candidate = matches!(b.kind(), BallState::Full | BallState::Degraded);
-            if seen[i] != candidate {
-                return Err(format!(
-                    "ball {i} ({:?}) is {} the BVH",
-                    b.kind(),
-                    if seen[i] { "in" } else { "missing from" }
-                ));
-            }
+        if let Some(i) = balls.par_iter().zip(&seen).position_first(|(b, &seen)| {
+            seen != matches!(b.kind(), BallState::Full | BallState::Degraded)
+        }) {
+            return Err(format!(
+                "ball {i} ({:?}) is {} the BVH",
+                balls[i].kind(),
+                if seen[i] { "in" } else { "missing from" }
+            ));
         }
         if let Some(d) = seen[n..].iter().position(|s| !s) {
             return Err(format!("droplet sphere {d} is missing from the BVH"));

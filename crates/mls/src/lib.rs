@@ -41,7 +41,9 @@ pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
     weight,
 };
-pub use surface::{BallFit, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds};
+pub use surface::{
+    BallFit, BesideFits, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds,
+};
 pub use timing::StageClock;
 pub use tracer::{BallIndex, Camera, CameraBasis, MAX_CANDIDATES, TraceHit};
 pub use up::guess_up;

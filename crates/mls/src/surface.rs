@@ -85,6 +85,18 @@ pub struct Sphere<T> {
     pub radius: T,
 }
 
+/// What [`SurfaceParts::build_with`] hands to the work it runs beside the initial fits.
+#[derive(Debug, Clone, Copy)]
+pub struct BesideFits<'a, T> {
+    /// The points as the parts hold them (recentred), in f64.
+    pub points: &'a [[f64; 3]],
+    /// The balls' radii, in f64.
+    pub radii: &'a [f64],
+    /// (point, sphere) for every point drawn as spray.
+    pub droplet_of: &'a [(u32, u32)],
+    pub spheres: &'a [Sphere<T>],
+}
+
 /// Everything a [`Surface`] holds except its search grid: what a cache stores.
 #[derive(Debug, Clone)]
 pub struct SurfaceParts<T> {
@@ -162,6 +174,20 @@ impl<T: Real> SurfaceParts<T> {
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
     ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
+        Self::build_with(points, normals, params, |_| ()).map(|(parts, laps, ())| (parts, laps))
+    }
+
+    /// [`SurfaceParts::build`], running `beside` on the points, radii and spray as soon as
+    /// the droplets are found, at the same time as the initial fits: work that needs those but
+    /// not the fits (a bake's BVH) takes the cores the fits leave idle instead of waiting for
+    /// them.
+    #[allow(clippy::type_complexity)]
+    pub fn build_with<R: Send>(
+        points: &[[f64; 3]],
+        normals: Option<&[[f64; 3]]>,
+        params: &SurfaceParams,
+        beside: impl FnOnce(BesideFits<'_, T>) -> R + Send,
+    ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>, R), SurfaceError> {
         if points.len() < 2 {
             return Err(SurfaceError::TooFew(points.len()));
         }
@@ -346,19 +372,28 @@ impl<T: Real> SurfaceParts<T> {
                 params.droplet_below,
             )
         };
-        let ((balls, mut ball_fits, fits_seconds), (spheres, droplet_of, droplets_seconds)) =
-            rayon::join(
-                || {
-                    // From before the conversions above, which only the fits wait for.
-                    let (balls, fits) = initial_fits();
-                    (balls, fits, fits_start.elapsed().as_secs_f64())
-                },
-                || {
-                    let start = std::time::Instant::now();
-                    let (spheres, marks) = find_droplets();
-                    (spheres, marks, start.elapsed().as_secs_f64())
-                },
-            );
+        let (
+            (balls, mut ball_fits, fits_seconds),
+            (spheres, droplet_of, droplets_seconds, beside_result),
+        ) = rayon::join(
+            || {
+                // From before the conversions above, which only the fits wait for.
+                let (balls, fits) = initial_fits();
+                (balls, fits, fits_start.elapsed().as_secs_f64())
+            },
+            || {
+                let start = std::time::Instant::now();
+                let (spheres, marks) = find_droplets();
+                let seconds = start.elapsed().as_secs_f64();
+                let result = beside(BesideFits {
+                    points: &rel,
+                    radii: &radii,
+                    droplet_of: &marks,
+                    spheres: &spheres,
+                });
+                (spheres, marks, seconds, result)
+            },
+        );
         for &(i, d) in &droplet_of {
             ball_fits[i as usize] = BallFit::Droplet(d);
         }
@@ -385,7 +420,7 @@ impl<T: Real> SurfaceParts<T> {
             orientation,
             params: params.clone(),
         };
-        Ok((parts, clock.laps))
+        Ok((parts, clock.laps, beside_result))
     }
 
     pub fn len(&self) -> usize {
