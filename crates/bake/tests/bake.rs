@@ -148,7 +148,7 @@ fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
         let reference = oracle.render(&camera, &f64_params);
         // The lists come back from the clusters in f32 with nothing lost (a rounding tie at
         // the reach may add one).
-        let (stored, exact) = (step.surface.neighbours.len(), oracle.neighbours.len());
+        let (stored, exact) = (step.surface.neighbours.total(), oracle.neighbours.total());
         assert!(
             stored >= exact && stored * 1000 <= exact * 1001,
             "{kind:?}: {stored} neighbours from the cache, {exact} in memory"

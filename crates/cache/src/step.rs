@@ -2,8 +2,8 @@
 //! reference tracer needs to trace straight from a cache.
 
 use slosh_mls::{
-    Ball, BallFit, Camera, FitStatus, NormalsMode, Params, Poly, Sphere, Surface, SurfaceParams,
-    SurfaceParts, TraceHit, V3,
+    Ball, BallFit, Camera, FitStatus, Neighbours, NormalsMode, Params, Poly, Sphere, Surface,
+    SurfaceParams, SurfaceParts, TraceHit, V3,
 };
 
 use crate::bvh::Bvh;
@@ -166,8 +166,9 @@ impl LoadedStep {
             radii: points.iter().map(|p| p.radius).collect(),
             h: header.smoothing_length as f32,
             spacing: header.spacing as f32,
-            neighbour_start,
-            neighbours,
+            neighbours: Neighbours::from_csr(neighbour_start, neighbours).ok_or_else(|| {
+                invalid("the expanded neighbour lists are not a CSR index".into())
+            })?,
             reach,
             capped: header.stats.capped as usize,
             run_unions: None,

@@ -7,12 +7,13 @@
 use rayon::prelude::*;
 
 use crate::lists::{LIST_RUN, RunUnions};
+use crate::neighbours::Neighbours;
 use crate::real::{Real, V3};
 
 /// Union of the lists of each run of `size` consecutive points: CSR offsets (one per cluster
 /// plus one) and sorted candidate indices.
-pub fn cluster_lists(start: &[u32], neighbours: &[u32], size: usize) -> (Vec<u32>, Vec<u32>) {
-    let n = start.len().saturating_sub(1);
+pub fn cluster_lists(neighbours: &Neighbours, size: usize) -> (Vec<u32>, Vec<u32>) {
+    let n = neighbours.len();
     let size = size.max(1);
     // Members' lists overlap by most of their length: mark each index once per cluster (a
     // per-thread stamp array), then sort only the union.
@@ -23,7 +24,7 @@ pub fn cluster_lists(start: &[u32], neighbours: &[u32], size: usize) -> (Vec<u32
             |stamp, c| {
                 let (first, last) = (c * size, ((c + 1) * size).min(n));
                 let mut union = Vec::new();
-                for &j in &neighbours[start[first] as usize..start[last] as usize] {
+                for &j in (first..last).flat_map(|i| neighbours.of(i)) {
                     if let Some(s) = stamp.get_mut(j as usize)
                         && *s != c as u32
                     {

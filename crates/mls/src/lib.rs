@@ -13,6 +13,7 @@ mod frame;
 mod grid;
 mod intersect;
 mod lists;
+mod neighbours;
 mod order;
 mod orient;
 mod poly;
@@ -32,6 +33,7 @@ pub use intersect::{
     ray_ball, refine,
 };
 pub use lists::RunUnions;
+pub use neighbours::Neighbours;
 pub use order::morton_order;
 pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 pub use poly::{Poly, coefficient_count, monomials};

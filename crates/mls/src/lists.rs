@@ -9,6 +9,8 @@
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
+use crate::neighbours::Neighbours;
+
 /// Points per query. Larger runs query farther beyond each member's reach, smaller ones query
 /// more often; 16 measured fastest of 8, 16 and 32 on a 100k-point sphere (2 cores).
 const RUN: usize = 16;
@@ -23,8 +25,7 @@ const RUNS_PER_BLOCK: usize = 32;
 /// cut, the union of each run's lists where the runs were consecutive indices, and the links
 /// asked for (per run).
 pub(crate) struct NeighbourLists {
-    pub start: Vec<u32>,
-    pub ids: Vec<u32>,
+    pub lists: Neighbours,
     pub reach: Vec<f64>,
     pub capped: usize,
     pub run_unions: Option<RunUnions>,
@@ -270,13 +271,13 @@ pub(crate) fn neighbour_lists(
             },
         )
         .collect();
-    // Back to point order. Each point's list is found in its block's output, then copied into
-    // place by blocks of points in parallel: the lists of a 1M-point step are half a gigabyte,
-    // which one thread would take longer to zero and fault in than the runs took to find.
+    // Runs of consecutive indices (the points came in spatial order): each block's buffer holds
+    // the lists of consecutive points, in order, and becomes a piece of the lists as it is.
+    let index_runs = order.iter().enumerate().all(|(k, &i)| i as usize == k);
     let mut start = vec![0u32; n + 1];
     let mut reach_out = vec![0.0; n];
-    // (block, offset into its ids) of each point's list.
-    let mut source = vec![(0u32, 0u32); n];
+    // (block, offset into its ids) of each point's list, where they must be copied.
+    let mut source = vec![(0u32, 0u32); if index_runs { 0 } else { n }];
     let mut capped = 0;
     // Block b's members are `order`'s b-th chunk.
     for (b, (block, members)) in blocks
@@ -289,7 +290,9 @@ pub(crate) fn neighbour_lists(
             let i = i as usize;
             start[i + 1] = count;
             reach_out[i] = reach;
-            source[i] = (b as u32, from);
+            if let Some(slot) = source.get_mut(i) {
+                *slot = (b as u32, from);
+            }
             from += count;
         }
         capped += block.capped;
@@ -297,43 +300,51 @@ pub(crate) fn neighbour_lists(
     for i in 0..n {
         start[i + 1] += start[i];
     }
-    let total = start[n] as usize;
-    let mut ids: Vec<u32> = Vec::with_capacity(total);
-    ids.par_extend(rayon::iter::repeat_n(0, total));
-    const POINTS_PER_COPY: usize = 1024;
-    let mut pieces: Vec<(std::ops::Range<usize>, &mut [u32])> =
-        Vec::with_capacity(n.div_ceil(POINTS_PER_COPY));
-    let mut rest = ids.as_mut_slice();
-    for first in (0..n).step_by(POINTS_PER_COPY) {
-        let last = (first + POINTS_PER_COPY).min(n);
-        let (piece, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
-        pieces.push((first..last, piece));
-        rest = tail;
-    }
-    pieces.into_par_iter().for_each(|(points, piece)| {
-        let mut at = 0;
-        for i in points {
-            let (b, from) = (source[i].0 as usize, source[i].1 as usize);
-            let len = (start[i + 1] - start[i]) as usize;
-            piece[at..at + len].copy_from_slice(&blocks[b].ids[from..from + len]);
-            at += len;
-        }
-    });
-    // Runs of consecutive indices (the points came in spatial order) keep their unions.
-    let index_runs = order.iter().enumerate().all(|(k, &i)| i as usize == k);
     let mut links = Vec::with_capacity(blocks.len());
     let mut unions = Vec::with_capacity(blocks.len());
+    let mut pieces = Vec::with_capacity(blocks.len());
     for block in blocks {
         links.push(block.links);
         unions.push((block.union_start, block.union_ids));
+        pieces.push(block.ids);
     }
+    let lists = if index_runs {
+        Neighbours::from_pieces(start, RUN * RUNS_PER_BLOCK, pieces)
+    } else {
+        // Back to point order, copied by blocks of points in parallel: the lists of a
+        // 1M-point step are half a gigabyte, which one thread would take longer to zero and
+        // fault in than the runs took to find.
+        let total = start[n] as usize;
+        let mut ids: Vec<u32> = Vec::with_capacity(total);
+        ids.par_extend(rayon::iter::repeat_n(0, total));
+        const POINTS_PER_COPY: usize = 1024;
+        let mut copies: Vec<(std::ops::Range<usize>, &mut [u32])> =
+            Vec::with_capacity(n.div_ceil(POINTS_PER_COPY));
+        let mut rest = ids.as_mut_slice();
+        for first in (0..n).step_by(POINTS_PER_COPY) {
+            let last = (first + POINTS_PER_COPY).min(n);
+            let (piece, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
+            copies.push((first..last, piece));
+            rest = tail;
+        }
+        copies.into_par_iter().for_each(|(points, piece)| {
+            let mut at = 0;
+            for i in points {
+                let (b, from) = (source[i].0 as usize, source[i].1 as usize);
+                let len = (start[i + 1] - start[i]) as usize;
+                piece[at..at + len].copy_from_slice(&pieces[b][from..from + len]);
+                at += len;
+            }
+        });
+        Neighbours::from_csr(start, ids)
+    }
+    .expect("the blocks hold exactly the lists their counts say");
     let run_unions = index_runs.then_some(RunUnions {
         runs: n.div_ceil(RUN),
         blocks: unions,
     });
     NeighbourLists {
-        start,
-        ids,
+        lists,
         reach: reach_out,
         capped,
         run_unions,
@@ -450,8 +461,7 @@ mod tests {
             let want = reference(&tree, &points, &reach, cap, &normals);
             let mut capped = 0;
             for i in 0..n {
-                let got = &lists.ids[lists.start[i] as usize..lists.start[i + 1] as usize];
-                assert_eq!(got, want[i].as_slice(), "point {i}");
+                assert_eq!(lists.lists.of(i), want[i].as_slice(), "point {i}");
                 capped += usize::from(lists.reach[i] < reach[i]);
             }
             assert!(
@@ -478,7 +488,7 @@ mod tests {
                 for size in [RUN, 2 * RUN, 4 * RUN] {
                     assert_eq!(
                         crate::clusters::cluster_lists_from_runs(unions, size),
-                        crate::clusters::cluster_lists(&lists.start, &lists.ids, size),
+                        crate::clusters::cluster_lists(&lists.lists, size),
                         "clusters of {size}"
                     );
                 }

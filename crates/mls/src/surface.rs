@@ -12,6 +12,7 @@ use crate::fit::FitStatus;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit};
 use crate::lists::{LIST_RUN, NeighbourLists, RunUnions, neighbour_lists};
+use crate::neighbours::Neighbours;
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
@@ -112,8 +113,7 @@ pub struct SurfaceParts<T> {
     /// Mean distance to the nearest other point.
     pub spacing: T,
     /// CSR neighbour lists: the neighbours of point i are `neighbours[start[i]..start[i + 1]]`.
-    pub neighbour_start: Vec<u32>,
-    pub neighbours: Vec<u32>,
+    pub neighbours: Neighbours,
     /// How far each point's neighbour list reaches: ρ_i + support·h_i, or the distance of the
     /// farthest neighbour kept where the cap cut the list.
     pub reach: Vec<T>,
@@ -286,8 +286,7 @@ impl<T: Real> SurfaceParts<T> {
             .map(|i| radii[i] + params.support * ball_h(i))
             .collect();
         let NeighbourLists {
-            start: neighbour_start,
-            ids: neighbours,
+            lists: neighbours,
             reach,
             capped,
             run_unions,
@@ -324,14 +323,7 @@ impl<T: Real> SurfaceParts<T> {
                 .map_init(
                     || (Vec::new(), Vec::new()),
                     |(np, nn), i| {
-                        gather(
-                            &pts,
-                            nrm.as_deref(),
-                            &neighbours
-                                [neighbour_start[i] as usize..neighbour_start[i + 1] as usize],
-                            np,
-                            nn,
-                        );
+                        gather(&pts, nrm.as_deref(), neighbours.of(i), np, nn);
                         let centre = pts[i];
                         // Without data normals the plane faces away from the set's centre.
                         let toward = centre * T::c(2.0);
@@ -409,7 +401,6 @@ impl<T: Real> SurfaceParts<T> {
             radii: radii.par_iter().map(|&r| T::c(r)).collect(),
             h: h_t,
             spacing: T::c(spacing),
-            neighbour_start,
             neighbours,
             reach: reach.par_iter().map(|&r| T::c(r)).collect(),
             capped,
@@ -432,7 +423,7 @@ impl<T: Real> SurfaceParts<T> {
     }
 
     pub fn neighbours_of(&self, i: usize) -> &[u32] {
-        &self.neighbours[self.neighbour_start[i] as usize..self.neighbour_start[i + 1] as usize]
+        self.neighbours.of(i)
     }
 
     /// The union of the lists of each cluster of `size` consecutive points (CSR): merged from
@@ -443,7 +434,7 @@ impl<T: Real> SurfaceParts<T> {
             Some(unions) if size > 0 && size.is_multiple_of(LIST_RUN) => {
                 crate::clusters::cluster_lists_from_runs(unions, size)
             }
-            _ => crate::clusters::cluster_lists(&self.neighbour_start, &self.neighbours, size),
+            _ => crate::clusters::cluster_lists(&self.neighbours, size),
         }
     }
 }
@@ -467,13 +458,13 @@ impl<T: Real> Surface<T> {
         if parts.reach.len() != n {
             return bad(format!("{n} points but {} reaches", parts.reach.len()));
         }
-        if parts.neighbour_start.len() != n + 1
-            || parts.neighbour_start.windows(2).any(|w| w[0] > w[1])
-            || parts.neighbour_start.last().map(|&e| e as usize) != Some(parts.neighbours.len())
-        {
-            return bad("neighbour offsets are not a CSR index over the neighbour list".into());
+        if parts.neighbours.len() != n {
+            return bad(format!(
+                "{n} points but {} neighbour lists",
+                parts.neighbours.len()
+            ));
         }
-        if parts.neighbours.iter().any(|&j| j as usize >= n) {
+        if parts.neighbours.ids().any(|j| j as usize >= n) {
             return bad("a neighbour index is out of range".into());
         }
         if parts
