@@ -4,6 +4,7 @@
 //! bake stores in caches.
 
 use std::num::NonZero;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
@@ -525,24 +526,48 @@ fn droplets<T: Real>(
     let d2 = |a: [f64; 3], b: [f64; 3]| {
         (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
     };
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn root(parent: &mut [u32], mut i: u32) -> u32 {
-        while parent[i as usize] != i {
-            let up = parent[parent[i as usize] as usize];
-            parent[i as usize] = up;
-            i = up;
+    // Components by a concurrent union-find: a root is only ever linked to a smaller root
+    // (by compare-and-swap, so that two threads cannot both link it), every link points to a
+    // smaller index, and each component's root ends as its smallest index, in whatever order
+    // the links were taken.
+    let parent: Vec<AtomicU32> = (0..n as u32).into_par_iter().map(AtomicU32::new).collect();
+    let find = |mut i: u32| -> u32 {
+        loop {
+            let up = parent[i as usize].load(Ordering::Acquire);
+            if up == i {
+                return i;
+            }
+            let above = parent[up as usize].load(Ordering::Acquire);
+            if above != up {
+                // Path halving; if another thread moved the link first, its value is as good.
+                let _ = parent[i as usize].compare_exchange(
+                    up,
+                    above,
+                    Ordering::AcqRel,
+                    Ordering::Acquire,
+                );
+            }
+            i = above;
         }
-        i
-    }
-    for &(i, j) in links.iter().flatten() {
-        let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
-        if ri != rj {
-            parent[ri.max(rj) as usize] = ri.min(rj);
+    };
+    links.par_iter().flatten().for_each(|&(i, j)| {
+        loop {
+            let (ri, rj) = (find(i), find(j));
+            if ri == rj {
+                return;
+            }
+            let (high, low) = (ri.max(rj), ri.min(rj));
+            if parent[high as usize]
+                .compare_exchange(high, low, Ordering::AcqRel, Ordering::Acquire)
+                .is_ok()
+            {
+                return;
+            }
         }
-    }
+    });
     // Members grouped by component (each root is its component's smallest index), in one
     // array: components in order of their first member, members in index order.
-    let roots: Vec<u32> = (0..n as u32).map(|i| root(&mut parent, i)).collect();
+    let roots: Vec<u32> = (0..n as u32).into_par_iter().map(find).collect();
     let mut first = vec![0u32; n + 1];
     for &r in &roots {
         first[r as usize + 1] += 1;
@@ -556,55 +581,81 @@ fn droplets<T: Real>(
         order[fill[r as usize] as usize] = i;
         fill[r as usize] += 1;
     }
-    let members = (0..n).filter_map(|r| {
-        let m = &order[first[r] as usize..first[r + 1] as usize];
-        (!m.is_empty()).then_some(m)
-    });
+    let components: Vec<&[usize]> = (0..n)
+        .filter_map(|r| {
+            let m = &order[first[r] as usize..first[r + 1] as usize];
+            (!m.is_empty()).then_some(m)
+        })
+        .collect();
     let distance = |p: [f64; 3], c: [f64; 3]| d2(p, c).sqrt();
     let particle = 0.5 * spacing;
+    /// What a component is drawn as.
+    enum Spray {
+        Surface,
+        Blob { centre: [f64; 3], radius: f64 },
+        Particles,
+    }
+    // Each component on its own (its sums in member order), all at once.
+    let kinds: Vec<Spray> = components
+        .par_iter()
+        .map(|m| {
+            let mut c = [0.0; 3];
+            for &i in *m {
+                for a in 0..3 {
+                    c[a] += points[i][a] / m.len() as f64;
+                }
+            }
+            let far = m
+                .iter()
+                .map(|&i| distance(points[i], c))
+                .fold(0.0, f64::max);
+            // A surface: enough points, wider than h, and sampled about as densely as the
+            // fluid (spray spread thin is not a sheet to stretch across its gaps).
+            let mean_gap = m.iter().map(|&i| nearest[i]).sum::<f64>() / m.len() as f64;
+            if m.len() >= below && far > ball_h(m[0]) && mean_gap <= SPRAY_GAP * spacing {
+                return Spray::Surface;
+            }
+            let rms = (m
+                .iter()
+                .map(|&i| distance(points[i], c).powi(2))
+                .sum::<f64>()
+                / m.len() as f64)
+                .sqrt();
+            // A blob only where the particles fill it: no wider than their own volume's
+            // sphere (N particles of radius s / 2 fill one of radius (s / 2)·∛N), with slack.
+            let filled = rms <= 1.25 * particle * (m.len() as f64).cbrt();
+            if m.len() >= 4 && far <= rms + spacing && filled {
+                Spray::Blob {
+                    centre: c,
+                    radius: rms + particle,
+                }
+            } else {
+                Spray::Particles
+            }
+        })
+        .collect();
     // Spheres numbered in order of their first member, so the result does not depend on threads.
     let mut spheres = Vec::new();
     let mut marks = Vec::new();
-    for m in members {
-        let mut c = [0.0; 3];
-        for &i in m {
-            for a in 0..3 {
-                c[a] += points[i][a] / m.len() as f64;
-            }
-        }
-        let far = m
-            .iter()
-            .map(|&i| distance(points[i], c))
-            .fold(0.0, f64::max);
-        // A surface: enough points, wider than h, and sampled about as densely as the fluid
-        // (spray spread thin is not a sheet to stretch across its gaps).
-        let mean_gap = m.iter().map(|&i| nearest[i]).sum::<f64>() / m.len() as f64;
-        if m.len() >= below && far > ball_h(m[0]) && mean_gap <= SPRAY_GAP * spacing {
-            continue;
-        }
-        let rms = (m
-            .iter()
-            .map(|&i| distance(points[i], c).powi(2))
-            .sum::<f64>()
-            / m.len() as f64)
-            .sqrt();
-        // A blob only where the particles fill it: no wider than their own volume's
-        // sphere (N particles of radius s / 2 fill one of radius (s / 2)·∛N), with slack.
-        let filled = rms <= 1.25 * particle * (m.len() as f64).cbrt();
-        if m.len() >= 4 && far <= rms + spacing && filled {
-            let d = spheres.len() as u32;
-            marks.extend(m.iter().map(|&i| (i as u32, d)));
-            spheres.push(Sphere {
-                centre: V3::from_f64(c),
-                radius: T::c(rms + particle),
-            });
-        } else {
-            for &i in m {
-                marks.push((i as u32, spheres.len() as u32));
+    for (m, kind) in components.iter().zip(kinds) {
+        match kind {
+            Spray::Surface => {}
+            Spray::Blob { centre, radius } => {
+                let d = spheres.len() as u32;
+                marks.extend(m.iter().map(|&i| (i as u32, d)));
                 spheres.push(Sphere {
-                    centre: V3::from_f64(points[i]),
-                    radius: T::c(particle),
+                    centre: V3::from_f64(centre),
+                    radius: T::c(radius),
                 });
+            }
+            Spray::Particles => {
+                for &i in *m {
+                    marks.push((i as u32, spheres.len() as u32));
+                    spheres.push(Sphere {
+                        centre: V3::from_f64(points[i]),
+                        radius: T::c(particle),
+                    });
+                }
             }
         }
     }
