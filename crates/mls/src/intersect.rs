@@ -6,7 +6,7 @@ use crate::frame::Frame;
 use crate::poly::Poly;
 use crate::real::{Real, V3};
 use crate::roots::first_root_in;
-use crate::support::{NormalsMode, support_normal, support_weighted, weight};
+use crate::support::{DataNormals, NormalsMode, support_normal, support_weighted, weight};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ray<T> {
@@ -178,12 +178,37 @@ pub fn initial_fit<T: Real>(
     params: &Params<T>,
     toward: V3<T>,
 ) -> Option<(V3<T>, Fit<T>)> {
+    initial_fit_with(
+        centre,
+        neighbours,
+        normals.map(DataNormals::Raw),
+        h,
+        params,
+        toward,
+        &mut Vec::new(),
+    )
+}
+
+/// [`initial_fit`] with the normals as the caller has them and a buffer for the weights, for
+/// a build that fits every point.
+pub(crate) fn initial_fit_with<T: Real>(
+    centre: V3<T>,
+    neighbours: &[V3<T>],
+    normals: Option<DataNormals<'_, T>>,
+    h: T,
+    params: &Params<T>,
+    toward: V3<T>,
+    weights: &mut Vec<T>,
+) -> Option<(V3<T>, Fit<T>)> {
     // The support plane and the fit weigh the same points from the same centre: once.
     let h2 = h * h;
-    let weights: Vec<T> = neighbours
-        .iter()
-        .map(|&p| weight((p - centre).length_squared(), h2))
-        .collect();
+    weights.clear();
+    weights.extend(
+        neighbours
+            .iter()
+            .map(|&p| weight((p - centre).length_squared(), h2)),
+    );
+    let weights = weights.as_slice();
     let weight_of = |j: usize, _| weights[j];
     let support = support_weighted(
         centre,

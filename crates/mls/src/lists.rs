@@ -200,10 +200,15 @@ pub(crate) fn neighbour_lists(
                         keys.resize(d2.len(), 0);
                         near.resize(d2.len(), 0);
                         let mut within = 0;
-                        for (k, &d) in d2.iter().enumerate() {
-                            keys[within] = d.to_bits();
-                            near[within] = k as u32;
-                            within += usize::from(d <= r2);
+                        {
+                            // Local slices: through the scratch's vectors, every store made
+                            // the compiler load their pointers and lengths again.
+                            let (keys, near) = (keys.as_mut_slice(), near.as_mut_slice());
+                            for (k, &d) in d2.iter().enumerate() {
+                                keys[within] = d.to_bits();
+                                near[within] = k as u32;
+                                within += usize::from(d <= r2);
+                            }
                         }
                         keys.truncate(within);
                         near.truncate(within);
@@ -223,6 +228,10 @@ pub(crate) fn neighbour_lists(
                         let link2 = link_distance2.map_or(-1.0, |f| f(i));
                         let mut far = 0.0f64;
                         let before = block.ids.len();
+                        let (d2, found, kept) =
+                            (d2.as_slice(), found.as_slice(), kept.as_mut_slice());
+                        let [nx, ny, nz] = [&normal_axes[0], &normal_axes[1], &normal_axes[2]]
+                            .map(|axis| axis.as_slice());
                         // Only those within reach, in index order.
                         for &k in near.iter() {
                             let (k, d) = (k as usize, d2[k as usize]);
@@ -235,9 +244,7 @@ pub(crate) fn neighbour_lists(
                             far = far.max(d);
                             // Thin sheets: a neighbour whose normal opposes the centre's is the
                             // other side.
-                            let dot = own[0] * normal_axes[0][k]
-                                + own[1] * normal_axes[1][k]
-                                + own[2] * normal_axes[2][k];
+                            let dot = own[0] * nx[k] + own[1] * ny[k] + own[2] * nz[k];
                             if dot < 0.0 {
                                 continue;
                             }

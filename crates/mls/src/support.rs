@@ -43,6 +43,26 @@ pub struct Support<T> {
     pub ambiguity: T,
 }
 
+/// The neighbours' data normals, as the caller has them.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum DataNormals<'a, T> {
+    /// As the data gives them: each is normalised where it is used, unusable ones skipped.
+    Raw(&'a [V3<T>]),
+    /// Normalised already by [`V3::normalized`], zero where that gave none: a build that fits
+    /// every point normalises each normal once instead of once per list it is in.
+    Unit(&'a [V3<T>]),
+}
+
+impl<T: Real> DataNormals<'_, T> {
+    /// Normal j normalised, or `None` where it is unusable.
+    fn unit(&self, j: usize) -> Option<V3<T>> {
+        match self {
+            DataNormals::Raw(ns) => ns.get(j).and_then(|n| n.normalized()),
+            DataNormals::Unit(ns) => ns.get(j).copied().filter(|n| *n != V3::zero()),
+        }
+    }
+}
+
 /// The support plane normal at `r` from the neighbours `points` (with `normals` if the data has
 /// them), smoothing length `h`. Without usable data normals the normal is turned toward
 /// `toward` (the ray origin). `None` when no point has weight at `r`.
@@ -55,9 +75,15 @@ pub fn support_normal<T: Real>(
     toward: V3<T>,
 ) -> Option<Support<T>> {
     let h2 = h * h;
-    support_weighted(r, points, normals, h, mode, toward, |_, q| {
-        weight(q.length_squared(), h2)
-    })
+    support_weighted(
+        r,
+        points,
+        normals.map(DataNormals::Raw),
+        h,
+        mode,
+        toward,
+        |_, q| weight(q.length_squared(), h2),
+    )
 }
 
 /// [`support_normal`] with the weight of point j (offset q = p_j − r) from `weight_of`, so
@@ -65,7 +91,7 @@ pub fn support_normal<T: Real>(
 pub(crate) fn support_weighted<T: Real>(
     r: V3<T>,
     points: &[V3<T>],
-    normals: Option<&[V3<T>]>,
+    normals: Option<DataNormals<'_, T>>,
     h: T,
     mode: NormalsMode,
     toward: V3<T>,
@@ -77,10 +103,7 @@ pub(crate) fn support_weighted<T: Real>(
     for (j, &p) in points.iter().enumerate() {
         let w = weight_of(j, p - r);
         weight_sum = weight_sum + w;
-        if let Some(n) = normals
-            .and_then(|ns| ns.get(j))
-            .and_then(|n| n.normalized())
-        {
+        if let Some(n) = normals.and_then(|ns| ns.unit(j)) {
             mean = mean + n * w;
             magnitude = magnitude + w;
         }
@@ -102,8 +125,8 @@ pub(crate) fn support_weighted<T: Real>(
     // Orientation: the weighted majority of the data normals, else toward the ray origin.
     let mut vote = T::zero();
     if let Some(ns) = normals {
-        for (j, (&p, n)) in points.iter().zip(ns).enumerate() {
-            if let Some(n) = n.normalized() {
+        for (j, &p) in points.iter().enumerate() {
+            if let Some(n) = ns.unit(j) {
                 let w = weight_of(j, p - r);
                 vote = vote + w * n.dot(normal).signum();
             }

@@ -11,12 +11,13 @@ use rayon::prelude::*;
 
 use crate::fit::FitStatus;
 use crate::grid::Grid;
-use crate::intersect::{Ball, Params, initial_fit};
+use crate::intersect::{Ball, Params, initial_fit_with};
 use crate::lists::{LIST_RUN, NeighbourLists, RunUnions, neighbour_lists};
 use crate::neighbours::Neighbours;
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
+use crate::support::DataNormals;
 use crate::support::NormalsMode;
 use crate::timing::StageClock;
 
@@ -319,12 +320,18 @@ impl<T: Real> SurfaceParts<T> {
             h_factor: T::one(),
         };
         let initial_fits = || -> (Vec<Ball<T>>, Vec<BallFit>) {
+            // Each normal normalised once here, not once for every list it is in.
+            let unit_nrm: Option<Vec<V3<T>>> = nrm.as_ref().map(|ns| {
+                ns.par_iter()
+                    .map(|n| n.normalized().unwrap_or(V3::zero()))
+                    .collect()
+            });
             (0..n)
                 .into_par_iter()
                 .map_init(
-                    || (Vec::new(), Vec::new()),
-                    |(np, nn), i| {
-                        gather(&pts, nrm.as_deref(), neighbours.of(i), np, nn);
+                    || (Vec::new(), Vec::new(), Vec::new()),
+                    |(np, nn, weights), i| {
+                        gather(&pts, unit_nrm.as_deref(), neighbours.of(i), np, nn);
                         let centre = pts[i];
                         // Without data normals the plane faces away from the set's centre.
                         let toward = centre * T::c(2.0);
@@ -336,13 +343,14 @@ impl<T: Real> SurfaceParts<T> {
                             normal,
                             poly,
                         };
-                        match initial_fit(
+                        match initial_fit_with(
                             centre,
                             np,
-                            nrm.as_ref().map(|_| nn.as_slice()),
+                            unit_nrm.as_ref().map(|_| DataNormals::Unit(nn.as_slice())),
                             hi,
                             &fit_params,
                             toward,
+                            weights,
                         ) {
                             Some((normal, f)) => (ball(normal, f.poly), BallFit::Fitted(f.status)),
                             None => (
