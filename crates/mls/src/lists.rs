@@ -65,6 +65,9 @@ impl RunUnions {
 /// Points per run of the lists stage (and per union in [`RunUnions`]).
 pub(crate) const LIST_RUN: usize = RUN;
 
+/// Points per block of the lists stage: its links come in one piece per block.
+pub(crate) const LIST_BLOCK: usize = RUN * RUNS_PER_BLOCK;
+
 /// kiddo's squared Euclidean distance, summed in its order, so that a list is the set its
 /// `within` query would return.
 #[inline(always)]
