@@ -303,6 +303,18 @@ impl<T: Real> SurfaceParts<T> {
         );
         clock.lap("neighbour lists");
 
+        // Spray first, from the lists alone and on every core: the fits do not need it, but the
+        // work beside them does, and beside the fits it would get too few cores to keep up.
+        let droplets_start = std::time::Instant::now();
+        let (spheres, droplet_of) = droplets::<T>(
+            &rel,
+            &links,
+            &ball_h,
+            &nearest,
+            dense_spacing,
+            params.droplet_below,
+        );
+        let droplets_seconds = droplets_start.elapsed().as_secs_f64();
         let to_t = |p: [f64; 3]| V3::<T>::from_f64(p);
         let fits_start = std::time::Instant::now();
         let pts: Vec<V3<T>> = rel.par_iter().map(|p| to_t(*p)).collect();
@@ -361,43 +373,26 @@ impl<T: Real> SurfaceParts<T> {
                 )
                 .unzip()
         };
-        // Spray is found from the lists alone: beside the fits, whose cores it shares.
-        let find_droplets = || {
-            droplets::<T>(
-                &rel,
-                &links,
-                &ball_h,
-                &nearest,
-                dense_spacing,
-                params.droplet_below,
-            )
-        };
-        let (
-            (balls, mut ball_fits, fits_seconds),
-            (spheres, droplet_of, droplets_seconds, beside_result),
-        ) = rayon::join(
+        // The fits, and beside them the caller's work on the spray (a bake's BVH): obvhs leaves
+        // cores idle that the fits take.
+        let ((balls, mut ball_fits, fits_seconds), beside_result) = rayon::join(
             || {
                 // From before the conversions above, which only the fits wait for.
                 let (balls, fits) = initial_fits();
                 (balls, fits, fits_start.elapsed().as_secs_f64())
             },
             || {
-                let start = std::time::Instant::now();
-                let (spheres, marks) = find_droplets();
-                let seconds = start.elapsed().as_secs_f64();
-                let result = beside(BesideFits {
+                beside(BesideFits {
                     points: &rel,
                     radii: &radii,
-                    droplet_of: &marks,
+                    droplet_of: &droplet_of,
                     spheres: &spheres,
-                });
-                (spheres, marks, seconds, result)
+                })
             },
         );
         for &(i, d) in &droplet_of {
             ball_fits[i as usize] = BallFit::Droplet(d);
         }
-        // Each side's own wall time: the two ran at once.
         clock.extend(&[
             ("initial fits", fits_seconds),
             ("droplets", droplets_seconds),
