@@ -116,9 +116,9 @@ pub struct BakeConfig {
     pub jobs_chosen: Option<String>,
 }
 
-/// Peak memory of a bake per point of the step, measured: a 100k-point sphere step peaked at
-/// 188 MB resident and a 400k one at 682 MB (`/usr/bin/time -v slosh bake … --jobs 1`), about
-/// 1.65 KB per point over a base of 23 MB; with headroom.
+/// Peak memory of a bake per point of the step, measured: sphere steps of 100k, 400k and 1M
+/// points peaked at 177 MB, 679 MB and 1.55 GB resident (`/usr/bin/time -v slosh bake …
+/// --jobs 1`), about 1.52 KB per point over a base of 25 MB; with headroom.
 const BAKE_BYTES_PER_POINT: u64 = 2048;
 const BAKE_BASE_BYTES: u64 = 64 << 20;
 
