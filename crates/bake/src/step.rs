@@ -46,28 +46,28 @@ pub struct BakedStep {
     pub sections: Vec<SectionInput>,
 }
 
-/// The BVH over every ball that `is_candidate` keeps (in index order), then the droplet
+/// The BVH's items: every ball that `is_candidate` keeps (in index order), then the droplet
 /// spheres (ids after the balls').
-fn build_bvh(
+fn bvh_items(
     is_candidate: impl Fn(usize) -> bool + Sync,
     centre: impl Fn(usize) -> [f64; 3] + Sync,
     radii: &[f64],
     spheres: &[Sphere<f64>],
-) -> slosh_cache::Bvh {
+) -> Vec<(u32, [f64; 3], f64)> {
     let n = radii.len();
-    let mut candidates: Vec<(u32, [f64; 3], f64)> = (0..n)
+    let mut items: Vec<(u32, [f64; 3], f64)> = (0..n)
         .into_par_iter()
         .filter(|&i| is_candidate(i))
         .map(|i| (i as u32, centre(i), radii[i]))
         .collect();
     for (d, s) in spheres.iter().enumerate() {
-        candidates.push((
+        items.push((
             (n + d) as u32,
             [s.centre.x, s.centre.y, s.centre.z],
             s.radius,
         ));
     }
-    crate::bvh::build(&candidates)
+    items
 }
 
 fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
@@ -186,194 +186,210 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         .as_deref()
         .and_then(|ns| slosh_mls::guess_up(&local, ns));
 
-    // 4–8. kNN, radii, neighbour lists, initial fits, droplets, and the BVH over fitted balls
-    // and droplet spheres, built beside the fits: obvhs leaves cores idle that the fits take.
-    // It is built before the fits are known, on the guess that every ball outside the spray
-    // gets one; the rare step where some ball has none builds it again.
-    let speculative_bvh = |beside: BesideFits<'_, f64>| {
-        let start = std::time::Instant::now();
-        let mut spray = vec![false; beside.points.len()];
-        for &(i, _) in beside.droplet_of {
-            spray[i as usize] = true;
-        }
-        let bvh = build_bvh(
-            |i| !spray[i],
-            |i| beside.points[i],
-            beside.radii,
-            beside.spheres,
-        );
-        (bvh, start.elapsed().as_secs_f64())
-    };
-    let (surface, build_laps, (bvh, bvh_seconds)) =
-        SurfaceParts::<f64>::build_with(&local, normals.as_deref(), &params.mls, speculative_bvh)
-            .map_err(|source| BakeError::Surface { step, source })?;
-    clock.extend(&build_laps);
-    let n = surface.len();
-    let (bvh, bvh_seconds) = if surface.ball_fits.par_iter().any(|f| *f == BallFit::None) {
-        let start = std::time::Instant::now();
-        let bvh = build_bvh(
-            |i| matches!(surface.ball_fits[i], BallFit::Fitted(_)),
-            |i| {
-                let c = surface.points[i];
-                [c.x, c.y, c.z]
-            },
-            &surface.radii,
-            &surface.spheres,
-        );
-        (bvh, bvh_seconds + start.elapsed().as_secs_f64())
-    } else {
-        (bvh, bvh_seconds)
-    };
-
     // Structs shuffled by their own size: a field's sign and exponent bytes side by side, a
     // padding or unused field one run of zeros (`docs/cache-format.md`).
     let by_element = |element: Element| Encoding::shuffled_elements(element.size());
-    // Sections, in the GPU layouts (the BVH's are added once it is built).
-    let prepare_sections = || -> Result<_, BakeError> {
-        let start = std::time::Instant::now();
-        let f32x3 = |v: slosh_mls::V3<f64>| [v.x as f32, v.y as f32, v.z as f32];
-        let points: Vec<GpuPoint> = (0..n)
-            .into_par_iter()
-            .map(|i| GpuPoint {
-                position: f32x3(surface.points[i]),
-                radius: surface.radii[i] as f32,
-            })
-            .collect();
-        // Fits and normals at the stored precision (`docs/cache-format.md`, "Stored precision").
-        let rounded = |v: f32| slosh_cache::round_mantissa(v, params.mantissa_bits);
-        let balls: Vec<GpuBall> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let b = &surface.balls[i];
-                let (kind, sphere) = match surface.ball_fits[i] {
-                    BallFit::Fitted(FitStatus::Full) => (BallState::Full, 0),
-                    BallFit::Fitted(FitStatus::Degraded { .. }) => (BallState::Degraded, 0),
-                    BallFit::Fitted(FitStatus::Failed) | BallFit::None => (BallState::Unfitted, 0),
-                    BallFit::Droplet(d) => (BallState::Droplet, d),
-                };
-                GpuBall {
-                    normal: f32x3(b.normal).map(rounded),
-                    h: b.h as f32,
-                    coeffs: b.poly.c.map(|c| rounded(c as f32)),
-                    degree: u32::from(b.poly.degree),
-                    state: GpuBall::state_word(kind, sphere),
-                }
-            })
-            .collect();
-        // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
-        // rounded up to f32 keeps every stored list within its distance filter.
-        let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
-        // The reach as f32, raised where needed so that the expansion, which measures distances
-        // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
-        let stored: Vec<slosh_mls::V3<f32>> = points
-            .par_iter()
-            .map(|p| slosh_mls::V3::new(p.position[0], p.position[1], p.position[2]))
-            .collect();
-        let reach: Vec<f32> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let far2 = surface
-                    .neighbours_of(i)
-                    .iter()
-                    .map(|&j| (stored[j as usize] - stored[i]).length_squared())
-                    .fold(0.0f32, f32::max);
-                let mut r = (surface.reach[i] as f32).max(far2.sqrt());
-                while r * r < far2 || f64::from(r) < surface.reach[i] {
-                    r = r.next_up();
-                }
-                r
-            })
-            .collect();
-        let spheres: Vec<GpuSphere> = surface
-            .spheres
-            .iter()
-            .map(|s| GpuSphere {
-                centre: f32x3(s.centre),
-                radius: s.radius as f32,
-            })
-            .collect();
-        let mut sections = vec![
-            SectionInput::new(
-                names::POINTS,
-                Element::Point,
-                &points,
-                by_element(Element::Point),
-            ),
-            SectionInput::new(
-                names::BALLS,
-                Element::Ball,
-                &balls,
-                by_element(Element::Ball),
-            ),
-            SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
-            SectionInput::new(
-                names::CLUSTER_START,
-                Element::U32,
-                &cluster_start,
-                Encoding::Delta4Shuffle4Zstd,
-            ),
-            SectionInput::new(
-                names::CLUSTER_NEIGHBOURS,
-                Element::U32,
-                &cluster_ids,
-                Encoding::Delta4Shuffle4Zstd,
-            ),
-            SectionInput::new(
-                names::SPHERES,
-                Element::Sphere,
-                &spheres,
-                by_element(Element::Sphere),
-            ),
-        ];
-        if let Some(ns) = &surface.normals {
-            let normals: Vec<GpuNormal> = ns
-                .par_iter()
-                .map(|v| GpuNormal {
-                    normal: f32x3(*v).map(rounded),
-                    pad: 0.0,
-                })
-                .collect();
-            sections.insert(
-                1,
-                SectionInput::new(
-                    names::NORMALS,
-                    Element::Normal,
-                    &normals,
-                    by_element(Element::Normal),
-                ),
+
+    // 4–8. kNN, radii, neighbour lists, initial fits, droplets, and the BVH over fitted balls
+    // and droplet spheres, started as soon as the spray is known and left to run beside the
+    // fits and the sections' arrays: obvhs leaves cores idle that they take. It is built
+    // before the fits are known, on the guess that every ball outside the spray gets one; the
+    // rare step where some ball has none builds it again.
+    let speculative: std::sync::Mutex<Option<(slosh_cache::Bvh, f64)>> = Default::default();
+    let built = rayon::scope(|scope| {
+        let start_bvh = |beside: BesideFits<'_, f64>| {
+            let start = std::time::Instant::now();
+            let mut spray = vec![false; beside.points.len()];
+            for &(i, _) in beside.droplet_of {
+                spray[i as usize] = true;
+            }
+            let items = bvh_items(
+                |i| !spray[i],
+                |i| beside.points[i],
+                beside.radii,
+                beside.spheres,
             );
-        }
-        let mut fields = Vec::with_capacity(params.fields.len());
-        for name in &params.fields {
-            let values = input
-                .fields
-                .iter()
-                .find(|(n, _)| n == name)
-                .map(|(_, v)| v)
-                .ok_or_else(|| input_err(format!("field '{name}' was not read")))?;
-            let section = format!("{}{name}", names::FIELD_PREFIX);
-            fields.push(match values {
-                FieldValues::Scalar(v) => SectionInput::new(
-                    &section,
-                    Element::F32,
-                    &permute(v, &source_index),
-                    Encoding::Shuffle4Zstd,
-                ),
-                FieldValues::Vector(v) => {
-                    let vec4: Vec<[f32; 4]> = source_index
-                        .par_iter()
-                        .map(|&i| {
-                            let x = v[i as usize];
-                            [x[0], x[1], x[2], 0.0]
-                        })
-                        .collect();
-                    SectionInput::new(&section, Element::Vec4, &vec4, by_element(Element::Vec4))
+            let slot = &speculative;
+            scope.spawn(move |_| {
+                let bvh = crate::bvh::build(&items);
+                if let Ok(mut slot) = slot.lock() {
+                    *slot = Some((bvh, start.elapsed().as_secs_f64()));
                 }
             });
+        };
+        let (surface, build_laps, ()) =
+            SurfaceParts::<f64>::build_with(&local, normals.as_deref(), &params.mls, start_bvh)
+                .map_err(|source| BakeError::Surface { step, source })?;
+        let n = surface.len();
+        // Sections, in the GPU layouts (the BVH's are added once it is built).
+        let prepare_sections = || -> Result<_, BakeError> {
+            let start = std::time::Instant::now();
+            let f32x3 = |v: slosh_mls::V3<f64>| [v.x as f32, v.y as f32, v.z as f32];
+            let points: Vec<GpuPoint> = (0..n)
+                .into_par_iter()
+                .map(|i| GpuPoint {
+                    position: f32x3(surface.points[i]),
+                    radius: surface.radii[i] as f32,
+                })
+                .collect();
+            // Fits and normals at the stored precision (`docs/cache-format.md`, "Stored precision").
+            let rounded = |v: f32| slosh_cache::round_mantissa(v, params.mantissa_bits);
+            let balls: Vec<GpuBall> = (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let b = &surface.balls[i];
+                    let (kind, sphere) = match surface.ball_fits[i] {
+                        BallFit::Fitted(FitStatus::Full) => (BallState::Full, 0),
+                        BallFit::Fitted(FitStatus::Degraded { .. }) => (BallState::Degraded, 0),
+                        BallFit::Fitted(FitStatus::Failed) | BallFit::None => {
+                            (BallState::Unfitted, 0)
+                        }
+                        BallFit::Droplet(d) => (BallState::Droplet, d),
+                    };
+                    GpuBall {
+                        normal: f32x3(b.normal).map(rounded),
+                        h: b.h as f32,
+                        coeffs: b.poly.c.map(|c| rounded(c as f32)),
+                        degree: u32::from(b.poly.degree),
+                        state: GpuBall::state_word(kind, sphere),
+                    }
+                })
+                .collect();
+            // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
+            // rounded up to f32 keeps every stored list within its distance filter.
+            let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
+            // The reach as f32, raised where needed so that the expansion, which measures distances
+            // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
+            let stored: Vec<slosh_mls::V3<f32>> = points
+                .par_iter()
+                .map(|p| slosh_mls::V3::new(p.position[0], p.position[1], p.position[2]))
+                .collect();
+            let reach: Vec<f32> = (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let far2 = surface
+                        .neighbours_of(i)
+                        .iter()
+                        .map(|&j| (stored[j as usize] - stored[i]).length_squared())
+                        .fold(0.0f32, f32::max);
+                    let mut r = (surface.reach[i] as f32).max(far2.sqrt());
+                    while r * r < far2 || f64::from(r) < surface.reach[i] {
+                        r = r.next_up();
+                    }
+                    r
+                })
+                .collect();
+            let spheres: Vec<GpuSphere> = surface
+                .spheres
+                .iter()
+                .map(|s| GpuSphere {
+                    centre: f32x3(s.centre),
+                    radius: s.radius as f32,
+                })
+                .collect();
+            let mut sections = vec![
+                SectionInput::new(
+                    names::POINTS,
+                    Element::Point,
+                    &points,
+                    by_element(Element::Point),
+                ),
+                SectionInput::new(
+                    names::BALLS,
+                    Element::Ball,
+                    &balls,
+                    by_element(Element::Ball),
+                ),
+                SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
+                SectionInput::new(
+                    names::CLUSTER_START,
+                    Element::U32,
+                    &cluster_start,
+                    Encoding::Delta4Shuffle4Zstd,
+                ),
+                SectionInput::new(
+                    names::CLUSTER_NEIGHBOURS,
+                    Element::U32,
+                    &cluster_ids,
+                    Encoding::Delta4Shuffle4Zstd,
+                ),
+                SectionInput::new(
+                    names::SPHERES,
+                    Element::Sphere,
+                    &spheres,
+                    by_element(Element::Sphere),
+                ),
+            ];
+            if let Some(ns) = &surface.normals {
+                let normals: Vec<GpuNormal> = ns
+                    .par_iter()
+                    .map(|v| GpuNormal {
+                        normal: f32x3(*v).map(rounded),
+                        pad: 0.0,
+                    })
+                    .collect();
+                sections.insert(
+                    1,
+                    SectionInput::new(
+                        names::NORMALS,
+                        Element::Normal,
+                        &normals,
+                        by_element(Element::Normal),
+                    ),
+                );
+            }
+            let mut fields = Vec::with_capacity(params.fields.len());
+            for name in &params.fields {
+                let values = input
+                    .fields
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .map(|(_, v)| v)
+                    .ok_or_else(|| input_err(format!("field '{name}' was not read")))?;
+                let section = format!("{}{name}", names::FIELD_PREFIX);
+                fields.push(match values {
+                    FieldValues::Scalar(v) => SectionInput::new(
+                        &section,
+                        Element::F32,
+                        &permute(v, &source_index),
+                        Encoding::Shuffle4Zstd,
+                    ),
+                    FieldValues::Vector(v) => {
+                        let vec4: Vec<[f32; 4]> = source_index
+                            .par_iter()
+                            .map(|&i| {
+                                let x = v[i as usize];
+                                [x[0], x[1], x[2], 0.0]
+                            })
+                            .collect();
+                        SectionInput::new(&section, Element::Vec4, &vec4, by_element(Element::Vec4))
+                    }
+                });
+            }
+            Ok((sections, fields, start.elapsed().as_secs_f64()))
+        };
+        let (sections, fields, sections_seconds) = prepare_sections()?;
+        Ok((surface, build_laps, sections, fields, sections_seconds))
+    });
+    let (surface, build_laps, mut sections, fields, sections_seconds) = built?;
+    clock.extend(&build_laps);
+    let n = surface.len();
+    let (bvh, bvh_seconds) = match speculative.into_inner().ok().flatten() {
+        Some(built) if !surface.ball_fits.par_iter().any(|f| *f == BallFit::None) => built,
+        _ => {
+            let start = std::time::Instant::now();
+            let items = bvh_items(
+                |i| matches!(surface.ball_fits[i], BallFit::Fitted(_)),
+                |i| {
+                    let c = surface.points[i];
+                    [c.x, c.y, c.z]
+                },
+                &surface.radii,
+                &surface.spheres,
+            );
+            (crate::bvh::build(&items), start.elapsed().as_secs_f64())
         }
-        Ok((sections, fields, start.elapsed().as_secs_f64()))
     };
-    let (mut sections, fields, sections_seconds) = prepare_sections()?;
     // After the spheres, before the fields: the order every cache has had.
     sections.push(SectionInput::new(
         names::BVH_NODES,
