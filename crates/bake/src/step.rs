@@ -70,6 +70,167 @@ fn bvh_items(
     items
 }
 
+/// Structs shuffled by their own size: a field's sign and exponent bytes side by side, a
+/// padding or unused field one run of zeros (`docs/cache-format.md`).
+fn by_element(element: Element) -> Encoding {
+    Encoding::shuffled_elements(element.size())
+}
+
+/// A step's sections in the GPU layouts, but for the BVH's, and its field sections.
+fn gpu_sections(
+    surface: &SurfaceParts<f64>,
+    input: &StepInput,
+    source_index: &[u32],
+    params: &BakeParams,
+) -> Result<(Vec<SectionInput>, Vec<SectionInput>), BakeError> {
+    let n = surface.len();
+    let input_err = |problem: String| BakeError::Input {
+        step: input.index,
+        problem,
+    };
+    let f32x3 = |v: slosh_mls::V3<f64>| [v.x as f32, v.y as f32, v.z as f32];
+    let points: Vec<GpuPoint> = (0..n)
+        .into_par_iter()
+        .map(|i| GpuPoint {
+            position: f32x3(surface.points[i]),
+            radius: surface.radii[i] as f32,
+        })
+        .collect();
+    // Fits and normals at the stored precision (`docs/cache-format.md`, "Stored precision").
+    let rounded = |v: f32| slosh_cache::round_mantissa(v, params.mantissa_bits);
+    let balls: Vec<GpuBall> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let b = &surface.balls[i];
+            let (kind, sphere) = match surface.ball_fits[i] {
+                BallFit::Fitted(FitStatus::Full) => (BallState::Full, 0),
+                BallFit::Fitted(FitStatus::Degraded { .. }) => (BallState::Degraded, 0),
+                BallFit::Fitted(FitStatus::Failed) | BallFit::None => (BallState::Unfitted, 0),
+                BallFit::Droplet(d) => (BallState::Droplet, d),
+            };
+            GpuBall {
+                normal: f32x3(b.normal).map(rounded),
+                h: b.h as f32,
+                coeffs: b.poly.c.map(|c| rounded(c as f32)),
+                degree: u32::from(b.poly.degree),
+                state: GpuBall::state_word(kind, sphere),
+            }
+        })
+        .collect();
+    // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
+    // rounded up to f32 keeps every stored list within its distance filter.
+    let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
+    // The reach as f32, raised where needed so that the expansion, which measures distances
+    // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
+    let stored: Vec<slosh_mls::V3<f32>> = points
+        .par_iter()
+        .map(|p| slosh_mls::V3::new(p.position[0], p.position[1], p.position[2]))
+        .collect();
+    let reach: Vec<f32> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let far2 = surface
+                .neighbours_of(i)
+                .iter()
+                .map(|&j| (stored[j as usize] - stored[i]).length_squared())
+                .fold(0.0f32, f32::max);
+            let mut r = (surface.reach[i] as f32).max(far2.sqrt());
+            while r * r < far2 || f64::from(r) < surface.reach[i] {
+                r = r.next_up();
+            }
+            r
+        })
+        .collect();
+    let spheres: Vec<GpuSphere> = surface
+        .spheres
+        .iter()
+        .map(|s| GpuSphere {
+            centre: f32x3(s.centre),
+            radius: s.radius as f32,
+        })
+        .collect();
+    let mut sections = vec![
+        SectionInput::new(
+            names::POINTS,
+            Element::Point,
+            &points,
+            by_element(Element::Point),
+        ),
+        SectionInput::new(
+            names::BALLS,
+            Element::Ball,
+            &balls,
+            by_element(Element::Ball),
+        ),
+        SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
+        SectionInput::new(
+            names::CLUSTER_START,
+            Element::U32,
+            &cluster_start,
+            Encoding::Delta4Shuffle4Zstd,
+        ),
+        SectionInput::new(
+            names::CLUSTER_NEIGHBOURS,
+            Element::U32,
+            &cluster_ids,
+            Encoding::Delta4Shuffle4Zstd,
+        ),
+        SectionInput::new(
+            names::SPHERES,
+            Element::Sphere,
+            &spheres,
+            by_element(Element::Sphere),
+        ),
+    ];
+    if let Some(ns) = &surface.normals {
+        let normals: Vec<GpuNormal> = ns
+            .par_iter()
+            .map(|v| GpuNormal {
+                normal: f32x3(*v).map(rounded),
+                pad: 0.0,
+            })
+            .collect();
+        sections.insert(
+            1,
+            SectionInput::new(
+                names::NORMALS,
+                Element::Normal,
+                &normals,
+                by_element(Element::Normal),
+            ),
+        );
+    }
+    let mut fields = Vec::with_capacity(params.fields.len());
+    for name in &params.fields {
+        let values = input
+            .fields
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v)
+            .ok_or_else(|| input_err(format!("field '{name}' was not read")))?;
+        let section = format!("{}{name}", names::FIELD_PREFIX);
+        fields.push(match values {
+            FieldValues::Scalar(v) => SectionInput::new(
+                &section,
+                Element::F32,
+                &permute(v, source_index),
+                Encoding::Shuffle4Zstd,
+            ),
+            FieldValues::Vector(v) => {
+                let vec4: Vec<[f32; 4]> = source_index
+                    .par_iter()
+                    .map(|&i| {
+                        let x = v[i as usize];
+                        [x[0], x[1], x[2], 0.0]
+                    })
+                    .collect();
+                SectionInput::new(&section, Element::Vec4, &vec4, by_element(Element::Vec4))
+            }
+        });
+    }
+    Ok((sections, fields))
+}
+
 fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
     order.par_iter().map(|&i| values[i as usize]).collect()
 }
@@ -186,10 +347,6 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         .as_deref()
         .and_then(|ns| slosh_mls::guess_up(&local, ns));
 
-    // Structs shuffled by their own size: a field's sign and exponent bytes side by side, a
-    // padding or unused field one run of zeros (`docs/cache-format.md`).
-    let by_element = |element: Element| Encoding::shuffled_elements(element.size());
-
     // 4–8. kNN, radii, neighbour lists, initial fits, droplets, and the BVH over fitted balls
     // and droplet spheres, started as soon as the spray is known and left to run beside the
     // fits and the sections' arrays: obvhs leaves cores idle that they take. It is built
@@ -217,158 +374,13 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                 }
             });
         };
-        let (surface, build_laps, ()) =
+        let (surface, build_laps) =
             SurfaceParts::<f64>::build_with(&local, normals.as_deref(), &params.mls, start_bvh)
                 .map_err(|source| BakeError::Surface { step, source })?;
-        let n = surface.len();
         // Sections, in the GPU layouts (the BVH's are added once it is built).
-        let prepare_sections = || -> Result<_, BakeError> {
-            let start = std::time::Instant::now();
-            let f32x3 = |v: slosh_mls::V3<f64>| [v.x as f32, v.y as f32, v.z as f32];
-            let points: Vec<GpuPoint> = (0..n)
-                .into_par_iter()
-                .map(|i| GpuPoint {
-                    position: f32x3(surface.points[i]),
-                    radius: surface.radii[i] as f32,
-                })
-                .collect();
-            // Fits and normals at the stored precision (`docs/cache-format.md`, "Stored precision").
-            let rounded = |v: f32| slosh_cache::round_mantissa(v, params.mantissa_bits);
-            let balls: Vec<GpuBall> = (0..n)
-                .into_par_iter()
-                .map(|i| {
-                    let b = &surface.balls[i];
-                    let (kind, sphere) = match surface.ball_fits[i] {
-                        BallFit::Fitted(FitStatus::Full) => (BallState::Full, 0),
-                        BallFit::Fitted(FitStatus::Degraded { .. }) => (BallState::Degraded, 0),
-                        BallFit::Fitted(FitStatus::Failed) | BallFit::None => {
-                            (BallState::Unfitted, 0)
-                        }
-                        BallFit::Droplet(d) => (BallState::Droplet, d),
-                    };
-                    GpuBall {
-                        normal: f32x3(b.normal).map(rounded),
-                        h: b.h as f32,
-                        coeffs: b.poly.c.map(|c| rounded(c as f32)),
-                        degree: u32::from(b.poly.degree),
-                        state: GpuBall::state_word(kind, sphere),
-                    }
-                })
-                .collect();
-            // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
-            // rounded up to f32 keeps every stored list within its distance filter.
-            let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
-            // The reach as f32, raised where needed so that the expansion, which measures distances
-            // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
-            let stored: Vec<slosh_mls::V3<f32>> = points
-                .par_iter()
-                .map(|p| slosh_mls::V3::new(p.position[0], p.position[1], p.position[2]))
-                .collect();
-            let reach: Vec<f32> = (0..n)
-                .into_par_iter()
-                .map(|i| {
-                    let far2 = surface
-                        .neighbours_of(i)
-                        .iter()
-                        .map(|&j| (stored[j as usize] - stored[i]).length_squared())
-                        .fold(0.0f32, f32::max);
-                    let mut r = (surface.reach[i] as f32).max(far2.sqrt());
-                    while r * r < far2 || f64::from(r) < surface.reach[i] {
-                        r = r.next_up();
-                    }
-                    r
-                })
-                .collect();
-            let spheres: Vec<GpuSphere> = surface
-                .spheres
-                .iter()
-                .map(|s| GpuSphere {
-                    centre: f32x3(s.centre),
-                    radius: s.radius as f32,
-                })
-                .collect();
-            let mut sections = vec![
-                SectionInput::new(
-                    names::POINTS,
-                    Element::Point,
-                    &points,
-                    by_element(Element::Point),
-                ),
-                SectionInput::new(
-                    names::BALLS,
-                    Element::Ball,
-                    &balls,
-                    by_element(Element::Ball),
-                ),
-                SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
-                SectionInput::new(
-                    names::CLUSTER_START,
-                    Element::U32,
-                    &cluster_start,
-                    Encoding::Delta4Shuffle4Zstd,
-                ),
-                SectionInput::new(
-                    names::CLUSTER_NEIGHBOURS,
-                    Element::U32,
-                    &cluster_ids,
-                    Encoding::Delta4Shuffle4Zstd,
-                ),
-                SectionInput::new(
-                    names::SPHERES,
-                    Element::Sphere,
-                    &spheres,
-                    by_element(Element::Sphere),
-                ),
-            ];
-            if let Some(ns) = &surface.normals {
-                let normals: Vec<GpuNormal> = ns
-                    .par_iter()
-                    .map(|v| GpuNormal {
-                        normal: f32x3(*v).map(rounded),
-                        pad: 0.0,
-                    })
-                    .collect();
-                sections.insert(
-                    1,
-                    SectionInput::new(
-                        names::NORMALS,
-                        Element::Normal,
-                        &normals,
-                        by_element(Element::Normal),
-                    ),
-                );
-            }
-            let mut fields = Vec::with_capacity(params.fields.len());
-            for name in &params.fields {
-                let values = input
-                    .fields
-                    .iter()
-                    .find(|(n, _)| n == name)
-                    .map(|(_, v)| v)
-                    .ok_or_else(|| input_err(format!("field '{name}' was not read")))?;
-                let section = format!("{}{name}", names::FIELD_PREFIX);
-                fields.push(match values {
-                    FieldValues::Scalar(v) => SectionInput::new(
-                        &section,
-                        Element::F32,
-                        &permute(v, &source_index),
-                        Encoding::Shuffle4Zstd,
-                    ),
-                    FieldValues::Vector(v) => {
-                        let vec4: Vec<[f32; 4]> = source_index
-                            .par_iter()
-                            .map(|&i| {
-                                let x = v[i as usize];
-                                [x[0], x[1], x[2], 0.0]
-                            })
-                            .collect();
-                        SectionInput::new(&section, Element::Vec4, &vec4, by_element(Element::Vec4))
-                    }
-                });
-            }
-            Ok((sections, fields, start.elapsed().as_secs_f64()))
-        };
-        let (sections, fields, sections_seconds) = prepare_sections()?;
+        let sections_start = std::time::Instant::now();
+        let (sections, fields) = gpu_sections(&surface, input, &source_index, params)?;
+        let sections_seconds = sections_start.elapsed().as_secs_f64();
         Ok((surface, build_laps, sections, fields, sections_seconds))
     });
     let (surface, build_laps, mut sections, fields, sections_seconds) = built?;

@@ -16,8 +16,7 @@ use crate::neighbours::Neighbours;
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
-use crate::support::DataNormals;
-use crate::support::NormalsMode;
+use crate::support::{DataNormals, NormalsMode};
 use crate::timing::StageClock;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -113,7 +112,7 @@ pub struct SurfaceParts<T> {
     pub h: T,
     /// Mean distance to the nearest other point.
     pub spacing: T,
-    /// CSR neighbour lists: the neighbours of point i are `neighbours[start[i]..start[i + 1]]`.
+    /// Every point's neighbour list: point i's is `neighbours.of(i)`.
     pub neighbours: Neighbours,
     /// How far each point's neighbour list reaches: ρ_i + support·h_i, or the distance of the
     /// farthest neighbour kept where the cap cut the list.
@@ -175,7 +174,7 @@ impl<T: Real> SurfaceParts<T> {
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
     ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
-        Self::build_with(points, normals, params, |_| ()).map(|(parts, laps, ())| (parts, laps))
+        Self::build_with(points, normals, params, |_| {})
     }
 
     /// [`SurfaceParts::build`], running `beside` on the points, radii and spray as soon as
@@ -183,12 +182,12 @@ impl<T: Real> SurfaceParts<T> {
     /// not the fits (a bake's BVH) takes the cores the fits leave idle instead of waiting for
     /// them.
     #[allow(clippy::type_complexity)]
-    pub fn build_with<R: Send>(
+    pub fn build_with(
         points: &[[f64; 3]],
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
-        beside: impl FnOnce(BesideFits<'_, T>) -> R + Send,
-    ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>, R), SurfaceError> {
+        beside: impl FnOnce(BesideFits<'_, T>) + Send,
+    ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
         if points.len() < 2 {
             return Err(SurfaceError::TooFew(points.len()));
         }
@@ -375,7 +374,7 @@ impl<T: Real> SurfaceParts<T> {
         };
         // The fits, and beside them the caller's work on the spray (a bake's BVH): obvhs leaves
         // cores idle that the fits take.
-        let ((balls, mut ball_fits, fits_seconds), beside_result) = rayon::join(
+        let ((balls, mut ball_fits, fits_seconds), ()) = rayon::join(
             || {
                 // From before the conversions above, which only the fits wait for.
                 let (balls, fits) = initial_fits();
@@ -414,7 +413,7 @@ impl<T: Real> SurfaceParts<T> {
             orientation,
             params: params.clone(),
         };
-        Ok((parts, clock.laps, beside_result))
+        Ok((parts, clock.laps))
     }
 
     pub fn len(&self) -> usize {
