@@ -549,6 +549,7 @@ fn scaling_and_series(
             out: dir.path().to_path_buf(),
             steps: None,
             jobs,
+            threads: cores,
             shard: Shard::WHOLE,
             params: params.clone(),
         };

@@ -122,10 +122,11 @@ pub struct BakeConfig {
 const BAKE_BYTES_PER_POINT: u64 = 2048;
 const BAKE_BASE_BYTES: u64 = 64 << 20;
 
-/// Steps baked at once by default: half the cores (a step is parallel inside, but not all of
-/// it, and its reading and writing are serial: on the 16-core H200 host a series of eight
-/// 1M-point steps took 13.4 s with 2 jobs, 11.3 s with 4 and 10.4 s with 8), no more than
-/// three quarters of the memory available hold, at least one.
+/// Steps baked at once by default, each on its share of the cores (`BatchOptions::threads`):
+/// half the cores (a step is parallel inside, but not all of it, and its reading and writing
+/// are serial: on the 16-core H200 host a series of eight 1M-point steps took 13.4 s with 2
+/// jobs, 11.3 s with 4 and 10.4 s with 8), no more than three quarters of the memory
+/// available hold, at least one.
 pub fn default_jobs(
     cores: usize,
     available: Option<u64>,
@@ -419,6 +420,7 @@ impl BakeConfig {
                 out,
                 steps,
                 jobs,
+                threads: cores,
                 shard: a
                     .shard
                     .as_deref()

@@ -72,6 +72,9 @@ pub struct BatchOptions {
     pub steps: Option<(usize, usize)>,
     /// Steps in flight at once (each is parallel inside).
     pub jobs: usize,
+    /// Threads of the whole bake. Each job bakes its steps on a pool of its own, an equal
+    /// share of them (at least one), so that steps in flight do not compete inside one pool.
+    pub threads: usize,
     pub shard: Shard,
     pub params: BakeParams,
 }
@@ -273,17 +276,33 @@ pub fn run_batch(
     refuse_mixing(&opts.out, &planned, &hash)?;
     let next = AtomicUsize::new(0);
     let report = Mutex::new(BatchReport::default());
-    // Plain threads pull steps; each step runs on the rayon pool. A rayon thread waiting inside
-    // one step could otherwise start another step, and memory would grow with the series.
+    // Plain threads pull steps; each runs its steps on a rayon pool of its own. A rayon thread
+    // waiting inside one step could otherwise start another step, and memory would grow with
+    // the series; and steps sharing one pool spread every stage over all cores, paying for its
+    // splitting and stealing, where a pool per job keeps each step on its share (16 steps of
+    // 1M points on the 16-core H200 host, 8 jobs: 23.1 and 21.2 s shared, 19.5 and 16.8 s).
+    let jobs = opts.jobs.clamp(1, planned.len().max(1));
     std::thread::scope(|scope| {
-        for _ in 0..opts.jobs.max(1) {
-            scope.spawn(|| {
+        for job in 0..jobs {
+            let threads = opts.threads / jobs + usize::from(job < opts.threads % jobs);
+            // A pool that cannot be made leaves the job on the global pool.
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.max(1))
+                .thread_name(move |t| format!("bake-{job}-{t}"))
+                .build()
+                .ok();
+            let (next, report, planned, hash) = (&next, &report, &planned, &hash);
+            scope.spawn(move || {
                 loop {
                     let k = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&(index, _)) = planned.get(k) else {
                         break;
                     };
-                    let outcome = bake_one(source, index, opts, &hash);
+                    let bake = || bake_one(source, index, opts, hash);
+                    let outcome = match &pool {
+                        Some(pool) => pool.install(bake),
+                        None => bake(),
+                    };
                     {
                         let mut r = report.lock().unwrap_or_else(|p| p.into_inner());
                         match &outcome {

@@ -365,6 +365,7 @@ fn options(dir: &Path, shard: Shard) -> BatchOptions {
         out: dir.to_path_buf(),
         steps: None,
         jobs: 2,
+        threads: 2,
         shard,
         params: params(),
     }
@@ -435,4 +436,56 @@ fn batches_resume_shard_and_go_on_past_bad_steps() {
     assert!(problems.is_empty());
     assert_eq!(manifest.steps.len(), 6);
     assert_eq!(section_sums(&single, 6), section_sums(&sharded, 6));
+}
+
+/// A series that records the size of the rayon pool each step is read on.
+struct PoolSizes {
+    steps: usize,
+    seen: std::sync::Mutex<Vec<(usize, usize)>>,
+}
+
+impl StepSource for PoolSizes {
+    fn steps(&self) -> Vec<(usize, f64)> {
+        (0..self.steps).map(|i| (i, i as f64)).collect()
+    }
+    fn read(&self, index: usize) -> Result<StepInput, String> {
+        let threads = rayon::current_num_threads();
+        self.seen.lock().unwrap().push((index, threads));
+        // Long enough that no job bakes every step before the others have started.
+        std::thread::sleep(std::time::Duration::from_millis(30));
+        Ok(scene_input(SceneKind::Sphere, 200, index).1)
+    }
+}
+
+/// Each job bakes on a pool of its own, an equal share of the threads (the remainder to the
+/// first jobs); with fewer steps than jobs, fewer jobs with larger shares.
+#[test]
+fn each_job_bakes_on_its_share_of_the_threads() {
+    for (steps, jobs, threads, shares) in [
+        (6, 2, 5, vec![2, 3]),
+        (6, 3, 3, vec![1]),
+        (1, 4, 5, vec![5]),
+        (2, 4, 5, vec![2, 3]),
+        (3, 8, 2, vec![1]),
+    ] {
+        let tmp = tempfile::tempdir().unwrap();
+        let source = PoolSizes {
+            steps,
+            seen: Default::default(),
+        };
+        let mut opts = options(tmp.path(), Shard::WHOLE);
+        opts.jobs = jobs;
+        opts.threads = threads;
+        let report = run_batch(&source, &opts, &|_| {}).unwrap();
+        assert_eq!(report.baked, steps);
+        let seen = source.seen.into_inner().unwrap();
+        assert_eq!(seen.len(), steps);
+        let mut sizes: Vec<usize> = seen.iter().map(|s| s.1).collect();
+        sizes.sort_unstable();
+        sizes.dedup();
+        assert_eq!(
+            sizes, shares,
+            "{steps} steps, {jobs} jobs, {threads} threads"
+        );
+    }
 }
