@@ -1,6 +1,6 @@
-//! Step 8 of the bake: a BVH2 over the candidates' boxes, built by obvhs (PLOC with
-//! reinsertion) and rewritten into the cache's node layout: children adjacent, root first,
-//! boxes rounded outward to f32.
+//! Step 8 of the bake: a BVH2 over the candidates' boxes, built by obvhs (PLOC pairing each
+//! cluster among its nearest neighbours in Morton order, then reinsertion) and rewritten into
+//! the cache's node layout: children adjacent, root first, boxes rounded outward to f32.
 
 use std::time::Duration;
 
@@ -8,6 +8,7 @@ use glam::Vec3A;
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
+use obvhs::ploc::PlocSearchDistance;
 use rayon::prelude::*;
 use slosh_cache::{Bvh, GpuBvhNode};
 
@@ -38,8 +39,16 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
             )
         })
         .collect();
+    // obvhs's fast preset, but PLOC searching one neighbour either side at every depth (its
+    // fast path) instead of a wider search near the root: balls of about one size tiling a
+    // surface gain nothing from the wider search. On the H200 host at 1M points the build
+    // took 218–274 ms on 16 threads (470–595 ms on 2) against 256–326 ms (560–736 ms), and
+    // frames traced faster (1 iteration, 1280×800: 0.890 ms against 0.942 ms), with 5 % more
+    // nodes.
     let params = BvhBuildParams {
         max_prims_per_leaf: MAX_LEAF_ITEMS,
+        ploc_search_distance: PlocSearchDistance::Minimum,
+        search_depth_threshold: 0,
         ..BvhBuildParams::fast_build()
     };
     let built = build_bvh2(&boxes, params, &mut Duration::default());

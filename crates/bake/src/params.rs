@@ -49,7 +49,7 @@ pub struct BakeParams {
 pub const DEFAULT_MANTISSA_BITS: u32 = 14;
 
 /// Bumped whenever the bake's output for the same input and parameters changes.
-pub const BAKE_REVISION: u32 = 3;
+pub const BAKE_REVISION: u32 = 4;
 
 impl BakeParams {
     /// Parameters with the MLS defaults and the normals mode matching `normals`.
