@@ -42,9 +42,8 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
     // obvhs's fast preset, but PLOC searching one neighbour either side at every depth (its
     // fast path) instead of a wider search near the root: balls of about one size tiling a
     // surface gain nothing from the wider search. On the H200 host at 1M points the build
-    // took 218–274 ms on 16 threads (470–595 ms on 2) against 256–326 ms (560–736 ms), and
-    // frames traced faster (1 iteration, 1280×800: 0.890 ms against 0.942 ms), with 5 % more
-    // nodes.
+    // took 218–274 ms on 16 threads (470–595 ms on 2) against 256–326 ms (560–736 ms), with
+    // 5 % more nodes; frames traced within a few per cent either way (docs/bake.md).
     let params = BvhBuildParams {
         max_prims_per_leaf: MAX_LEAF_ITEMS,
         ploc_search_distance: PlocSearchDistance::Minimum,
