@@ -65,7 +65,8 @@ impl RunUnions {
 /// Points per run of the lists stage (and per union in [`RunUnions`]).
 pub(crate) const LIST_RUN: usize = RUN;
 
-/// Points per block of the lists stage: its links come in one piece per block.
+/// Points per block of the lists stage: one parallel task, one buffer of lists (a piece of
+/// [`Neighbours`] where the points came in spatial order) and one piece of links.
 pub(crate) const LIST_BLOCK: usize = RUN * RUNS_PER_BLOCK;
 
 /// kiddo's squared Euclidean distance, summed in its order, so that a list is the set its
@@ -120,7 +121,7 @@ pub(crate) fn neighbour_lists(
     // already in this order, and then the runs are consecutive indices).
     let order = crate::order::morton_order(points);
     let blocks: Vec<Block> = order
-        .par_chunks(RUN * RUNS_PER_BLOCK)
+        .par_chunks(LIST_BLOCK)
         .map_init(
             || Scratch {
                 query: tree.create_scratch::<SquaredEuclidean<f64>>(),
@@ -290,11 +291,7 @@ pub(crate) fn neighbour_lists(
     let mut source = vec![(0u32, 0u32); if index_runs { 0 } else { n }];
     let mut capped = 0;
     // Block b's members are `order`'s b-th chunk.
-    for (b, (block, members)) in blocks
-        .iter()
-        .zip(order.chunks(RUN * RUNS_PER_BLOCK))
-        .enumerate()
-    {
+    for (b, (block, members)) in blocks.iter().zip(order.chunks(LIST_BLOCK)).enumerate() {
         let mut from = 0;
         for ((&i, &count), &reach) in members.iter().zip(&block.counts).zip(&block.reach) {
             let i = i as usize;
@@ -319,7 +316,7 @@ pub(crate) fn neighbour_lists(
         pieces.push(block.ids);
     }
     let lists = if index_runs {
-        Neighbours::from_pieces(start, RUN * RUNS_PER_BLOCK, pieces)
+        Neighbours::from_pieces(start, LIST_BLOCK, pieces)
     } else {
         // Back to point order, copied by blocks of points in parallel: the lists of a
         // 1M-point step are half a gigabyte, which one thread would take longer to zero and
