@@ -20,6 +20,10 @@ struct CloudSource<'a> {
 }
 
 impl StepSource for CloudSource<'_> {
+    fn source_path(&self) -> String {
+        self.label.clone()
+    }
+
     fn steps(&self) -> Vec<(usize, f64)> {
         vec![(0, 0.0)]
     }
@@ -53,10 +57,16 @@ pub fn manifest_only(dir: &std::path::Path) -> Result<()> {
     for (path, e) in &problems {
         eprintln!("left out {}: {e}", path.display());
     }
-    if !problems.is_empty() {
-        bail!("{} step files failed their checks", problems.len());
+    let missing = manifest.missing();
+    if let Some(gaps) = manifest.key().describe_missing(&missing) {
+        eprintln!("{gaps}");
     }
-    Ok(())
+    match (problems.len(), missing.len()) {
+        (0, 0) => Ok(()),
+        (0, m) => bail!("the series is incomplete: {m} steps are missing"),
+        (p, 0) => bail!("{p} step files failed their checks"),
+        (p, m) => bail!("{p} step files failed their checks and {m} steps are missing"),
+    }
 }
 
 pub fn run(cfg: &BakeConfig) -> Result<()> {
@@ -77,7 +87,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         BakeInput::PointCloud(c) => {
             cloud = CloudSource {
                 cloud: c,
-                label: label.clone(),
+                label: slosh_bake::canonical_label(&cfg.input_path),
             };
             &cloud
         }
@@ -159,6 +169,22 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
                 100.0 * s / stage_total.max(f64::MIN_POSITIVE)
             );
         }
+    }
+    if !report.empty.is_empty() {
+        let mut list: Vec<String> = report
+            .empty
+            .iter()
+            .take(20)
+            .map(|i| i.to_string())
+            .collect();
+        if report.empty.len() > 20 {
+            list.push(format!("… ({} in all)", report.empty.len()));
+        }
+        say!(
+            "{} steps hold no particles and were baked as empty steps: {}",
+            report.empty.len(),
+            list.join(", ")
+        );
     }
     for (path, e) in &report.manifest_problems {
         eprintln!("manifest: left out {}: {e}", path.display());

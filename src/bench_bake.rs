@@ -428,6 +428,10 @@ struct SceneSteps {
 }
 
 impl StepSource for SceneSteps {
+    fn source_path(&self) -> String {
+        "bench series".into()
+    }
+
     fn steps(&self) -> Vec<(usize, f64)> {
         (0..self.steps).map(|i| (i, i as f64)).collect()
     }

@@ -97,8 +97,19 @@ fn read_obj(path: &Path) -> Result<PointCloud> {
         ignore_points: false,
         ignore_lines: false,
     };
-    let (models, _) = tobj::load_obj(path, &options)
-        .map_err(|e| anyhow::anyhow!("{}: not a readable OBJ file: {e}", path.display()))?;
+    let (models, _) = match tobj::load_obj(path, &options) {
+        Ok(loaded) => loaded,
+        // tobj names no line; where a vertex line is what is wrong, ours does.
+        Err(e) => {
+            read_obj_vertices(path)?;
+            bail!("{}: not a readable OBJ file: {e}", path.display());
+        }
+    };
+    // tobj makes models of faces, lines and points only; a scanner's or solver's cloud of
+    // bare `v` (and `vn`) lines has none.
+    if models.iter().all(|m| m.mesh.positions.is_empty()) {
+        return read_obj_vertices(path);
+    }
     let mut cloud = PointCloud::default();
     let mut normals: Vec<[f64; 3]> = Vec::new();
     let mut any_normals = false;
@@ -133,6 +144,50 @@ fn read_obj(path: &Path) -> Result<PointCloud> {
         cloud.normals = Some(normals.into_iter().map(normalise).collect());
     }
     Ok(cloud)
+}
+
+/// The `v` lines of an OBJ file without elements, and its `vn` lines as their normals where
+/// there is one per vertex, in order (how point-cloud exporters write them).
+fn read_obj_vertices(path: &Path) -> Result<PointCloud> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: not a readable OBJ text file", path.display()))?;
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    for (number, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let list = match words.next() {
+            Some("v") => &mut positions,
+            Some("vn") => &mut normals,
+            _ => continue,
+        };
+        let values: Vec<f64> = words
+            .by_ref()
+            .take(3)
+            .map(str::parse)
+            .collect::<Result<_, _>>()
+            .ok()
+            .filter(|v: &Vec<f64>| v.len() == 3)
+            .with_context(|| {
+                format!(
+                    "{}: line {}: expected three numbers after '{}', found '{line}'",
+                    path.display(),
+                    number + 1,
+                    line.split_whitespace().next().unwrap_or_default()
+                )
+            })?;
+        list.push([values[0], values[1], values[2]]);
+    }
+    let normals = match normals.len() {
+        0 => None,
+        n if n == positions.len() => Some(normals.into_iter().map(normalise).collect()),
+        n => bail!(
+            "{}: {} vertices but {n} normals (vn lines) and no faces to pair them: expected \
+             one normal per vertex, in order, or none",
+            path.display(),
+            positions.len()
+        ),
+    };
+    Ok(PointCloud { positions, normals })
 }
 
 /// Unit length; zero stays zero (the reader of the result decides what a zero normal means).

@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use slosh_cache::{
     BallState, Bvh, CacheFile, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, Header, Manifest,
-    SectionEntry, names, parse_step_file_name,
+    SectionEntry, SeriesKey, names, parse_step_file_name,
 };
 
 use crate::cli::InspectArgs;
@@ -316,7 +316,15 @@ fn inspect_file(path: &Path, args: &InspectArgs) -> Result<bool> {
         Ok(s) => s,
         Err(e) if !ok => {
             let msg = verify.and_then(|v| v.error).unwrap_or_default();
-            bail!("{}: verification failed: {msg} ({e})", path.display());
+            // The decoding error often is the verification's own (the file changed): once.
+            let e = e.to_string();
+            if msg.contains(&e) || e.contains(&msg) {
+                bail!(
+                    "verification failed: {}",
+                    if e.len() > msg.len() { e } else { msg }
+                );
+            }
+            bail!("verification failed: {msg} ({e})");
         }
         Err(e) => return Err(e),
     };
@@ -410,13 +418,35 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
             }
         }
     }
+    // Steps are checked against the manifest, or, where there is none, against each other
+    // (the first readable step's series): a directory holds one bake either way.
+    let opened: Vec<(usize, PathBuf, slosh_cache::Result<CacheFile>)> = files
+        .into_iter()
+        .map(|(index, path)| {
+            let file = CacheFile::open(&path);
+            (index, path, file)
+        })
+        .collect();
+    let reference = manifest.as_ref().map(Manifest::key).or_else(|| {
+        opened
+            .iter()
+            .find_map(|(_, _, f)| f.as_ref().ok().map(|f| SeriesKey::of(f.header())))
+    });
+    if args.verify
+        && let Some(key) = &reference
+    {
+        let present: Vec<usize> = opened.iter().map(|(i, _, _)| *i).collect();
+        if let Some(gaps) = key.describe_missing(&key.missing(&present)) {
+            series.push(gaps);
+        }
+    }
     let mut steps = Vec::new();
-    for (index, path) in files {
+    for (index, path, opened) in opened {
         let file_name = path
             .file_name()
             .map(|f| f.to_string_lossy().into_owned())
             .unwrap_or_default();
-        match CacheFile::open(&path) {
+        match opened {
             Ok(f) => steps.push(DirStep {
                 index,
                 file: file_name,
@@ -426,8 +456,9 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
                 params_hash: f.header().params_hash.clone(),
                 verify: args.verify.then(|| verification(&f)),
                 error: None,
-                series: match (&manifest, args.verify) {
-                    (Some(m), true) => m.step_problems(index, &f),
+                series: match (&manifest, &reference, args.verify) {
+                    (Some(m), _, true) => m.step_problems(index, &f),
+                    (None, Some(key), true) => key.differences(index, f.header()),
                     _ => Vec::new(),
                 },
             }),

@@ -96,7 +96,8 @@ fn path(p: &Path) -> Result<&str> {
 
 /// Whether `cache` holds a complete demo of `steps` steps.
 fn demo_ready(cache: &Path, steps: usize) -> bool {
-    slosh_cache::Manifest::read(cache).is_ok_and(|m| m.steps.len() == steps)
+    slosh_cache::Manifest::read(cache)
+        .is_ok_and(|m| m.steps.len() == steps && m.missing().is_empty())
 }
 
 pub fn demo(args: &DemoArgs) -> Result<()> {
@@ -109,6 +110,30 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
     };
     let case_dir = root.join("case");
     let cache = root.join("cache");
+    // One demo prepares the directory at a time: another waits, then finds it ready (two
+    // writing one case at once would bake a mixture of both). Released before playing.
+    std::fs::create_dir_all(&root).with_context(|| format!("creating {}", root.display()))?;
+    let lock_path = root.join(".demo.lock");
+    let lock = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&lock_path)
+        .with_context(|| format!("opening {}", lock_path.display()))?;
+    match lock.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            say!(
+                "another slosh demo is preparing {}; waiting for it to finish",
+                root.display()
+            );
+            lock.lock()
+                .with_context(|| format!("locking {}", lock_path.display()))?;
+        }
+        Err(std::fs::TryLockError::Error(e)) => {
+            return Err(e).with_context(|| format!("locking {}", lock_path.display()));
+        }
+    }
     if demo_ready(&cache, args.steps) {
         say!("demo series: {} (already baked)", cache.display());
     } else {
@@ -141,6 +166,7 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
             "pressure",
         ])?;
     }
+    drop(lock);
     let display = std::env::var_os("DISPLAY").is_some_and(|d| !d.is_empty())
         || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|d| !d.is_empty());
     if display && !args.headless {

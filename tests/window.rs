@@ -509,3 +509,198 @@ fn a_slow_step_source_never_stops_the_ui() {
     );
     player.wait_title(&display, "step 3/3");
 }
+
+/// A series of `steps` steps of a sphere baked with the settings `series` uses: another
+/// series, steps of which a user might copy into the wrong directory.
+fn other_series(dir: &Path, steps: usize) -> PathBuf {
+    let case = dir.join("other-case");
+    let cache = dir.join("other-cache");
+    slosh(&[
+        "gen",
+        "sphere",
+        "--points",
+        "3000",
+        "--steps",
+        &steps.to_string(),
+        "--out",
+        case.to_str().unwrap(),
+    ]);
+    slosh(&[
+        "bake",
+        case.join("sphere.case").to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--quiet",
+    ]);
+    cache
+}
+
+/// The failures the player logged, by bake index.
+fn failures(log: &str, step: usize) -> Vec<String> {
+    let prefix = format!("failed step {step}: ");
+    log.lines()
+        .filter_map(|l| l.strip_prefix(&prefix).map(str::to_string))
+        .collect()
+}
+
+/// Steps checked against the series, numbered by bake index, through files changing under
+/// the player (issue 25, items 7, 8 and 10): a step of another series copied in is failed
+/// against the manifest; a removed step keeps every later step's number (title, F12); a
+/// restored step plays again.
+#[test]
+fn steps_keep_their_numbers_and_are_checked_as_files_change() {
+    if !tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cache = series(dir.path(), 6);
+    let other = other_series(dir.path(), 6);
+    let step = |i: usize| cache.join(slosh_cache::step_file_name(i));
+    let kept = dir.path().join("step-2.kept");
+    std::fs::copy(step(2), &kept).unwrap();
+    // Renamed into place, as a careful copy would be.
+    std::fs::copy(other.join(slosh_cache::step_file_name(2)), cache.join("x")).unwrap();
+    std::fs::rename(cache.join("x"), step(2)).unwrap();
+    let display = Display::start();
+    let player = Player::start(&display, &cache, dir.path(), &[]);
+    player.wait_title(&display, "step 0/5");
+    player.key(&display, "Right");
+    player.wait_title(&display, "step 1/5");
+    player.key(&display, "Right");
+    wait_for("step 2's failure", Duration::from_secs(60), || {
+        !failures(&player.log(), 2).is_empty()
+    });
+    let why = failures(&player.log(), 2).remove(0);
+    assert!(
+        why.contains("not step 2 of this series") && why.contains("sphere.case"),
+        "{why}"
+    );
+    // Step 3 removed while playing: the later steps keep their numbers.
+    std::fs::remove_file(step(3)).unwrap();
+    player.key(&display, "End");
+    player.wait_title(&display, "step 5/5");
+    wait_for("step 3's removal", Duration::from_secs(30), || {
+        failures(&player.log(), 3)
+            .iter()
+            .any(|w| w.contains("was removed"))
+    });
+    player.key(&display, "Left");
+    player.wait_title(&display, "step 4/5");
+    std::thread::sleep(Duration::from_secs(2));
+    player.key(&display, "F12");
+    wait_for("the screenshot", Duration::from_secs(60), || {
+        player.log().contains("slosh-step-00004.png")
+    });
+    assert!(dir.path().join("slosh-step-00004.png").exists());
+    // Step 2 restored: it loads again (its failure was against a file that is gone).
+    std::fs::copy(&kept, cache.join("x")).unwrap();
+    std::fs::rename(cache.join("x"), step(2)).unwrap();
+    std::thread::sleep(Duration::from_secs(3));
+    player.key(&display, "Home");
+    player.wait_title(&display, "step 0/5");
+    player.key(&display, "Right");
+    player.key(&display, "Right");
+    player.wait_title(&display, "step 2/5");
+}
+
+/// Junk step files, and a budget smaller than one step, are failed steps the window names,
+/// not an endless "waiting" or "loading" (issue 25, item 10).
+#[test]
+fn unreadable_steps_and_a_tiny_budget_are_said() {
+    if !tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let junk = dir.path().join("junk");
+    std::fs::create_dir_all(&junk).unwrap();
+    for i in 0..3 {
+        std::fs::write(
+            junk.join(slosh_cache::step_file_name(i)),
+            b"not a cache file",
+        )
+        .unwrap();
+    }
+    let display = Display::start();
+    let out = dir.path().join("junk-out");
+    std::fs::create_dir_all(&out).unwrap();
+    let player = Player::start(&display, &junk, &out, &[]);
+    wait_for("the junk steps' failures", Duration::from_secs(30), || {
+        (0..3).all(|i| !failures(&player.log(), i).is_empty())
+    });
+    assert!(failures(&player.log(), 0)[0].contains("step-00000.slc"));
+    drop(player);
+    let cache = series(dir.path(), 2);
+    let out = dir.path().join("budget-out");
+    std::fs::create_dir_all(&out).unwrap();
+    let player = Player::start(&display, &cache, &out, &["--budget", "0.0001"]);
+    wait_for("the budget failure", Duration::from_secs(60), || {
+        failures(&player.log(), 0)
+            .iter()
+            .any(|w| w.contains("more than the whole budget"))
+    });
+    // Said once, not loaded again and again.
+    std::thread::sleep(Duration::from_secs(2));
+    assert_eq!(failures(&player.log(), 0).len(), 1, "{}", player.log());
+}
+
+/// CPU seconds a process has used (user and system), from /proc.
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .unwrap()
+        .1
+        .split_whitespace()
+        .collect();
+    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+    ticks / 100.0
+}
+
+/// Every key press counts, however slow the passes (issue 25, item 11); a player at rest
+/// draws no passes beyond one a second and uses almost no CPU (item 12); a window larger than
+/// the default texture limit (8192) and a render scale past the device's limit are drawn,
+/// not a panic (item 6).
+#[test]
+fn presses_count_rest_is_quiet_and_huge_windows_live() {
+    if !tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cache = series(dir.path(), 10);
+    let display = Display::start();
+    let mut player = Player::start(&display, &cache, dir.path(), &["--render-scale", "2"]);
+    player.wait_title(&display, "step 0/9");
+    display.xdotool(&["windowfocus", "--sync", &player.window]);
+    display.xdotool(&["mousemove", "--window", &player.window, "150", "150"]);
+    display
+        .xdotool(&[
+            "key", "--delay", "1", "Right", "Right", "Right", "Right", "Right",
+        ])
+        .unwrap();
+    player.wait_title(&display, "step 5/9");
+    // At rest (refined and still): passes and CPU.
+    std::thread::sleep(Duration::from_secs(4));
+    let passes = |log: &str| log.lines().filter(|l| l.starts_with("pass ")).count();
+    let pid = player._process.0.id();
+    let (before, cpu) = (passes(&player.log()), cpu_seconds(pid));
+    std::thread::sleep(Duration::from_secs(4));
+    let (after, used) = (passes(&player.log()), cpu_seconds(pid) - cpu);
+    eprintln!(
+        "at rest: {} passes and {used:.2} CPU seconds in 4 s",
+        after - before
+    );
+    assert!(after - before <= 6, "{} passes at rest", after - before);
+    assert!(used < 0.4, "{used} CPU seconds at rest");
+    // Past 8192 pixels a side (render scale 2 makes the frame 18000 wide), then back.
+    display.xdotool(&["windowsize", &player.window, "9000", "9000"]);
+    std::thread::sleep(Duration::from_secs(10));
+    assert!(player.alive(), "the player died in a 9000-pixel window");
+    display.xdotool(&["windowsize", &player.window, "640", "480"]);
+    player.key(&display, "Right");
+    player.wait_title(&display, "step 6/9");
+    assert!(player.alive());
+    assert!(
+        !player.log().contains("exceeds"),
+        "a frame was asked past the largest texture"
+    );
+}

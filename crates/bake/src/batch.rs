@@ -7,7 +7,9 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use slosh_cache::{CacheFile, Manifest, StepStats, encode_step, step_file_name};
+use slosh_cache::{
+    CacheFile, Manifest, SeriesKey, SeriesRecord, StepStats, encode_step, step_file_name,
+};
 use slosh_fileio::FileBytes;
 
 use crate::params::BakeParams;
@@ -16,6 +18,9 @@ use crate::step::bake_step;
 
 /// Where steps come from: an EnSight case, or a single point-cloud file.
 pub trait StepSource: Sync {
+    /// What the steps are read from, as every step file records it: the input's canonical
+    /// path, so that two runs given one input by different paths agree.
+    fn source_path(&self) -> String;
     /// (step index, time) of every step, in order.
     fn steps(&self) -> Vec<(usize, f64)>;
     /// Reads one step with everything `BakeParams` asks for.
@@ -35,6 +40,9 @@ pub fn files_identity<'a>(paths: impl IntoIterator<Item = &'a Path>) -> Option<S
     let mut text = String::new();
     for path in paths {
         let meta = std::fs::metadata(path).ok()?;
+        // One file given by different paths (relative, absolute, through a link) is one
+        // input.
+        let path = std::fs::canonicalize(path).ok()?;
         let modified = meta
             .modified()
             .ok()
@@ -104,6 +112,8 @@ pub struct BatchReport {
     pub baked: usize,
     pub kept: usize,
     pub failed: Vec<(usize, String)>,
+    /// Steps baked without particles (valid steps, not failures), in order.
+    pub empty: Vec<usize>,
     pub points: u64,
     pub bytes: u64,
     /// Summed seconds per stage over baked steps, pipeline order; plus "write".
@@ -115,34 +125,59 @@ pub struct BatchReport {
     pub manifest_error: Option<String>,
 }
 
-/// The steps this process is responsible for.
-pub fn plan(source: &dyn StepSource, opts: &BatchOptions) -> Vec<(usize, f64)> {
+/// The steps of the series, every shard's: the source's steps that `--steps` selects.
+fn selection(source: &dyn StepSource, opts: &BatchOptions) -> Vec<(usize, f64)> {
     source
         .steps()
         .into_iter()
         .filter(|(i, _)| opts.steps.is_none_or(|(a, b)| (a..=b).contains(i)))
+        .collect()
+}
+
+/// The steps this process is responsible for.
+pub fn plan(source: &dyn StepSource, opts: &BatchOptions) -> Vec<(usize, f64)> {
+    selection(source, opts)
+        .into_iter()
         .enumerate()
         .filter(|(pos, _)| opts.shard.owns(*pos))
         .map(|(_, s)| s)
         .collect()
 }
 
-/// True when `path` holds a complete cache made with `hash`, from the input `identity`
-/// (where the source gives one) of step `index`, whose bytes are intact.
-pub fn is_current(path: &Path, hash: &str, index: usize, identity: Option<&str>) -> bool {
+/// What every step file of this bake records: its input, settings and steps (the source's
+/// steps are numbered consecutively, so the selection is a range).
+pub fn series_key(source: &dyn StepSource, opts: &BatchOptions) -> SeriesKey {
+    let selected = selection(source, opts);
+    SeriesKey {
+        source: source.source_path(),
+        params_hash: opts.params.hash(),
+        series: match (selected.first(), selected.last()) {
+            (Some(&(first, _)), Some(&(last, _))) => Some(SeriesRecord { first, last }),
+            _ => None,
+        },
+    }
+}
+
+/// True when `path` holds a complete cache of step `index` of the series `key`, from the
+/// input `identity` (where the source gives one), whose bytes are intact.
+pub fn is_current(path: &Path, key: &SeriesKey, index: usize, identity: Option<&str>) -> bool {
     CacheFile::open(path).is_ok_and(|f| {
         let source = &f.header().source;
-        f.header().params_hash == hash
-            && source.step == index
+        key.differences(index, f.header()).is_empty()
             && identity.is_none_or(|id| source.identity.as_deref() == Some(id))
             && f.body_intact()
     })
 }
 
-fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &str) -> Outcome {
+fn bake_one(
+    source: &dyn StepSource,
+    index: usize,
+    opts: &BatchOptions,
+    key: &SeriesKey,
+) -> Outcome {
     let path = opts.out.join(step_file_name(index));
     let identity = source.identity(index);
-    if is_current(&path, hash, index, identity.as_deref()) {
+    if is_current(&path, key, index, identity.as_deref()) {
         return Outcome::Kept;
     }
     let start = Instant::now();
@@ -160,6 +195,8 @@ fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &s
     };
     drop(input);
     let mut header = baked.header;
+    header.series = key.series;
+    header.source.path.clone_from(&key.source);
     header
         .stats
         .stage_seconds
@@ -198,37 +235,54 @@ fn bake_one(source: &dyn StepSource, index: usize, opts: &BatchOptions, hash: &s
     }
 }
 
-/// One directory holds one bake: a step file this run will not rewrite, made with other
-/// settings, stops the run before anything is written (otherwise the steps it bakes would
-/// replace good ones and the manifest would then refuse the mixture).
+/// One directory holds one bake. A step file of another input stops the run before anything
+/// is written, whether this run would rewrite it or not (it would replace another series'
+/// steps); so does a step file this run will not rewrite that belongs to another bake of this
+/// input (other settings or other steps: the directory would end up holding a mixture).
 fn refuse_mixing(
     dir: &Path,
     planned: &[(usize, f64)],
-    hash: &str,
+    key: &SeriesKey,
 ) -> Result<(), slosh_cache::Error> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Ok(());
     };
-    for e in entries.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        let Some(index) = slosh_cache::parse_step_file_name(&name) else {
+    let mut files: Vec<(usize, PathBuf)> = entries
+        .flatten()
+        .filter_map(|e| {
+            slosh_cache::parse_step_file_name(&e.file_name().to_string_lossy())
+                .map(|i| (i, e.path()))
+        })
+        .collect();
+    files.sort();
+    for (index, path) in files {
+        let Ok(file) = CacheFile::open(&path) else {
             continue;
         };
-        if planned.iter().any(|(i, _)| *i == index) {
-            continue;
-        }
-        let Ok(file) = CacheFile::open(&e.path()) else {
+        let theirs = SeriesKey::of(file.header());
+        let rewritten = planned.iter().any(|(i, _)| *i == index);
+        let problem = if theirs.source != key.source {
+            format!(
+                "this step is of another series, {}; this run is {}",
+                crate::claim::describe(&theirs),
+                crate::claim::describe(key)
+            )
+        } else if !rewritten && theirs != *key {
+            format!(
+                "this step was {} and this run, {}, does not rebake it",
+                crate::claim::describe(&theirs).replacen("a bake", "baked by a bake", 1),
+                crate::claim::describe(key)
+            )
+        } else {
             continue;
         };
-        let theirs = &file.header().params_hash;
-        if theirs != hash {
-            return Err(slosh_cache::Error::Invalid {
-                path: e.path(),
-                problem: format!(
-                    "this step was baked with other settings (parameter hash {theirs}, this run's {hash}), and this run does not rebake it; one directory holds one bake, so nothing was written: bake every step with the new settings, or into another directory"
-                ),
-            });
-        }
+        return Err(slosh_cache::Error::Invalid {
+            path,
+            problem: format!(
+                "{problem}; one directory holds one bake, so nothing was written: bake into \
+                 another directory, or remove the old steps first"
+            ),
+        });
     }
     Ok(())
 }
@@ -267,13 +321,15 @@ pub fn run_batch(
 ) -> Result<BatchReport, slosh_cache::Error> {
     let start = Instant::now();
     std::fs::create_dir_all(&opts.out).map_err(|e| slosh_fileio::IoError::new(&opts.out, e))?;
+    let key = series_key(source, opts);
+    // Held to the end of the run, manifest included.
+    let _claim = crate::claim::claim(&opts.out, &key)?;
     remove_stale_temps(&opts.out);
     let planned = plan(source, opts);
+    refuse_mixing(&opts.out, &planned, &key)?;
     progress(Event::Planned {
         steps: planned.len(),
     });
-    let hash = opts.params.hash();
-    refuse_mixing(&opts.out, &planned, &hash)?;
     let next = AtomicUsize::new(0);
     let report = Mutex::new(BatchReport::default());
     // Plain threads pull steps; each runs its steps on a rayon pool of its own. A rayon thread
@@ -291,14 +347,14 @@ pub fn run_batch(
                 .thread_name(move |t| format!("bake-{job}-{t}"))
                 .build()
                 .ok();
-            let (next, report, planned, hash) = (&next, &report, &planned, &hash);
+            let (next, report, planned, key) = (&next, &report, &planned, &key);
             scope.spawn(move || {
                 loop {
                     let k = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&(index, _)) = planned.get(k) else {
                         break;
                     };
-                    let bake = || bake_one(source, index, opts, hash);
+                    let bake = || bake_one(source, index, opts, key);
                     let outcome = match &pool {
                         Some(pool) => pool.install(bake),
                         None => bake(),
@@ -313,6 +369,9 @@ pub fn run_batch(
                                 ..
                             } => {
                                 r.baked += 1;
+                                if *points == 0 {
+                                    r.empty.push(index);
+                                }
                                 r.bytes += bytes;
                                 r.points += points;
                                 for (name, s) in &stats.stage_seconds {
@@ -333,6 +392,7 @@ pub fn run_batch(
     });
     let mut report = report.into_inner().unwrap_or_else(|p| p.into_inner());
     report.failed.sort_by_key(|(i, _)| *i);
+    report.empty.sort_unstable();
     // A manifest that cannot be written is reported beside the steps' own outcomes, which
     // must not be lost behind it.
     match Manifest::refresh(&opts.out) {

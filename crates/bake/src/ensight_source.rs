@@ -36,12 +36,25 @@ impl EnsightSource {
         EnsightSource {
             case,
             request,
-            label: path.display().to_string(),
+            label: canonical_label(path),
         }
     }
 }
 
+/// A path as every step file records its input: canonical (absolute, links resolved) where
+/// it can be made so, so that runs given one input by different paths agree.
+pub fn canonical_label(path: &Path) -> String {
+    std::fs::canonicalize(path)
+        .unwrap_or_else(|_| path.to_path_buf())
+        .display()
+        .to_string()
+}
+
 impl StepSource for EnsightSource {
+    fn source_path(&self) -> String {
+        self.label.clone()
+    }
+
     fn steps(&self) -> Vec<(usize, f64)> {
         let times = self.case.times();
         (0..self.case.step_count())

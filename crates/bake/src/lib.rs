@@ -3,6 +3,7 @@
 
 mod batch;
 mod bvh;
+mod claim;
 mod ensight_source;
 mod params;
 mod select;
@@ -10,10 +11,11 @@ mod step;
 
 pub use batch::{
     BatchOptions, BatchReport, Event, Outcome, Shard, StepSource, files_identity, is_current, plan,
-    run_batch,
+    run_batch, series_key,
 };
 pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
-pub use ensight_source::EnsightSource;
+pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
+pub use ensight_source::{EnsightSource, canonical_label};
 pub use params::{BAKE_REVISION, BakeParams, DEFAULT_MANTISSA_BITS, NormalSource, SurfaceSelect};
 pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,

@@ -252,6 +252,10 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         }
     }
 
+    if n_in == 0 {
+        return empty_step(input, params);
+    }
+
     // 1. Select: finite positions, then the surface.
     let finite: Vec<u32> = (0..n_in as u32)
         .filter(|&i| input.positions[i as usize].iter().all(|c| c.is_finite()))
@@ -300,7 +304,17 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     let (lo, hi) = slosh_mls::bounds(&world);
     let origin: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
     let half = (0..3).map(|a| 0.5 * (hi[a] - lo[a])).fold(0.0, f64::max);
-    let scale = if half > 0.0 { half } else { 1.0 };
+    if half == 0.0 {
+        return Err(input_err(format!(
+            "all {} particles left after selection coincide, at ({}, {}, {}): coincident \
+             points define no surface",
+            world.len(),
+            lo[0],
+            lo[1],
+            lo[2]
+        )));
+    }
+    let scale = half;
     let transform = Transform { origin, scale };
     let local: Vec<[f64; 3]> = world.par_iter().map(|p| transform.to_local(*p)).collect();
     clock.lap("recentre");
@@ -403,18 +417,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         }
     };
     // After the spheres, before the fields: the order every cache has had.
-    sections.push(SectionInput::new(
-        names::BVH_NODES,
-        Element::BvhNode,
-        &bvh.nodes,
-        by_element(Element::BvhNode),
-    ));
-    sections.push(SectionInput::new(
-        names::BVH_ITEMS,
-        Element::U32,
-        &bvh.items,
-        Encoding::Shuffle4Zstd,
-    ));
+    sections.extend(bvh_sections(&bvh));
     sections.extend(fields);
     let mut stats = StepStats {
         input_points: n_in as u64,
@@ -446,24 +449,73 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         .collect();
 
     let header = Header {
+        points: n as u64,
+        transform,
+        bounds: [lo, hi],
+        smoothing_length: surface.h,
+        spacing: surface.spacing,
+        stats,
+        up,
+        ..step_header(input, params)
+    };
+    Ok(BakedStep { header, sections })
+}
+
+/// The header fields every step of `input` shares, whatever it holds.
+fn step_header(input: &StepInput, params: &BakeParams) -> Header {
+    Header {
         source: Source {
             path: input.source.clone(),
             step: input.index,
             time: input.time,
             identity: input.identity.clone(),
         },
-        points: n as u64,
-        transform,
-        bounds: [lo, hi],
-        smoothing_length: surface.h,
-        spacing: surface.spacing,
+        points: 0,
+        transform: Transform {
+            origin: [0.0; 3],
+            scale: 1.0,
+        },
+        bounds: [[0.0; 3]; 2],
+        smoothing_length: 0.0,
+        spacing: 0.0,
         neighbour_cluster: NEIGHBOUR_CLUSTER,
         mls: MlsSettings::from_params(&params.mls),
         bake: params.record(),
         params_hash: params.hash(),
-        stats,
+        series: None,
+        stats: StepStats::default(),
         sections: Vec::new(),
-        up,
-    };
-    Ok(BakedStep { header, sections })
+        up: None,
+    }
+}
+
+/// The BVH's sections.
+fn bvh_sections(bvh: &slosh_cache::Bvh) -> [SectionInput; 2] {
+    [
+        SectionInput::new(
+            names::BVH_NODES,
+            Element::BvhNode,
+            &bvh.nodes,
+            by_element(Element::BvhNode),
+        ),
+        SectionInput::new(
+            names::BVH_ITEMS,
+            Element::U32,
+            &bvh.items,
+            Encoding::Shuffle4Zstd,
+        ),
+    ]
+}
+
+/// A step without particles (a Lagrangian or DEM run before its first injection): a valid
+/// step with every section empty, shown as empty and counted as such, not a failure.
+fn empty_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
+    let surface = SurfaceParts::<f64>::empty(&params.mls);
+    let (mut sections, fields) = gpu_sections(&surface, input, &[], params)?;
+    sections.extend(bvh_sections(&slosh_cache::Bvh::default()));
+    sections.extend(fields);
+    Ok(BakedStep {
+        header: step_header(input, params),
+        sections,
+    })
 }

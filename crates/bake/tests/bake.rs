@@ -349,6 +349,9 @@ struct Series {
 }
 
 impl StepSource for Series {
+    fn source_path(&self) -> String {
+        scene_input(SceneKind::Sphere, 800, 0).1.source
+    }
     fn steps(&self) -> Vec<(usize, f64)> {
         (0..self.steps).map(|i| (i, i as f64 * 0.1)).collect()
     }
@@ -445,6 +448,9 @@ struct PoolSizes {
 }
 
 impl StepSource for PoolSizes {
+    fn source_path(&self) -> String {
+        "pool sizes".into()
+    }
     fn steps(&self) -> Vec<(usize, f64)> {
         (0..self.steps).map(|i| (i, i as f64)).collect()
     }

@@ -10,7 +10,7 @@ pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
 pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files with a larger major version; minor versions only add.
 pub const MAJOR: u16 = 3;
-pub const MINOR: u16 = 0;
+pub const MINOR: u16 = 1;
 /// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
 /// element size.
@@ -243,6 +243,37 @@ pub struct Source {
     pub identity: Option<String>,
 }
 
+/// The steps one bake into a directory was asked for (`first ..= last` of its source, every
+/// one of them), recorded in every step file it writes: a directory can then be checked as a
+/// whole, gaps included, with or without its manifest. Absent in files of earlier bakes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SeriesRecord {
+    pub first: usize,
+    pub last: usize,
+}
+
+impl SeriesRecord {
+    pub fn count(&self) -> usize {
+        self.last.saturating_sub(self.first) + 1
+    }
+
+    pub fn contains(&self, index: usize) -> bool {
+        (self.first..=self.last).contains(&index)
+    }
+}
+
+impl std::fmt::Display for SeriesRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "steps {}..={} ({} steps)",
+            self.first,
+            self.last,
+            self.count()
+        )
+    }
+}
+
 /// Counts the bake records about a step.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -289,6 +320,9 @@ pub struct Header {
     /// Everything that shaped the output, as the bake recorded it, and its hash.
     pub bake: serde_json::Value,
     pub params_hash: String,
+    /// The series the step was baked as part of (format 3.1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub series: Option<SeriesRecord>,
     pub stats: StepStats,
     pub sections: Vec<SectionEntry>,
     /// The unit axis that is up in this step's data (`slosh_mls::guess_up`), where the data

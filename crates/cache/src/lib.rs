@@ -27,11 +27,12 @@ pub use codec::{
 pub use error::{Error, Result};
 pub use format::{
     ALIGN, CHUNK_RAW, ChunkEntry, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings,
-    PREAMBLE_LEN, SectionEntry, Source, StepStats, Transform, hex64,
+    PREAMBLE_LEN, SectionEntry, SeriesRecord, Source, StepStats, Transform, hex64,
 };
 pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
 pub use manifest::{
-    MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, parse_step_file_name, step_file_name,
+    MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,
+    step_file_name,
 };
 pub use precision::{F32_MANTISSA_BITS, round_mantissa};
 pub use reader::CacheFile;

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::format::hex64;
+use crate::format::{Header, SeriesRecord, hex64};
 use crate::reader::CacheFile;
 
 pub const MANIFEST_NAME: &str = "manifest.json";
@@ -28,6 +28,92 @@ pub fn parse_step_file_name(name: &str) -> Option<usize> {
         .flatten()
 }
 
+/// What every step file of one bake shares: the input (its canonical path), the settings and
+/// the steps asked for. Two step files that differ in it belong to different bakes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SeriesKey {
+    pub source: String,
+    pub params_hash: String,
+    pub series: Option<SeriesRecord>,
+}
+
+impl SeriesKey {
+    pub fn of(header: &Header) -> SeriesKey {
+        SeriesKey {
+            source: header.source.path.clone(),
+            params_hash: header.params_hash.clone(),
+            series: header.series,
+        }
+    }
+
+    /// Why step file `index` with `header` is not of this series (empty when it is).
+    pub fn differences(&self, index: usize, header: &Header) -> Vec<String> {
+        let mut problems = Vec::new();
+        if header.source.step != index {
+            problems.push(format!(
+                "holds step {} of its source, not step {index} as its name says",
+                header.source.step
+            ));
+        }
+        if header.params_hash != self.params_hash {
+            problems.push(format!(
+                "baked with parameter hash {}, the series with {}",
+                header.params_hash, self.params_hash
+            ));
+        }
+        if header.source.path != self.source {
+            problems.push(format!(
+                "baked from {}, the series from {}",
+                header.source.path, self.source
+            ));
+        }
+        if header.series != self.series {
+            let say = |s: &Option<SeriesRecord>| {
+                s.map_or("steps not recorded".to_string(), |s| s.to_string())
+            };
+            problems.push(format!(
+                "baked as part of {}, the series is {}",
+                say(&header.series),
+                say(&self.series)
+            ));
+        }
+        if let Some(series) = self.series
+            && !series.contains(index)
+        {
+            problems.push(format!("is outside the series ({series})"));
+        }
+        problems
+    }
+
+    /// The steps of the series that `present` lacks (none where the series is not recorded).
+    pub fn missing(&self, present: &[usize]) -> Vec<usize> {
+        self.series.map_or_else(Vec::new, |s| {
+            (s.first..=s.last)
+                .filter(|i| present.binary_search(i).is_err())
+                .collect()
+        })
+    }
+
+    /// "steps 3, 5 and 7 of steps 0..=9 (10 steps) are missing", at most `shown` listed.
+    pub fn describe_missing(&self, missing: &[usize]) -> Option<String> {
+        const SHOWN: usize = 12;
+        let series = self.series?;
+        if missing.is_empty() {
+            return None;
+        }
+        let mut list: Vec<String> = missing.iter().take(SHOWN).map(|i| i.to_string()).collect();
+        if missing.len() > SHOWN {
+            list.push(format!("… ({} in all)", missing.len()));
+        }
+        Some(format!(
+            "{} of the series' {series} {} missing: {}",
+            missing.len(),
+            if missing.len() == 1 { "is" } else { "are" },
+            list.join(", ")
+        ))
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ManifestStep {
     pub index: usize,
@@ -46,6 +132,9 @@ pub struct Manifest {
     pub version: u32,
     pub source: String,
     pub params_hash: String,
+    /// The steps the series holds (absent in manifests of earlier bakes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub series: Option<SeriesRecord>,
     pub bake: serde_json::Value,
     /// World bounds over all steps.
     pub bounds: [[f64; 3]; 2],
@@ -67,7 +156,7 @@ impl Manifest {
         files.sort();
         let mut steps = Vec::new();
         let mut failed = Vec::new();
-        let mut first: Option<(String, serde_json::Value, String)> = None;
+        let mut first: Option<(SeriesKey, serde_json::Value)> = None;
         let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
         for (index, path) in files {
             let file = match CacheFile::open(&path) {
@@ -89,26 +178,28 @@ impl Manifest {
             }
             let h = file.header();
             match &first {
-                None => {
-                    first = Some((h.params_hash.clone(), h.bake.clone(), h.source.path.clone()))
+                None => first = Some((SeriesKey::of(h), h.bake.clone())),
+                Some((key, _)) => {
+                    let differences = key.differences(index, h);
+                    if !differences.is_empty() {
+                        return Err(Error::Invalid {
+                            path: path.clone(),
+                            problem: format!(
+                                "{}, unlike the other steps in {}: one directory holds one bake",
+                                differences.join("; "),
+                                dir.display()
+                            ),
+                        });
+                    }
                 }
-                Some((hash, _, _)) if *hash != h.params_hash => {
-                    return Err(Error::Invalid {
-                        path: path.clone(),
-                        problem: format!(
-                            "baked with parameter hash {}, other steps in {} with {hash}: \
-                             one directory holds one bake",
-                            h.params_hash,
-                            dir.display()
-                        ),
-                    });
-                }
-                Some(_) => {}
             }
-            bounds = [
-                std::array::from_fn(|a| bounds[0][a].min(h.bounds[0][a])),
-                std::array::from_fn(|a| bounds[1][a].max(h.bounds[1][a])),
-            ];
+            // A step without particles has no extent to add.
+            if h.points > 0 {
+                bounds = [
+                    std::array::from_fn(|a| bounds[0][a].min(h.bounds[0][a])),
+                    std::array::from_fn(|a| bounds[1][a].max(h.bounds[1][a])),
+                ];
+            }
             let bytes = file.file_len();
             let foot = file.footer_checksum();
             steps.push(ManifestStep {
@@ -121,18 +212,28 @@ impl Manifest {
                 bounds: h.bounds,
             });
         }
-        let (params_hash, bake, source) = first.unwrap_or_default();
+        let (key, bake) = first.unwrap_or_else(|| {
+            (
+                SeriesKey {
+                    source: String::new(),
+                    params_hash: String::new(),
+                    series: None,
+                },
+                serde_json::Value::Null,
+            )
+        });
         // A series of no steps has no extent: zero bounds, not infinities (JSON has none,
         // and the manifest would not read back).
-        if steps.is_empty() {
+        if steps.iter().all(|s| s.points == 0) {
             bounds = [[0.0; 3]; 2];
         }
         Ok((
             Manifest {
                 format: MANIFEST_FORMAT.into(),
                 version: 1,
-                source,
-                params_hash,
+                source: key.source,
+                params_hash: key.params_hash,
+                series: key.series,
                 bake,
                 bounds,
                 steps,
@@ -173,25 +274,7 @@ impl Manifest {
     /// and the manifest; its bytes, checksum, points and time against the manifest's entry.
     pub fn step_problems(&self, index: usize, file: &CacheFile) -> Vec<String> {
         let h = file.header();
-        let mut problems = Vec::new();
-        if h.source.step != index {
-            problems.push(format!(
-                "holds step {} of its source, not step {index} as its name says",
-                h.source.step
-            ));
-        }
-        if h.params_hash != self.params_hash {
-            problems.push(format!(
-                "baked with parameter hash {}, the series with {}",
-                h.params_hash, self.params_hash
-            ));
-        }
-        if h.source.path != self.source {
-            problems.push(format!(
-                "baked from {}, the series from {}",
-                h.source.path, self.source
-            ));
-        }
+        let mut problems = self.key().differences(index, h);
         match self.steps.iter().find(|s| s.index == index) {
             None => problems.push("is not in the manifest".into()),
             Some(entry) => {
@@ -213,6 +296,21 @@ impl Manifest {
             }
         }
         problems
+    }
+
+    /// What every step of the series shares.
+    pub fn key(&self) -> SeriesKey {
+        SeriesKey {
+            source: self.source.clone(),
+            params_hash: self.params_hash.clone(),
+            series: self.series,
+        }
+    }
+
+    /// The steps of the series that are not listed (a shard not yet done, a file deleted).
+    pub fn missing(&self) -> Vec<usize> {
+        let present: Vec<usize> = self.steps.iter().map(|s| s.index).collect();
+        self.key().missing(&present)
     }
 
     pub fn write(&self, dir: &Path) -> Result<()> {

@@ -263,6 +263,20 @@ impl CacheFile {
         self.bytes.is_mapped()
     }
 
+    /// An error where the file shrank under its map since it was opened (another program
+    /// truncated or rewrote it in place): whatever was read from it since may be zeros.
+    pub fn unchanged(&self) -> Result<()> {
+        if self.bytes.changed() {
+            return Err(Error::Invalid {
+                path: self.path().to_path_buf(),
+                problem: "the file changed while it was read (truncated or rewritten in place by \
+                          another program); nothing read from it is used"
+                    .into(),
+            });
+        }
+        Ok(())
+    }
+
     /// The footer's xxh3 over the body, as recorded.
     pub fn footer_checksum(&self) -> u64 {
         self.footer.body_xxh3
@@ -274,7 +288,7 @@ impl CacheFile {
             return true;
         }
         let foot = self.bytes.len() - FOOTER_LEN;
-        xxh3_64(&self.bytes[..foot]) == self.footer.body_xxh3
+        xxh3_64(&self.bytes[..foot]) == self.footer.body_xxh3 && !self.bytes.changed()
     }
 
     pub fn section(&self, name: &str) -> Option<&SectionEntry> {
@@ -320,6 +334,7 @@ impl CacheFile {
         expected: &str,
     ) -> Result<()> {
         let sum = hex64(xxh3_64(bytes));
+        self.unchanged()?;
         if sum != expected && !self.skip_checksums {
             return Err(self.section_error(
                 entry,
@@ -419,7 +434,9 @@ impl CacheFile {
                 format!("{what} (stored bytes {}..{}): {e}", st.start, st.end)
             };
             self.section_error(entry, problem)
-        })
+        })?;
+        // The bytes may have gone to zeros after their checksum was taken.
+        self.unchanged()
     }
 
     /// One zeroed buffer per section, each the size of its decoded bytes.

@@ -35,6 +35,7 @@ impl CacheFile {
             problem,
         };
         if !self.body_intact() {
+            self.unchanged()?;
             return Err(invalid(
                 "the footer checksum does not match the file's bytes (corrupt or modified)".into(),
             ));
@@ -54,6 +55,8 @@ impl CacheFile {
                 self.decode_into(entry, &mut out, &mut scratch)?;
             }
         }
+        // A file that shrank under its map read zeros somewhere above.
+        self.unchanged()?;
         Ok(VerifyReport {
             sections: self.header().sections.len(),
             raw_bytes: self.header().sections.iter().map(|s| s.raw).sum(),

@@ -28,6 +28,7 @@ fn header() -> Header {
         mls: MlsSettings::from_params(&slosh_mls::SurfaceParams::default()),
         bake: serde_json::json!({"test": true}),
         params_hash: "0123456789abcdef".into(),
+        series: None,
         stats: StepStats::default(),
         sections: Vec::new(),
         up: None,
@@ -105,7 +106,7 @@ fn truncation_at_any_length_is_a_clear_error() {
 #[test]
 fn a_newer_major_version_is_refused_by_name() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8] = 4;
+    bytes[8..12].copy_from_slice(&[4, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
     assert!(err.contains("newer") && err.contains("4.0"), "{err}");
 }
@@ -269,7 +270,7 @@ fn as_format_1(bytes: &[u8]) -> Vec<u8> {
     let json = serde_json::to_vec(&header).unwrap();
     assert!(json.len() <= header_len);
     let mut out = bytes[..bytes.len() - FOOTER_LEN].to_vec();
-    out[8..10].copy_from_slice(&1u16.to_le_bytes());
+    out[8..12].copy_from_slice(&[1, 0, 0, 0]);
     out[16..24].copy_from_slice(&(json.len() as u64).to_le_bytes());
     out[24..32].copy_from_slice(&xxhash_rust::xxh3::xxh3_64(&json).to_le_bytes());
     out[PREAMBLE_LEN..PREAMBLE_LEN + header_len].fill(0);
@@ -300,4 +301,47 @@ fn format_1_files_still_open_and_decode() {
     v2_as_1[8..10].copy_from_slice(&1u16.to_le_bytes());
     let err = open(v2_as_1).unwrap_err().to_string();
     assert!(err.contains("format 1 file has a chunk table"), "{err}");
+}
+
+/// A step file truncated under its map (`cp`, `rsync --inplace`, NFS) or rewritten in place:
+/// reading it is an error naming the file, never a SIGBUS (issue 25, item 5).
+#[test]
+fn a_file_changed_under_its_map_is_an_error_not_a_crash() {
+    let sections: Vec<SectionInput> = (0..4)
+        .map(|k| {
+            let v: Vec<u32> = (0..200_000u32)
+                .map(|i| i.wrapping_mul(2654435761 + k))
+                .collect();
+            SectionInput::new(&format!("s{k}"), Element::U32, &v, Encoding::Raw)
+        })
+        .collect();
+    let bytes = encode_step(header(), &sections, Compression::None).unwrap();
+    assert!(bytes.len() > 3_000_000);
+    let mut changed = 0;
+    for cut in [0u8, 1, 60, 128, 200, 254] {
+        for rewrite in [0u8, 1] {
+            let mut data = vec![cut, rewrite];
+            data.extend_from_slice(&bytes);
+            changed += usize::from(fuzzing::changed_while_mapped(&data));
+        }
+    }
+    // Every truncation without a rewrite leaves pages past the end that the reads meet.
+    assert!(changed >= 6, "{changed}");
+    // Directly: the error names the file and says what happened.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("v.slc");
+    std::fs::write(&path, &bytes).unwrap();
+    let file = CacheFile::open(&path).unwrap();
+    assert!(file.is_mapped());
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&path)
+        .unwrap()
+        .set_len(8000)
+        .unwrap();
+    let err = file.verify().unwrap_err().to_string();
+    assert!(
+        err.contains("v.slc") && err.contains("changed while it was read"),
+        "{err}"
+    );
 }

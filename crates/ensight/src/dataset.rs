@@ -317,6 +317,22 @@ impl Case {
         let file = self
             .model_file(step)?
             .ok_or_else(|| Error::Request(format!("{}: no model geometry", self.path.display())))?;
+        // After the first step such files hold coordinates only, laid out by the first
+        // step's connectivity: read as geometry they would fail somewhere in their bytes.
+        if step > 0
+            && self
+                .file
+                .model
+                .as_ref()
+                .is_some_and(|m| m.change_coords_only)
+        {
+            return Err(Error::Request(format!(
+                "{}: the model line says `change_coords_only` (the geometry files after the \
+                 first step hold coordinates only), which slosh does not read: write each \
+                 step's geometry in full, or the particles as measured files",
+                self.path.display()
+            )));
+        }
         let bytes = source::open(&file.path)?;
         let encoding = sniff(&file.path, &bytes)?;
         let format = self.file.format;
@@ -414,14 +430,34 @@ impl Case {
             idx.sort_unstable();
             idx.dedup();
         }
+        // A `point` block of no elements is a step without particles yet (Lagrangian and DEM
+        // runs inject them later): an empty step, not an error. Only a geometry without any
+        // `point` block has nothing slosh can read as particles.
         if idx.is_empty()
             && source == PointSource::PointElements
             && parts.is_none()
-            && g.parts.iter().all(|p| p.point_nodes.is_empty())
+            && !g.parts.iter().any(|p| {
+                p.blocks
+                    .iter()
+                    .any(|b| b.kind.trim_start_matches("g_") == "point")
+            })
         {
+            let mut kinds: Vec<&str> = g
+                .parts
+                .iter()
+                .flat_map(|p| p.blocks.iter().map(|b| b.kind.as_str()))
+                .collect();
+            kinds.sort_unstable();
+            kinds.dedup();
             return Err(Error::Request(format!(
-                "{}: step {step} has no `point` elements and no measured particles; ask for all nodes to use mesh nodes as particles",
-                self.path.display()
+                "{}: step {step}: slosh reads particles from `point` elements or a measured \
+                 file; this case has no measured file and its geometry holds {}",
+                self.path.display(),
+                if kinds.is_empty() {
+                    "no elements".to_string()
+                } else {
+                    format!("only {} elements", kinds.join(", "))
+                }
             )));
         }
         let parts_layout = g

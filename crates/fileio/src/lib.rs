@@ -1,5 +1,8 @@
 //! Whole files in and out: bytes memory-mapped where the OS allows (read into memory
-//! otherwise), and writes that either land completely or not at all.
+//! otherwise), guarded against the file shrinking under the map, and writes that either land
+//! completely or not at all.
+
+mod sigbus;
 
 use std::fs::{File, OpenOptions};
 use std::io::Write;
@@ -34,7 +37,11 @@ pub struct FileBytes {
 
 #[derive(Debug)]
 enum Data {
-    Mapped(memmap2::Mmap),
+    /// The guard is dropped (unregistered) before the map is unmapped: fields drop in order.
+    Mapped {
+        guard: sigbus::Guard,
+        map: memmap2::Mmap,
+    },
     Owned(Vec<u8>),
 }
 
@@ -57,15 +64,18 @@ impl FileBytes {
         let len = file.metadata().map_err(|e| IoError::new(path, e))?.len();
         // An empty file cannot be mapped on every OS; it has nothing to map anyway.
         if len > 0 {
-            // SAFETY: the map is read-only. Another process truncating the file while it is
-            // mapped would raise SIGBUS; files are only ever replaced by rename (see
-            // `atomic_write`), which leaves a mapped old inode intact, and the read fallback
-            // exists for file systems where that promise does not hold.
+            // SAFETY: the map is read-only. slosh replaces files by rename (`atomic_write`),
+            // which leaves a mapped old inode intact, but another program may truncate or
+            // rewrite the file in place: a read past its new end then raises SIGBUS, which
+            // the guard turns into a page of zeros and a mark (`changed`). Without a guard
+            // the file is read instead.
             let mapped = unsafe { memmap2::MmapOptions::new().populate().map(&file) };
-            if let Ok(map) = mapped {
+            if let Ok(map) = mapped
+                && let Some(guard) = sigbus::register(map.as_ptr(), map.len())
+            {
                 return Ok(FileBytes {
                     path: path.to_path_buf(),
-                    data: Data::Mapped(map),
+                    data: Data::Mapped { guard, map },
                 });
             }
         }
@@ -86,7 +96,17 @@ impl FileBytes {
     }
 
     pub fn is_mapped(&self) -> bool {
-        matches!(self.data, Data::Mapped(_))
+        matches!(self.data, Data::Mapped { .. })
+    }
+
+    /// Whether the file shrank under its map since it was opened and a read past its new end
+    /// got zeros instead of its bytes: nothing read from it can be trusted. Checked after
+    /// reading, since it can happen at any moment.
+    pub fn changed(&self) -> bool {
+        match &self.data {
+            Data::Mapped { guard, .. } => guard.faulted(),
+            Data::Owned(_) => false,
+        }
     }
 }
 
@@ -94,7 +114,7 @@ impl Deref for FileBytes {
     type Target = [u8];
     fn deref(&self) -> &[u8] {
         match &self.data {
-            Data::Mapped(m) => m,
+            Data::Mapped { map, .. } => map,
             Data::Owned(v) => v,
         }
     }
@@ -165,6 +185,39 @@ mod tests {
             Some(&b"precious"[..])
         );
         assert_eq!(std::fs::read(&target).ok().as_deref(), Some(&b"new"[..]));
+    }
+
+    /// A mapped file truncated under its map: reading past the new end neither kills the
+    /// process nor returns the old bytes unmarked.
+    #[cfg(unix)]
+    #[test]
+    fn a_file_truncated_under_its_map_is_marked_changed() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("big.bin");
+        let len = 64 * 4096;
+        std::fs::write(&path, vec![7u8; len]).unwrap_or_else(|e| panic!("{e}"));
+        let bytes = FileBytes::open(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert!(bytes.is_mapped());
+        assert!(!bytes.changed());
+        let file = OpenOptions::new()
+            .write(true)
+            .open(&path)
+            .unwrap_or_else(|e| panic!("{e}"));
+        file.set_len(4096).unwrap_or_else(|e| panic!("{e}"));
+        // Past the new end: zeros (the page was dropped), and the map is marked.
+        let sum: u64 = bytes.iter().map(|&b| u64::from(b)).sum();
+        assert!(bytes.changed());
+        assert_eq!(
+            sum,
+            7 * 4096,
+            "only the first page still holds the file's bytes"
+        );
+        // Another map is unaffected, and a dropped map frees its slot.
+        let other = dir.path().join("other.bin");
+        std::fs::write(&other, vec![1u8; 8192]).unwrap_or_else(|e| panic!("{e}"));
+        let second = FileBytes::open(&other).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(second.iter().map(|&b| u64::from(b)).sum::<u64>(), 8192);
+        assert!(!second.changed());
     }
 
     #[test]

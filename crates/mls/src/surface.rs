@@ -424,6 +424,29 @@ impl<T: Real> SurfaceParts<T> {
         self.points.is_empty()
     }
 
+    /// The parts of a step without particles (a Lagrangian run before its first injection):
+    /// nothing to fit, nothing to hit.
+    pub fn empty(params: &SurfaceParams) -> SurfaceParts<T> {
+        SurfaceParts {
+            origin: [0.0; 3],
+            points: Vec::new(),
+            normals: None,
+            radii: Vec::new(),
+            h: T::c(0.0),
+            spacing: T::c(0.0),
+            neighbours: Neighbours::from_csr(vec![0], Vec::new())
+                .unwrap_or_else(|| unreachable!("one offset of 0 over no ids is a CSR index")),
+            reach: Vec::new(),
+            capped: 0,
+            run_unions: None,
+            balls: Vec::new(),
+            ball_fits: Vec::new(),
+            spheres: Vec::new(),
+            orientation: OrientationRepair::default(),
+            params: params.clone(),
+        }
+    }
+
     pub fn neighbours_of(&self, i: usize) -> &[u32] {
         self.neighbours.of(i)
     }

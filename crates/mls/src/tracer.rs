@@ -89,12 +89,19 @@ impl Camera {
         up: [f64; 3],
     ) -> Camera {
         let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (bounds[0][a] + bounds[1][a]));
-        let radius = (0..3)
+        let extent = (0..3)
             .map(|a| (bounds[1][a] - bounds[0][a]).powi(2))
             .sum::<f64>()
             .sqrt()
-            .max(1e-9)
             * 0.5;
+        // No absolute floor: data in any unit (a droplet of 1e-15 m, a dam of 1e4 m) frames
+        // alike. Only bounds of no extent (one point) need one, relative to where they are.
+        let radius = if extent > 0.0 && extent.is_finite() {
+            extent
+        } else {
+            let at = centre.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+            (at * 1e-6).max(f64::MIN_POSITIVE.sqrt())
+        };
         // (right, front, up) = (0.45, -0.8, 0.4) in the frame whose third axis is `up`:
         // for z up that is x, y, z; for another axis the two others follow cyclically.
         let axis = (0..3)

@@ -84,8 +84,13 @@ pub struct Prepared {
 #[derive(Debug)]
 pub struct GpuSource {
     gpu: Arc<Gpu>,
-    /// The series' manifest, where it has one (a bake in progress may not yet).
-    manifest: Mutex<Option<slosh_cache::Manifest>>,
+    /// What a step must be to belong to the series: the manifest's entries where it has one
+    /// (a bake in progress may not yet), and the series' key (the manifest's, else the first
+    /// readable step's).
+    belongs: Mutex<(
+        Option<slosh_cache::Manifest>,
+        Option<slosh_cache::SeriesKey>,
+    )>,
     staging: StagingPool,
     delay: Option<std::time::Duration>,
     paths: Mutex<HashMap<usize, PathBuf>>,
@@ -122,20 +127,22 @@ impl StepSource for GpuSource {
         }
         let field = self.field();
         let host = HostStep::open(&path, field.as_deref()).map_err(|e| e.to_string())?;
-        // A file must hold the step its name says, and, where the manifest lists the step,
-        // be the file the manifest describes.
-        let manifest = self
-            .manifest
+        // A file must hold the step its name says, be of the series (its input, settings
+        // and steps), and, where the manifest lists the step, be the file it describes.
+        let (manifest, key) = self
+            .belongs
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .clone();
-        let header_step = host.file().header().source.step;
-        let problems = match &manifest {
-            Some(m) if m.steps.iter().any(|s| s.index == index) => {
+        let header = host.file().header();
+        let problems = match (&manifest, &key) {
+            (Some(m), _) if m.steps.iter().any(|s| s.index == index) => {
                 m.step_problems(index, host.file())
             }
-            _ if header_step != index => vec![format!(
-                "holds step {header_step} of its source, not step {index} as its name says"
+            (_, Some(key)) => key.differences(index, header),
+            _ if header.source.step != index => vec![format!(
+                "holds step {} of its source, not step {index} as its name says",
+                header.source.step
             )],
             _ => Vec::new(),
         };
@@ -218,6 +225,9 @@ pub struct Engine {
     options: EngineOptions,
     /// Failed steps by bake index, with why.
     failed: BTreeMap<usize, String>,
+    /// Failures found outside a frame (a file removed or unreadable), by bake index, for the
+    /// next frame's report.
+    unreported: Vec<(usize, String)>,
     /// The field each resident step holds, by bake index.
     step_fields: HashMap<usize, Option<String>>,
     field: Option<String>,
@@ -249,7 +259,7 @@ impl Engine {
         let budget = options.budget.unwrap_or_else(|| default_budget(&gpu));
         let source = Arc::new(GpuSource {
             gpu: gpu.clone(),
-            manifest: Mutex::new(None),
+            belongs: Mutex::new((None, None)),
             staging: StagingPool::new(options.loaders + 2),
             delay: options.load_delay,
             paths: Mutex::new(HashMap::new()),
@@ -269,6 +279,7 @@ impl Engine {
             field: options.field.clone(),
             options,
             failed: BTreeMap::new(),
+            unreported: Vec::new(),
             step_fields: HashMap::new(),
             revision: 0,
             moves: std::collections::VecDeque::new(),
@@ -299,6 +310,26 @@ impl Engine {
                 .map(|s| (s.index, s.path.clone())),
         );
         drop(paths);
+        *self
+            .source
+            .belongs
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) =
+            (self.series.manifest().cloned(), self.series.key().cloned());
+        // Steps whose files are gone or unreadable are failed steps, said like any other.
+        let problems: Vec<(usize, String)> = self
+            .series
+            .problems()
+            .map(|(i, why)| (i, why.to_string()))
+            .collect();
+        for (index, why) in problems {
+            self.pool.remove(index);
+            self.step_fields.remove(&index);
+            if self.failed.get(&index) != Some(&why) {
+                self.unreported.push((index, why.clone()));
+            }
+            self.failed.insert(index, why);
+        }
         self.timeline.set_times(self.series.times());
         // The step shown stays shown where the series grew before it.
         if let Some(index) = current
@@ -309,13 +340,24 @@ impl Engine {
         self.last_position = self.timeline.current();
     }
 
-    /// Looks for steps a running bake added; returns whether there are new ones.
+    /// Looks again at the series' directory: steps a running bake added, files copied over,
+    /// restored or removed, a manifest written. Returns whether anything changed. What was
+    /// loaded from or concluded about a changed file is dropped, so it loads again.
     pub fn refresh_series(&mut self) -> Result<bool> {
-        let added = self.series.refresh()?;
-        if added {
+        let change = self.series.refresh()?;
+        for index in &change.changed {
+            self.pool.remove(*index);
+            self.step_fields.remove(index);
+            self.failed.remove(index);
+        }
+        if change.manifest {
+            // Steps failed against the old manifest (or none) are judged again.
+            self.failed.clear();
+        }
+        if change.any() {
             self.adopt_series();
         }
-        Ok(added)
+        Ok(change.any())
     }
 
     pub fn gpu(&self) -> &Arc<Gpu> {
@@ -410,11 +452,14 @@ impl Engine {
         self.revision += 1;
     }
 
-    fn bake_index(&self, position: usize) -> Option<usize> {
+    /// The bake index (the step's number everywhere: file names, `slosh render --step`) of
+    /// the step at timeline position `position`.
+    pub fn bake_index(&self, position: usize) -> Option<usize> {
         self.series.steps().get(position).map(|s| s.index)
     }
 
-    fn position(&self, index: usize) -> Option<usize> {
+    /// The timeline position of the step with bake index `index`.
+    pub fn position(&self, index: usize) -> Option<usize> {
         self.series
             .steps()
             .binary_search_by_key(&index, |s| s.index)
@@ -501,7 +546,28 @@ impl Engine {
                         continue;
                     }
                     let upload = prepared.step.upload;
+                    if bytes > self.pool.budget() {
+                        // It would never fit: said once, not loaded again and again.
+                        let why = format!(
+                            "step {} needs {:.1} MB of GPU memory, more than the whole budget \
+                             of {:.1} MB (--budget sets it)",
+                            loaded.index,
+                            bytes as f64 / 1e6,
+                            self.pool.budget() as f64 / 1e6
+                        );
+                        report.failures.push((position, why.clone()));
+                        self.failed.insert(loaded.index, why);
+                        continue;
+                    }
                     self.failed.remove(&loaded.index);
+                    // The step asked for may take the shown one's room when only one fits.
+                    let keep = if position == self.timeline.current()
+                        && !self.pool.could_hold(bytes, keep)
+                    {
+                        None
+                    } else {
+                        keep
+                    };
                     if let Admission::Stored { evicted } =
                         self.pool.insert(loaded.index, prepared.step, keep)
                     {
@@ -591,6 +657,11 @@ impl Engine {
             wanted: position,
             ..FrameReport::default()
         };
+        for (index, why) in std::mem::take(&mut self.unreported) {
+            if let Some(position) = self.position(index) {
+                report.failures.push((position, why));
+            }
+        }
         self.admit(&window, &mut report);
         let resident_or_failed = |e: &Engine, p: usize| {
             e.bake_index(p)

@@ -1,21 +1,70 @@
 //! A cache directory as a series of steps: the manifest's steps, and the step files a bake
 //! is still adding (bake renames each finished file into place, so a file that is there is
-//! whole).
+//! whole). Positions are stable for the life of the series: a step whose file disappears
+//! stays in place, marked, so that every later step keeps its place on the timeline; a step
+//! file that cannot be read is a step too, marked with why.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::time::SystemTime;
 
-use slosh_cache::{CacheFile, Manifest, parse_step_file_name};
+use slosh_cache::{CacheFile, Manifest, SeriesKey, parse_step_file_name};
 
 use crate::error::{Error, Result};
+
+/// What a file was when it was last looked at: a file copied over, restored or rewritten has
+/// another stamp.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FileStamp {
+    len: u64,
+    modified: Option<SystemTime>,
+    inode: u64,
+}
+
+impl FileStamp {
+    pub fn of(path: &Path) -> Option<FileStamp> {
+        let meta = std::fs::metadata(path).ok()?;
+        #[cfg(unix)]
+        let inode = std::os::unix::fs::MetadataExt::ino(&meta);
+        #[cfg(not(unix))]
+        let inode = 0;
+        Some(FileStamp {
+            len: meta.len(),
+            modified: meta.modified().ok(),
+            inode,
+        })
+    }
+}
 
 /// One step of a series.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SeriesStep {
-    /// The bake's step index (the file's number).
+    /// The bake's step index (the file's number): what the step is called everywhere.
     pub index: usize,
     pub time: f64,
     pub path: PathBuf,
+    /// The file as last seen; `None` while it is missing.
+    pub stamp: Option<FileStamp>,
+    /// Why the step cannot be shown, where it cannot be: its file is gone or unreadable.
+    pub problem: Option<String>,
+}
+
+/// What a refresh found.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SeriesChange {
+    /// Steps new to the series.
+    pub added: usize,
+    /// Bake indices of known steps whose file changed, vanished or came back: whatever was
+    /// loaded or concluded from them is stale.
+    pub changed: Vec<usize>,
+    /// The manifest appeared, changed or went away.
+    pub manifest: bool,
+}
+
+impl SeriesChange {
+    pub fn any(&self) -> bool {
+        self.added > 0 || !self.changed.is_empty() || self.manifest
+    }
 }
 
 /// The steps of a cache directory, in the bake's order.
@@ -23,8 +72,10 @@ pub struct SeriesStep {
 pub struct Series {
     dir: PathBuf,
     steps: Vec<SeriesStep>,
-    /// Files that are there but could not be read, with why.
-    unreadable: Vec<(PathBuf, String)>,
+    manifest: Option<Manifest>,
+    manifest_stamp: Option<FileStamp>,
+    /// What every step must share: the manifest's, else the first readable step's.
+    key: Option<SeriesKey>,
 }
 
 impl Series {
@@ -34,7 +85,9 @@ impl Series {
         let mut series = Series {
             dir: dir.to_path_buf(),
             steps: Vec::new(),
-            unreadable: Vec::new(),
+            manifest: None,
+            manifest_stamp: None,
+            key: None,
         };
         series.refresh()?;
         Ok(series)
@@ -60,14 +113,26 @@ impl Series {
         self.steps.iter().map(|s| s.time).collect()
     }
 
-    pub fn unreadable(&self) -> &[(PathBuf, String)] {
-        &self.unreadable
+    pub fn manifest(&self) -> Option<&Manifest> {
+        self.manifest.as_ref()
     }
 
-    /// Looks again for step files (a bake still filling the directory); returns whether
-    /// steps were added. Known steps keep their positions only if no new step sorts before
-    /// them, so callers re-map by [`SeriesStep::index`].
-    pub fn refresh(&mut self) -> Result<bool> {
+    /// What every step of the series shares, where it is known yet.
+    pub fn key(&self) -> Option<&SeriesKey> {
+        self.key.as_ref()
+    }
+
+    /// Steps that cannot be shown (a file gone or unreadable), by bake index, with why.
+    pub fn problems(&self) -> impl Iterator<Item = (usize, &str)> {
+        self.steps
+            .iter()
+            .filter_map(|s| s.problem.as_deref().map(|p| (s.index, p)))
+    }
+
+    /// Looks again at the directory (a bake still filling it, files copied over or deleted).
+    /// Known steps keep their positions unless a new step sorts before them, so callers
+    /// re-map by [`SeriesStep::index`].
+    pub fn refresh(&mut self) -> Result<SeriesChange> {
         let entries = std::fs::read_dir(&self.dir).map_err(|e| Error::Series {
             path: self.dir.clone(),
             problem: format!("cannot list the directory: {e}"),
@@ -79,43 +144,88 @@ impl Series {
                 files.insert(index, entry.path());
             }
         }
+        let mut change = SeriesChange::default();
+        let manifest_path = self.dir.join(slosh_cache::MANIFEST_NAME);
+        let manifest_stamp = FileStamp::of(&manifest_path);
+        if manifest_stamp != self.manifest_stamp || (self.steps.is_empty() && !files.is_empty()) {
+            let manifest = Manifest::read(&self.dir).ok();
+            change.manifest = manifest != self.manifest;
+            self.manifest = manifest;
+            self.manifest_stamp = manifest_stamp;
+        }
         let mut known: BTreeMap<usize, SeriesStep> =
             self.steps.drain(..).map(|s| (s.index, s)).collect();
-        if known.is_empty()
-            && let Ok(manifest) = Manifest::read(&self.dir)
-        {
-            for s in manifest.steps {
-                if files.contains_key(&s.index) {
-                    let path = self.dir.join(&s.file);
-                    known.insert(
-                        s.index,
-                        SeriesStep {
-                            index: s.index,
-                            time: s.time,
-                            path,
-                        },
-                    );
-                }
+        // Known steps: still there, changed, gone or back.
+        for step in known.values_mut() {
+            let stamp = files.get(&step.index).and_then(|p| FileStamp::of(p));
+            if stamp == step.stamp {
+                continue;
             }
+            change.changed.push(step.index);
+            step.stamp = stamp;
+            step.problem = match stamp {
+                None => Some(format!(
+                    "{} was removed while the series was open",
+                    step.path.display()
+                )),
+                Some(_) => match CacheFile::open(&step.path) {
+                    Ok(file) => {
+                        step.time = file.header().source.time;
+                        None
+                    }
+                    Err(e) => Some(e.to_string()),
+                },
+            };
         }
-        let before = known.len();
-        self.unreadable.clear();
+        // New steps: their times from the manifest where it lists them, else their headers.
+        let listed: BTreeMap<usize, f64> = self
+            .manifest
+            .iter()
+            .flat_map(|m| m.steps.iter().map(|s| (s.index, s.time)))
+            .collect();
         for (index, path) in files {
             if known.contains_key(&index) {
                 continue;
             }
-            // A step the manifest does not list yet: its time from its own header.
-            match CacheFile::open(&path) {
-                Ok(file) => {
-                    let time = file.header().source.time;
-                    known.insert(index, SeriesStep { index, time, path });
-                }
-                Err(e) => self.unreadable.push((path, e.to_string())),
+            let stamp = FileStamp::of(&path);
+            let (time, problem) = match listed.get(&index) {
+                Some(&time) => (time, None),
+                None => match CacheFile::open(&path) {
+                    Ok(file) => {
+                        if self.key.is_none() && self.manifest.is_none() {
+                            self.key = Some(SeriesKey::of(file.header()));
+                        }
+                        (file.header().source.time, None)
+                    }
+                    Err(e) => (f64::NAN, Some(e.to_string())),
+                },
+            };
+            change.added += 1;
+            known.insert(
+                index,
+                SeriesStep {
+                    index,
+                    time,
+                    path,
+                    stamp,
+                    problem,
+                },
+            );
+        }
+        if let Some(m) = &self.manifest {
+            self.key = Some(m.key());
+        }
+        self.steps = known.into_values().collect();
+        // A step whose time is unknown (its file unreadable) takes its predecessor's, so the
+        // timeline stays ordered.
+        let mut last = 0.0;
+        for step in &mut self.steps {
+            if step.time.is_finite() {
+                last = step.time;
+            } else {
+                step.time = last;
             }
         }
-        known.retain(|_, s| s.path.exists());
-        let added = known.len() > before;
-        self.steps = known.into_values().collect();
-        Ok(added)
+        Ok(change)
     }
 }

@@ -135,6 +135,9 @@ impl Gpu {
             max_storage_buffer_binding_size: available.max_storage_buffer_binding_size,
             max_buffer_size: available.max_buffer_size,
             max_compute_workgroups_per_dimension: available.max_compute_workgroups_per_dimension,
+            // A window's surface is a texture: the default (8192) is less than a large
+            // monitor wall or a window an X client sizes at will.
+            max_texture_dimension_2d: available.max_texture_dimension_2d,
             ..wgpu::Limits::default()
         })
     }

@@ -650,6 +650,7 @@ enum Piece<'a> {
 /// are copied or decoded in parallel; the copies are recorded into `encoder`.
 fn storage_buffers(
     gpu: &Gpu,
+    file: &CacheFile,
     arrays: &[(&str, Source<'_>, u64)],
     encoder: &mut wgpu::CommandEncoder,
     pool: Option<&StagingPool>,
@@ -748,6 +749,8 @@ fn storage_buffers(
             Ok(())
         },
     );
+    // Raw pieces were copied straight from the map, which may have gone to zeros under them.
+    let filled = filled.and_then(|()| file.unchanged().map_err(Error::from));
     if let Err(e) = filled {
         // Still mapped and never submitted: ready for the next upload as it is.
         if let Some(pool) = pool {
@@ -863,7 +866,8 @@ impl GpuStep {
             arrays.push(("field", Source::Bytes(&f.bytes), 0));
         }
         stats.bytes = arrays.iter().map(|(_, b, _)| b.len()).sum();
-        let (mut sections, staging) = storage_buffers(gpu, &arrays, encoder, staging, cancelled)?;
+        let (mut sections, staging) =
+            storage_buffers(gpu, file, &arrays, encoder, staging, cancelled)?;
         let field_values = match &host.field {
             Some(_) => sections
                 .pop()

@@ -95,8 +95,12 @@ struct Player {
     last_refresh: Instant,
     output: PathBuf,
     export: Option<Export>,
+    /// The export's steps, by bake index.
     export_first: usize,
     export_last: usize,
+    /// The series' last bake index when the range was last looked at: a range that ended
+    /// there grows with the series.
+    export_seen_last: usize,
     export_size: (u32, u32),
     export_iterations: u32,
     bounds: [[f64; 3]; 2],
@@ -109,6 +113,9 @@ struct Player {
     passes: u64,
     /// The viewport in physical pixels within the window.
     viewport_px: egui::Rect,
+    /// The window title last set (set again only when it changes: setting it asks for
+    /// another pass).
+    title: String,
 }
 
 /// Runs the player until its window closes.
@@ -126,9 +133,13 @@ pub fn run(options: PlayOptions) -> Result<(), AppError> {
     };
     let gpu = Arc::new(gpu);
     let engine = Engine::open(gpu.clone(), &options.dir, options.engine.clone())?;
+    // The window's surface is a texture: a window manager that honours the hint never makes
+    // it larger than the device holds (the device asks for the adapter's largest).
+    let max_side = gpu.device.limits().max_texture_dimension_2d as f32;
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_inner_size([options.window.0, options.window.1])
+            .with_max_inner_size([max_side, max_side])
             .with_title("slosh"),
         renderer: eframe::Renderer::Wgpu,
         wgpu_options: eframe::egui_wgpu::WgpuConfiguration {
@@ -184,11 +195,13 @@ fn series_bounds(engine: &Engine) -> [[f64; 3]; 2] {
     if let Ok(m) = slosh_cache::Manifest::read(engine.series().dir()) {
         return m.bounds;
     }
+    // The first step with particles (a Lagrangian run's first steps may have none).
     engine
         .series()
         .steps()
-        .first()
-        .and_then(|s| CacheFile::open(&s.path).ok())
+        .iter()
+        .filter_map(|s| CacheFile::open(&s.path).ok())
+        .find(|f| f.header().points > 0)
         .map_or([[-1.0; 3], [1.0; 3]], |f| f.header().bounds)
 }
 
@@ -199,6 +212,24 @@ fn default_light() -> (f32, f32) {
         y.atan2(x).to_degrees(),
         z.clamp(-1.0, 1.0).asin().to_degrees(),
     )
+}
+
+/// The most pixels a frame is traced at (8K: 7680 × 4320).
+const MAX_FRAME_PIXELS: f32 = 7680.0 * 4320.0;
+
+/// The frame size for a viewport of `width` × `height` physical pixels (render scale
+/// applied): as it is where the device can hold it, else scaled down, keeping its aspect, to
+/// the device's largest texture (the texture is stretched over the viewport).
+fn fit_texture(width: f32, height: f32, max_side: u32) -> (u32, u32) {
+    let longest = width.max(height).max(1.0);
+    // And at most an 8K display's pixels: a frame's hit buffers grow with them (a window an X
+    // client sizes to 16000² would ask for gigabytes), and past that a person cannot tell.
+    let pixels = (width * height).max(1.0);
+    let shrink = (max_side as f32 / longest)
+        .min((MAX_FRAME_PIXELS / pixels).sqrt())
+        .min(1.0);
+    let side = |v: f32| ((v * shrink).round() as u32).clamp(1, max_side.max(1));
+    (side(width), side(height))
 }
 
 fn axis_vector(axis: usize) -> [f64; 3] {
@@ -231,7 +262,8 @@ impl Player {
         let camera = OrbitCamera::framing(&bounds, 40.0, axis_vector(up_axis));
         let fields = baked_fields(&engine);
         let field_choice = engine.field().map(str::to_string);
-        let last_step = engine.timeline().len().saturating_sub(1);
+        let first_step = engine.series().steps().first().map_or(0, |s| s.index);
+        let last_step = engine.series().steps().last().map_or(0, |s| s.index);
         Player {
             gpu,
             render_state,
@@ -260,8 +292,9 @@ impl Player {
             last_refresh: Instant::now(),
             output: options.output,
             export: None,
-            export_first: 0,
+            export_first: first_step,
             export_last: last_step,
+            export_seen_last: last_step,
             export_size: (1920, 1080),
             export_iterations: 3,
             bounds,
@@ -271,34 +304,42 @@ impl Player {
             log_frames: options.log_frames,
             light: default_light(),
             passes: 0,
+            title: String::new(),
         }
     }
 
+    /// Every key press of the pass, in order: presses faster than the passes (a slow frame)
+    /// each count.
     fn keys(&mut self, ctx: &egui::Context) {
         if ctx.egui_wants_keyboard_input() {
             return;
         }
-        let t = self.engine.timeline_mut();
-        ctx.input(|i| {
-            let by = if i.modifiers.shift { 10 } else { 1 };
-            if i.key_pressed(egui::Key::Space) {
-                t.toggle_play();
-            }
-            if i.key_pressed(egui::Key::ArrowRight) {
-                t.step_by(by);
-            }
-            if i.key_pressed(egui::Key::ArrowLeft) {
-                t.step_by(-by);
-            }
-            if i.key_pressed(egui::Key::Home) {
-                t.home();
-            }
-            if i.key_pressed(egui::Key::End) {
-                t.end();
-            }
+        let presses: Vec<(egui::Key, bool)> = ctx.input(|i| {
+            i.events
+                .iter()
+                .filter_map(|e| match e {
+                    egui::Event::Key {
+                        key,
+                        pressed: true,
+                        modifiers,
+                        ..
+                    } => Some((*key, modifiers.shift)),
+                    _ => None,
+                })
+                .collect()
         });
-        if ctx.input(|i| i.key_pressed(egui::Key::F12)) {
-            self.screenshot_pending = true;
+        let t = self.engine.timeline_mut();
+        for (key, shift) in presses {
+            let by = if shift { 10 } else { 1 };
+            match key {
+                egui::Key::Space => t.toggle_play(),
+                egui::Key::ArrowRight => t.step_by(by),
+                egui::Key::ArrowLeft => t.step_by(-by),
+                egui::Key::Home => t.home(),
+                egui::Key::End => t.end(),
+                egui::Key::F12 => self.screenshot_pending = true,
+                _ => {}
+            }
         }
     }
 
@@ -368,8 +409,11 @@ impl Player {
             (rect.max.to_vec2() * ui.ctx().pixels_per_point()).to_pos2(),
         );
         let ppp = ui.ctx().pixels_per_point() * self.render_scale;
-        let width = ((rect.width() * ppp).round() as u32).max(1);
-        let height = ((rect.height() * ppp).round() as u32).max(1);
+        let (width, height) = fit_texture(
+            rect.width() * ppp,
+            rect.height() * ppp,
+            self.gpu.device.limits().max_texture_dimension_2d,
+        );
         let seconds = self.last_frame.elapsed().as_secs_f64();
         self.last_frame = Instant::now();
         let request = FrameRequest {
@@ -404,7 +448,8 @@ impl Player {
                     self.message = Some(why.clone());
                 }
                 if self.log_frames {
-                    for (step, why) in &report.failures {
+                    for (position, why) in &report.failures {
+                        let step = self.engine.bake_index(*position).unwrap_or(*position);
                         say(&format!("failed step {step}: {why}"));
                     }
                 }
@@ -432,16 +477,35 @@ impl Player {
         }
     }
 
+    /// Why the step asked for failed, where it did.
+    fn wanted_failure(&self) -> Option<String> {
+        self.engine
+            .failures()
+            .into_iter()
+            .find(|(p, _)| *p == self.last.wanted)
+            .map(|(_, why)| why)
+    }
+
     fn show_texture(&mut self, ui: &mut egui::Ui, rect: egui::Rect) {
         let Some(targets) = self.engine.targets() else {
+            let failures = self.engine.failures();
+            let text = if self.engine.timeline().is_empty() {
+                "waiting for the first step file…".to_string()
+            } else if failures.len() == self.engine.timeline().len() {
+                format!(
+                    "none of the {} step files can be shown; the first: {}",
+                    failures.len(),
+                    failures.first().map_or("", |(_, why)| why.as_str())
+                )
+            } else if let Some(why) = self.wanted_failure() {
+                format!("this step failed: {why}")
+            } else {
+                "loading…".to_string()
+            };
             ui.painter().text(
                 rect.center(),
                 egui::Align2::CENTER_CENTER,
-                if self.engine.timeline().is_empty() {
-                    "waiting for the first step file…"
-                } else {
-                    "loading…"
-                },
+                text,
                 egui::FontId::proportional(18.0),
                 ui.visuals().text_color(),
             );
@@ -480,10 +544,16 @@ impl Player {
         if self.last.stand_in
             && let Some(shown) = self.last.shown
         {
+            let index = |p: usize| self.engine.bake_index(p).unwrap_or(p);
+            let wanted = index(self.last.wanted);
+            let text = match self.wanted_failure() {
+                Some(why) => format!("step {wanted} failed: {why}; showing step {}", index(shown)),
+                None => format!("showing step {} while step {wanted} loads", index(shown)),
+            };
             ui.painter().text(
                 rect.left_top() + egui::vec2(10.0, 10.0),
                 egui::Align2::LEFT_TOP,
-                format!("showing step {shown} while step {} loads", self.last.wanted),
+                text,
                 egui::FontId::proportional(14.0),
                 egui::Color32::from_rgb(240, 200, 80),
             );
@@ -569,12 +639,17 @@ impl Player {
         {
             self.screenshot();
         }
-        let last = self.engine.timeline().len().saturating_sub(1);
+        self.follow_series_in_export_range();
+        let steps = self.engine.series().steps();
+        let (first, last) = (
+            steps.first().map_or(0, |s| s.index),
+            steps.last().map_or(0, |s| s.index),
+        );
         ui.horizontal(|ui| {
-            ui.label("frames");
-            ui.add(egui::DragValue::new(&mut self.export_first).range(0..=last));
+            ui.label("steps");
+            ui.add(egui::DragValue::new(&mut self.export_first).range(first..=last));
             ui.label("–");
-            ui.add(egui::DragValue::new(&mut self.export_last).range(0..=last));
+            ui.add(egui::DragValue::new(&mut self.export_last).range(first..=last));
         });
         ui.horizontal(|ui| {
             ui.add(egui::DragValue::new(&mut self.export_size.0).range(16..=8192));
@@ -639,7 +714,8 @@ impl Player {
             self.message = Some("nothing to save yet".into());
             return;
         };
-        let step = self.last.shown.unwrap_or(self.last.wanted);
+        let position = self.last.shown.unwrap_or(self.last.wanted);
+        let step = self.engine.bake_index(position).unwrap_or(position);
         let path = self.output.join(format!("slosh-step-{step:05}.png"));
         let saved = self
             .engine
@@ -670,6 +746,21 @@ impl Player {
         });
     }
 
+    /// A range that ended at the series' last step grows with the series (a bake adding
+    /// steps), and every range stays within the series.
+    fn follow_series_in_export_range(&mut self) {
+        let steps = self.engine.series().steps();
+        let (Some(first), Some(last)) = (steps.first(), steps.last()) else {
+            return;
+        };
+        if self.export_last == self.export_seen_last {
+            self.export_last = last.index;
+        }
+        self.export_seen_last = last.index;
+        self.export_first = self.export_first.clamp(first.index, last.index);
+        self.export_last = self.export_last.clamp(first.index, last.index);
+    }
+
     fn start_export(&mut self) {
         let (first, last) = (
             self.export_first.min(self.export_last),
@@ -680,9 +771,8 @@ impl Player {
             .series()
             .steps()
             .iter()
-            .enumerate()
-            .filter(|(i, _)| (first..=last).contains(i))
-            .map(|(i, s)| (i, s.path.clone()))
+            .filter(|s| (first..=last).contains(&s.index) && s.problem.is_none())
+            .map(|s| (s.index, s.path.clone()))
             .collect();
         let (tx, rx) = channel();
         let gpu = self.gpu.clone();
@@ -692,6 +782,10 @@ impl Player {
         let field = self.field_choice.clone();
         let dir = self.output.join("frames");
         let total = steps.len();
+        if total == 0 {
+            self.message = Some(format!("export: no readable step in {first}..={last}"));
+            return;
+        }
         std::thread::spawn(move || {
             let tracer = match Tracer::new(&gpu) {
                 Ok(t) => t,
@@ -766,9 +860,14 @@ impl Player {
         let progress = self.last.progress.map_or(String::new(), |p| {
             format!(" · refined {}/{}", p.done, p.target)
         });
+        let index = |p: usize| self.engine.bake_index(p).unwrap_or(p);
         let shown = match (self.last.shown, self.last.stand_in) {
-            (Some(s), true) => format!(" · showing step {s} for {}", self.last.wanted),
-            (Some(s), false) => format!(" · step {s}"),
+            (Some(s), true) => format!(
+                " · showing step {} for {}",
+                index(s),
+                index(self.last.wanted)
+            ),
+            (Some(s), false) => format!(" · step {}", index(s)),
             (None, _) => " · nothing resident yet".into(),
         };
         // Two lines of fixed height, truncated: the viewport's size never depends on what
@@ -838,7 +937,8 @@ impl eframe::App for Player {
                     .map_or(String::new(), |n| format!(" drew {n}"))
             ));
         }
-        // The title names the step on screen (a stand-in's own number while another loads).
+        // The title names the step on screen (a stand-in's own number while another loads),
+        // by its bake index, as `slosh render --step` does.
         let title = match self.last.shown {
             Some(shown) => {
                 let time = self
@@ -848,25 +948,50 @@ impl eframe::App for Player {
                     .get(shown)
                     .copied()
                     .unwrap_or(0.0);
+                let index = |p: usize| self.engine.bake_index(p).unwrap_or(p);
                 format!(
-                    "slosh — step {shown}/{}, t = {time:.3}",
-                    self.engine.timeline().len().saturating_sub(1)
+                    "slosh — step {}/{}, t = {time:.3}",
+                    index(shown),
+                    index(self.engine.timeline().len().saturating_sub(1))
                 )
             }
             None => format!("slosh — loading {}", self.engine.series().dir().display()),
         };
-        ctx.send_viewport_cmd(egui::ViewportCommand::Title(title));
-        // Keep drawing while something changes: playback, loads, refinement, exports.
+        if title != self.title {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
+            self.title = title;
+        }
+        // Keep drawing while something changes: playback, loads, refinement, exports. At
+        // rest, one pass a second looks for steps a bake adds.
+        let waiting_for_load = (self.last.stand_in || self.last.shown.is_none())
+            && self.wanted_failure().is_none()
+            && !self.engine.prefetching().is_empty();
         let busy = self.engine.timeline().is_playing()
-            || self.last.stand_in
-            || self.last.shown.is_none()
-            || !self.engine.prefetching().is_empty()
+            || waiting_for_load
             || self.last.progress.is_some_and(|p| !p.finished())
+            || self.screenshot_pending
             || self.export.is_some();
         if busy {
             ctx.request_repaint();
         } else {
-            ctx.request_repaint_after(std::time::Duration::from_millis(500));
+            ctx.request_repaint_after(std::time::Duration::from_millis(1000));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fit_texture;
+
+    /// A viewport larger than the device's largest texture renders at the largest size that
+    /// fits, keeping its aspect, instead of failing validation (issue 25, item 6).
+    #[test]
+    fn frames_fit_the_largest_texture_keeping_their_aspect() {
+        assert_eq!(fit_texture(1600.0, 1000.0, 8192), (1600, 1000));
+        assert_eq!(fit_texture(9000.0, 1000.0, 8192), (8192, 910));
+        assert_eq!(fit_texture(5000.0, 5000.0, 16384), (5000, 5000));
+        // 16000² is past an 8K display's pixels: traced at 5760² and stretched.
+        assert_eq!(fit_texture(16000.0, 16000.0, 16384), (5760, 5760));
+        assert_eq!(fit_texture(0.0, 0.0, 8192), (1, 1));
     }
 }

@@ -88,11 +88,12 @@ pub fn show(ui: &mut egui::Ui, engine: &mut Engine) {
             t.set_speed(speed);
         }
         ui.separator();
+        let (current, time) = (t.current(), t.time());
+        let index = |p: usize| engine.bake_index(p).unwrap_or(p);
         ui.monospace(format!(
-            "step {}/{}   t = {:.4}",
-            t.current(),
-            len.saturating_sub(1),
-            t.time()
+            "step {}/{}   t = {time:.4}",
+            index(current),
+            index(len.saturating_sub(1)),
         ));
     });
     scrub_bar(ui, engine);
@@ -166,6 +167,7 @@ fn scrub_bar(ui: &mut egui::Ui, engine: &mut Engine) {
             .find(|(i, _)| *i == step)
             .map(|(_, why)| why);
         let time = engine.timeline().times().get(step).copied().unwrap_or(0.0);
+        let step = engine.bake_index(step).unwrap_or(step);
         response.on_hover_text(match failure {
             Some(why) => format!("step {step}, t = {time:.4}: {why}"),
             None => format!("step {step}, t = {time:.4}"),

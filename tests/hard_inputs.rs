@@ -1,0 +1,210 @@
+//! Inputs a real user brings that earlier broke or misled (issue 25, items 9, 14 and 15):
+//! geometry at any scale, EnSight cases slosh cannot read said as such, clouds of bare OBJ
+//! vertices.
+
+#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
+
+mod common;
+
+use std::path::Path;
+
+use common::{bake_case, slosh};
+
+/// A unit sphere of `n` points (a Fibonacci lattice) with outward normals, scaled by
+/// `scale`, as an ASCII PLY of doubles.
+fn sphere_ply(path: &Path, n: usize, scale: f64) {
+    let mut text = format!(
+        "ply\nformat ascii 1.0\nelement vertex {n}\nproperty double x\nproperty double y\n\
+         property double z\nproperty double nx\nproperty double ny\nproperty double nz\n\
+         end_header\n"
+    );
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    for i in 0..n {
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+        let r = (1.0 - z * z).sqrt();
+        let (x, y) = (r * (golden * i as f64).cos(), r * (golden * i as f64).sin());
+        text += &format!(
+            "{:e} {:e} {:e} {x} {y} {z}\n",
+            x * scale,
+            y * scale,
+            z * scale
+        );
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// Hit pixels of a 64×64 render of step 0 of `cache` with the CPU tracer.
+fn hit_pixels(cache: &Path, npy: &Path) -> usize {
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--cpu",
+        "--step",
+        "0",
+        "--size",
+        "64x64",
+        "--aov",
+        npy.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}{err}");
+    let bytes = std::fs::read(npy).unwrap();
+    let values: &[f32] = bytemuck::cast_slice(&bytes[128..]);
+    values.chunks_exact(8).filter(|p| p[7] != 0.0).count()
+}
+
+/// Item 9: a sphere frames and renders alike at any scale: the framing camera has no
+/// absolute floor on the length it frames.
+#[test]
+fn tiny_and_huge_geometry_render_like_unit_geometry() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut counts = Vec::new();
+    for scale in [1.0, 1e-10, 1e-15, 1e4] {
+        let tag = format!("{scale:e}");
+        let ply = dir.path().join(format!("s{tag}.ply"));
+        sphere_ply(&ply, 3000, scale);
+        let run = dir.path().join(format!("run{tag}"));
+        let (ok, _, err) = slosh(&[
+            "gen",
+            "from-file",
+            ply.to_str().unwrap(),
+            "--out",
+            run.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let case = std::fs::read_dir(&run)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|e| e == "case"))
+            .unwrap();
+        let cache = dir.path().join(format!("cache{tag}"));
+        let (ok, out, err) = bake_case(&case, &cache, &["--quiet"]);
+        assert!(ok, "{out}{err}");
+        counts.push((
+            scale,
+            hit_pixels(&cache, &dir.path().join(format!("{tag}.npy"))),
+        ));
+    }
+    let unit = counts[0].1;
+    assert!(unit > 500, "{counts:?}");
+    for (scale, n) in &counts {
+        assert!(
+            n.abs_diff(unit) * 50 <= unit,
+            "scale {scale}: {n} hit pixels, {unit} at unit scale ({counts:?})"
+        );
+    }
+}
+
+fn write(path: &Path, text: &str) {
+    std::fs::write(path, text).unwrap();
+}
+
+/// Item 14: EnSight cases slosh cannot read say what slosh reads, and what the case holds.
+#[test]
+fn unreadable_cases_say_what_slosh_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A surface mesh: triangles, no point elements, no measured file.
+    write(
+        &d.join("tri.geo"),
+        "tri\ngeometry\nnode id off\nelement id off\npart\n1\nmesh\ncoordinates\n3\n0\n1\n0\n\
+         0\n0\n1\n0\n0\n0\ntria3\n1\n1 2 3\n",
+    );
+    write(
+        &d.join("tri.case"),
+        "FORMAT\ntype: ensight gold\nGEOMETRY\nmodel: tri.geo\n",
+    );
+    let (ok, _, err) = bake_case(&d.join("tri.case"), &d.join("c1"), &["--quiet"]);
+    assert!(!ok);
+    assert!(
+        err.contains("slosh reads particles from `point` elements or a measured file")
+            && err.contains("only tria3 elements")
+            && !err.contains("ask for all nodes"),
+        "{err}"
+    );
+    // change_coords_only: the steps after the first are refused by name.
+    let geo = |x: f64| {
+        let xs: String = (0..4)
+            .map(|i| format!("{}\n", x + i as f64 * 0.1))
+            .collect();
+        format!(
+            "p\ngeometry\nnode id off\nelement id off\npart\n1\nparticles\ncoordinates\n4\n\
+             {xs}0\n0.1\n0\n0.1\n0\n0\n0.1\n0.1\npoint\n4\n1\n2\n3\n4\n"
+        )
+    };
+    write(&d.join("p.0000.geo"), &geo(0.0));
+    write(&d.join("p.0001.geo"), &geo(0.5));
+    write(
+        &d.join("p.case"),
+        "FORMAT\ntype: ensight gold\nGEOMETRY\nmodel: 1 p.****.geo change_coords_only\nTIME\n\
+         time set: 1\nnumber of steps: 2\nfilename start number: 0\nfilename increment: 1\n\
+         time values: 0 1\n",
+    );
+    let (ok, _, err) = bake_case(&d.join("p.case"), &d.join("c2"), &["--quiet"]);
+    assert!(!ok);
+    assert!(
+        err.contains("step 1") && err.contains("change_coords_only"),
+        "{err}"
+    );
+    // Coincident particles: said as such, not as a point without a radius.
+    let ply = d.join("same.ply");
+    let mut text = "ply\nformat ascii 1.0\nelement vertex 50\nproperty float x\nproperty float y\n\
+                    property float z\nend_header\n"
+        .to_string();
+    text += &"0.5 0.5 0.5\n".repeat(50);
+    write(&ply, &text);
+    let (ok, _, err) = bake_case(&ply, &d.join("c3"), &["--quiet"]);
+    assert!(!ok);
+    assert!(
+        err.contains("coincide") && !err.contains("no positive radius"),
+        "{err}"
+    );
+}
+
+/// Item 15: an OBJ of bare `v` and `vn` lines (a scanner's or solver's export) is a point
+/// cloud, its normals paired by order; a malformed line is named.
+#[test]
+fn obj_clouds_without_faces_are_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("cloud.obj");
+    write(
+        &obj,
+        "# scanner export\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvn 0 0 2\nvn 1 0 0\nvn 0 1 0\n\
+         vn 0 0 1\n",
+    );
+    let out = dir.path().join("cloud");
+    let (ok, _, err) = slosh(&[
+        "gen",
+        "from-file",
+        obj.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let case = slosh_ensight::Case::open(out.join("cloud.case")).unwrap();
+    let step = case
+        .read_step(
+            0,
+            &slosh_ensight::StepRequest {
+                normals: Some("normal".into()),
+                ..slosh_ensight::StepRequest::default()
+            },
+        )
+        .unwrap();
+    assert_eq!(step.positions.len(), 4);
+    assert_eq!(step.positions[1], [1.0, 0.0, 0.0]);
+    let normals = step.normals.unwrap();
+    assert_eq!(normals[0], [0.0, 0.0, 1.0]);
+    assert_eq!(normals[1], [1.0, 0.0, 0.0]);
+    // A malformed vertex line is named by its line number.
+    let bad = dir.path().join("bad.obj");
+    write(&bad, "v 0 0 0\nv 1 x 0\n");
+    let (ok, _, err) = slosh(&[
+        "gen",
+        "from-file",
+        bad.to_str().unwrap(),
+        "--out",
+        dir.path().join("bad").to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("bad.obj: line 2"), "{err}");
+}
