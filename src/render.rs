@@ -372,8 +372,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let config = RenderConfig::from_args(args)?;
     let first = CacheFile::open(&step_path(&args.path, config.steps[0]))
         .with_context(|| format!("opening step {}", config.steps[0]))?;
-    let camera = camera_for(args, first.header(), config.width, config.height)?;
-    drop(first);
+    // The first step of the range with particles frames it (a Lagrangian run's first steps
+    // may hold none, and an empty step has no extent).
+    let framing = match first.header().points {
+        0 => config
+            .steps
+            .iter()
+            .skip(1)
+            .filter_map(|&s| CacheFile::open(&step_path(&args.path, s)).ok())
+            .find(|f| f.header().points > 0)
+            .unwrap_or(first),
+        _ => first,
+    };
+    let camera = camera_for(args, framing.header(), config.width, config.height)?;
+    drop(framing);
     let manifest = if args.path.is_dir() {
         slosh_cache::Manifest::read(&args.path).ok()
     } else {

@@ -208,3 +208,78 @@ fn obj_clouds_without_faces_are_read() {
     ]);
     assert!(!ok && err.contains("bad.obj: line 2"), "{err}");
 }
+
+/// Item 16: a step without particles (a Lagrangian run before its first injection: a point
+/// part of no elements) is a valid step: baked as empty, verified, reported in the summary
+/// and by `inspect`, rendered as background, and the series framed by its other steps.
+#[test]
+fn empty_steps_are_valid_steps() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let (ok, _, err) = slosh(&[
+        "gen",
+        "sphere",
+        "--points",
+        "500",
+        "--steps",
+        "3",
+        "--format",
+        "gold-ascii",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    // Step 0 before the injection: a point part of no elements, and variables of no values.
+    write(
+        &run.join("sphere.geo00000"),
+        "particles\nEnSight point data\nnode id assign\nelement id assign\npart\n         1\n\
+         particles\ncoordinates\n         0\npoint\n         0\n",
+    );
+    for v in ["normal", "pressure", "surface"] {
+        write(
+            &run.join(format!("sphere.{v}00000")),
+            &format!("{v}\npart\n         1\ncoordinates\n"),
+        );
+    }
+    let cache = dir.path().join("cache");
+    let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &["--fields", "pressure"]);
+    assert!(ok, "{out}{err}");
+    assert!(
+        out.contains("baked 3 steps") && out.contains("0 failed"),
+        "{out}"
+    );
+    assert!(
+        out.contains("1 steps hold no particles and were baked as empty steps: 0"),
+        "{out}"
+    );
+    let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
+    assert!(ok, "{out}{err}");
+    let row = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("0 "))
+        .unwrap();
+    assert!(row.contains(" 0 ") && row.ends_with("verified"), "{row}");
+    // Rendered: step 0 is background; the others are framed by their own extent.
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--cpu",
+        "--steps",
+        "0..3",
+        "--size",
+        "48x48",
+        "--aov",
+        dir.path().join("h{:05}.npy").to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}{err}");
+    let hits = |i: usize| {
+        let bytes = std::fs::read(dir.path().join(format!("h{i:05}.npy"))).unwrap();
+        let values: &[f32] = bytemuck::cast_slice(&bytes[128..]);
+        values.chunks_exact(8).filter(|p| p[7] != 0.0).count()
+    };
+    assert_eq!(hits(0), 0);
+    for i in [1, 2] {
+        let n = hits(i);
+        assert!(n > 200 && n < 48 * 48 * 9 / 10, "step {i}: {n} hit pixels");
+    }
+}

@@ -509,11 +509,13 @@ fn slot_of(name: &str) -> usize {
     SECTIONS.iter().position(|n| *n == name).unwrap_or_default()
 }
 
-/// wgpu refuses zero-sized bindings; absent or empty sections bind this many zero bytes.
-const EMPTY_BINDING: u64 = 16;
-
 /// Bytes of an entry of the 4-wide tree (`struct Wide` in mls.wgsl).
 const WIDE_NODE_BYTES: u64 = 128;
+
+/// wgpu refuses zero-sized bindings, and a binding must hold one element of its array:
+/// absent or empty sections (a step without particles) bind this many zero bytes, the
+/// largest element any binding holds (the wide node).
+const EMPTY_BINDING: u64 = WIDE_NODE_BYTES;
 
 /// Bytes of the blank node before a step's BVH nodes on the GPU (one `GpuBvhNode`).
 const NODE_LEAD: u64 = 32;

@@ -214,6 +214,23 @@ fn default_light() -> (f32, f32) {
     )
 }
 
+/// An export range (bake indices) after the series came to span `series`: one that ended at
+/// the last step seen (`seen_last`) ends at the new last step; every range stays within.
+fn follow_series(
+    range: (usize, usize),
+    seen_last: usize,
+    series: (usize, usize),
+) -> (usize, usize) {
+    let (first, mut last) = range;
+    if last == seen_last {
+        last = series.1;
+    }
+    (
+        first.clamp(series.0, series.1),
+        last.clamp(series.0, series.1),
+    )
+}
+
 /// The most pixels a frame is traced at (8K: 7680 × 4320).
 const MAX_FRAME_PIXELS: f32 = 7680.0 * 4320.0;
 
@@ -753,12 +770,12 @@ impl Player {
         let (Some(first), Some(last)) = (steps.first(), steps.last()) else {
             return;
         };
-        if self.export_last == self.export_seen_last {
-            self.export_last = last.index;
-        }
+        (self.export_first, self.export_last) = follow_series(
+            (self.export_first, self.export_last),
+            self.export_seen_last,
+            (first.index, last.index),
+        );
         self.export_seen_last = last.index;
-        self.export_first = self.export_first.clamp(first.index, last.index);
-        self.export_last = self.export_last.clamp(first.index, last.index);
     }
 
     fn start_export(&mut self) {
@@ -981,7 +998,19 @@ impl eframe::App for Player {
 
 #[cfg(test)]
 mod tests {
-    use super::fit_texture;
+    use super::{fit_texture, follow_series};
+
+    /// The export range grows with a series a bake is filling, unless the user set its end
+    /// (issue 25, item 13).
+    #[test]
+    fn the_export_range_follows_a_growing_series() {
+        // Opened with one step (0..=0), the bake adds steps up to 9.
+        assert_eq!(follow_series((0, 0), 0, (0, 9)), (0, 9));
+        // An end the user moved stays.
+        assert_eq!(follow_series((2, 5), 9, (0, 20)), (2, 5));
+        // Steps removed from the end: the range stays within the series.
+        assert_eq!(follow_series((3, 12), 9, (0, 8)), (3, 8));
+    }
 
     /// A viewport larger than the device's largest texture renders at the largest size that
     /// fits, keeping its aspect, instead of failing validation (issue 25, item 6).
