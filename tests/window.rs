@@ -263,6 +263,17 @@ impl Player {
     }
 }
 
+/// Window tests take turns: each runs a software GPU (lavapipe) flat out, and side by side
+/// on two cores their timing assertions (passes per second) would measure each other.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Holds the turn of one window test.
+fn turn() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 fn tools() -> bool {
     let missing: Vec<&str> = ["Xvfb", "xdotool", "import"]
         .into_iter()
@@ -284,6 +295,7 @@ fn keys_drag_and_the_screen_agree_with_slosh_render() {
     if !tools() {
         return;
     }
+    let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
     let cache = series(dir.path(), 6);
     corrupt(&cache, 4);
@@ -478,6 +490,7 @@ fn a_slow_step_source_never_stops_the_ui() {
     if !tools() {
         return;
     }
+    let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
     let cache = series(dir.path(), 4);
     let display = Display::start();
@@ -552,6 +565,7 @@ fn steps_keep_their_numbers_and_are_checked_as_files_change() {
     if !tools() {
         return;
     }
+    let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
     let cache = series(dir.path(), 6);
     let other = other_series(dir.path(), 6);
@@ -601,6 +615,22 @@ fn steps_keep_their_numbers_and_are_checked_as_files_change() {
     player.key(&display, "Right");
     player.key(&display, "Right");
     player.wait_title(&display, "step 2/5");
+    // Files copied over in place while they play (`cp` truncates, then writes): a read of a
+    // mapped file that shrank is a failed step, never a SIGBUS (item 5).
+    player.key(&display, "space");
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(6) {
+        for i in [0, 1, 4, 5] {
+            std::fs::copy(other.join(slosh_cache::step_file_name(i)), step(i)).unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    std::thread::sleep(Duration::from_secs(2));
+    let mut player = player;
+    assert!(
+        player.alive(),
+        "the player died while its files were copied over"
+    );
 }
 
 /// Junk step files, and a budget smaller than one step, are failed steps the window names,
@@ -610,6 +640,7 @@ fn unreadable_steps_and_a_tiny_budget_are_said() {
     if !tools() {
         return;
     }
+    let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
     let junk = dir.path().join("junk");
     std::fs::create_dir_all(&junk).unwrap();
@@ -624,7 +655,7 @@ fn unreadable_steps_and_a_tiny_budget_are_said() {
     let out = dir.path().join("junk-out");
     std::fs::create_dir_all(&out).unwrap();
     let player = Player::start(&display, &junk, &out, &[]);
-    wait_for("the junk steps' failures", Duration::from_secs(30), || {
+    wait_for("the junk steps' failures", Duration::from_secs(90), || {
         (0..3).all(|i| !failures(&player.log(), i).is_empty())
     });
     assert!(failures(&player.log(), 0)[0].contains("step-00000.slc"));
@@ -633,7 +664,7 @@ fn unreadable_steps_and_a_tiny_budget_are_said() {
     let out = dir.path().join("budget-out");
     std::fs::create_dir_all(&out).unwrap();
     let player = Player::start(&display, &cache, &out, &["--budget", "0.0001"]);
-    wait_for("the budget failure", Duration::from_secs(60), || {
+    wait_for("the budget failure", Duration::from_secs(120), || {
         failures(&player.log(), 0)
             .iter()
             .any(|w| w.contains("more than the whole budget"))
@@ -665,6 +696,7 @@ fn presses_count_rest_is_quiet_and_huge_windows_live() {
     if !tools() {
         return;
     }
+    let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
     let cache = series(dir.path(), 10);
     let display = Display::start();
@@ -699,8 +731,7 @@ fn presses_count_rest_is_quiet_and_huge_windows_live() {
     player.key(&display, "Right");
     player.wait_title(&display, "step 6/9");
     assert!(player.alive());
-    assert!(
-        !player.log().contains("exceeds"),
-        "a frame was asked past the largest texture"
-    );
+    let log = player.log();
+    let errors: Vec<&str> = log.lines().filter(|l| l.contains("frame error")).collect();
+    assert!(errors.is_empty(), "frames failed: {errors:?}");
 }

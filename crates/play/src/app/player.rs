@@ -472,7 +472,12 @@ impl Player {
                 }
                 self.last = report;
             }
-            Err(e) => self.message = Some(e.to_string()),
+            Err(e) => {
+                if self.log_frames {
+                    say(&format!("frame error: {e}"));
+                }
+                self.message = Some(e.to_string());
+            }
         }
         self.track_field_range();
         self.show_texture(ui, rect);
