@@ -427,16 +427,18 @@ impl CacheFile {
             None => ("section".to_string(), &entry.xxh3),
         };
         self.check_sum(entry, &what, st.start, bytes, sum)?;
-        decode_into(bytes, entry.encoding, out, scratch).map_err(|e| {
+        let decoded = decode_into(bytes, entry.encoding, out, scratch);
+        // The bytes may have gone to zeros after their checksum was taken: that, not the
+        // decoder's complaint about them, is what happened.
+        self.unchanged()?;
+        decoded.map_err(|e| {
             let problem = if entry.chunks.is_empty() {
                 e.to_string()
             } else {
                 format!("{what} (stored bytes {}..{}): {e}", st.start, st.end)
             };
             self.section_error(entry, problem)
-        })?;
-        // The bytes may have gone to zeros after their checksum was taken.
-        self.unchanged()
+        })
     }
 
     /// One zeroed buffer per section, each the size of its decoded bytes.

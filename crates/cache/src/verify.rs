@@ -42,7 +42,11 @@ impl CacheFile {
         }
         // The invariant checks decode (and so checksum) the structural sections; the rest are
         // decoded here, so that no section is decoded twice.
-        self.check_invariants().map_err(invalid)?;
+        if let Err(problem) = self.check_invariants() {
+            // A file that changed under its map fails its checks; said as what happened.
+            self.unchanged()?;
+            return Err(invalid(problem));
+        }
         let mut scratch = Vec::new();
         for entry in &self.header().sections {
             // Chunked sections are decoded against their chunks' checksums; the section's

@@ -450,8 +450,8 @@ impl Case {
             kinds.sort_unstable();
             kinds.dedup();
             return Err(Error::Request(format!(
-                "{}: step {step}: slosh reads particles from `point` elements or a measured \
-                 file; this case has no measured file and its geometry holds {}",
+                "{}: slosh reads particles from `point` elements or a measured file; this \
+                 case has no measured file and step {step}'s geometry holds {}",
                 self.path.display(),
                 if kinds.is_empty() {
                     "no elements".to_string()
