@@ -735,3 +735,51 @@ fn presses_count_rest_is_quiet_and_huge_windows_live() {
     let errors: Vec<&str> = log.lines().filter(|l| l.contains("frame error")).collect();
     assert!(errors.is_empty(), "frames failed: {errors:?}");
 }
+
+/// The export range follows a series a bake is still filling (issue 25, item 13): opened on
+/// the first shard of a job array (steps 0 and 3), it spans 0..=3; once the other shards land
+/// it spans 0..=5 without being touched.
+#[test]
+fn the_export_range_follows_a_growing_series() {
+    if !tools() {
+        return;
+    }
+    let _turn = turn();
+    let dir = tempfile::tempdir().unwrap();
+    let case = dir.path().join("case");
+    let cache = dir.path().join("cache");
+    slosh(&[
+        "gen",
+        "droplets",
+        "--points",
+        "4000",
+        "--steps",
+        "6",
+        "--out",
+        case.to_str().unwrap(),
+    ]);
+    let bake = |shard: &str| {
+        slosh(&[
+            "bake",
+            case.join("droplets.case").to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--shard",
+            shard,
+            "--quiet",
+        ]);
+    };
+    bake("0/3");
+    let display = Display::start();
+    let player = Player::start(&display, &cache, dir.path(), &[]);
+    player.wait_title(&display, "step 0/3");
+    wait_for("an export range of 0..=3", Duration::from_secs(30), || {
+        player.log().lines().any(|l| l.ends_with("export 0..=3"))
+    });
+    bake("1/3");
+    bake("2/3");
+    wait_for("an export range of 0..=5", Duration::from_secs(60), || {
+        player.log().lines().any(|l| l.ends_with("export 0..=5"))
+    });
+    player.wait_title(&display, "/5");
+}

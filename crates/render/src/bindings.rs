@@ -65,6 +65,13 @@ fn ranges_needed(array: &RangedArray, size: u64, limit: u64) -> u64 {
     size.div_ceil(span).max(1)
 }
 
+/// The most bytes an array can hold and still be bound: `RANGES` bindings under `limit`,
+/// within the device's largest buffer.
+pub(crate) fn capacity(gpu: &Gpu, limit: u64, array: &RangedArray) -> u64 {
+    let span = elements_per_range(limit, array.element_size) * array.element_size;
+    (u64::from(RANGES) * span).min(gpu.device.limits().max_buffer_size)
+}
+
 /// Whether `what`, an array of `bytes`, spans more than one binding under `limit`; why it
 /// cannot be bound where it needs more than `RANGES` or exceeds the device's largest buffer.
 pub(crate) fn needs_split(

@@ -5,7 +5,7 @@ use std::sync::OnceLock;
 
 use slosh_mls::Camera;
 
-use crate::bindings::{bind_entries, layout_entries, needs_split};
+use crate::bindings::{bind_entries, capacity, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{DEFAULT_KEY_LIGHT, GpuHit, GpuSettings, status};
@@ -368,6 +368,14 @@ impl Tracer {
 
     /// Buffers, texture and bind groups for `width` × `height` frames of any step; an error
     /// where the frame's hits exceed `RANGES` bindings.
+    /// The most pixels a frame can have on `gpu`: its hits and its image must each bind
+    /// (a larger view is traced smaller and stretched, as the player does).
+    pub fn max_frame_pixels(&self, gpu: &Gpu) -> u64 {
+        let hits = capacity(gpu, self.limit, &FRAME_ARRAYS[0]) / size_of::<GpuHit>() as u64;
+        let image = capacity(gpu, self.limit, &FRAME_ARRAYS[1]) / 4;
+        hits.min(image)
+    }
+
     pub fn targets(&self, gpu: &Gpu, width: u32, height: u32) -> Result<FrameTargets> {
         let device = &gpu.device;
         let (width, height) = (width.max(1), height.max(1));

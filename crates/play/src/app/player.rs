@@ -232,20 +232,29 @@ fn follow_series(
 }
 
 /// The most pixels a frame is traced at (8K: 7680 × 4320).
-const MAX_FRAME_PIXELS: f32 = 7680.0 * 4320.0;
+const MAX_FRAME_PIXELS: u64 = 7680 * 4320;
 
 /// The frame size for a viewport of `width` × `height` physical pixels (render scale
 /// applied): as it is where the device can hold it, else scaled down, keeping its aspect, to
 /// the device's largest texture (the texture is stretched over the viewport).
-fn fit_texture(width: f32, height: f32, max_side: u32) -> (u32, u32) {
-    let longest = width.max(height).max(1.0);
-    // And at most an 8K display's pixels: a frame's hit buffers grow with them (a window an X
-    // client sizes to 16000² would ask for gigabytes), and past that a person cannot tell.
-    let pixels = (width * height).max(1.0);
-    let shrink = (max_side as f32 / longest)
-        .min((MAX_FRAME_PIXELS / pixels).sqrt())
+fn fit_texture(width: f32, height: f32, max_side: u32, max_pixels: u64) -> (u32, u32) {
+    let (width, height) = (f64::from(width).max(1.0), f64::from(height).max(1.0));
+    // And at most an 8K display's pixels, or what the device can bind for a frame's hits if
+    // less: the hit buffers grow with the pixels (a window an X client sizes to 16000² would
+    // ask for gigabytes), and past 8K a person cannot tell.
+    let most = (MAX_FRAME_PIXELS as f64).min(max_pixels as f64);
+    let shrink = (f64::from(max_side) / width.max(height))
+        .min((most / (width * height)).sqrt())
         .min(1.0);
-    let side = |v: f32| ((v * shrink).round() as u32).clamp(1, max_side.max(1));
+    // Rounded down when shrunk, so that the sides' product stays within the pixels allowed.
+    let side = |v: f64| {
+        let scaled = if shrink < 1.0 {
+            (v * shrink).floor()
+        } else {
+            v.round()
+        };
+        (scaled as u32).clamp(1, max_side.max(1))
+    };
     (side(width), side(height))
 }
 
@@ -430,6 +439,7 @@ impl Player {
             rect.width() * ppp,
             rect.height() * ppp,
             self.gpu.device.limits().max_texture_dimension_2d,
+            self.engine.tracer().max_frame_pixels(&self.gpu),
         );
         let seconds = self.last_frame.elapsed().as_secs_f64();
         self.last_frame = Instant::now();
@@ -949,14 +959,16 @@ impl eframe::App for Player {
         self.passes += 1;
         if self.log_frames {
             say(&format!(
-                "pass {}: wanted {} shown {:?}{}{}",
+                "pass {}: wanted {} shown {:?}{}{} export {}..={}",
                 self.passes,
                 self.last.wanted,
                 self.last.shown,
                 if self.last.stand_in { " stand-in" } else { "" },
                 self.last
                     .drawn
-                    .map_or(String::new(), |n| format!(" drew {n}"))
+                    .map_or(String::new(), |n| format!(" drew {n}")),
+                self.export_first,
+                self.export_last
             ));
         }
         // The title names the step on screen (a stand-in's own number while another loads),
@@ -1021,11 +1033,20 @@ mod tests {
     /// fits, keeping its aspect, instead of failing validation (issue 25, item 6).
     #[test]
     fn frames_fit_the_largest_texture_keeping_their_aspect() {
-        assert_eq!(fit_texture(1600.0, 1000.0, 8192), (1600, 1000));
-        assert_eq!(fit_texture(9000.0, 1000.0, 8192), (8192, 910));
-        assert_eq!(fit_texture(5000.0, 5000.0, 16384), (5000, 5000));
+        let any = u64::MAX;
+        assert_eq!(fit_texture(1600.0, 1000.0, 8192, any), (1600, 1000));
+        assert_eq!(fit_texture(9000.0, 1000.0, 8192, any), (8192, 910));
+        // Within the pixels allowed, however the sides round.
+        let (w, h) = fit_texture(5730.0, 5856.0, 16384, 8_388_608);
+        assert!(u64::from(w) * u64::from(h) <= 8_388_608, "{w}x{h}");
+        assert_eq!(fit_texture(5000.0, 5000.0, 16384, any), (5000, 5000));
         // 16000² is past an 8K display's pixels: traced at 5760² and stretched.
-        assert_eq!(fit_texture(16000.0, 16000.0, 16384), (5760, 5760));
-        assert_eq!(fit_texture(0.0, 0.0, 8192), (1, 1));
+        assert_eq!(fit_texture(16000.0, 16000.0, 16384, any), (5760, 5760));
+        // A device that binds fewer pixels for a frame (lavapipe: 8M): fewer.
+        assert_eq!(
+            fit_texture(16000.0, 16000.0, 16384, 4_000_000),
+            (2000, 2000)
+        );
+        assert_eq!(fit_texture(0.0, 0.0, 8192, any), (1, 1));
     }
 }
