@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use crate::output::say;
+use slosh_fileio::say;
 
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -11,7 +11,7 @@ use slosh_cache::Manifest;
 use slosh_ensight::PointSource;
 
 use crate::config::{BakeConfig, BakeInput};
-use crate::import::PointCloud;
+use slosh_bake::PointCloud;
 
 /// A PLY/OBJ point cloud as a one-step series.
 struct CloudSource<'a> {

@@ -463,6 +463,18 @@ pub enum ModeArg {
     Water,
 }
 
+impl From<ModeArg> for slosh_render::ShadeMode {
+    fn from(mode: ModeArg) -> Self {
+        match mode {
+            ModeArg::Shade => Self::Shade,
+            ModeArg::Normals => Self::Normals,
+            ModeArg::Status => Self::Status,
+            ModeArg::Backfaces => Self::Backfaces,
+            ModeArg::Water => Self::Water,
+        }
+    }
+}
+
 #[derive(Debug, Args)]
 pub struct RenderArgs {
     /// A cache directory or one step file.

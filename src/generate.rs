@@ -8,7 +8,7 @@ use slosh_ensight::{CaseWriter, VarData, VarType, atomic_write};
 use slosh_scenes::{Droplet, Extra, Scene, SceneSpec, Truth};
 
 use crate::config::{GenConfig, GenSource};
-use crate::import::read_point_cloud;
+use slosh_bake::read_point_cloud;
 
 /// `truth.json`: everything needed to compute exact errors against the analytic surface.
 /// Schema documented in docs/truth-json.md.
@@ -104,7 +104,7 @@ fn gen_scene(cfg: &GenConfig, spec: &SceneSpec, steps: usize) -> Result<()> {
     };
     let json = serde_json::to_vec_pretty(&truth)?;
     atomic_write(&cfg.out.join("truth.json"), &json)?;
-    crate::output::print(&format!(
+    slosh_fileio::stdout::print(&format!(
         "wrote {} ({} steps, {:.0} points per step on average, mean spacing {:.4e}) and {}\n",
         writer.case_path().display(),
         steps,
@@ -144,7 +144,7 @@ fn gen_from_file(cfg: &GenConfig, path: &Path) -> Result<()> {
         .into_iter()
         .collect();
     writer.write_step(0.0, &positions, &data)?;
-    crate::output::print(&format!(
+    slosh_fileio::stdout::print(&format!(
         "wrote {} ({} points, {})\n",
         writer.case_path().display(),
         positions.len(),

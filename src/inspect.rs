@@ -12,7 +12,7 @@ use slosh_cache::{
 };
 
 use crate::cli::InspectArgs;
-use crate::output::print;
+use slosh_fileio::stdout::print;
 
 #[derive(Debug, Serialize)]
 struct Summary {

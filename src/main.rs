@@ -1,23 +1,15 @@
 //! slosh: a thin binary over the library crates. Flags are parsed in `cli`, validated into
 //! settings in `config`, and each subcommand lives in its own module.
 
-mod accuracy;
 mod bake;
-mod bench_bake;
-mod bench_gpu;
-mod bench_precision;
-mod bench_scrub;
 mod cli;
 mod config;
 mod generate;
-mod import;
 mod info;
 mod inspect;
 mod machine;
-mod output;
 mod play;
 mod render;
-mod sph;
 
 use anyhow::Result;
 use clap::Parser;
@@ -28,7 +20,7 @@ fn main() -> std::process::ExitCode {
     machine::keep_freed_memory();
     let result = run(Cli::parse());
     // Output that could not be written is an error too, once the work is done.
-    let result = result.and_then(|()| match output::stdout_error() {
+    let result = result.and_then(|()| match slosh_fileio::stdout::stdout_error() {
         Some(e) => Err(anyhow::anyhow!("writing to stdout: {e}")),
         None => Ok(()),
     });
@@ -58,14 +50,22 @@ fn message(e: &anyhow::Error) -> String {
     out
 }
 
+fn run_bench(command: cli::BenchCommand) -> Result<()> {
+    use cli::BenchCommand;
+    use config::bench;
+    match command {
+        BenchCommand::Accuracy(a) => slosh_bench::accuracy::run(&bench::accuracy(&a)),
+        BenchCommand::Bake(a) => slosh_bench::bake::run(&bench::bake(&a)),
+        BenchCommand::Precision(a) => slosh_bench::precision::run(&bench::precision(&a)),
+        BenchCommand::Gpu(a) => slosh_bench::gpu::run(&bench::gpu(&a)?),
+        BenchCommand::Scrub(a) => slosh_bench::scrub::run(&bench::scrub(&a)?),
+    }
+}
+
 pub(crate) fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Gen(args) => generate::run(&config::GenConfig::from_args(&args)?),
-        Command::Bench(cli::BenchCommand::Accuracy(args)) => accuracy::run(&args),
-        Command::Bench(cli::BenchCommand::Bake(args)) => bench_bake::run(&args),
-        Command::Bench(cli::BenchCommand::Precision(args)) => bench_precision::run(&args),
-        Command::Bench(cli::BenchCommand::Gpu(args)) => bench_gpu::run(&args),
-        Command::Bench(cli::BenchCommand::Scrub(args)) => bench_scrub::run(&args),
+        Command::Bench(bench) => run_bench(bench),
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
         Command::Inspect(args) => inspect::run(&args),

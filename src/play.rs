@@ -1,7 +1,7 @@
 //! `slosh play` (one call into the player) and `slosh demo` (generate, bake, then play, or
 //! render frames where there is no display).
 
-use crate::output::say;
+use slosh_fileio::say;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};

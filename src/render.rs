@@ -2,28 +2,15 @@
 //! steps. The GPU path uploads each step into wgpu buffers and runs the WGSL trace and shade
 //! passes; `--cpu` runs the CPU reference tracer on the mapped cache through its baked BVH.
 
-use crate::output::say;
+use slosh_fileio::say;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use slosh_cache::{CacheFile, LoadedStep, step_file_name};
-use slosh_mls::{Camera, HitStatus, NormalsMode, Params, TraceHit};
-use slosh_render::{GpuHit, GpuStep, ShadeMode, TraceParams, Tracer};
+use slosh_mls::{Camera, NormalsMode, Params};
+use slosh_render::{GpuStep, TraceParams, Tracer, cpu_shade};
 
 use crate::cli::{ModeArg, RenderArgs};
-
-/// Status codes in the hit buffer's 8th channel.
-pub fn status_code(status: HitStatus) -> f32 {
-    match status {
-        HitStatus::Converged => 1.0,
-        HitStatus::IterationLimit => 2.0,
-        HitStatus::NoSupport => 3.0,
-        HitStatus::DegenerateFit => 4.0,
-        HitStatus::Droplet => 5.0,
-        // Not hits; never stored for a hit pixel.
-        HitStatus::LeftTrustRegion | HitStatus::NoInitialRoot | HitStatus::MissedBall => 0.0,
-    }
-}
 
 fn parse_vec3(flag: &str, s: &str) -> Result<[f64; 3]> {
     let parts: Vec<&str> = s.split(',').collect();
@@ -59,61 +46,6 @@ fn step_path(path: &Path, step: usize) -> PathBuf {
     }
 }
 
-/// 8-bit sRGB of a linear value in [0, 1].
-fn srgb(v: f64) -> u8 {
-    let v = v.clamp(0.0, 1.0);
-    let s = if v <= 0.0031308 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
-}
-
-/// Blinn–Phong under a key light and a fill, water-blue; back faces lit as front faces.
-fn shade(hit: &TraceHit, dir: [f64; 3], mode: ModeArg) -> [f64; 3] {
-    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    match mode {
-        ModeArg::Normals => hit.normal.map(|c| 0.5 + 0.5 * c),
-        ModeArg::Backfaces => {
-            let dot = hit.normal[0] * dir[0] + hit.normal[1] * dir[1] + hit.normal[2] * dir[2];
-            let base = if dot > 0.0 {
-                [0.95, 0.1, 0.85]
-            } else {
-                [0.6; 3]
-            };
-            base.map(|c| c * (0.4 + 0.6 * dot.abs()))
-        }
-        ModeArg::Status => match hit.status {
-            HitStatus::Converged => [0.1, 0.7, 0.2],
-            HitStatus::IterationLimit => [0.9, 0.8, 0.1],
-            HitStatus::Droplet => [0.2, 0.4, 0.95],
-            _ => [0.9, 0.15, 0.1],
-        },
-        // Water is refused on the CPU path (RenderConfig::from_args).
-        ModeArg::Shade | ModeArg::Water => {
-            let mut n = hit.normal;
-            if dot(n, dir) > 0.0 {
-                n = n.map(|c| -c);
-            }
-            let view = dir.map(|c| -c);
-            let norm = |v: [f64; 3]| {
-                let l = dot(v, v).sqrt();
-                v.map(|c| c / l)
-            };
-            let key = slosh_render::DEFAULT_KEY_LIGHT.map(f64::from);
-            let fill = norm([-0.6, 0.5, 0.3]);
-            let base = [0.16, 0.42, 0.72];
-            let half = norm([key[0] + view[0], key[1] + view[1], key[2] + view[2]]);
-            let diffuse = 0.85 * dot(n, key).max(0.0) + 0.25 * dot(n, fill).max(0.0);
-            let spec = 0.6 * dot(n, half).max(0.0).powf(60.0);
-            // A rim term reads the silhouette of thin sheets against the background.
-            let rim = 0.25 * (1.0 - dot(n, view).max(0.0)).powi(3);
-            std::array::from_fn(|c| base[c] * (0.12 + diffuse) + spec + rim)
-        }
-    }
-}
-
 fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
     Ok(slosh_render::write_rgb_png(path, width, height, rgb)?)
 }
@@ -127,29 +59,6 @@ fn write_npy(path: &Path, height: u32, width: u32, channels: usize, data: &[f32]
     Ok(slosh_render::write_npy(
         path, height, width, channels, data,
     )?)
-}
-
-/// The hit buffer of a render: 8 floats per pixel, zeros for a miss.
-pub fn hit_buffer(hits: &[Option<TraceHit>]) -> Vec<f32> {
-    let mut out = vec![0f32; hits.len() * 8];
-    for (px, hit) in out.chunks_exact_mut(8).zip(hits) {
-        if let Some(h) = hit {
-            let v = [
-                h.position[0],
-                h.position[1],
-                h.position[2],
-                h.normal[0],
-                h.normal[1],
-                h.normal[2],
-                h.t,
-            ];
-            for (o, x) in px.iter_mut().zip(v) {
-                *o = x as f32;
-            }
-            px[7] = status_code(h.status);
-        }
-    }
-    out
 }
 
 /// `{}` or `{:0N}` in `pattern` replaced by `step` (zero-padded to N digits).
@@ -266,7 +175,7 @@ impl RenderConfig {
         // A frame holds its hits and pixels on the device and again in memory when read back
         // (about 120 bytes a pixel): refuse what the machine cannot hold instead of aborting.
         let needed = u64::from(width) * u64::from(height) * BYTES_PER_PIXEL;
-        if let Some(available) = crate::machine::available_memory()
+        if let Some(available) = slosh_bake::available_memory()
             && needed > available
         {
             bail!(
@@ -337,31 +246,6 @@ fn camera_for(
         );
     }
     Ok(camera)
-}
-
-fn background(y: u32, height: u32) -> [f64; 3] {
-    let t = f64::from(y) / f64::from(height);
-    [0.03 + 0.05 * t, 0.035 + 0.05 * t, 0.05 + 0.06 * t]
-}
-
-/// The GPU's hits in world coordinates, as the `.npy` layout.
-fn gpu_hit_buffer(step: &GpuStep, hits: &[GpuHit]) -> Vec<f32> {
-    let mut out = vec![0f32; hits.len() * 8];
-    for (px, h) in out.chunks_exact_mut(8).zip(hits) {
-        if h.status == slosh_render::status::MISS {
-            continue;
-        }
-        let p = step.info.transform.to_world(h.position.map(f64::from));
-        let t = f64::from(h.t) * step.info.transform.scale;
-        let v = [p[0], p[1], p[2]];
-        for (o, x) in px.iter_mut().zip(v) {
-            *o = x as f32;
-        }
-        px[3..6].copy_from_slice(&h.normal);
-        px[6] = t as f32;
-        px[7] = h.status as f32;
-    }
-    out
 }
 
 fn h_factor(args: &RenderArgs, baked: f64) -> f64 {
@@ -440,13 +324,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             h_factor: h_factor(args, h.mls.h_scale) as f32,
             covariance: args.covariance || h.mls.normals == "covariance",
             epsilon: 1e-4,
-            mode: match args.mode {
-                ModeArg::Shade => ShadeMode::Shade,
-                ModeArg::Normals => ShadeMode::Normals,
-                ModeArg::Status => ShadeMode::Status,
-                ModeArg::Backfaces => ShadeMode::Backfaces,
-                ModeArg::Water => ShadeMode::Water,
-            },
+            mode: args.mode.into(),
             field_range: None,
             key_light: slosh_render::DEFAULT_KEY_LIGHT,
         };
@@ -463,7 +341,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 frame.height,
                 frame.width,
                 8,
-                &gpu_hit_buffer(&gpu_step, &frame.hits),
+                &cpu_shade::gpu_hit_buffer(&gpu_step, &frame.hits),
             )?;
         }
         let hits = frame.hits.iter().filter(|h| h.status != 0).count();
@@ -517,15 +395,15 @@ fn render_cpu(
         for (i, hit) in hits.iter().enumerate() {
             let (x, y) = (i as u32 % width, i as u32 / width);
             let colour = match hit {
-                Some(hit) => shade(hit, camera.ray(x, y).1, args.mode),
-                None => background(y, height),
+                Some(hit) => cpu_shade::shade(hit, camera.ray(x, y).1, args.mode.into()),
+                None => cpu_shade::background(y, height),
             };
-            rgb.extend(colour.map(srgb));
+            rgb.extend(colour.map(cpu_shade::srgb));
         }
         write_png(out, width, height, &rgb)?;
     }
     if let Some(aov) = aov {
-        write_npy(aov, height, width, 8, &hit_buffer(&hits))?;
+        write_npy(aov, height, width, 8, &cpu_shade::cpu_hit_buffer(&hits))?;
     }
     say!(
         "step {} ({} points): {width}x{height}, {} iterations, {hit_count} hit pixels, traced in {seconds:.2} s on the CPU",

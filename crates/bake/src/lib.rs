@@ -5,7 +5,9 @@ mod batch;
 mod bvh;
 mod claim;
 mod ensight_source;
+mod jobs;
 mod params;
+mod point_cloud;
 mod select;
 mod step;
 
@@ -16,7 +18,9 @@ pub use batch::{
 pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
 pub use ensight_source::{EnsightSource, canonical_label};
+pub use jobs::{available_memory, cores, default_jobs};
 pub use params::{BAKE_REVISION, BakeParams, DEFAULT_MANTISSA_BITS, NormalSource, SurfaceSelect};
+pub use point_cloud::{PointCloud, PointCloudError, read_point_cloud};
 pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
 };

@@ -17,7 +17,7 @@ use crate::format::{
 use crate::layout::Element;
 
 /// A step file, mapped and structurally checked. Section contents are checked when they are
-/// decoded (checksum) or by [`CacheFile::verify`](crate::verify) (everything).
+/// decoded (checksum) or by [`CacheFile::verify`] (everything).
 #[derive(Debug)]
 pub struct CacheFile {
     bytes: FileBytes,

@@ -12,6 +12,7 @@ mod decoder;
 pub mod elements;
 mod error;
 mod geometry;
+pub mod info;
 mod reader;
 mod source;
 mod variables;

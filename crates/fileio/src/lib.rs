@@ -1,8 +1,9 @@
 //! Whole files in and out: bytes memory-mapped where the OS allows (read into memory
-//! otherwise), guarded against the file shrinking under the map, and writes that either land
-//! completely or not at all.
+//! otherwise), guarded against the file shrinking under the map, writes that either land
+//! completely or not at all, and stdout that a closed pipe or a full disk never panics.
 
 mod sigbus;
+pub mod stdout;
 
 use std::fs::{File, OpenOptions};
 use std::io::Write;

@@ -1,7 +1,15 @@
 //! A uniform grid over the balls' bounding boxes, walked front to back along a ray
-//! (Amanatides & Woo). The in-memory tracer's index; caches carry a BVH instead.
+//! (Amanatides & Woo), and the index trait every tracer walks. The in-memory tracer's index;
+//! caches carry a BVH instead.
 
-use crate::tracer::BallIndex;
+/// A spatial index over a surface's candidates: ball i is item i, droplet sphere d is item
+/// `len + d`.
+pub trait BallIndex: Sync {
+    /// Calls `visit` with batches of items whose bounds the ray (t ≥ 0) enters, roughly nearest
+    /// first. `visit` returns the nearest hit so far (∞ if none); the walk ends once nothing
+    /// unvisited can be nearer (or as near: ties go to the lower item).
+    fn walk(&self, origin: [f64; 3], dir: [f64; 3], visit: &mut dyn FnMut(&[u32]) -> f64);
+}
 
 #[derive(Debug, Clone)]
 pub(crate) struct Grid {

@@ -10,6 +10,7 @@
 mod clusters;
 mod fit;
 mod frame;
+mod geometry;
 mod grid;
 mod intersect;
 mod lists;
@@ -19,6 +20,7 @@ mod orient;
 mod poly;
 mod real;
 mod roots;
+mod spray;
 mod support;
 mod surface;
 mod timing;
@@ -28,6 +30,8 @@ mod up;
 pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use frame::Frame;
+pub use geometry::bounds;
+pub use grid::BallIndex;
 pub use intersect::{
     Ball, HitStatus, InitialHit, Outcome, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
@@ -39,13 +43,12 @@ pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};
+pub use spray::Sphere;
 pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
     weight,
 };
-pub use surface::{
-    BallFit, BesideFits, Sphere, Surface, SurfaceError, SurfaceParams, SurfaceParts, bounds,
-};
+pub use surface::{BallFit, BesideFits, Surface, SurfaceError, SurfaceParams, SurfaceParts};
 pub use timing::StageClock;
-pub use tracer::{BallIndex, Camera, CameraBasis, MAX_CANDIDATES, TraceHit};
+pub use tracer::{Camera, CameraBasis, MAX_CANDIDATES, TraceHit};
 pub use up::guess_up;

@@ -149,7 +149,7 @@ pub(crate) fn neighbour_lists(
                     let members = run_points.iter().map(|&i| i as usize);
                     // The run's box centre, and a radius holding every member's reach (with
                     // slack far above rounding, so that no point within reach is missed).
-                    let (lo, hi) = crate::surface::bounds(members.clone().map(|i| &points[i]));
+                    let (lo, hi) = crate::geometry::bounds(members.clone().map(|i| &points[i]));
                     let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
                     let radius = members
                         .clone()
@@ -259,7 +259,7 @@ pub(crate) fn neighbour_lists(
                             }
                         }
                         // A cut list reaches only as far as its farthest member: the radius
-                        // that reproduces it as a distance filter (`crate::clusters::expand`),
+                        // that reproduces it as a distance filter (clusters' `expand`),
                         // rounded up so that squaring it again cannot fall below the farthest d².
                         let list_reach = if capped {
                             far.sqrt().next_up().next_up()

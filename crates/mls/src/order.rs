@@ -16,7 +16,7 @@ fn spread(v: u64) -> u64 {
 /// The permutation that sorts `points` by 63-bit Morton code over their bounding box
 /// (ties keep input order).
 pub fn morton_order(points: &[[f64; 3]]) -> Vec<u32> {
-    let (lo, hi) = crate::surface::bounds(points);
+    let (lo, hi) = crate::geometry::bounds(points);
     let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
     let scale = if extent > 0.0 {
         ((1u64 << 21) - 1) as f64 / extent

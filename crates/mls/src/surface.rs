@@ -9,13 +9,15 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
 use crate::fit::FitStatus;
+use crate::geometry::bounds;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit_with};
-use crate::lists::{LIST_BLOCK, LIST_RUN, NeighbourLists, RunUnions, neighbour_lists};
+use crate::lists::{LIST_RUN, NeighbourLists, RunUnions, neighbour_lists};
 use crate::neighbours::Neighbours;
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
+use crate::spray::{Sphere, droplets};
 use crate::support::{DataNormals, NormalsMode};
 use crate::timing::StageClock;
 
@@ -77,13 +79,6 @@ pub enum BallFit {
     None,
     /// Part of a component too small for a fit: drawn as `spheres[index]` instead.
     Droplet(u32),
-}
-
-/// Spray drawn as what it is: a small sphere (a blob or a particle).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Sphere<T> {
-    pub centre: V3<T>,
-    pub radius: T,
 }
 
 /// What [`SurfaceParts::build_with`] hands to the work it runs beside the initial fits.
@@ -526,183 +521,6 @@ impl<T: Real> Surface<T> {
     }
 }
 
-/// The spheres that draw spray, and (point, sphere) for each point of it. Spray is a
-/// component (points linked where one is in the other's list within its h, the `links` the
-/// lists stage found) that cannot support a surface: fewer points than
-/// `below`, or no wider than its smoothing length (every fit in it would span it whole). A
-/// compact component of 4 points or more becomes one blob: its centroid, radius the members'
-/// RMS distance to it plus half the dense spacing (a particle's radius). Otherwise (fewer
-/// points, or a scattered component whose members stand out of that blob by more than a
-/// spacing) each point is a sphere of half the dense spacing: never a sphere that bounds
-/// particles far apart.
-fn droplets<T: Real>(
-    points: &[[f64; 3]],
-    links: &[Vec<(u32, u32)>],
-    ball_h: &(dyn Fn(usize) -> f64 + Sync),
-    nearest: &[f64],
-    spacing: f64,
-    below: usize,
-) -> (Vec<Sphere<T>>, Vec<(u32, u32)>) {
-    if below <= 1 {
-        return (Vec::new(), Vec::new());
-    }
-    let n = points.len();
-    let d2 = |a: [f64; 3], b: [f64; 3]| {
-        (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
-    };
-    // Components by union-find, every root linked to a smaller one, so that each component's
-    // root is its smallest index whatever order the links come in. The lists stage gives the
-    // links by blocks of consecutive points (in a bake, where points come in spatial order):
-    // the links within a block are joined by that block's own task in its own slice of the
-    // parents, all blocks at once, and only the links between blocks (a tenth of them) one
-    // after another. A concurrent union-find over all links measured slower on 16 threads
-    // than this on one: every thread's links led to the same few roots.
-    fn root(parent: &mut [u32], offset: u32, mut i: u32) -> u32 {
-        while parent[(i - offset) as usize] != i {
-            let up = parent[(parent[(i - offset) as usize] - offset) as usize];
-            parent[(i - offset) as usize] = up;
-            i = up;
-        }
-        i
-    }
-    fn join(parent: &mut [u32], offset: u32, i: u32, j: u32) {
-        let (ri, rj) = (root(parent, offset, i), root(parent, offset, j));
-        if ri != rj {
-            parent[(ri.max(rj) - offset) as usize] = ri.min(rj);
-        }
-    }
-    let block = LIST_BLOCK;
-    let by_block = links.len() == n.div_ceil(block);
-    let local = |b: usize, (i, j): (u32, u32)| {
-        by_block && i as usize / block == b && j as usize / block == b
-    };
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    if by_block {
-        parent
-            .par_chunks_mut(block)
-            .zip(links)
-            .enumerate()
-            .for_each(|(b, (parent, links))| {
-                let offset = (b * block) as u32;
-                for &(i, j) in links {
-                    if local(b, (i, j)) {
-                        join(parent, offset, i, j);
-                    }
-                }
-            });
-    }
-    for (b, links) in links.iter().enumerate() {
-        for &(i, j) in links {
-            if !local(b, (i, j)) {
-                join(&mut parent, 0, i, j);
-            }
-        }
-    }
-    // Members grouped by component (each root is its component's smallest index), in one
-    // array: components in order of their first member, members in index order.
-    let roots: Vec<u32> = (0..n)
-        .into_par_iter()
-        .map(|mut i| {
-            while parent[i] as usize != i {
-                i = parent[i] as usize;
-            }
-            i as u32
-        })
-        .collect();
-    let mut first = vec![0u32; n + 1];
-    for &r in &roots {
-        first[r as usize + 1] += 1;
-    }
-    for k in 0..n {
-        first[k + 1] += first[k];
-    }
-    let mut fill = first.clone();
-    let mut order = vec![0usize; n];
-    for (i, &r) in roots.iter().enumerate() {
-        order[fill[r as usize] as usize] = i;
-        fill[r as usize] += 1;
-    }
-    let components: Vec<&[usize]> = (0..n)
-        .filter_map(|r| {
-            let m = &order[first[r] as usize..first[r + 1] as usize];
-            (!m.is_empty()).then_some(m)
-        })
-        .collect();
-    let distance = |p: [f64; 3], c: [f64; 3]| d2(p, c).sqrt();
-    let particle = 0.5 * spacing;
-    /// What a component is drawn as.
-    enum Spray {
-        Surface,
-        Blob { centre: [f64; 3], radius: f64 },
-        Particles,
-    }
-    // Each component on its own (its sums in member order), all at once.
-    let kinds: Vec<Spray> = components
-        .par_iter()
-        .map(|m| {
-            let mut c = [0.0; 3];
-            for &i in *m {
-                for a in 0..3 {
-                    c[a] += points[i][a] / m.len() as f64;
-                }
-            }
-            let far = m
-                .iter()
-                .map(|&i| distance(points[i], c))
-                .fold(0.0, f64::max);
-            // A surface: enough points, wider than h, and sampled about as densely as the
-            // fluid (spray spread thin is not a sheet to stretch across its gaps).
-            let mean_gap = m.iter().map(|&i| nearest[i]).sum::<f64>() / m.len() as f64;
-            if m.len() >= below && far > ball_h(m[0]) && mean_gap <= SPRAY_GAP * spacing {
-                return Spray::Surface;
-            }
-            let rms = (m
-                .iter()
-                .map(|&i| distance(points[i], c).powi(2))
-                .sum::<f64>()
-                / m.len() as f64)
-                .sqrt();
-            // A blob only where the particles fill it: no wider than their own volume's
-            // sphere (N particles of radius s / 2 fill one of radius (s / 2)·∛N), with slack.
-            let filled = rms <= 1.25 * particle * (m.len() as f64).cbrt();
-            if m.len() >= 4 && far <= rms + spacing && filled {
-                Spray::Blob {
-                    centre: c,
-                    radius: rms + particle,
-                }
-            } else {
-                Spray::Particles
-            }
-        })
-        .collect();
-    // Spheres numbered in order of their first member, so the result does not depend on threads.
-    let mut spheres = Vec::new();
-    let mut marks = Vec::new();
-    for (m, kind) in components.iter().zip(kinds) {
-        match kind {
-            Spray::Surface => {}
-            Spray::Blob { centre, radius } => {
-                let d = spheres.len() as u32;
-                marks.extend(m.iter().map(|&i| (i as u32, d)));
-                spheres.push(Sphere {
-                    centre: V3::from_f64(centre),
-                    radius: T::c(radius),
-                });
-            }
-            Spray::Particles => {
-                for &i in *m {
-                    marks.push((i as u32, spheres.len() as u32));
-                    spheres.push(Sphere {
-                        centre: V3::from_f64(points[i]),
-                        radius: T::c(particle),
-                    });
-                }
-            }
-        }
-    }
-    (spheres, marks)
-}
-
 /// Copies the positions (and normals) of `ids` into the scratch vectors.
 pub(crate) fn gather<T: Real>(
     points: &[V3<T>],
@@ -723,23 +541,6 @@ fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     (len.is_finite() && len > 1e-12).then(|| [n[0] / len, n[1] / len, n[2] / len])
 }
-
-/// The axis-aligned bounding box (lo, hi) of `points`; infinite and empty for no points.
-pub fn bounds<'a>(points: impl IntoIterator<Item = &'a [f64; 3]>) -> ([f64; 3], [f64; 3]) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in points {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
-    (lo, hi)
-}
-
-/// A component whose points lie farther apart on average than this many dense spacings is
-/// spray, whatever its size.
-const SPRAY_GAP: f64 = 1.25;
 
 /// The quantile of the radii that sets h, and of the nearest distances that sets the spray's
 /// particle size: the median. A lower one (0.25 was tried) resists more spray but makes cubic

@@ -3,6 +3,7 @@
 
 use rayon::prelude::*;
 
+use crate::grid::BallIndex;
 use crate::intersect::{HitStatus, InitialHit, Params, Ray, initial_hit, ray_ball, refine};
 use crate::real::{Real, V3};
 use crate::surface::{BallFit, Surface, gather};
@@ -22,15 +23,6 @@ struct Candidate<T> {
 enum CandidateKind<T> {
     Ball(InitialHit<T>),
     Droplet { normal: V3<T> },
-}
-
-/// A spatial index over a surface's candidates: ball i is item i, droplet sphere d is item
-/// `len + d`.
-pub trait BallIndex: Sync {
-    /// Calls `visit` with batches of items whose bounds the ray (t ≥ 0) enters, roughly nearest
-    /// first. `visit` returns the nearest hit so far (∞ if none); the walk ends once nothing
-    /// unvisited can be nearer (or as near: ties go to the lower item).
-    fn walk(&self, origin: [f64; 3], dir: [f64; 3], visit: &mut dyn FnMut(&[u32]) -> f64);
 }
 
 /// A pinhole camera.

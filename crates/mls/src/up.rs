@@ -37,7 +37,7 @@ pub fn guess_up(points: &[[f64; 3]], normals: &[[f64; 3]]) -> Option<[f64; 3]> {
             .unwrap_or(2);
         return Some(unit(axis, mean[axis].signum()));
     } // A closed shape resting on a flat base: the base faces down.
-    let (lo, hi) = crate::surface::bounds(points);
+    let (lo, hi) = crate::geometry::bounds(points);
     // A flat base: for each candidate up (axis, sign), the share of points in a thin band at
     // its low end whose normals point down.
     let mut scores = Vec::with_capacity(6);

@@ -2,7 +2,6 @@
 //! each storage array bound in `RANGES` consecutive slices of its buffer (shaders.rs), and one
 //! uniform block.
 
-use crate::context::Gpu;
 use crate::shaders::{RANGES, RangedArray, UNIFORM_BINDING, elements_per_range};
 
 /// A compute-visible buffer binding of `ty` at `binding`.
@@ -67,26 +66,28 @@ fn ranges_needed(array: &RangedArray, size: u64, limit: u64) -> u64 {
 
 /// The most bytes an array can hold and still be bound: `RANGES` bindings under `limit`,
 /// within the device's largest buffer.
-pub(crate) fn capacity(gpu: &Gpu, limit: u64, array: &RangedArray) -> u64 {
+pub(crate) fn capacity(device: &wgpu::Device, limit: u64, array: &RangedArray) -> u64 {
     let span = elements_per_range(limit, array.element_size) * array.element_size;
-    (u64::from(RANGES) * span).min(gpu.device.limits().max_buffer_size)
+    (u64::from(RANGES) * span).min(device.limits().max_buffer_size)
 }
 
 /// Whether `what`, an array of `bytes`, spans more than one binding under `limit`; why it
-/// cannot be bound where it needs more than `RANGES` or exceeds the device's largest buffer.
+/// cannot be bound where it needs more than `RANGES` or exceeds the device's largest buffer
+/// (`adapter` names the device in that message).
 pub(crate) fn needs_split(
-    gpu: &Gpu,
+    device: &wgpu::Device,
+    adapter: &str,
     limit: u64,
     array: &RangedArray,
     what: &str,
     bytes: u64,
 ) -> Result<bool, String> {
     let needed = ranges_needed(array, bytes, limit);
-    let max_buffer = gpu.device.limits().max_buffer_size;
+    let max_buffer = device.limits().max_buffer_size;
     if needed > u64::from(RANGES) || bytes > max_buffer {
         return Err(format!(
             "'{what}' takes {bytes} bytes on the GPU; {} binds at most {RANGES} ranges of {} bytes per array, in buffers of at most {max_buffer} bytes",
-            gpu.describe(),
+            adapter,
             elements_per_range(limit, array.element_size) * array.element_size
         ));
     }

@@ -188,7 +188,8 @@ impl Gpu {
     }
 
     pub(crate) fn expander(&self) -> &Expander {
-        self.expander.get_or_init(|| Expander::new(&self.device))
+        self.expander
+            .get_or_init(|| Expander::new(&self.device, self.binding_limit))
     }
 
     /// Bytes of device-local memory, where the adapter is a Vulkan one (the sum of its

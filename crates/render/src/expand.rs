@@ -6,7 +6,6 @@
 use std::sync::OnceLock;
 
 use crate::bindings::{bind_entries, layout_entries};
-use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
 use crate::shaders::{EXPAND_ARRAYS, expand_wgsl};
@@ -21,9 +20,11 @@ struct Passes {
     widen: wgpu::ComputePipeline,
 }
 
-/// The compiled passes, built once per device, per split, on first use.
+/// The compiled passes, built once per device and binding limit, per split, on first use.
 #[derive(Debug)]
 pub(crate) struct Expander {
+    /// The storage binding limit the passes are compiled for.
+    max_binding: u64,
     layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
     passes: [OnceLock<Passes>; 2],
@@ -46,7 +47,7 @@ pub(crate) struct ExpandInputs<'a> {
 }
 
 impl Expander {
-    pub(crate) fn new(device: &wgpu::Device) -> Expander {
+    pub(crate) fn new(device: &wgpu::Device, max_binding: u64) -> Expander {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("expand"),
             entries: &layout_entries(&EXPAND_ARRAYS, true),
@@ -57,30 +58,28 @@ impl Expander {
             immediate_size: 0,
         });
         Expander {
+            max_binding,
             layout,
             pipeline_layout,
             passes: Default::default(),
         }
     }
 
-    fn passes(&self, gpu: &Gpu, split: bool) -> &Passes {
+    fn passes(&self, device: &wgpu::Device, split: bool) -> &Passes {
         self.passes[usize::from(split)].get_or_init(|| {
-            let module = gpu
-                .device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("expand"),
-                    source: wgpu::ShaderSource::Wgsl(expand_wgsl(gpu.max_binding(), split).into()),
-                });
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("expand"),
+                source: wgpu::ShaderSource::Wgsl(expand_wgsl(self.max_binding, split).into()),
+            });
             let pipeline = |entry| {
-                gpu.device
-                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(entry),
-                        layout: Some(&self.pipeline_layout),
-                        module: &module,
-                        entry_point: Some(entry),
-                        compilation_options: wgpu::PipelineCompilationOptions::default(),
-                        cache: None,
-                    })
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&self.pipeline_layout),
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    cache: None,
+                })
             };
             Passes {
                 masks: pipeline("expand"),
@@ -95,20 +94,20 @@ impl Expander {
     /// `split` when an array spans several ranges.
     pub(crate) fn encode(
         &self,
-        gpu: &Gpu,
+        device: &wgpu::Device,
         inputs: &ExpandInputs,
         settings: ExpandSettings,
         split: bool,
         encoder: &mut wgpu::CommandEncoder,
         timestamps: Option<&wgpu::QuerySet>,
     ) -> Result<()> {
-        let max_groups = gpu.device.limits().max_compute_workgroups_per_dimension;
+        let max_groups = device.limits().max_compute_workgroups_per_dimension;
         // Rows are full width whenever a dispatch needs more than one.
         let settings = ExpandSettings {
             row_threads: max_groups * WORKGROUP,
             ..settings
         };
-        let uniform = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("expand settings"),
             size: size_of::<ExpandSettings>() as u64,
             usage: wgpu::BufferUsages::UNIFORM,
@@ -133,13 +132,13 @@ impl Expander {
             inputs.bvh_nodes,
             inputs.wide_nodes,
         ];
-        let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), gpu.max_binding());
-        let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), self.max_binding);
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("expand"),
             layout: &self.layout,
             entries: &entries,
         });
-        let passes = self.passes(gpu, split);
+        let passes = self.passes(device, split);
         // The masks pass runs one workgroup per cluster; the others a thread per element.
         let clusters = settings.point_count.div_ceil(settings.cluster_size.max(1));
         let dispatches = [

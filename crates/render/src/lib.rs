@@ -8,6 +8,7 @@
 mod bindings;
 pub mod colormap;
 mod context;
+pub mod cpu_shade;
 mod error;
 mod expand;
 pub mod layout;

@@ -371,8 +371,8 @@ impl Tracer {
     /// The most pixels a frame can have on `gpu`: its hits and its image must each bind
     /// (a larger view is traced smaller and stretched, as the player does).
     pub fn max_frame_pixels(&self, gpu: &Gpu) -> u64 {
-        let hits = capacity(gpu, self.limit, &FRAME_ARRAYS[0]) / size_of::<GpuHit>() as u64;
-        let image = capacity(gpu, self.limit, &FRAME_ARRAYS[1]) / 4;
+        let hits = capacity(&gpu.device, self.limit, &FRAME_ARRAYS[0]) / size_of::<GpuHit>() as u64;
+        let image = capacity(&gpu.device, self.limit, &FRAME_ARRAYS[1]) / 4;
         hits.min(image)
     }
 
@@ -382,8 +382,22 @@ impl Tracer {
         let pixels = u64::from(width) * u64::from(height);
         let hit_bytes = pixels * size_of::<GpuHit>() as u64;
         let hits_what = format!("hits of a {width}×{height} frame");
-        let hits_split = needs_split(gpu, self.limit, &FRAME_ARRAYS[0], &hits_what, hit_bytes);
-        let image_split = needs_split(gpu, self.limit, &FRAME_ARRAYS[1], "image", pixels * 4);
+        let hits_split = needs_split(
+            &gpu.device,
+            &gpu.describe(),
+            self.limit,
+            &FRAME_ARRAYS[0],
+            &hits_what,
+            hit_bytes,
+        );
+        let image_split = needs_split(
+            &gpu.device,
+            &gpu.describe(),
+            self.limit,
+            &FRAME_ARRAYS[1],
+            "image",
+            pixels * 4,
+        );
         let split =
             hits_split.map_err(Error::Validation)? || image_split.map_err(Error::Validation)?;
         let max_side = device.limits().max_texture_dimension_2d;

@@ -539,8 +539,15 @@ fn array_of(name: &str) -> &'static RangedArray {
 /// Whether an array of `bytes` needs more than one binding; an error naming it where it
 /// cannot be bound.
 fn fits(gpu: &Gpu, file: &CacheFile, what: &str, array: &RangedArray, bytes: u64) -> Result<bool> {
-    needs_split(gpu, gpu.max_binding(), array, what, bytes)
-        .map_err(|problem| invalid(file, problem))
+    needs_split(
+        &gpu.device,
+        &gpu.describe(),
+        gpu.max_binding(),
+        array,
+        what,
+        bytes,
+    )
+    .map_err(|problem| invalid(file, problem))
 }
 
 /// Bytes before a section's data in its GPU buffer: trace.wgsl reads the nodes after one
@@ -888,7 +895,7 @@ impl GpuStep {
         let leaf_spheres = derived(gpu, "leaf spheres", leaf_bytes);
         let wide_nodes = derived(gpu, "wide nodes", wide_bytes);
         gpu.expander().encode(
-            gpu,
+            &gpu.device,
             &ExpandInputs {
                 points: &points,
                 normals: &normals,
@@ -971,9 +978,14 @@ impl GpuStep {
                         self.info.point_count
                     )));
                 }
-                needs_split(gpu, self.binding_limit, &STEP_ARRAYS[9], "field", {
-                    f.bytes.len() as u64
-                })
+                needs_split(
+                    &gpu.device,
+                    &gpu.describe(),
+                    self.binding_limit,
+                    &STEP_ARRAYS[9],
+                    "field",
+                    f.bytes.len() as u64,
+                )
                 .map_err(Error::Validation)?;
                 let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("field"),

@@ -2,14 +2,35 @@
 //! report (error against cost, per setting) and a PNG plot.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use slosh_mls::{Camera, NormalsMode, Params, Real, Surface, SurfaceParams, TraceHit};
 use slosh_scenes::{DVec3, Ray as TrueRay, Scene, SceneKind, SceneSpec, Truth};
 
-use crate::cli::AccuracyArgs;
+use crate::stats::percentile;
+
+/// What `slosh bench accuracy` measures and where it writes.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Markdown report to write.
+    pub out: PathBuf,
+    /// PNG plot of error against cost.
+    pub plot: PathBuf,
+    /// Image side in pixels of each rendered scene.
+    pub size: u32,
+    /// Small images and fewer settings (seconds instead of minutes).
+    pub quick: bool,
+    /// Directory of SPH cases compared with splashsurf (`scripts/sph_reference.py`).
+    pub sph: Option<PathBuf>,
+    /// Only the SPH section.
+    pub sph_only: bool,
+    /// The SPH results as JSON too.
+    pub json: Option<PathBuf>,
+    /// Write the small SPH fixture the tests keep (each case's reference depths) here.
+    pub sph_fixture: Option<PathBuf>,
+}
 
 /// One scene at one time, rendered once by the exact truth.
 pub(crate) struct Case {
@@ -180,15 +201,6 @@ fn reference(case: &Case, cfg: &Config) -> Result<Render> {
     render_as::<f64>(case, cfg, 40, 1e-10)
 }
 
-/// The `q` quantile of `v` (nearest rank), NaN for none.
-pub(crate) fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
-}
-
 pub(crate) fn metrics(case: &Case, r: &Render, reference: &Render) -> Metrics {
     let (mut dist, mut angles, mut solver) = (Vec::new(), Vec::new(), Vec::new());
     let (mut compared, mut disagree) = (0usize, 0usize);
@@ -321,7 +333,7 @@ fn sph_section(root: &Path, plot: &Path) -> Result<(String, String, Vec<crate::s
     Ok((out, goals, results))
 }
 
-pub fn run(args: &AccuracyArgs) -> Result<()> {
+pub fn run(args: &Settings) -> Result<()> {
     if let (Some(root), Some(fixture)) = (&args.sph, &args.sph_fixture) {
         for dir in crate::sph::cases(root)? {
             let name = dir
@@ -342,7 +354,7 @@ pub fn run(args: &AccuracyArgs) -> Result<()> {
             }
             crate::sph::write_reference_depth(&dir, &target.join("reference-depth.npy"))?;
         }
-        crate::output::print(&format!("wrote the fixture under {}\n", fixture.display()))?;
+        slosh_fileio::stdout::print(&format!("wrote the fixture under {}\n", fixture.display()))?;
         return Ok(());
     }
     if args.sph_only {
@@ -355,7 +367,7 @@ pub fn run(args: &AccuracyArgs) -> Result<()> {
         if let Some(json) = &args.json {
             write_atomic(json, serde_json::to_string_pretty(&results)?.as_bytes())?;
         }
-        crate::output::print(&format!("wrote {}\n", args.out.display()))?;
+        slosh_fileio::stdout::print(&format!("wrote {}\n", args.out.display()))?;
         return Ok(());
     }
     let size = if args.quick {
@@ -599,7 +611,7 @@ pub fn run(args: &AccuracyArgs) -> Result<()> {
         write_atomic(json, serde_json::to_string_pretty(&value)?.as_bytes())?;
     }
     plot_png(&args.plot, &plot)?;
-    crate::output::print(&format!(
+    slosh_fileio::stdout::print(&format!(
         "wrote {} and {}\n",
         args.out.display(),
         args.plot.display()

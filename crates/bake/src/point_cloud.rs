@@ -1,10 +1,27 @@
 //! Point clouds from PLY (ASCII or binary) and OBJ files, with normals where the file has them.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{DefaultElement, Property};
+
+/// Why a point cloud file could not be read: the file and what was wrong with it.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {what}", path.display())]
+pub struct PointCloudError {
+    pub path: PathBuf,
+    pub what: String,
+}
+
+type Result<T> = std::result::Result<T, PointCloudError>;
+
+/// The error `what` about `path`.
+fn bad(path: &Path, what: impl Into<String>) -> PointCloudError {
+    PointCloudError {
+        path: path.to_path_buf(),
+        what: what.into(),
+    }
+}
 
 /// Positions and (unit, or `None` where the file has none) normals.
 #[derive(Debug, Default)]
@@ -21,21 +38,23 @@ pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
     let cloud = match ext.as_deref() {
         Some("ply") => read_ply(path)?,
         Some("obj") => read_obj(path)?,
-        _ => bail!("{}: expected a .ply or .obj file", path.display()),
+        _ => return Err(bad(path, "expected a .ply or .obj file")),
     };
     if cloud.positions.is_empty() {
-        bail!("{}: no vertices found", path.display());
+        return Err(bad(path, "no vertices found"));
     }
     if let Some(i) = cloud
         .positions
         .iter()
         .position(|p| !p.iter().all(|c| c.is_finite()))
     {
-        bail!(
-            "{}: vertex {i} has a non-finite coordinate {:?}",
-            path.display(),
-            cloud.positions[i]
-        );
+        return Err(bad(
+            path,
+            format!(
+                "vertex {i} has a non-finite coordinate {:?}",
+                cloud.positions[i]
+            ),
+        ));
     }
     Ok(cloud)
 }
@@ -55,16 +74,15 @@ fn number(p: &Property) -> Option<f64> {
 }
 
 fn read_ply(path: &Path) -> Result<PointCloud> {
-    let file =
-        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let file = std::fs::File::open(path).map_err(|e| bad(path, format!("cannot open: {e}")))?;
     let mut reader = std::io::BufReader::new(file);
     let ply = Parser::<DefaultElement>::new()
         .read_ply(&mut reader)
-        .map_err(|e| anyhow::anyhow!("{}: not a readable PLY file: {e}", path.display()))?;
+        .map_err(|e| bad(path, format!("not a readable PLY file: {e}")))?;
     let vertices = ply
         .payload
         .get("vertex")
-        .with_context(|| format!("{}: PLY file without a `vertex` element", path.display()))?;
+        .ok_or_else(|| bad(path, "PLY file without a `vertex` element"))?;
     let get = |v: &DefaultElement, k: &str| v.get(k).and_then(number);
     let mut cloud = PointCloud::default();
     let has_normals = vertices
@@ -73,7 +91,7 @@ fn read_ply(path: &Path) -> Result<PointCloud> {
     let mut normals = Vec::new();
     for (i, v) in vertices.iter().enumerate() {
         let (Some(x), Some(y), Some(z)) = (get(v, "x"), get(v, "y"), get(v, "z")) else {
-            bail!("{}: vertex {i} lacks numeric x, y, z", path.display());
+            return Err(bad(path, format!("vertex {i} lacks numeric x, y, z")));
         };
         cloud.positions.push([x, y, z]);
         if has_normals {
@@ -102,7 +120,7 @@ fn read_obj(path: &Path) -> Result<PointCloud> {
         // tobj names no line; where a vertex line is what is wrong, ours does.
         Err(e) => {
             read_obj_vertices(path)?;
-            bail!("{}: not a readable OBJ file: {e}", path.display());
+            return Err(bad(path, format!("not a readable OBJ file: {e}")));
         }
     };
     // tobj makes models of faces, lines and points only; a scanner's or solver's cloud of
@@ -150,7 +168,7 @@ fn read_obj(path: &Path) -> Result<PointCloud> {
 /// there is one per vertex, in order (how point-cloud exporters write them).
 fn read_obj_vertices(path: &Path) -> Result<PointCloud> {
     let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: not a readable OBJ text file", path.display()))?;
+        .map_err(|e| bad(path, format!("not a readable OBJ text file: {e}")))?;
     let mut positions = Vec::new();
     let mut normals = Vec::new();
     for (number, line) in text.lines().enumerate() {
@@ -164,15 +182,17 @@ fn read_obj_vertices(path: &Path) -> Result<PointCloud> {
             .by_ref()
             .take(3)
             .map(str::parse)
-            .collect::<Result<_, _>>()
+            .collect::<std::result::Result<_, _>>()
             .ok()
             .filter(|v: &Vec<f64>| v.len() == 3)
-            .with_context(|| {
-                format!(
-                    "{}: line {}: expected three numbers after '{}', found '{line}'",
-                    path.display(),
-                    number + 1,
-                    line.split_whitespace().next().unwrap_or_default()
+            .ok_or_else(|| {
+                bad(
+                    path,
+                    format!(
+                        "line {}: expected three numbers after '{}', found '{line}'",
+                        number + 1,
+                        line.split_whitespace().next().unwrap_or_default()
+                    ),
                 )
             })?;
         list.push([values[0], values[1], values[2]]);
@@ -180,12 +200,16 @@ fn read_obj_vertices(path: &Path) -> Result<PointCloud> {
     let normals = match normals.len() {
         0 => None,
         n if n == positions.len() => Some(normals.into_iter().map(normalise).collect()),
-        n => bail!(
-            "{}: {} vertices but {n} normals (vn lines) and no faces to pair them: expected \
-             one normal per vertex, in order, or none",
-            path.display(),
-            positions.len()
-        ),
+        n => {
+            return Err(bad(
+                path,
+                format!(
+                    "{} vertices but {n} normals (vn lines) and no faces to pair them: \
+                     expected one normal per vertex, in order, or none",
+                    positions.len()
+                ),
+            ));
+        }
     };
     Ok(PointCloud { positions, normals })
 }

@@ -3,7 +3,7 @@
 //! 4.6 plus 1M points and 1920×1080, each row beside its error against the analytic surface
 //! (or, for the bunny, against the 5-iteration solution), and upload times per step.
 
-use crate::output::say;
+use slosh_fileio::say;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -16,8 +16,45 @@ use slosh_mls::Camera;
 use slosh_render::{Gpu, GpuStep, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 
-use crate::cli::{BenchTable, GpuBenchArgs};
-use crate::render::write_frame_png;
+use slosh_render::write_frame_png;
+
+use crate::stats::median;
+
+/// A table of `slosh bench gpu`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Table {
+    /// Table 4.1: the bunny, iterations 1–5, quadratic and cubic.
+    Bunny,
+    /// Table 4.5: the tank at four image sizes.
+    Tank,
+    /// Figure 4.9: the water shader on the tank.
+    Water,
+    /// Table 4.6: point counts at 1280×800 (and 1920×1080 from 100k points).
+    Points,
+}
+
+/// What `slosh bench gpu` measures and where it writes.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Markdown report to write.
+    pub out: PathBuf,
+    /// Timed frames per row (after warm-up).
+    pub frames: usize,
+    /// Most iterations measured.
+    pub max_iterations: u32,
+    /// Small sizes only.
+    pub quick: bool,
+    /// The bunny's points, read by the caller (table 4.1 is skipped without them).
+    pub bunny: Option<StepInput>,
+    /// Folder for the tables' pictures.
+    pub images: PathBuf,
+    /// GPU adapter whose name contains this.
+    pub adapter: Option<String>,
+    /// Tables measured (empty: all).
+    pub tables: Vec<Table>,
+    /// Point counts of table 4.6 (empty: the defaults).
+    pub points: Vec<usize>,
+}
 
 /// A baked step in memory, its analytic truth if it has one, and its world spacing.
 struct Bench {
@@ -53,11 +90,6 @@ fn scene(kind: SceneKind, points: usize, degree: u8) -> Result<Bench> {
     };
     let label = format!("{} ({} surface points)", kind.name(), input.positions.len());
     bake(&label, &input, degree, Some(scene.truth(scene.time(0))))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Median and 99th percentile of |distance to the truth| / spacing over the hit pixels.
@@ -177,7 +209,7 @@ const THESIS_POINTS_FPS: [(usize, [f64; 3]); 3] = [
     (100_000, [28.43, 1.47, 0.75]),
 ];
 
-pub fn run(args: &GpuBenchArgs) -> Result<()> {
+pub fn run(args: &Settings) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
@@ -200,24 +232,12 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
     let wanted = |table| args.tables.is_empty() || args.tables.contains(&table);
 
     // Table 4.1: the bunny.
-    let bunny_path = args
-        .bunny
-        .clone()
-        .or_else(|| std::env::var_os("SLOSH_DATA").map(|d| PathBuf::from(d).join("bunny.obj")));
-    let bunny = bunny_path.filter(|p| p.exists() && wanted(BenchTable::Bunny));
-    if let Some(path) = &bunny {
-        let cloud = crate::import::read_point_cloud(path)?;
-        let input = StepInput {
-            source: path.display().to_string(),
-            positions: cloud.positions,
-            normals: cloud.normals,
-            ..StepInput::default()
-        };
+    if let Some(input) = args.bunny.as_ref().filter(|_| wanted(Table::Bunny)) {
         let size = if args.quick { (200, 200) } else { (800, 800) };
         for degree in [2u8, 3] {
             let bench = bake(
                 &format!("bunny.obj ({} points)", input.positions.len()),
-                &input,
+                input,
                 degree,
                 None,
             )?;
@@ -255,21 +275,21 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
                 );
             }
         }
-    } else if wanted(BenchTable::Bunny) {
+    } else if wanted(Table::Bunny) {
         say!("  (no bunny.obj: give --bunny or set SLOSH_DATA; table 4.1 skipped)");
     }
 
     // Table 4.5: the tank, ~10k surface points, image sizes.
-    if wanted(BenchTable::Tank) || wanted(BenchTable::Water) {
+    if wanted(Table::Tank) || wanted(Table::Water) {
         tank_rows(
             args,
             &runner,
             &mut rows,
-            wanted(BenchTable::Tank),
-            wanted(BenchTable::Water),
+            wanted(Table::Tank),
+            wanted(Table::Water),
         )?;
     }
-    if wanted(BenchTable::Points) {
+    if wanted(Table::Points) {
         points_rows(args, &runner, &mut rows, &mut uploads)?;
     }
     write_report(args, &gpu, &rows, &uploads)
@@ -277,7 +297,7 @@ pub fn run(args: &GpuBenchArgs) -> Result<()> {
 
 /// Table 4.5 (the tank at four image sizes) and the water row.
 fn tank_rows(
-    args: &GpuBenchArgs,
+    args: &Settings,
     runner: &Runner,
     rows: &mut Vec<Row>,
     sizes_table: bool,
@@ -345,7 +365,7 @@ fn tank_rows(
 
 /// Table 4.6: point counts at 1280×800, plus 1M points and 1920×1080, with upload times.
 fn points_rows(
-    args: &GpuBenchArgs,
+    args: &Settings,
     runner: &Runner,
     rows: &mut Vec<Row>,
     uploads: &mut Vec<(String, usize, slosh_render::UploadStats)>,
@@ -467,7 +487,7 @@ fn write_goals(md: &mut String, rows: &[Row]) {
 }
 
 fn write_report(
-    args: &GpuBenchArgs,
+    args: &Settings,
     gpu: &Gpu,
     rows: &[Row],
     uploads: &[(String, usize, slosh_render::UploadStats)],
@@ -554,6 +574,6 @@ fn write_report(
     }
     slosh_fileio::atomic_write(&args.out, md.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    crate::output::say_text(&md);
+    slosh_fileio::stdout::say_text(&md);
     Ok(())
 }

@@ -2,9 +2,9 @@
 //! per point per section, the measured trade-off of each section encoding, and load times.
 //! Writes a Markdown report (docs/results-bake.md).
 
-use crate::output::say;
+use slosh_fileio::say;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -17,7 +17,24 @@ use slosh_fileio::FileBytes;
 use slosh_mls::{Surface, SurfaceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
-use crate::cli::BakeBenchArgs;
+use crate::stats::median;
+
+/// What `slosh bench bake` measures and where it writes.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Markdown report to write.
+    pub out: PathBuf,
+    /// Timed runs per measurement (the median is reported).
+    pub runs: usize,
+    /// Small sizes only.
+    pub quick: bool,
+    /// Point counts measured (empty: the defaults).
+    pub points: Vec<usize>,
+    /// Thread counts measured (empty: 1, 2, 4 … up to the cores).
+    pub threads: Vec<usize>,
+    /// Steps per series in the end-to-end rows.
+    pub series: usize,
+}
 
 /// The thesis's table 4.7 (sloshing tank, 50 neighbours, quadratic): nearest neighbours,
 /// initial MLS and total seconds per step, by point count.
@@ -97,11 +114,6 @@ print(times[len(times) // 2], len(m.mesh.triangles))
     Ok(Some((seconds, triangles)))
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> f64 {
     median(
         (0..runs.max(1))
@@ -114,7 +126,7 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> f64 {
     )
 }
 
-pub fn run(args: &BakeBenchArgs) -> Result<()> {
+pub fn run(args: &Settings) -> Result<()> {
     let sizes: Vec<usize> = if !args.points.is_empty() {
         args.points.clone()
     } else if args.quick {
@@ -452,12 +464,12 @@ impl StepSource for SceneSteps {
 /// The scaling table (each size on pools of each thread count, stage by stage) and the series
 /// table (the batch driver with its default `--jobs` against one step alone), as Markdown.
 fn scaling_and_series(
-    args: &BakeBenchArgs,
+    args: &Settings,
     sizes: &[usize],
     params: &BakeParams,
     one_step: &[(usize, f64)],
 ) -> Result<(String, String)> {
-    let cores = crate::machine::cores();
+    let cores = slosh_bake::cores();
     let mut threads: Vec<usize> = if args.threads.is_empty() {
         vec![1, 2, cores]
     } else {
@@ -546,8 +558,7 @@ fn scaling_and_series(
             scene,
             steps: args.series,
         };
-        let (jobs, _) =
-            crate::config::default_jobs(cores, crate::machine::available_memory(), Some(n));
+        let (jobs, _) = slosh_bake::default_jobs(cores, slosh_bake::available_memory(), Some(n));
         let dir = tempfile::tempdir()?;
         let opts = BatchOptions {
             out: dir.path().to_path_buf(),

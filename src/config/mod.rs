@@ -1,5 +1,7 @@
 //! Validated settings built from parsed flags: every check on user input happens here, once.
 
+pub mod bench;
+
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
@@ -102,7 +104,7 @@ impl GenConfig {
 #[derive(Debug)]
 pub enum BakeInput {
     Case(slosh_ensight::Case),
-    PointCloud(crate::import::PointCloud),
+    PointCloud(slosh_bake::PointCloud),
 }
 
 /// Validated `slosh bake` settings: every "auto" resolved against the input.
@@ -114,43 +116,6 @@ pub struct BakeConfig {
     pub quiet: bool,
     /// Why `--jobs` took its value, when it was not given.
     pub jobs_chosen: Option<String>,
-}
-
-/// Peak memory of a bake per point of the step, measured: sphere steps of 100k, 400k and 1M
-/// points peaked at 177 MB, 679 MB and 1.55 GB resident (`/usr/bin/time -v slosh bake …
-/// --jobs 1`), about 1.52 KB per point over a base of 25 MB; with headroom.
-const BAKE_BYTES_PER_POINT: u64 = 2048;
-const BAKE_BASE_BYTES: u64 = 64 << 20;
-
-/// Steps baked at once by default, each on its share of the cores (`BatchOptions::threads`):
-/// half the cores (a step is parallel inside, but not all of it, and its reading and writing
-/// are serial: on the 16-core H200 host a series of eight 1M-point steps took 13.4 s with 2
-/// jobs, 11.3 s with 4 and 10.4 s with 8), no more than three quarters of the memory
-/// available hold, at least one.
-pub fn default_jobs(
-    cores: usize,
-    available: Option<u64>,
-    points: Option<usize>,
-) -> (usize, String) {
-    let by_cores = (cores / 2).max(1);
-    let per_job = points.map(|p| BAKE_BASE_BYTES + p as u64 * BAKE_BYTES_PER_POINT);
-    let by_memory = match (available, per_job) {
-        (Some(a), Some(j)) => ((a / 4 * 3) / j).max(1) as usize,
-        _ => usize::MAX,
-    };
-    let jobs = by_cores.min(by_memory);
-    let memory = match (available, per_job, points) {
-        (Some(a), Some(j), Some(p)) => format!(
-            "; a step of {p} points needs about {:.2} GB, {:.1} GB available",
-            j as f64 / 1e9,
-            a as f64 / 1e9
-        ),
-        _ => String::new(),
-    };
-    (
-        jobs,
-        format!("baking {jobs} steps at once ({cores} cores{memory}; --jobs sets it)"),
-    )
 }
 
 /// Points of step `index` of the input, where it can be read now (a step that cannot is
@@ -302,7 +267,7 @@ impl BakeConfig {
                     bail!("--surface {v}: a point cloud has no variables (use all or estimate)")
                 }
             };
-            let cloud = crate::import::read_point_cloud(&a.input)?;
+            let cloud = slosh_bake::read_point_cloud(&a.input)?;
             let normals = match a.normals.as_deref() {
                 Some("pca") => NormalSource::Pca,
                 Some("estimate") => NormalSource::Estimate,
@@ -395,7 +360,7 @@ impl BakeConfig {
         params.mantissa_bits = a.mantissa_bits;
         // Each job holds a whole step in memory and is parallel inside: more jobs than a few
         // per core only cost memory and threads.
-        let cores = crate::machine::cores();
+        let cores = slosh_bake::cores();
         let most_jobs = (4 * cores).max(8);
         if let Some(jobs) = a.jobs
             && (jobs == 0 || jobs > most_jobs)
@@ -409,7 +374,8 @@ impl BakeConfig {
             Some(jobs) => (jobs, None),
             None => {
                 let points = first_step_points(&input, steps.map_or(0, |(f, _)| f));
-                let (jobs, why) = default_jobs(cores, crate::machine::available_memory(), points);
+                let (jobs, why) =
+                    slosh_bake::default_jobs(cores, slosh_bake::available_memory(), points);
                 (jobs, Some(why))
             }
         };
@@ -446,19 +412,6 @@ mod tests {
                 .find(|(k, _)| *k == name)
                 .map(|(_, v)| v.to_string())
         }
-    }
-
-    #[test]
-    fn jobs_default_to_half_the_cores_within_memory() {
-        assert_eq!(default_jobs(2, Some(24 << 30), Some(100_000)).0, 1);
-        assert_eq!(default_jobs(16, Some(128 << 30), Some(1_000_000)).0, 8);
-        assert_eq!(default_jobs(64, None, None).0, 32);
-        // 12 GiB available, a 1M-point step needs about 2.1 GB: four at a time.
-        assert_eq!(default_jobs(16, Some(12 << 30), Some(1_000_000)).0, 4);
-        // 4 GiB available, a 1M-point step needs about 2.1 GB: one at a time.
-        let (jobs, why) = default_jobs(64, Some(4 << 30), Some(1_000_000));
-        assert_eq!(jobs, 1, "{why}");
-        assert!(why.contains("1000000 points"), "{why}");
     }
 
     #[test]

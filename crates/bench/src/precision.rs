@@ -4,7 +4,7 @@
 //! surface, hits against the cache stored exactly (23 bits), and bytes per point.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
@@ -13,9 +13,22 @@ use slosh_fileio::FileBytes;
 use slosh_mls::{NormalsMode, Params};
 use slosh_scenes::SceneKind;
 
-use crate::accuracy::{Case, Render, case, metrics, percentile};
-use crate::cli::PrecisionBenchArgs;
-use crate::output::say;
+use crate::accuracy::{Case, Render, case, metrics};
+use crate::stats::percentile;
+
+/// What `slosh bench precision` measures and where it writes.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Markdown report to write.
+    pub out: PathBuf,
+    /// Points per scene.
+    pub points: usize,
+    /// Image side in pixels.
+    pub size: u32,
+    /// Mantissa bits compared (23 is exact f32).
+    pub bits: Vec<u32>,
+}
+use slosh_fileio::say;
 
 /// One scene baked at one precision and read back: the step and its file's size.
 struct Baked {
@@ -56,7 +69,7 @@ fn trace(case: &Case, baked: &Baked, iterations: u32) -> Render {
     ))
 }
 
-pub fn run(args: &PrecisionBenchArgs) -> Result<()> {
+pub fn run(args: &Settings) -> Result<()> {
     let scenes = [
         (SceneKind::Sphere, 0.0),
         (SceneKind::Sphere, 0.1),

@@ -34,10 +34,10 @@ pub fn stdout_error() -> Option<String> {
         .clone()
 }
 
-/// `println!` that never panics on a closed or full stdout (see [`say`]).
+/// `println!` that never panics on a closed or full stdout (see [`say_text`]).
+#[macro_export]
 macro_rules! say {
     ($($arg:tt)*) => {
-        $crate::output::say_text(&format!("{}\n", format_args!($($arg)*)))
+        $crate::stdout::say_text(&format!("{}\n", format_args!($($arg)*)))
     };
 }
-pub(crate) use say;

@@ -4,7 +4,7 @@
 //! step (bytes on the GPU, host ms, GPU upload and passes ms), and, in the same run, the
 //! floors: `std::fs::read` of the same files and a raw `Queue::write_buffer` of as many bytes.
 
-use crate::output::say;
+use slosh_fileio::say;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -18,38 +18,38 @@ use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest};
 use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
-use crate::cli::ScrubBenchArgs;
-use crate::render::parse_size;
+use crate::stats::{Spread, median, spread};
+
+/// What `slosh bench scrub` measures and where it writes.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Markdown report to write.
+    pub out: PathBuf,
+    /// Points per step of each series measured (empty: 100000 and 1000000; quick: 2000).
+    pub points: Vec<usize>,
+    /// Steps per series.
+    pub steps: usize,
+    /// Distinct baked shapes per series (default: every step up to 200k points, 8 above).
+    pub distinct: Option<usize>,
+    /// Frame size, width and height.
+    pub size: (u32, u32),
+    /// Random jumps measured, in the pool and from the page cache each.
+    pub jumps: usize,
+    /// Seed of the jumps' steps.
+    pub seed: u64,
+    /// Loader threads (default: the player's).
+    pub loaders: Option<usize>,
+    /// Steps the GPU pool holds while streaming.
+    pub pool_steps: u64,
+    /// Where the series live (default: a temporary directory).
+    pub dir: Option<PathBuf>,
+    /// Small series and frames.
+    pub quick: bool,
+    /// GPU adapter whose name contains this.
+    pub adapter: Option<String>,
+}
 
 /// Percentiles of a sample, in the sample's unit.
-#[derive(Debug, Clone, Copy, Default)]
-struct Spread {
-    p50: f64,
-    p90: f64,
-    p99: f64,
-    max: f64,
-    count: usize,
-}
-
-fn spread(mut v: Vec<f64>) -> Spread {
-    if v.is_empty() {
-        return Spread::default();
-    }
-    v.sort_by(f64::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    Spread {
-        p50: at(0.5),
-        p90: at(0.9),
-        p99: at(0.99),
-        max: v[v.len() - 1],
-        count: v.len(),
-    }
-}
-
-fn median(v: Vec<f64>) -> f64 {
-    spread(v).p50
-}
-
 /// A series of `steps` cache files of a moving sphere of `points` surface points: `distinct`
 /// instants baked, cycled over the steps (each step its own file, time values increasing).
 /// Reused when `dir` already holds that series.
@@ -263,7 +263,7 @@ fn measure(
     points: usize,
     label: String,
     size: (u32, u32),
-    args: &ScrubBenchArgs,
+    args: &Settings,
 ) -> Result<SeriesReport> {
     let manifest = Manifest::read(dir)?;
     let paths: Vec<PathBuf> = manifest.steps.iter().map(|s| dir.join(&s.file)).collect();
@@ -506,12 +506,8 @@ fn measure(
     })
 }
 
-pub fn run(args: &ScrubBenchArgs) -> Result<()> {
-    let size = if args.quick {
-        (160, 100)
-    } else {
-        parse_size(&args.size)?
-    };
+pub fn run(args: &Settings) -> Result<()> {
+    let size = if args.quick { (160, 100) } else { args.size };
     let counts: Vec<usize> = match (&args.points[..], args.quick) {
         ([], true) => vec![2_000],
         ([], false) => vec![100_000, 1_000_000],
@@ -525,26 +521,18 @@ pub fn run(args: &ScrubBenchArgs) -> Result<()> {
     if steps < 2 || args.jumps == 0 {
         bail!("--steps must be at least 2 and --jumps at least 1");
     }
-    let jumps_args = ScrubBenchArgs {
+    let jumps_args = Settings {
         jumps: if args.quick {
             args.jumps.min(10)
         } else {
             args.jumps
         },
-        out: args.out.clone(),
         points: Vec::new(),
         steps,
-        distinct: args.distinct,
-        size: args.size.clone(),
-        seed: args.seed,
-        loaders: args.loaders,
-        pool_steps: args.pool_steps,
-        dir: args.dir.clone(),
-        quick: args.quick,
-        adapter: args.adapter.clone(),
+        ..args.clone()
     };
     let gpu = Arc::new(Gpu::new(args.adapter.as_deref())?);
-    let cores = crate::machine::cores();
+    let cores = slosh_bake::cores();
     say!("scrub benchmark on {} ({cores} cores)", gpu.describe());
     let root = args
         .dir
@@ -572,7 +560,7 @@ pub fn run(args: &ScrubBenchArgs) -> Result<()> {
     let md = markdown(&gpu, cores, size, args, &reports);
     slosh_fileio::atomic_write(&args.out, md.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    crate::output::say_text(&md);
+    slosh_fileio::stdout::say_text(&md);
     Ok(())
 }
 
@@ -580,7 +568,7 @@ fn markdown(
     gpu: &Gpu,
     cores: usize,
     size: (u32, u32),
-    args: &ScrubBenchArgs,
+    args: &Settings,
     reports: &[SeriesReport],
 ) -> String {
     let mut md = String::new();

@@ -21,7 +21,7 @@ use slosh_cache::{CacheFile, LoadedStep, encode_step};
 use slosh_fileio::FileBytes;
 use slosh_mls::{Camera, Params, TraceHit};
 
-use crate::accuracy::percentile;
+use crate::stats::percentile;
 
 /// Image size of every comparison.
 pub const SPH_WIDTH: u32 = 320;
