@@ -15,18 +15,9 @@ use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn gpu() -> Option<Arc<Gpu>> {
     static GPU: OnceLock<Option<Arc<Gpu>>> = OnceLock::new();
-    GPU.get_or_init(
-        || match Gpu::new(std::env::var("SLOSH_ADAPTER").ok().as_deref()) {
-            Ok(gpu) => Some(Arc::new(gpu)),
-            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
-                panic!("CI=true requires a GPU adapter: {e}")
-            }
-            Err(e) => {
-                eprintln!("skipping GPU test: {e}");
-                None
-            }
-        },
-    )
+    GPU.get_or_init(|| {
+        slosh_testkit::gpu_or_skip(Gpu::new(slosh_testkit::adapter().as_deref())).map(Arc::new)
+    })
     .clone()
 }
 

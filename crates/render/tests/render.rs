@@ -62,22 +62,12 @@ struct Device {
 fn device() -> Option<&'static Device> {
     static DEVICE: OnceLock<Option<Device>> = OnceLock::new();
     DEVICE
-        .get_or_init(
-            || match Gpu::new(std::env::var("SLOSH_ADAPTER").ok().as_deref()) {
-                Ok(gpu) => {
-                    eprintln!("GPU tests on {}", gpu.describe());
-                    let tracer = Tracer::new(&gpu).unwrap();
-                    Some(Device { gpu, tracer })
-                }
-                Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
-                    panic!("CI=true requires a GPU adapter: {e}")
-                }
-                Err(e) => {
-                    eprintln!("skipping GPU test: {e}");
-                    None
-                }
-            },
-        )
+        .get_or_init(|| {
+            let gpu = slosh_testkit::gpu_or_skip(Gpu::new(slosh_testkit::adapter().as_deref()))?;
+            eprintln!("GPU tests on {}", gpu.describe());
+            let tracer = Tracer::new(&gpu).unwrap();
+            Some(Device { gpu, tracer })
+        })
         .as_ref()
 }
 

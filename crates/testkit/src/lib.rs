@@ -1,5 +1,6 @@
 //! What the test suites and the accuracy harness share, defined once: the cameras that frame
-//! a point set, and the mask of silhouette pixels that comparisons leave out.
+//! a point set, the mask of silhouette pixels that comparisons leave out, and the rule for a
+//! test that cannot run here (skipped with a message, except under `CI=true`).
 
 use slosh_mls::Camera;
 
@@ -69,6 +70,35 @@ pub fn silhouette_mask(depth: &[Option<f64>], width: usize, depth_jump: Option<f
             })
         })
         .collect()
+}
+
+/// Whether this is CI's run (`CI=true`), where every GPU, window, SLURM and peer test must
+/// run: the one place the suites read `CI`.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// Says that a test cannot run here for `why` (no adapter, a missing tool), so that the
+/// caller returns; under `CI=true`, where everything must run, fails the test instead.
+pub fn skip(why: &str) {
+    assert!(!in_ci(), "CI=true requires this test to run, but: {why}");
+    eprintln!("skipping: {why}");
+}
+
+/// The GPU adapter the tests use: `SLOSH_ADAPTER` (a part of its name), else the default.
+pub fn adapter() -> Option<String> {
+    std::env::var("SLOSH_ADAPTER").ok()
+}
+
+/// The device `found` opened, or `None` once [`skip`] has said why there is none.
+pub fn gpu_or_skip<T, E: std::fmt::Display>(found: Result<T, E>) -> Option<T> {
+    match found {
+        Ok(gpu) => Some(gpu),
+        Err(e) => {
+            skip(&format!("no GPU adapter: {e}"));
+            None
+        }
+    }
 }
 
 #[cfg(test)]
