@@ -85,19 +85,38 @@ const fn array(
 }
 
 /// The step's arrays as the trace, water and shade passes bind them (group 0).
+/// A step's arrays by name, so that code binding one says which (their order in
+/// `STEP_ARRAYS` is their slot).
+pub mod step_array {
+    use super::{RangedArray, array};
+
+    pub const POINTS: RangedArray = array("points", "Point", 16, 0, 0, false);
+    pub const NORMALS: RangedArray = array("normals", "Normal", 16, 0, 1, false);
+    pub const NEIGHBOUR_MASKS: RangedArray = array("neighbour_masks", "u32", 4, 0, 2, false);
+    pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 3, false);
+    pub const CLUSTER_IDS: RangedArray = array("cluster_ids", "u32", 4, 0, 4, false);
+    pub const BALLS: RangedArray = array("balls", "Ball", 64, 0, 5, false);
+    pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 6, false);
+    pub const BVH_NODES: RangedArray = array("bvh_nodes", "BvhNode", 32, 0, 7, false);
+    pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 8, false);
+    pub const FIELD: RangedArray = array("field", "f32", 4, 0, 9, false);
+    pub const LEAF_SPHERES: RangedArray = array("leaf_spheres", "vec4<f32>", 16, 0, 10, false);
+    pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 11, false);
+}
+
 pub const STEP_ARRAYS: [RangedArray; 12] = [
-    array("points", "Point", 16, 0, 0, false),
-    array("normals", "Normal", 16, 0, 1, false),
-    array("neighbour_masks", "u32", 4, 0, 2, false),
-    array("cluster_start", "u32", 4, 0, 3, false),
-    array("cluster_ids", "u32", 4, 0, 4, false),
-    array("balls", "Ball", 64, 0, 5, false),
-    array("spheres", "Sphere", 16, 0, 6, false),
-    array("bvh_nodes", "BvhNode", 32, 0, 7, false),
-    array("bvh_items", "u32", 4, 0, 8, false),
-    array("field", "f32", 4, 0, 9, false),
-    array("leaf_spheres", "vec4<f32>", 16, 0, 10, false),
-    array("wide_nodes", "Wide", 128, 0, 11, false),
+    step_array::POINTS,
+    step_array::NORMALS,
+    step_array::NEIGHBOUR_MASKS,
+    step_array::CLUSTER_START,
+    step_array::CLUSTER_IDS,
+    step_array::BALLS,
+    step_array::SPHERES,
+    step_array::BVH_NODES,
+    step_array::BVH_ITEMS,
+    step_array::FIELD,
+    step_array::LEAF_SPHERES,
+    step_array::WIDE_NODES,
 ];
 
 /// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.

@@ -20,7 +20,7 @@ use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::expand::ExpandInputs;
 use crate::layout::ExpandSettings;
-use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS};
+use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS, step_array};
 use crate::staging::StagingPool;
 
 /// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
@@ -520,25 +520,37 @@ const EMPTY_BINDING: u64 = WIDE_NODE_BYTES;
 /// Bytes of the blank node before a step's BVH nodes on the GPU (one `GpuBvhNode`).
 const NODE_LEAD: u64 = 32;
 
-/// How the passes bind each section of `SECTIONS` (and the field).
-fn array_of(name: &str) -> &'static RangedArray {
-    match name {
-        names::POINTS => &STEP_ARRAYS[0],
-        names::NORMALS => &STEP_ARRAYS[1],
+/// How the passes bind each section of `SECTIONS`: the reach is read only by the per-step
+/// passes; a name that is no section is an error, never a guess.
+fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
+    Ok(match name {
+        names::POINTS => &step_array::POINTS,
+        names::NORMALS => &step_array::NORMALS,
         names::REACH => &EXPAND_ARRAYS[2],
-        names::CLUSTER_START => &STEP_ARRAYS[3],
-        names::CLUSTER_NEIGHBOURS => &STEP_ARRAYS[4],
-        names::BALLS => &STEP_ARRAYS[5],
-        names::SPHERES => &STEP_ARRAYS[6],
-        names::BVH_NODES => &STEP_ARRAYS[7],
-        names::BVH_ITEMS => &STEP_ARRAYS[8],
-        _ => &STEP_ARRAYS[9],
-    }
+        names::CLUSTER_START => &step_array::CLUSTER_START,
+        names::CLUSTER_NEIGHBOURS => &step_array::CLUSTER_IDS,
+        names::BALLS => &step_array::BALLS,
+        names::SPHERES => &step_array::SPHERES,
+        names::BVH_NODES => &step_array::BVH_NODES,
+        names::BVH_ITEMS => &step_array::BVH_ITEMS,
+        other => {
+            return Err(invalid(
+                file,
+                format!("no GPU binding for section '{other}'"),
+            ));
+        }
+    })
 }
 
-/// Whether an array of `bytes` needs more than one binding; an error naming it where it
-/// cannot be bound.
-fn fits(gpu: &Gpu, file: &CacheFile, what: &str, array: &RangedArray, bytes: u64) -> Result<bool> {
+/// Whether an array of `bytes` needs more than one binding (split into ranges); an error
+/// naming it where it cannot be bound at all.
+fn needs_ranges(
+    gpu: &Gpu,
+    file: &CacheFile,
+    what: &str,
+    array: &RangedArray,
+    bytes: u64,
+) -> Result<bool> {
     needs_split(
         &gpu.device,
         &gpu.describe(),
@@ -846,21 +858,33 @@ impl GpuStep {
         let mut split = false;
         for (slot, name) in SECTIONS.iter().enumerate() {
             let bytes = lead(name) + host.section_source(slot).len();
-            split |= fits(gpu, file, name, array_of(name), bytes)?;
+            split |= needs_ranges(gpu, file, name, array_of(file, name)?, bytes)?;
         }
         if let Some(field) = &host.field {
-            split |= fits(
+            split |= needs_ranges(
                 gpu,
                 file,
                 "field",
-                &STEP_ARRAYS[9],
+                &step_array::FIELD,
                 field.bytes.len() as u64,
             )?;
         }
         let [mask_bytes, leaf_bytes, wide_bytes] = info.derived_bytes();
-        split |= fits(gpu, file, "neighbour masks", &STEP_ARRAYS[2], mask_bytes)?;
-        split |= fits(gpu, file, "leaf spheres", &STEP_ARRAYS[10], leaf_bytes)?;
-        split |= fits(gpu, file, "wide nodes", &STEP_ARRAYS[11], wide_bytes)?;
+        split |= needs_ranges(
+            gpu,
+            file,
+            "neighbour masks",
+            &step_array::NEIGHBOUR_MASKS,
+            mask_bytes,
+        )?;
+        split |= needs_ranges(
+            gpu,
+            file,
+            "leaf spheres",
+            &step_array::LEAF_SPHERES,
+            leaf_bytes,
+        )?;
+        split |= needs_ranges(gpu, file, "wide nodes", &step_array::WIDE_NODES, wide_bytes)?;
         let mut stats = UploadStats {
             stored_bytes: host.stored_bytes,
             host_seconds: host.host_seconds,
@@ -982,7 +1006,7 @@ impl GpuStep {
                     &gpu.device,
                     &gpu.describe(),
                     self.binding_limit,
-                    &STEP_ARRAYS[9],
+                    &step_array::FIELD,
                     "field",
                     f.bytes.len() as u64,
                 )
