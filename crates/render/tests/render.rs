@@ -607,7 +607,7 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
 #[test]
 fn arrays_over_the_binding_limit_are_bound_in_ranges() {
     let Some(dev) = device() else { return };
-    let mut capped = Gpu::new(std::env::var("SLOSH_ADAPTER").ok().as_deref()).unwrap();
+    let mut capped = Gpu::new(slosh_testkit::adapter().as_deref()).unwrap();
     capped.limit_bindings(slosh_render::MIN_BINDING_LIMIT);
     let capped_tracer = Tracer::new(&capped).unwrap();
     let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 5));
