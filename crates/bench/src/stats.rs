@@ -5,11 +5,16 @@
 /// The `q` quantile of `v` by nearest rank (the smallest sample with at least `q` of the
 /// samples at or below it); NaN for an empty list.
 pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    if v.is_empty() {
+    v.sort_by(f64::total_cmp);
+    of_sorted(&v, q)
+}
+
+/// The `q` quantile by nearest rank of samples already in order; NaN for none.
+fn of_sorted(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
         return f64::NAN;
     }
-    v.sort_by(f64::total_cmp);
-    v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
+    sorted[((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1]
 }
 
 /// The median of `v` (its 0.5 quantile by nearest rank); NaN for an empty list.
@@ -28,13 +33,13 @@ pub struct Spread {
 }
 
 /// The spread of `v`; every quantile NaN (and `count` 0) for an empty list.
-pub fn spread(v: Vec<f64>) -> Spread {
-    let max = v.iter().copied().fold(f64::NAN, f64::max);
+pub fn spread(mut v: Vec<f64>) -> Spread {
+    v.sort_by(f64::total_cmp);
     Spread {
-        p50: percentile(v.clone(), 0.5),
-        p90: percentile(v.clone(), 0.9),
-        p99: percentile(v.clone(), 0.99),
-        max,
+        p50: of_sorted(&v, 0.5),
+        p90: of_sorted(&v, 0.9),
+        p99: of_sorted(&v, 0.99),
+        max: of_sorted(&v, 1.0),
         count: v.len(),
     }
 }

@@ -41,13 +41,13 @@ pub fn shade(hit: &TraceHit, dir: [f64; 3], mode: ShadeMode) -> [f64; 3] {
     match mode {
         ShadeMode::Normals => hit.normal.map(|c| 0.5 + 0.5 * c),
         ShadeMode::Backfaces => {
-            let dot = hit.normal[0] * dir[0] + hit.normal[1] * dir[1] + hit.normal[2] * dir[2];
-            let base = if dot > 0.0 {
+            let facing = dot(hit.normal, dir);
+            let base = if facing > 0.0 {
                 [0.95, 0.1, 0.85]
             } else {
                 [0.6; 3]
             };
-            base.map(|c| c * (0.4 + 0.6 * dot.abs()))
+            base.map(|c| c * (0.4 + 0.6 * facing.abs()))
         }
         ShadeMode::Status => match hit.status {
             HitStatus::Converged => [0.1, 0.7, 0.2],
