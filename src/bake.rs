@@ -6,7 +6,7 @@ use slosh_fileio::say;
 
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use slosh_bake::{EnsightSource, Event, Outcome, StepInput, StepSource, run_batch};
+use slosh_bake::{EnsightSource, Event, StepInput, StepOutcome, StepSource, run_batch};
 use slosh_cache::Manifest;
 use slosh_ensight::PointSource;
 
@@ -127,7 +127,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         Event::Planned { steps } => bar.set_length(steps as u64),
         Event::Done { index, outcome } => {
             match outcome {
-                Outcome::Baked {
+                StepOutcome::Baked {
                     points, seconds, ..
                 } => {
                     let total = baked_points
@@ -139,8 +139,8 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
                         rate / 1e3
                     ));
                 }
-                Outcome::Kept => bar.set_message(format!("step {index}: kept")),
-                Outcome::Failed(e) => bar.println(format!("step {index} failed: {e}")),
+                StepOutcome::Kept => bar.set_message(format!("step {index}: kept")),
+                StepOutcome::Failed(e) => bar.println(format!("step {index} failed: {e}")),
             }
             bar.inc(1);
         }

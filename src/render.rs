@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use slosh_cache::{CacheFile, LoadedStep, step_file_name};
 use slosh_mls::{Camera, NormalsMode, Params};
-use slosh_render::{GpuStep, TraceParams, Tracer, cpu_shade};
+use slosh_render::{TraceParams, Tracer, cpu_shade};
 
 use crate::cli::{ModeArg, RenderArgs};
 
@@ -304,7 +304,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         return Ok(());
     }
     let gpu = slosh_render::Gpu::new(args.adapter.as_deref())?;
-    let tracer = Tracer::new(&gpu)?;
+    let (tracer, passes) = (Tracer::new(&gpu)?, slosh_render::StepPasses::new(&gpu));
     if config.sequence {
         say!(
             "rendering {} steps on {}",
@@ -316,7 +316,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let path = step_path(&args.path, step);
         let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
         check_belongs(manifest.as_ref(), &args.path, step, &path, &file)?;
-        let gpu_step = GpuStep::upload(&gpu, &file, args.field.as_deref())?;
         let h = file.header();
         let params = TraceParams {
             iterations: args.iterations,
@@ -329,8 +328,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             key_light: slosh_render::DEFAULT_KEY_LIGHT,
         };
         let start = std::time::Instant::now();
-        let frame = tracer.render(&gpu, &gpu_step, &camera, &params)?;
-        let seconds = start.elapsed().as_secs_f64();
+        let (gpu_step, frame) = slosh_play::export::trace_file(
+            &gpu,
+            &tracer,
+            &passes,
+            &file,
+            args.field.as_deref(),
+            &camera,
+            &params,
+        )?;
+        // The frame's time, the upload's (timed on its own) left out.
+        let seconds = start.elapsed().as_secs_f64() - gpu_step.upload.total_seconds;
         let (out, aov) = targets(step);
         if let Some(out) = &out {
             write_frame_png(out, &frame)?;

@@ -10,28 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use slosh_testkit::in_ci;
+mod util;
 
-fn have(tool: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-fn slosh(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_slosh"))
-        .args(args)
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(out.status.success(), "slosh {args:?}: {text}");
-    text
-}
+use util::{have, in_ci, slosh_ok as slosh};
 
 /// Kills the child when dropped (the test may fail half-way).
 struct Guard(Child);

@@ -6,19 +6,14 @@
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
+use slosh_bake::{BakeParams, NormalSource, SurfaceSelect, bake_step};
 use slosh_cache::{CacheFile, encode_step};
 use slosh_mls::{Surface, SurfaceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn bench(c: &mut Criterion) {
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 10_000, 1)).unwrap();
-    let (positions, normals) = scene.particles(0).surface_arrays();
-    let input = StepInput {
-        positions,
-        normals: Some(normals),
-        ..StepInput::default()
-    };
+    let input = slosh_testkit::scene_step(&scene, 0, "");
     let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     let bare = SurfaceParams {
         droplet_below: 0,

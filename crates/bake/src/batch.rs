@@ -88,7 +88,7 @@ pub struct BatchOptions {
 }
 
 #[derive(Debug, Clone)]
-pub enum Outcome {
+pub enum StepOutcome {
     Baked {
         bytes: u64,
         points: u64,
@@ -104,7 +104,7 @@ pub enum Outcome {
 #[derive(Debug, Clone)]
 pub enum Event {
     Planned { steps: usize },
-    Done { index: usize, outcome: Outcome },
+    Done { index: usize, outcome: StepOutcome },
 }
 
 #[derive(Debug, Default)]
@@ -174,16 +174,16 @@ fn bake_one(
     index: usize,
     opts: &BatchOptions,
     key: &SeriesKey,
-) -> Outcome {
+) -> StepOutcome {
     let path = opts.out.join(step_file_name(index));
     let identity = source.identity(index);
     if is_current(&path, key, index, identity.as_deref()) {
-        return Outcome::Kept;
+        return StepOutcome::Kept;
     }
     let start = Instant::now();
     let input = match source.read(index) {
         Ok(i) => i,
-        Err(e) => return Outcome::Failed(e),
+        Err(e) => return StepOutcome::Failed(e),
     };
     let read_seconds = start.elapsed().as_secs_f64();
     let mut input = input;
@@ -191,7 +191,7 @@ fn bake_one(
     let baked = match bake_step(&input, &opts.params) {
         Ok(b) => b,
         // The report names the step; the error's own "step N:" would say it twice.
-        Err(e) => return Outcome::Failed(e.problem()),
+        Err(e) => return StepOutcome::Failed(e.problem()),
     };
     drop(input);
     let mut header = baked.header;
@@ -224,14 +224,14 @@ fn bake_one(
                 "compress, verify and write".into(),
                 write_start.elapsed().as_secs_f64(),
             ));
-            Outcome::Baked {
+            StepOutcome::Baked {
                 bytes,
                 points,
                 seconds: start.elapsed().as_secs_f64(),
                 stats: Box::new(stats),
             }
         }
-        Err(e) => Outcome::Failed(e),
+        Err(e) => StepOutcome::Failed(e),
     }
 }
 
@@ -362,7 +362,7 @@ pub fn run_batch(
                     {
                         let mut r = report.lock().unwrap_or_else(|p| p.into_inner());
                         match &outcome {
-                            Outcome::Baked {
+                            StepOutcome::Baked {
                                 bytes,
                                 points,
                                 stats,
@@ -381,8 +381,8 @@ pub fn run_batch(
                                     }
                                 }
                             }
-                            Outcome::Kept => r.kept += 1,
-                            Outcome::Failed(e) => r.failed.push((index, e.clone())),
+                            StepOutcome::Kept => r.kept += 1,
+                            StepOutcome::Failed(e) => r.failed.push((index, e.clone())),
                         }
                     }
                     progress(Event::Done { index, outcome });

@@ -12,8 +12,8 @@ mod select;
 mod step;
 
 pub use batch::{
-    BatchOptions, BatchReport, Event, Outcome, Shard, StepSource, files_identity, is_current, plan,
-    run_batch, series_key,
+    BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, files_identity, is_current,
+    plan, run_batch, series_key,
 };
 pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};

@@ -16,16 +16,7 @@ use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn scene_input(kind: SceneKind, points: usize, step: usize) -> (Scene, StepInput) {
     let scene = Scene::new(SceneSpec::new(kind, points, 7)).unwrap();
-    let p = scene.particles(step);
-    let (positions, normals) = p.surface_arrays();
-    let input = StepInput {
-        index: step,
-        time: scene.time(step),
-        source: format!("{kind:?}"),
-        positions,
-        normals: Some(normals),
-        ..StepInput::default()
-    };
+    let input = slosh_testkit::scene_step(&scene, step, &format!("{kind:?}"));
     (scene, input)
 }
 
@@ -34,9 +25,7 @@ fn params() -> BakeParams {
 }
 
 fn bake_to_file(input: &StepInput, params: &BakeParams) -> CacheFile {
-    let baked = bake_step(input, params).unwrap();
-    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
-    CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap()
+    slosh_testkit::bake_in_memory(input, params, Path::new("memory.slc")).unwrap()
 }
 
 /// The stored fits and data normals keep `mantissa_bits` bits, each the nearest such value to

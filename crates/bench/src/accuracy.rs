@@ -7,8 +7,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use slosh_mls::{Camera, NormalsMode, Params, Real, Surface, SurfaceParams, TraceHit};
-use slosh_scenes::{DVec3, Ray as TrueRay, Scene, SceneKind, SceneSpec, Truth};
+use slosh_scenes::{DVec3, Scene, SceneKind, SceneSpec, TrueRay, Truth};
 
+use crate::plot::plot_png;
 use crate::stats::percentile;
 
 /// What `slosh bench accuracy` measures and where it writes.
@@ -33,7 +34,7 @@ pub struct Settings {
 }
 
 /// One scene at one time, rendered once by the exact truth.
-pub(crate) struct Case {
+pub(crate) struct Scenario {
     pub(crate) name: String,
     noise: f64,
     pub(crate) spacing: f64,
@@ -88,25 +89,25 @@ pub(crate) struct Metrics {
     us_per_ray: f64,
 }
 
-pub(crate) fn case(
+pub(crate) fn scenario(
     kind: SceneKind,
     points: usize,
     step: usize,
     noise: f64,
     size: u32,
-) -> Result<Case> {
-    case_reversed(kind, points, step, noise, 0.0, size)
+) -> Result<Scenario> {
+    scenario_reversed(kind, points, step, noise, 0.0, size)
 }
 
 /// [`case`] with a fraction `reversed` of the normals reversed.
-fn case_reversed(
+fn scenario_reversed(
     kind: SceneKind,
     points: usize,
     step: usize,
     noise: f64,
     reversed: f64,
     size: u32,
-) -> Result<Case> {
+) -> Result<Scenario> {
     let mut spec = SceneSpec::new(kind, points, 7);
     spec.hard.noise = noise;
     spec.hard.flip_normals = reversed;
@@ -134,7 +135,7 @@ fn case_reversed(
         SceneKind::Tank => format!("tank t={t:.2}"),
         _ => kind.name().to_string(),
     };
-    Ok(Case {
+    Ok(Scenario {
         name,
         noise,
         spacing: scene.spacing(),
@@ -159,7 +160,12 @@ impl Render {
     }
 }
 
-fn render_as<T: Real>(case: &Case, cfg: &Config, iterations: u32, epsilon: f64) -> Result<Render> {
+fn render_as<T: Real>(
+    case: &Scenario,
+    cfg: &Config,
+    iterations: u32,
+    epsilon: f64,
+) -> Result<Render> {
     let sp = SurfaceParams {
         degree: cfg.degree,
         normals: cfg.normals,
@@ -188,7 +194,7 @@ fn render_as<T: Real>(case: &Case, cfg: &Config, iterations: u32, epsilon: f64) 
     })
 }
 
-fn render(case: &Case, cfg: &Config) -> Result<Render> {
+fn render(case: &Scenario, cfg: &Config) -> Result<Render> {
     if cfg.single {
         render_as::<f32>(case, cfg, cfg.iterations, 1e-4)
     } else {
@@ -197,11 +203,11 @@ fn render(case: &Case, cfg: &Config) -> Result<Render> {
 }
 
 /// The converged f64 MLS surface at the same settings: the solver's target.
-fn reference(case: &Case, cfg: &Config) -> Result<Render> {
+fn reference(case: &Scenario, cfg: &Config) -> Result<Render> {
     render_as::<f64>(case, cfg, 40, 1e-10)
 }
 
-pub(crate) fn metrics(case: &Case, r: &Render, reference: &Render) -> Metrics {
+pub(crate) fn metrics(case: &Scenario, r: &Render, reference: &Render) -> Metrics {
     let (mut dist, mut angles, mut solver) = (Vec::new(), Vec::new(), Vec::new());
     let (mut compared, mut disagree) = (0usize, 0usize);
     for (i, h) in r.hits.iter().enumerate() {
@@ -239,7 +245,7 @@ pub(crate) fn metrics(case: &Case, r: &Render, reference: &Render) -> Metrics {
     }
 }
 
-fn row(out: &mut String, case: &Case, label: &str, m: &Metrics) {
+fn row(out: &mut String, case: &Scenario, label: &str, m: &Metrics) {
     let _ = writeln!(
         out,
         "| {} | {} | {label} | {:.2e} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {:.2} | {:.2} |",
@@ -378,11 +384,11 @@ pub fn run(args: &Settings) -> Result<()> {
     let mut cases = Vec::new();
     let noises: &[f64] = if args.quick { &[0.0] } else { &[0.0, 0.1] };
     for &noise in noises {
-        cases.push(case(SceneKind::Sphere, 5000, 0, noise, size)?);
+        cases.push(scenario(SceneKind::Sphere, 5000, 0, noise, size)?);
         if !args.quick {
-            cases.push(case(SceneKind::Torus, 8000, 0, noise, size)?);
+            cases.push(scenario(SceneKind::Torus, 8000, 0, noise, size)?);
             for step in [0, 7, 14] {
-                cases.push(case(SceneKind::Tank, 40_000, step, noise, size)?);
+                cases.push(scenario(SceneKind::Tank, 40_000, step, noise, size)?);
             }
         }
     }
@@ -538,7 +544,7 @@ pub fn run(args: &Settings) -> Result<()> {
         };
         let mut clean_rms = 0.0;
         for reversed in [0.0, 0.1, 0.3] {
-            let c = case_reversed(kind, points, 0, 0.0, reversed, flip_size)?;
+            let c = scenario_reversed(kind, points, 0, 0.0, reversed, flip_size)?;
             let r = render(&c, &cfg)?;
             let m = metrics(&c, &r, &r);
             if reversed == 0.0 {
@@ -628,83 +634,5 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     slosh_ensight::atomic_write(path, bytes)?;
-    Ok(())
-}
-
-/// round(log10(v)) with `round` = floor or ceil.
-fn decade(v: f64, round: fn(f64) -> f64) -> f64 {
-    round(v.log10())
-}
-
-const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
-
-fn plot_png(path: &Path, series: &[(String, Vec<(f64, f64)>)]) -> Result<()> {
-    use plotters::prelude::*;
-    let font = std::fs::read(FONT).with_context(|| {
-        format!("{FONT}: the plot needs DejaVu Sans (Debian: fonts-dejavu-core)")
-    })?;
-    let font: &'static [u8] = Box::leak(font.into_boxed_slice());
-    plotters::style::register_font("sans-serif", FontStyle::Normal, font)
-        .map_err(|_| anyhow::anyhow!("{FONT}: not a usable font"))?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    let tmp = path.with_extension("tmp.png");
-    {
-        let root = BitMapBackend::new(&tmp, (1000, 650)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
-        let ys = series
-            .iter()
-            .flat_map(|s| s.1.iter().map(|p| p.1))
-            .filter(|y| *y > 0.0);
-        let x_max = xs.fold(0.0f64, f64::max) * 1.1;
-        let (y_min, y_max) = ys.fold((f64::INFINITY, 0.0f64), |(a, b), y| (a.min(y), b.max(y)));
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "MLS error against cost (clean scenes, iterations 1..)",
-                ("sans-serif", 24),
-            )
-            .margin(15)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            // log10 of the error on a linear axis over whole decades: labelled ticks always.
-            .build_cartesian_2d(
-                0.0..x_max.max(1e-3),
-                decade(y_min.max(1e-9), f64::floor)..decade(y_max.max(1e-8), f64::ceil),
-            )?;
-        chart
-            .configure_mesh()
-            .x_desc("CPU µs per ray (one thread)")
-            .y_desc("RMS distance to the true surface (spacings)")
-            .y_labels(12)
-            .y_label_formatter(&|v| format!("{:.1e}", 10f64.powf(*v)))
-            .label_style(("sans-serif", 15))
-            .draw()?;
-        for (k, (name, pts)) in series.iter().enumerate() {
-            let color = Palette99::pick(k).to_rgba();
-            let pts: Vec<(f64, f64)> = pts
-                .iter()
-                .filter(|p| p.1 > 0.0)
-                .map(|&(x, y)| (x, y.log10()))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
-                .label(name.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-            chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()?;
-        root.present()?;
-    }
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

@@ -48,13 +48,7 @@ const THESIS: [(usize, f64, f64, f64); 3] = [
 fn input(points: usize) -> (StepInput, f64) {
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))
         .unwrap_or_else(|_| unreachable!("sphere scenes of a positive size always build"));
-    let (positions, normals) = scene.particles(0).surface_arrays();
-    let input = StepInput {
-        source: format!("sphere {points}"),
-        positions,
-        normals: Some(normals),
-        ..StepInput::default()
-    };
+    let input = slosh_testkit::scene_step(&scene, 0, &format!("sphere {points}"));
     (input, scene.spacing())
 }
 

@@ -9,11 +9,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
-use slosh_cache::{CacheFile, Compression, encode_step};
-use slosh_fileio::FileBytes;
+use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect};
+use slosh_cache::{CacheFile, Compression};
 use slosh_mls::Camera;
-use slosh_render::{Gpu, GpuStep, ShadeMode, TraceParams, Tracer, status};
+use slosh_render::{Gpu, GpuStep, ShadeMode, StepPasses, TraceParams, Tracer, status};
 use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 
 use slosh_render::write_frame_png;
@@ -68,9 +67,7 @@ fn bake(label: &str, input: &StepInput, degree: u8, truth: Option<Truth>) -> Res
     let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     params.mls.degree = degree;
     params.compression = Compression::Level(3);
-    let baked = bake_step(input, &params)?;
-    let bytes = encode_step(baked.header, &baked.sections, params.compression)?;
-    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new(label), bytes))?;
+    let file = slosh_testkit::bake_in_memory(input, &params, Path::new(label))?;
     Ok(Bench {
         label: label.to_string(),
         points: input.positions.len(),
@@ -81,13 +78,7 @@ fn bake(label: &str, input: &StepInput, degree: u8, truth: Option<Truth>) -> Res
 
 fn scene(kind: SceneKind, points: usize, degree: u8) -> Result<Bench> {
     let scene = Scene::new(SceneSpec::new(kind, points, 1))?;
-    let (positions, normals) = scene.particles(0).surface_arrays();
-    let input = StepInput {
-        source: format!("{} {points}", kind.name()),
-        positions,
-        normals: Some(normals),
-        ..StepInput::default()
-    };
+    let input = slosh_testkit::scene_step(&scene, 0, &format!("{} {points}", kind.name()));
     let label = format!("{} ({} surface points)", kind.name(), input.positions.len());
     bake(&label, &input, degree, Some(scene.truth(scene.time(0))))
 }
@@ -133,6 +124,7 @@ struct Row {
 struct Runner<'a> {
     gpu: &'a Gpu,
     tracer: Tracer,
+    passes: StepPasses,
     frames: usize,
 }
 
@@ -223,6 +215,7 @@ pub fn run(args: &Settings) -> Result<()> {
     let runner = Runner {
         gpu: &gpu,
         tracer: Tracer::new(&gpu)?,
+        passes: StepPasses::new(&gpu),
         frames: args.frames,
     };
     say!("GPU benchmark on {}", gpu.describe());
@@ -241,7 +234,7 @@ pub fn run(args: &Settings) -> Result<()> {
                 degree,
                 None,
             )?;
-            let step = GpuStep::upload(&gpu, &bench.file, None)?;
+            let step = GpuStep::upload(&gpu, &runner.passes, &bench.file, None)?;
             let (_, _, reference) = runner.time(
                 &bench,
                 &step,
@@ -309,7 +302,7 @@ fn tank_rows(
         if args.quick { 60_000 } else { 250_000 },
         2,
     )?;
-    let tank_step = GpuStep::upload(gpu, &tank.file, None)?;
+    let tank_step = GpuStep::upload(gpu, &runner.passes, &tank.file, None)?;
     let sizes: &[(u32, u32)] = if !sizes_table {
         &[]
     } else if args.quick {
@@ -384,11 +377,11 @@ fn points_rows(
             "  sphere {points}: baked in {:.1} s",
             start.elapsed().as_secs_f64()
         );
-        let step = GpuStep::upload(runner.gpu, &bench.file, None)?;
+        let step = GpuStep::upload(runner.gpu, &runner.passes, &bench.file, None)?;
         // Upload: the median of 5 uploads of the same in-memory step.
         let mut best = Vec::new();
         for _ in 0..5 {
-            best.push(GpuStep::upload(runner.gpu, &bench.file, None)?.upload);
+            best.push(GpuStep::upload(runner.gpu, &runner.passes, &bench.file, None)?.upload);
         }
         best.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
         uploads.push((bench.label.clone(), bench.points, best[2]));

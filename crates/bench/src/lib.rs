@@ -9,6 +9,7 @@
 pub mod accuracy;
 pub mod bake;
 pub mod gpu;
+mod plot;
 pub mod precision;
 pub mod scrub;
 mod sph;

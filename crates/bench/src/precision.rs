@@ -7,13 +7,12 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
-use slosh_cache::{CacheFile, LoadedStep, encode_step};
-use slosh_fileio::FileBytes;
+use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect};
+use slosh_cache::LoadedStep;
 use slosh_mls::{NormalsMode, Params};
 use slosh_scenes::SceneKind;
 
-use crate::accuracy::{Case, Render, case, metrics};
+use crate::accuracy::{Render, Scenario, metrics, scenario};
 use crate::stats::percentile;
 
 /// What `slosh bench precision` measures and where it writes.
@@ -36,7 +35,7 @@ struct Baked {
     bytes_per_point: f64,
 }
 
-fn bake(case: &Case, bits: u32) -> Result<Baked> {
+fn bake(case: &Scenario, bits: u32) -> Result<Baked> {
     let input = StepInput {
         source: case.name.clone(),
         positions: case.positions.clone(),
@@ -45,10 +44,8 @@ fn bake(case: &Case, bits: u32) -> Result<Baked> {
     };
     let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     params.mantissa_bits = bits;
-    let baked = bake_step(&input, &params)?;
-    let bytes = encode_step(baked.header, &baked.sections, params.compression)?;
-    let bytes_per_point = bytes.len() as f64 / case.positions.len() as f64;
-    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("precision.slc"), bytes))?;
+    let file = slosh_testkit::bake_in_memory(&input, &params, Path::new("precision.slc"))?;
+    let bytes_per_point = file.bytes().len() as f64 / case.positions.len() as f64;
     file.verify()?;
     Ok(Baked {
         step: LoadedStep::load(&file)?,
@@ -56,7 +53,7 @@ fn bake(case: &Case, bits: u32) -> Result<Baked> {
     })
 }
 
-fn trace(case: &Case, baked: &Baked, iterations: u32) -> Render {
+fn trace(case: &Scenario, baked: &Baked, iterations: u32) -> Render {
     Render::from_hits(baked.step.render(
         &case.camera,
         &Params::<f32> {
@@ -78,7 +75,7 @@ pub fn run(args: &Settings) -> Result<()> {
     ];
     let mut table = String::new();
     for (kind, noise) in scenes {
-        let case = case(kind, args.points, 3, noise, args.size)?;
+        let case = scenario(kind, args.points, 3, noise, args.size)?;
         // Each precision baked once, traced at every iteration count.
         let exact = bake(&case, slosh_cache::F32_MANTISSA_BITS)?;
         let rounded: Vec<(u32, Option<Baked>)> = args

@@ -8,13 +8,13 @@ use slosh_fileio::say;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use rand::{Rng, SeedableRng};
-use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
+use slosh_bake::{BakeParams, NormalSource, SurfaceSelect, bake_step};
 use slosh_cache::{Manifest, step_file_name, write_step};
-use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest};
+use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest, Pace};
 use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
@@ -70,15 +70,8 @@ fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Re
     for d in 0..distinct {
         // The instants spread over the scene's motion.
         let instant = d * 4;
-        let (positions, normals) = scene.particles(instant).surface_arrays();
-        let input = StepInput {
-            index: d,
-            time: scene.time(instant),
-            source: format!("sphere {points}"),
-            positions,
-            normals: Some(normals),
-            ..StepInput::default()
-        };
+        let mut input = slosh_testkit::scene_step(&scene, instant, &format!("sphere {points}"));
+        input.index = d;
         baked.push(bake_step(&input, &params)?);
     }
     say!(
@@ -113,20 +106,6 @@ fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Re
     Ok(())
 }
 
-/// One frame of the engine submitted and finished.
-fn frame(engine: &mut Engine, request: &FrameRequest) -> Result<FrameReport> {
-    let gpu = engine.gpu().clone();
-    let mut encoder = gpu
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("scrub frame"),
-        });
-    let report = engine.frame(request, &mut encoder)?;
-    gpu.queue.submit([encoder.finish()]);
-    gpu.wait()?;
-    Ok(report)
-}
-
 /// The host and record ms of every step the engine's loaders prepared, as they reported
 /// them: under the load of streaming, beside the same halves timed alone.
 #[derive(Default)]
@@ -158,23 +137,13 @@ fn show_timed(
     loads: &mut LoadTimes,
 ) -> Result<f64> {
     let start = Instant::now();
-    engine.timeline_mut().set_current(position);
-    let mut last = Instant::now();
-    loop {
-        request.seconds = last.elapsed().as_secs_f64();
-        last = Instant::now();
-        let report = frame(engine, request)?;
-        loads.add(&report);
-        if let Some((p, why)) = report.failures.iter().find(|(p, _)| *p == position) {
-            bail!("step {p} failed: {why}");
-        }
-        if report.shown == Some(position) && !report.stand_in {
-            return Ok(start.elapsed().as_secs_f64());
-        }
-        if start.elapsed().as_secs_f64() > 60.0 {
-            bail!("step {position} was not shown within 60 s");
-        }
-    }
+    let pace = Pace {
+        real_time: true,
+        pause: Duration::ZERO,
+        timeout: Duration::from_secs(60),
+    };
+    engine.show_and_wait(request, position, pace, |_, report| loads.add(report))?;
+    Ok(start.elapsed().as_secs_f64())
 }
 
 /// One zstd level over a step's sections: stored bytes and single-core speeds.
@@ -295,7 +264,7 @@ fn measure(
         let warm_up = Instant::now();
         let seconds = if args.quick { 0.2 } else { 2.0 };
         while warm_up.elapsed().as_secs_f64() < seconds {
-            frame(&mut engine, &request)?;
+            engine.frame_and_wait(&request)?;
         }
     }
     // Floors. First a read of every file, so that all come from the page cache.
@@ -339,6 +308,7 @@ fn measure(
         )
     });
     let (mut step_gpu_bytes, mut section_bytes, mut stored_bytes) = (0, 0, 0);
+    let step_passes = slosh_render::StepPasses::new(gpu);
     for p in &sample {
         let host = HostStep::open(p, None)?;
         let encoder = || {
@@ -348,6 +318,7 @@ fn measure(
         let (mut copies, mut passes) = (encoder(), encoder());
         let step = GpuStep::create_in(
             gpu,
+            &step_passes,
             &host,
             &mut copies,
             slosh_render::UploadOptions {
@@ -437,7 +408,7 @@ fn measure(
     request.camera_moving = true;
     for _ in 0..20 {
         let t = Instant::now();
-        frame(&mut engine, &request)?;
+        engine.frame_and_wait(&request)?;
         trace.push(t.elapsed().as_secs_f64() * 1e3);
     }
     request.camera_moving = false;

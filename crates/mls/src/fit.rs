@@ -1,7 +1,7 @@
 //! Weighted least squares fit of the height field over the support plane (thesis eq. 2.5),
 //! in coordinates scaled by 1/h, with rank detection and degree degradation.
 
-use crate::frame::Frame;
+use crate::frame::LocalFrame;
 use crate::poly::{Poly, coefficient_count, monomials};
 use crate::real::{Real, V3};
 use crate::support::weight;
@@ -30,7 +30,7 @@ pub struct Fit<T> {
 
 /// Fits a polynomial of degree ≤ `degree` at reference point `r` in `frame`, from `points`
 /// weighted by θ(|p − r|) with smoothing length `h`.
-pub fn fit<T: Real>(r: V3<T>, frame: &Frame<T>, points: &[V3<T>], h: T, degree: u8) -> Fit<T> {
+pub fn fit<T: Real>(r: V3<T>, frame: &LocalFrame<T>, points: &[V3<T>], h: T, degree: u8) -> Fit<T> {
     let h2 = h * h;
     fit_weighted(r, frame, points, h, degree, |_, q| {
         weight(q.length_squared(), h2)
@@ -41,7 +41,7 @@ pub fn fit<T: Real>(r: V3<T>, frame: &Frame<T>, points: &[V3<T>], h: T, degree: 
 /// already has the weights (the support plane computed them) passes them on.
 pub(crate) fn fit_weighted<T: Real>(
     r: V3<T>,
-    frame: &Frame<T>,
+    frame: &LocalFrame<T>,
     points: &[V3<T>],
     h: T,
     degree: u8,
@@ -149,7 +149,7 @@ fn ldlt<T: Real>(a: &[[T; 10]; 10], n: usize) -> ([[T; 10]; 10], [T; 10], usize)
 /// for `N` monomials.
 fn normal_equations<T: Real, const N: usize>(
     r: V3<T>,
-    frame: &Frame<T>,
+    frame: &LocalFrame<T>,
     points: &[V3<T>],
     inv_h: T,
     weight_of: &impl Fn(usize, V3<T>) -> T,

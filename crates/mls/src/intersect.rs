@@ -2,7 +2,7 @@
 //! ball's precomputed initial polynomial.
 
 use crate::fit::{Fit, FitStatus, fit, fit_weighted};
-use crate::frame::Frame;
+use crate::frame::LocalFrame;
 use crate::poly::Poly;
 use crate::real::{Real, V3};
 use crate::roots::first_root_in;
@@ -93,7 +93,7 @@ impl HitStatus {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Outcome<T> {
+pub struct BallHit<T> {
     pub status: HitStatus,
     /// Ray parameter, position and unit normal of the hit (meaningful when `status.is_hit()`).
     pub t: T,
@@ -107,10 +107,10 @@ pub struct Outcome<T> {
     pub degraded: bool,
 }
 
-impl<T: Real> Outcome<T> {
+impl<T: Real> BallHit<T> {
     /// No hit, for `status`.
-    pub fn miss(status: HitStatus) -> Outcome<T> {
-        Outcome {
+    pub fn miss(status: HitStatus) -> BallHit<T> {
+        BallHit {
             status,
             t: T::zero(),
             position: V3::zero(),
@@ -143,7 +143,7 @@ pub fn ray_ball<T: Real>(ray: &Ray<T>, centre: V3<T>, radius: T) -> Option<(T, T
 fn intersect_poly<T: Real>(
     ray: &Ray<T>,
     r: V3<T>,
-    frame: &Frame<T>,
+    frame: &LocalFrame<T>,
     poly: &Poly<T>,
     h: T,
     t_lo: T,
@@ -162,7 +162,7 @@ fn intersect_poly<T: Real>(
     Some((t0 + s * h, q0.x + s * dl.x, q0.y + s * dl.y))
 }
 
-fn hit_normal<T: Real>(frame: &Frame<T>, poly: &Poly<T>, x: T, y: T) -> V3<T> {
+fn hit_normal<T: Real>(frame: &LocalFrame<T>, poly: &Poly<T>, x: T, y: T) -> V3<T> {
     let (fx, fy) = poly.gradient(x, y);
     (frame.n - frame.u * fx - frame.v * fy)
         .normalized()
@@ -219,7 +219,7 @@ pub(crate) fn initial_fit_with<T: Real>(
         toward,
         weight_of,
     )?;
-    let frame = Frame::from_normal(support.normal);
+    let frame = LocalFrame::from_normal(support.normal);
     let f = fit_weighted(centre, &frame, neighbours, h, params.degree, weight_of);
     (f.status != FitStatus::Failed).then_some((support.normal, f))
 }
@@ -243,7 +243,7 @@ pub fn initial_hit<T: Real>(ray: &Ray<T>, ball: &Ball<T>) -> Result<InitialHit<T
     if t_lo > t_out {
         return Err(HitStatus::MissedBall);
     }
-    let frame = Frame::from_normal(ball.normal);
+    let frame = LocalFrame::from_normal(ball.normal);
     let (t, x, y) = intersect_poly(ray, ball.centre, &frame, &ball.poly, ball.h, t_lo, t_out)
         .ok_or(HitStatus::NoInitialRoot)?;
     Ok(InitialHit {
@@ -262,10 +262,10 @@ pub fn intersect_ball<T: Real>(
     neighbours: &[V3<T>],
     normals: Option<&[V3<T>]>,
     params: &Params<T>,
-) -> Outcome<T> {
+) -> BallHit<T> {
     match initial_hit(ray, ball) {
         Ok(initial) => refine(ray, ball, &initial, neighbours, normals, params),
-        Err(status) => Outcome::miss(status),
+        Err(status) => BallHit::miss(status),
     }
 }
 
@@ -277,7 +277,7 @@ pub fn refine<T: Real>(
     neighbours: &[V3<T>],
     normals: Option<&[V3<T>]>,
     params: &Params<T>,
-) -> Outcome<T> {
+) -> BallHit<T> {
     let (t_lo, t_out) = (initial.t_lo, initial.t_out);
     let mut t = initial.t;
     let mut normal = initial.normal;
@@ -294,7 +294,7 @@ pub fn refine<T: Real>(
             status = HitStatus::NoSupport;
             break;
         };
-        let frame = Frame::from_normal(support.normal);
+        let frame = LocalFrame::from_normal(support.normal);
         let f = fit(r, &frame, neighbours, h, params.degree);
         if f.status == FitStatus::Failed {
             status = HitStatus::DegenerateFit;
@@ -302,11 +302,11 @@ pub fn refine<T: Real>(
         }
         degraded |= matches!(f.status, FitStatus::Degraded { .. });
         let Some((t_next, x, y)) = intersect_poly(ray, r, &frame, &f.poly, h, t_lo, t_out) else {
-            return Outcome {
+            return BallHit {
                 iterations: iterations + 1,
                 degree: f.poly.degree,
                 degraded,
-                ..Outcome::miss(HitStatus::LeftTrustRegion)
+                ..BallHit::miss(HitStatus::LeftTrustRegion)
             };
         };
         iterations += 1;
@@ -319,7 +319,7 @@ pub fn refine<T: Real>(
             break;
         }
     }
-    Outcome {
+    BallHit {
         status,
         t,
         position: ray.origin + ray.dir * t,

@@ -29,11 +29,11 @@ mod up;
 
 pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
-pub use frame::Frame;
+pub use frame::LocalFrame;
 pub use geometry::bounds;
 pub use grid::BallIndex;
 pub use intersect::{
-    Ball, HitStatus, InitialHit, Outcome, Params, Ray, initial_fit, initial_hit, intersect_ball,
+    Ball, BallHit, HitStatus, InitialHit, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
 };
 pub use lists::RunUnions;

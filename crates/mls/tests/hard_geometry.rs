@@ -4,7 +4,7 @@ mod common;
 
 use common::*;
 use slosh_mls::*;
-use slosh_scenes::{DVec3, Ray as TrueRay, SceneKind, SceneSpec};
+use slosh_scenes::{DVec3, SceneKind, SceneSpec, TrueRay};
 
 #[test]
 fn far_offset_keeps_f32_accuracy() {

@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use slosh_mls::*;
-use slosh_scenes::{DVec3, Ray as TrueRay, SceneKind, SceneSpec};
+use slosh_scenes::{DVec3, SceneKind, SceneSpec, TrueRay};
 
 fn spec(kind: SceneKind, n: usize) -> SceneSpec {
     SceneSpec::new(kind, n, 5)

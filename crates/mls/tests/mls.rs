@@ -16,7 +16,7 @@ proptest! {
     #[test]
     fn frames_are_orthonormal_and_right_handed(x in -1.0..1.0f64, y in -1.0..1.0f64, z in -1.0..1.0f64) {
         let Some(n) = v(x, y, z).normalized() else { return Ok(()) };
-        let f = Frame::from_normal(n);
+        let f = LocalFrame::from_normal(n);
         for (a, b) in [(f.u, f.v), (f.u, f.n), (f.v, f.n)] {
             prop_assert!(a.dot(b).abs() < 1e-12);
         }
@@ -96,7 +96,7 @@ fn samples(
     poly: &[f64; 10],
     degree: u8,
     n_side: usize,
-    frame: &Frame<f64>,
+    frame: &LocalFrame<f64>,
     origin: V,
     spacing: f64,
 ) -> Vec<V> {
@@ -116,7 +116,7 @@ fn samples(
 
 #[test]
 fn fit_reproduces_polynomials_and_matches_svd() {
-    let frame = Frame::from_normal(v(0.3, -0.2, 0.9).normalized().unwrap());
+    let frame = LocalFrame::from_normal(v(0.3, -0.2, 0.9).normalized().unwrap());
     let origin = v(1.0, 2.0, -0.5);
     let h = 0.3;
     for degree in 1..=3u8 {
@@ -170,7 +170,7 @@ fn fit_reproduces_polynomials_and_matches_svd() {
 
 #[test]
 fn fits_degrade_when_the_data_cannot_support_them() {
-    let frame = Frame::from_normal(v(0.0, 0.0, 1.0));
+    let frame = LocalFrame::from_normal(v(0.0, 0.0, 1.0));
     let o = v(0.0, 0.0, 0.0);
     // 3 × 3 grid: enough for a quadratic, not for a cubic.
     let grid: Vec<V> = (0..9)

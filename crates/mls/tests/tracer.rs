@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
 
 use slosh_mls::*;
-use slosh_scenes::{DVec3, Ray as TrueRay, Scene, SceneKind, SceneSpec};
+use slosh_scenes::{DVec3, Scene, SceneKind, SceneSpec, TrueRay};
 
 struct Report {
     hits: usize,

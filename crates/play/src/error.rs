@@ -6,6 +6,9 @@ pub enum Error {
         path: std::path::PathBuf,
         problem: String,
     },
+    /// A step driven to the screen without a window that did not get there.
+    #[error("step {position}: {why}")]
+    NotShown { position: usize, why: String },
     #[error(transparent)]
     Render(#[from] slosh_render::Error),
     #[error(transparent)]

@@ -7,6 +7,7 @@
 pub mod app;
 mod engine;
 mod error;
+pub mod export;
 pub mod pool;
 pub mod prefetch;
 pub mod refine;
@@ -14,12 +15,12 @@ pub mod series;
 pub mod timeline;
 
 pub use engine::{
-    Engine, EngineOptions, FrameReport, FrameRequest, GpuSource, Prepared, default_budget,
+    Engine, EngineOptions, FrameReport, FrameRequest, GpuSource, Pace, Prepared, default_budget,
     default_loaders,
 };
 pub use error::{Error, Result};
 pub use pool::{Admission, Resident, StepPool};
-pub use prefetch::{Loaded, Prefetcher, StepSource};
+pub use prefetch::{Loaded, Prefetcher, StepLoader};
 pub use refine::{Progress, Refinement, ViewKey};
 pub use series::{Series, SeriesStep};
 pub use timeline::{Direction, Looping, Timeline};

@@ -10,7 +10,7 @@ use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::time::Instant;
 
 /// Where steps come from: a cache directory, or an instrumented stand-in in tests.
-pub trait StepSource: Send + Sync + 'static {
+pub trait StepLoader: Send + Sync + 'static {
     type Step: Send + 'static;
     /// Loads step `index`; the error names the file and what is wrong with it. A load may
     /// ask `withdrawn` as it goes and give up (with any error) once it says `true`: nobody
@@ -54,7 +54,7 @@ impl Shared {
     }
 }
 
-/// Loader threads over a [`StepSource`].
+/// Loader threads over a [`StepLoader`].
 #[derive(Debug)]
 pub struct Prefetcher<T> {
     shared: Arc<Shared>,
@@ -63,7 +63,7 @@ pub struct Prefetcher<T> {
 
 impl<T: Send + 'static> Prefetcher<T> {
     /// `threads` loader threads (at least one) over `source`.
-    pub fn new<S: StepSource<Step = T>>(source: Arc<S>, threads: usize) -> Prefetcher<T> {
+    pub fn new<S: StepLoader<Step = T>>(source: Arc<S>, threads: usize) -> Prefetcher<T> {
         let shared = Arc::new(Shared::default());
         let (tx, results) = channel();
         for n in 0..threads.max(1) {
@@ -149,7 +149,7 @@ impl<T> Drop for Prefetcher<T> {
     }
 }
 
-fn worker<S: StepSource>(shared: &Shared, source: &S, tx: &Sender<Loaded<S::Step>>) {
+fn worker<S: StepLoader>(shared: &Shared, source: &S, tx: &Sender<Loaded<S::Step>>) {
     loop {
         let (index, generation) = {
             let mut q = shared.lock();
@@ -205,7 +205,7 @@ mod tests {
         go: Mutex<Receiver<()>>,
     }
 
-    impl StepSource for Gated {
+    impl StepLoader for Gated {
         type Step = usize;
         fn load(
             &self,

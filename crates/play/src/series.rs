@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
-use slosh_cache::{CacheFile, Manifest, SeriesKey, parse_step_file_name};
+use slosh_cache::{CacheFile, Manifest, SeriesKey, names, parse_step_file_name};
 
 use crate::error::{Error, Result};
 
@@ -120,6 +120,44 @@ impl Series {
     /// What every step of the series shares, where it is known yet.
     pub fn key(&self) -> Option<&SeriesKey> {
         self.key.as_ref()
+    }
+
+    /// The series' world bounds: the manifest's, or while a bake runs the first step's with
+    /// particles (a Lagrangian run's first steps may have none); `None` before any.
+    pub fn bounds(&self) -> Option<[[f64; 3]; 2]> {
+        if let Some(m) = &self.manifest {
+            return Some(m.bounds);
+        }
+        self.steps
+            .iter()
+            .filter_map(|s| CacheFile::open(&s.path).ok())
+            .find(|f| f.header().points > 0)
+            .map(|f| f.header().bounds)
+    }
+
+    /// The scalar fields baked into the series (its first step's).
+    pub fn fields(&self) -> Vec<String> {
+        self.first_file()
+            .map(|f| {
+                f.header()
+                    .sections
+                    .iter()
+                    .filter_map(|s| s.name.strip_prefix(names::FIELD_PREFIX))
+                    .map(str::to_string)
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// The data's up direction, where the bake recorded one (its first step's).
+    pub fn up(&self) -> Option<[f64; 3]> {
+        self.first_file().and_then(|f| f.header().up)
+    }
+
+    fn first_file(&self) -> Option<CacheFile> {
+        self.steps
+            .first()
+            .and_then(|s| CacheFile::open(&s.path).ok())
     }
 
     /// Steps that cannot be shown (a file gone or unreadable), by bake index, with why.

@@ -5,12 +5,14 @@
 
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
+use std::time::Duration;
 
-use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
+use slosh_bake::{BakeParams, NormalSource, SurfaceSelect, bake_step};
 use slosh_cache::{Manifest, step_file_name, write_step};
 use slosh_mls::Camera;
-use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest};
-use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
+use slosh_play::export::{ExportJob, ExportRequest, ExportState, frame_path, trace_file};
+use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest, Pace};
+use slosh_render::{Gpu, GpuStep, HostStep, StepPasses, TraceParams, Tracer};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn gpu() -> Option<Arc<Gpu>> {
@@ -26,15 +28,7 @@ fn bake_series(dir: &Path, steps: std::ops::Range<usize>, manifest: bool) {
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 1500, 3)).unwrap();
     let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     for step in steps {
-        let (positions, normals) = scene.particles(step).surface_arrays();
-        let input = StepInput {
-            index: step,
-            time: scene.time(step),
-            source: "sphere".into(),
-            positions,
-            normals: Some(normals),
-            ..StepInput::default()
-        };
+        let input = slosh_testkit::scene_step(&scene, step, "sphere");
         let baked = bake_step(&input, &params).unwrap();
         let path = dir.join(step_file_name(step));
         write_step(&path, baked.header, &baked.sections, params.compression).unwrap();
@@ -70,14 +64,7 @@ fn request(iterations: u32) -> FrameRequest {
 }
 
 fn frame(engine: &mut Engine, request: &FrameRequest) -> FrameReport {
-    let gpu = engine.gpu().clone();
-    let mut encoder = gpu
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    let report = engine.frame(request, &mut encoder).unwrap();
-    gpu.queue.submit([encoder.finish()]);
-    gpu.wait().unwrap();
-    report
+    engine.frame_and_wait(request).unwrap()
 }
 
 /// Frames until `position` is shown; the reports on the way.
@@ -85,26 +72,22 @@ fn show(engine: &mut Engine, request: &FrameRequest, position: usize) -> Vec<Fra
     show_checking(engine, request, position, |_, _| {})
 }
 
-/// `show`, with `check` called after every frame.
+/// `show`, with `check` called after every frame (the clock stays still: runs repeat).
 fn show_checking(
     engine: &mut Engine,
     request: &FrameRequest,
     position: usize,
-    mut check: impl FnMut(&Engine, &FrameReport),
+    check: impl FnMut(&Engine, &FrameReport),
 ) -> Vec<FrameReport> {
-    engine.timeline_mut().set_current(position);
-    let mut reports = Vec::new();
-    for _ in 0..20_000 {
-        let report = frame(engine, request);
-        check(engine, &report);
-        let done = report.shown == Some(position) && !report.stand_in;
-        reports.push(report);
-        if done {
-            return reports;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(1));
-    }
-    panic!("step {position} never shown");
+    let pace = Pace {
+        real_time: false,
+        pause: Duration::from_millis(1),
+        timeout: Duration::from_secs(120),
+    };
+    let mut request = request.clone();
+    engine
+        .show_and_wait(&mut request, position, pace, check)
+        .unwrap()
 }
 
 /// Bytes step `index` holds on the GPU, predicted by its host half and checked against the
@@ -114,7 +97,7 @@ fn step_bytes(dir: &Path, gpu: &Gpu, index: usize) -> u64 {
     let mut encoder = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    let step = GpuStep::create(gpu, &host, &mut encoder).unwrap();
+    let step = GpuStep::create(gpu, &StepPasses::new(gpu), &host, &mut encoder).unwrap();
     assert_eq!(step.gpu_bytes(), host.gpu_bytes(), "predicted bytes differ");
     step.gpu_bytes()
 }
@@ -191,7 +174,7 @@ fn a_series_that_fits_ends_up_wholly_resident() {
             break;
         }
         frame(&mut engine, &request);
-        std::thread::sleep(std::time::Duration::from_millis(2));
+        std::thread::sleep(Duration::from_millis(2));
     }
     assert_eq!(engine.resident(), (0..8).collect::<Vec<_>>());
     assert_eq!(engine.used_bytes(), bytes.iter().sum::<u64>());
@@ -212,7 +195,7 @@ fn finished_refinement_equals_a_direct_render() {
     let targets = engine.targets().unwrap();
     let refined = engine.tracer().read_frame(&gpu, targets).unwrap();
     let file = slosh_cache::CacheFile::open(&dir.path().join(step_file_name(1))).unwrap();
-    let step = GpuStep::upload(&gpu, &file, None).unwrap();
+    let step = GpuStep::upload(&gpu, &StepPasses::new(&gpu), &file, None).unwrap();
     let mut params = request.params;
     params.iterations = 3;
     let direct = engine
@@ -265,11 +248,90 @@ fn bad_steps_are_marked_and_a_growing_series_is_picked_up() {
             failed = Some(f.1);
             break;
         }
-        std::thread::sleep(std::time::Duration::from_millis(1));
+        std::thread::sleep(Duration::from_millis(1));
     }
     let why = failed.expect("the damaged step is reported");
     assert!(why.contains("step-00004.slc"), "{why}");
     assert_eq!(engine.failures().len(), 1);
     // The step before it still plays.
     show(&mut engine, &request, 2);
+}
+
+/// Exports until the job ends (two minutes at most).
+fn finish(job: &mut ExportJob) -> ExportState {
+    let start = std::time::Instant::now();
+    loop {
+        match job.poll() {
+            ExportState::Running { .. } => {
+                assert!(start.elapsed() < Duration::from_secs(120), "export hangs");
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            ended => return ended,
+        }
+    }
+}
+
+/// The export job, headless: each step's PNG is byte for byte the direct render of that
+/// step; an empty range is refused; a junk step ends the job with an error naming its file,
+/// after the frames before it.
+#[test]
+fn an_export_job_writes_each_step_as_a_direct_render() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    bake_series(dir.path(), 0..3, true);
+    let out = tempfile::tempdir().unwrap();
+    let params = TraceParams {
+        iterations: 2,
+        ..TraceParams::default()
+    };
+    let request = ExportRequest {
+        steps: (0..3)
+            .map(|i| (i, dir.path().join(step_file_name(i))))
+            .collect(),
+        camera: camera(),
+        params,
+        field: None,
+        dir: out.path().join("frames"),
+    };
+    let mut job = ExportJob::spawn(gpu.clone(), request.clone()).unwrap();
+    let ended = finish(&mut job);
+    let expected = ExportState::Finished {
+        frames: 3,
+        dir: request.dir.clone(),
+    };
+    assert_eq!(ended, expected);
+    let (tracer, passes) = (Tracer::new(&gpu).unwrap(), StepPasses::new(&gpu));
+    for (i, path) in &request.steps {
+        let file = slosh_cache::CacheFile::open(path).unwrap();
+        let (_, frame) =
+            trace_file(&gpu, &tracer, &passes, &file, None, &camera(), &params).unwrap();
+        let lit = frame.hits.iter().filter(|h| h.status != 0).count();
+        assert!(lit > 200, "step {i}: {lit} hit pixels");
+        let direct = out.path().join(format!("direct-{i}.png"));
+        slosh_render::write_frame_png(&direct, &frame).unwrap();
+        let exported = std::fs::read(frame_path(&request.dir, *i)).unwrap();
+        assert!(
+            exported == std::fs::read(&direct).unwrap(),
+            "step {i} differs"
+        );
+    }
+    let none = ExportRequest {
+        steps: Vec::new(),
+        ..request.clone()
+    };
+    assert!(ExportJob::spawn(gpu.clone(), none).is_err());
+    let junk = dir.path().join("junk.slc");
+    std::fs::write(&junk, b"not a cache file").unwrap();
+    let bad = ExportRequest {
+        steps: vec![request.steps[0].clone(), (7, junk)],
+        dir: out.path().join("bad"),
+        ..request
+    };
+    let mut job = ExportJob::spawn(gpu, bad).unwrap();
+    match finish(&mut job) {
+        ExportState::Failed(why) => assert!(why.contains("junk.slc"), "{why}"),
+        other => panic!("a junk step ended the export as {other:?}"),
+    }
+    assert!(frame_path(&out.path().join("bad"), 0).exists());
+    assert!(!frame_path(&out.path().join("bad"), 7).exists());
 }

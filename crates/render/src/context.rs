@@ -4,7 +4,6 @@ use std::sync::OnceLock;
 
 use crate::bindings::layout_entries;
 use crate::error::{Error, Result};
-use crate::expand::Expander;
 use crate::shaders::{FRAME_ARRAYS, RANGES, STEP_ARRAYS};
 
 /// Storage buffers bound per shader stage by the step and frame bind groups: every array in
@@ -26,8 +25,6 @@ pub struct Gpu {
     pub info: wgpu::AdapterInfo,
     /// Whether compute passes can write GPU timestamps (frame times in `slosh bench gpu`).
     pub timestamps: bool,
-    /// The per-step passes every upload runs, compiled on first use.
-    pub(crate) expander: OnceLock<Expander>,
     /// The trace and shade passes' step bind group layout (group 0), shared by every step's
     /// bind group and the tracer's pipelines.
     step_layout: OnceLock<wgpu::BindGroupLayout>,
@@ -176,7 +173,6 @@ impl Gpu {
             queue,
             info,
             timestamps,
-            expander: OnceLock::new(),
             step_layout: OnceLock::new(),
             binding_limit,
         })
@@ -185,11 +181,6 @@ impl Gpu {
     /// "NAME (backend, type, driver …)".
     pub fn describe(&self) -> String {
         describe(&self.info)
-    }
-
-    pub(crate) fn expander(&self) -> &Expander {
-        self.expander
-            .get_or_init(|| Expander::new(&self.device, self.binding_limit))
     }
 
     /// Bytes of device-local memory, where the adapter is a Vulkan one (the sum of its
@@ -230,12 +221,11 @@ impl Gpu {
 
     /// Binds storage in slices of at most `bytes` (at least [`MIN_BINDING_LIMIT`], at most
     /// the adapter's limit): how the splitting of large arrays is tested on small scenes.
-    /// Applies to steps uploaded and tracers built afterwards.
+    /// Applies to steps uploaded and tracers and [`StepPasses`](crate::StepPasses) built
+    /// afterwards.
     pub fn limit_bindings(&mut self, bytes: u64) {
         let adapter = self.device.limits().max_storage_buffer_binding_size;
         self.binding_limit = bytes.clamp(MIN_BINDING_LIMIT.min(adapter), adapter);
-        // The per-step passes are compiled for the limit.
-        self.expander = OnceLock::new();
     }
 
     /// Blocks until the GPU has finished all submitted work.

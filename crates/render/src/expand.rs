@@ -6,6 +6,7 @@
 use std::sync::OnceLock;
 
 use crate::bindings::{bind_entries, layout_entries};
+use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
 use crate::shaders::{EXPAND_ARRAYS, expand_wgsl};
@@ -20,9 +21,13 @@ struct Passes {
     widen: wgpu::ComputePipeline,
 }
 
-/// The compiled passes, built once per device and binding limit, per split, on first use.
+/// The per-step passes' pipelines, compiled for one device and its binding limit (per split,
+/// on first use): made by whoever uploads steps (a loader, `slosh render`, a test) beside
+/// its [`Tracer`](crate::Tracer), and handed to every [`GpuStep`](crate::GpuStep) upload.
+/// Made after [`Gpu::limit_bindings`](crate::Gpu::limit_bindings), which they are compiled
+/// for.
 #[derive(Debug)]
-pub(crate) struct Expander {
+pub struct StepPasses {
     /// The storage binding limit the passes are compiled for.
     max_binding: u64,
     layout: wgpu::BindGroupLayout,
@@ -46,8 +51,13 @@ pub(crate) struct ExpandInputs<'a> {
     pub wide_nodes: &'a wgpu::Buffer,
 }
 
-impl Expander {
-    pub(crate) fn new(device: &wgpu::Device, max_binding: u64) -> Expander {
+impl StepPasses {
+    /// The passes for `gpu` at its current binding limit.
+    pub fn new(gpu: &Gpu) -> StepPasses {
+        StepPasses::for_device(&gpu.device, gpu.max_binding())
+    }
+
+    fn for_device(device: &wgpu::Device, max_binding: u64) -> StepPasses {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("expand"),
             entries: &layout_entries(&EXPAND_ARRAYS, true),
@@ -57,7 +67,7 @@ impl Expander {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        Expander {
+        StepPasses {
             max_binding,
             layout,
             pipeline_layout,

@@ -21,6 +21,7 @@ pub mod water;
 
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
+pub use expand::StepPasses;
 pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, status};
 pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use staging::StagingPool;

@@ -49,12 +49,15 @@ use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{CacheFile, encode_step};
 use slosh_fileio::FileBytes;
 use slosh_mls::{Camera, HitStatus, NormalsMode, Params, Surface, TraceHit};
-use slosh_render::{Frame, Gpu, GpuHit, GpuStep, ShadeMode, TraceParams, Tracer, status};
+use slosh_render::{
+    Frame, Gpu, GpuHit, GpuStep, ShadeMode, StepPasses, TraceParams, Tracer, status,
+};
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
 
 struct Device {
     gpu: Gpu,
     tracer: Tracer,
+    passes: StepPasses,
 }
 
 /// The shared GPU, or `None` (with a message) where there is none; with `CI=true` a missing
@@ -66,7 +69,12 @@ fn device() -> Option<&'static Device> {
             let gpu = slosh_testkit::gpu_or_skip(Gpu::new(slosh_testkit::adapter().as_deref()))?;
             eprintln!("GPU tests on {}", gpu.describe());
             let tracer = Tracer::new(&gpu).unwrap();
-            Some(Device { gpu, tracer })
+            let passes = StepPasses::new(&gpu);
+            Some(Device {
+                gpu,
+                tracer,
+                passes,
+            })
         })
         .as_ref()
 }
@@ -118,23 +126,13 @@ fn cases() -> Vec<Case> {
 
 fn input_of(spec: &SceneSpec) -> StepInput {
     let scene = Scene::new(spec.clone()).unwrap();
-    let (positions, normals) = scene.particles(1).surface_arrays();
-    StepInput {
-        index: 1,
-        time: scene.time(1),
-        source: spec.kind.name().into(),
-        positions,
-        normals: Some(normals),
-        ..StepInput::default()
-    }
+    slosh_testkit::scene_step(&scene, 1, spec.kind.name())
 }
 
 fn bake(input: &StepInput, degree: u8) -> (CacheFile, BakeParams) {
     let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     params.mls.degree = degree;
-    let baked = bake_step(input, &params).unwrap();
-    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
-    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
+    let file = slosh_testkit::bake_in_memory(input, &params, Path::new("memory.slc")).unwrap();
     (file, params)
 }
 
@@ -205,7 +203,7 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
         let camera = slosh_testkit::framing_camera(&input.positions, SIZE);
         for degree in [2u8, 3] {
             let (file, params) = bake(&input, degree);
-            let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+            let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
             let oracle =
                 Surface::<f64>::build(&input.positions, input.normals.as_deref(), &params.mls)
                     .unwrap();
@@ -405,7 +403,7 @@ fn shaded_frame_matches_the_golden_image() {
     let input = input_of(&SceneSpec::new(SceneKind::Torus, 4000, 7));
     let camera = slosh_testkit::framing_camera(&input.positions, 96);
     let (file, _) = bake(&input, 2);
-    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+    let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
     let mut params = TraceParams::for_step(&step, 3);
     params.mode = ShadeMode::Shade;
     let frame: Frame = dev
@@ -466,7 +464,7 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
     };
     let input = input_of(&spec);
     let (file, _) = bake(&input, 2);
-    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+    let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
     let loaded = slosh_cache::LoadedStep::load(&file).unwrap();
     // The stage from its one source (slosh_render::water, which water.wgsl is generated
     // from): the floor under the BVH root box, the checker squares, the key light. What the
@@ -610,10 +608,11 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
     let mut capped = Gpu::new(slosh_testkit::adapter().as_deref()).unwrap();
     capped.limit_bindings(slosh_render::MIN_BINDING_LIMIT);
     let capped_tracer = Tracer::new(&capped).unwrap();
+    let capped_passes = StepPasses::new(&capped);
     let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 5));
     let (file, _) = bake(&input, 2);
-    let whole = GpuStep::upload(&dev.gpu, &file, None).unwrap();
-    let split = GpuStep::upload(&capped, &file, None).unwrap();
+    let whole = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
+    let split = GpuStep::upload(&capped, &capped_passes, &file, None).unwrap();
     assert!(!whole.split, "the unsplit device split the step");
     assert!(
         split.split,
@@ -647,7 +646,7 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
     // 5000 points: 320 KB of balls (and more neighbour ids), past 3 ranges of 64 KiB.
     let big = input_of(&SceneSpec::new(SceneKind::Sphere, 5000, 5));
     let (file, _) = bake(&big, 2);
-    let message = GpuStep::upload(&capped, &file, None)
+    let message = GpuStep::upload(&capped, &capped_passes, &file, None)
         .unwrap_err()
         .to_string();
     eprintln!("refused: {message}");
@@ -716,7 +715,8 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     let mut camera = slosh_testkit::framing_camera(&input.positions, 64);
     camera.height = 48;
     for mode in [ShadeMode::Shade, ShadeMode::Water] {
-        let reference_step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();
+        let reference_step =
+            GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("pressure")).unwrap();
         let mut trace = TraceParams::for_step(&reference_step, 3);
         trace.mode = mode;
         let reference = dev
@@ -735,7 +735,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        let step = GpuStep::create(&dev.gpu, &host, &mut encoder).unwrap();
+        let step = GpuStep::create(&dev.gpu, &dev.passes, &host, &mut encoder).unwrap();
         dev.tracer
             .record(&dev.gpu, &step, &targets, &camera, &trace, &mut encoder)
             .unwrap();
@@ -756,10 +756,10 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     }
     // Switching the field uploads the field alone and draws what a step uploaded with that
     // field draws.
-    let mut step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();
+    let mut step = GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("pressure")).unwrap();
     let x = slosh_render::HostField::read(&file, "x").unwrap();
     step.set_field(&dev.gpu, Some(&x)).unwrap();
-    let direct = GpuStep::upload(&dev.gpu, &file, Some("x")).unwrap();
+    let direct = GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("x")).unwrap();
     assert_eq!(step.field, direct.field);
     let trace = TraceParams::for_step(&step, 2);
     let switched = dev.tracer.render(&dev.gpu, &step, &camera, &trace).unwrap();
@@ -773,7 +773,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     );
     let before = dev.tracer.render(
         &dev.gpu,
-        &GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap(),
+        &GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("pressure")).unwrap(),
         &camera,
         &trace,
     );
@@ -815,7 +815,7 @@ fn neighbour_masks_equal_the_cpu_lists() {
     for case in cases() {
         let input = input_of(&case.spec);
         let (file, _) = bake(&input, 2);
-        let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+        let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
         let masks: Vec<u32> = read_buffer(&dev.gpu, &step.buffers.masks);
         let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
         let normals: Option<Vec<GpuNormal>> = file
@@ -879,7 +879,7 @@ fn the_key_light_comes_from_where_it_is_set() {
     let Some(dev) = device() else { return };
     let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 7));
     let (file, _) = bake(&input, 2);
-    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+    let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
     let (lo, hi) = slosh_mls::bounds(&input.positions);
     let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
     // Looking along +y at the sphere's centre, z up in the image.

@@ -7,7 +7,7 @@ mod scene;
 mod truth;
 
 pub use glam::{DMat3, DVec3};
-pub use ray::{Hit, Ray};
+pub use ray::{Hit, TrueRay};
 pub use sampling::{fibonacci_sphere, fibonacci_torus};
 pub use scene::{
     DENSITY, Droplet, Extra, GRAVITY, HardCases, Particles, Scene, SceneError, SceneKind, SceneSpec,

@@ -3,15 +3,15 @@
 use glam::DVec3;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Ray {
+pub struct TrueRay {
     pub origin: DVec3,
     /// Unit direction.
     pub dir: DVec3,
 }
 
-impl Ray {
-    pub fn new(origin: DVec3, dir: DVec3) -> Ray {
-        Ray {
+impl TrueRay {
+    pub fn new(origin: DVec3, dir: DVec3) -> TrueRay {
+        TrueRay {
             origin,
             dir: dir.normalize(),
         }

@@ -3,7 +3,7 @@
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
-use crate::ray::{Hit, Ray, first_root_lipschitz, quadratic_roots};
+use crate::ray::{Hit, TrueRay, first_root_lipschitz, quadratic_roots};
 
 /// One standing wave of the tank: a cos(kx x) cos(ky y) cos(ω t + phase), ω² = g k tanh(k d).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -65,7 +65,7 @@ pub enum Truth {
 }
 
 /// Both ray parameters where a ray meets a sphere, ascending.
-fn ray_sphere(ray: &Ray, center: DVec3, radius: f64) -> Option<(f64, f64)> {
+fn ray_sphere(ray: &TrueRay, center: DVec3, radius: f64) -> Option<(f64, f64)> {
     let oc = ray.origin - center;
     quadratic_roots(
         1.0,
@@ -81,7 +81,7 @@ fn local_frame(n: DVec3) -> (DVec3, DVec3) {
 
 impl Truth {
     /// Exact first intersection with t in (t_min, t_max).
-    pub fn intersect(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
+    pub fn intersect(&self, ray: &TrueRay, t_min: f64, t_max: f64) -> Option<Hit> {
         match self {
             Truth::Sphere { center, radius } => {
                 let (t0, t1) = ray_sphere(ray, *center, *radius)?;

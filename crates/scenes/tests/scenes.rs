@@ -73,7 +73,7 @@ fn ray_hits_are_exact_and_first() {
     };
     let h = sphere
         .intersect(
-            &Ray::new(DVec3::new(-5.0, 0.0, 0.0), DVec3::X),
+            &TrueRay::new(DVec3::new(-5.0, 0.0, 0.0), DVec3::X),
             0.0,
             f64::INFINITY,
         )
@@ -89,7 +89,7 @@ fn ray_hits_are_exact_and_first() {
     };
     let h = torus
         .intersect(
-            &Ray::new(DVec3::new(-3.0, 0.0, 0.0), DVec3::X),
+            &TrueRay::new(DVec3::new(-3.0, 0.0, 0.0), DVec3::X),
             0.0,
             f64::INFINITY,
         )
@@ -99,7 +99,7 @@ fn ray_hits_are_exact_and_first() {
     assert!(
         torus
             .intersect(
-                &Ray::new(DVec3::new(0.0, 0.0, 3.0), -DVec3::Z),
+                &TrueRay::new(DVec3::new(0.0, 0.0, 3.0), -DVec3::Z),
                 0.0,
                 f64::INFINITY
             )
@@ -109,7 +109,7 @@ fn ray_hits_are_exact_and_first() {
     assert!(
         torus
             .intersect(
-                &Ray::new(DVec3::new(-3.0, -1.0, 0.35 - 1e-6), DVec3::X),
+                &TrueRay::new(DVec3::new(-3.0, -1.0, 0.35 - 1e-6), DVec3::X),
                 0.0,
                 f64::INFINITY
             )
@@ -118,7 +118,7 @@ fn ray_hits_are_exact_and_first() {
     assert!(
         torus
             .intersect(
-                &Ray::new(DVec3::new(-3.0, -1.0, 0.35 + 1e-6), DVec3::X),
+                &TrueRay::new(DVec3::new(-3.0, -1.0, 0.35 + 1e-6), DVec3::X),
                 0.0,
                 f64::INFINITY
             )
@@ -132,7 +132,7 @@ fn ray_hits_are_exact_and_first() {
     };
     let h = ell
         .intersect(
-            &Ray::new(DVec3::new(0.0, 0.0, 4.0), -DVec3::Z),
+            &TrueRay::new(DVec3::new(0.0, 0.0, 4.0), -DVec3::Z),
             0.0,
             f64::INFINITY,
         )
@@ -161,7 +161,7 @@ fn tank_surface_hits_and_dispersion() {
         for (x, y) in [(0.3, 0.2), (1.0, 0.5), (1.7, 0.9)] {
             let h = truth
                 .intersect(
-                    &Ray::new(DVec3::new(x, y, 5.0), -DVec3::Z),
+                    &TrueRay::new(DVec3::new(x, y, 5.0), -DVec3::Z),
                     0.0,
                     f64::INFINITY,
                 )
@@ -176,7 +176,7 @@ fn tank_surface_hits_and_dispersion() {
             let target = DVec3::new(x, y, expect);
             let origin = target + DVec3::new(-0.3, 0.1, 1.0);
             let hit = truth
-                .intersect(&Ray::new(origin, target - origin), 0.0, f64::INFINITY)
+                .intersect(&TrueRay::new(origin, target - origin), 0.0, f64::INFINITY)
                 .unwrap();
             assert!(truth.signed_distance(hit.position).abs() < 1e-9);
             assert!(hit.t <= (target - origin).length() + 1e-9);

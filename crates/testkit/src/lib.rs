@@ -1,8 +1,52 @@
-//! What the test suites and the accuracy harness share, defined once: the cameras that frame
-//! a point set, the mask of silhouette pixels that comparisons leave out, and the rule for a
-//! test that cannot run here (skipped with a message, except under `CI=true`).
+//! What the test suites and the bench harness share, defined once: a scene's step as bake
+//! input, a step baked into an in-memory cache file, the cameras that frame a point set, the
+//! mask of silhouette pixels that comparisons leave out, and the rule for a test that cannot
+//! run here (skipped with a message, except under `CI=true`).
 
+use std::path::Path;
+
+use slosh_bake::{BakeError, BakeParams, StepInput, bake_step};
+use slosh_cache::{CacheFile, encode_step};
+use slosh_fileio::FileBytes;
 use slosh_mls::Camera;
+use slosh_scenes::Scene;
+
+/// Step `step` of `scene` as a bake takes it: the surface particles with their normals,
+/// the step's index and time, `source` as the series' source.
+pub fn scene_step(scene: &Scene, step: usize, source: &str) -> StepInput {
+    let (positions, normals) = scene.particles(step).surface_arrays();
+    StepInput {
+        index: step,
+        time: scene.time(step),
+        source: source.to_string(),
+        positions,
+        normals: Some(normals),
+        ..StepInput::default()
+    }
+}
+
+/// Why an in-memory bake failed: the bake, encoding the cache, or reading it back.
+#[derive(Debug, thiserror::Error)]
+pub enum KitError {
+    #[error(transparent)]
+    Bake(#[from] BakeError),
+    #[error("encoding the step: {0}")]
+    Encode(#[from] std::io::Error),
+    #[error(transparent)]
+    Cache(#[from] slosh_cache::Error),
+}
+
+/// `input` baked with `params`, encoded and read back as the cache file `name` that was
+/// never written (checked as a file read from disk is).
+pub fn bake_in_memory(
+    input: &StepInput,
+    params: &BakeParams,
+    name: &Path,
+) -> Result<CacheFile, KitError> {
+    let baked = bake_step(input, params)?;
+    let bytes = encode_step(baked.header, &baked.sections, params.compression)?;
+    Ok(CacheFile::from_bytes(FileBytes::from_vec(name, bytes))?)
+}
 
 /// A square camera that frames `points` from a generic direction (front left, above): the
 /// bounding box's centre, from 2.5 bounding radii away, 45° vertical field of view, z up.

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use slosh_mls::*;
-use slosh_scenes::{DVec3, Ray as TrueRay, Scene, SceneSpec};
+use slosh_scenes::{DVec3, Scene, SceneSpec, TrueRay};
 
 #[derive(Debug, Default)]
 pub struct Stats {

@@ -2,8 +2,15 @@
 //! engine, behind the `app` feature, so the engine builds and tests without a window toolkit.
 
 mod camera;
+mod export_panel;
+mod fit;
+mod frame_stats;
+mod launch;
+mod options;
 mod player;
 mod timeline_panel;
+mod view;
 
 pub use camera::OrbitCamera;
-pub use player::{AppError, PlayOptions, run};
+pub use launch::run;
+pub use options::{AppError, PlayOptions};

@@ -1,5 +1,28 @@
 //! The trace and shade compute passes: pipelines, bind groups, a frame's buffers, readback and
 //! GPU timestamps.
+//!
+//! `shaders/trace.wgsl`'s entry points share one BVH walk to the next candidate in the order
+//! of initial hits: `trace_initial` (one iteration, no refinement code, a small kernel) and
+//! `trace_refined` (Adamson & Alexa: refine that candidate, hand over to the next when the
+//! hit leaves its ball). The walk descends the 4-wide tree the upload's `widen` pass built
+//! (four boxes per 128-byte read over half the levels), keeps the node in hand in registers
+//! and descends to a leaf before testing it (while-while, after Aila & Laine), stacking the
+//! other entered slots, farthest first, as packed (first, count) links, so a pop reads no
+//! node. The module is built without wgpu's loop guards: the upload checks that every BVH
+//! child follows its parent, so every walk ends. Hits are stored as whole words; a miss
+//! writes its status word alone.
+//!
+//! Pipelines are built on first use per traversal stack size (32, 64 or 96 entries, by the
+//! step's BVH depth: WGSL sizes private arrays by constants only) and per fit degree (a
+//! pipeline override, so the fit's loops have constant bounds). The fit accumulates its
+//! normal equations in register blocks: dynamically indexed private arrays live in slow
+//! per-thread memory on GPUs.
+//!
+//! [`Tracer::targets`] makes one image size's buffers (hits, packed pixels, the uniforms in
+//! group 1, and an `Rgba8Unorm` texture that `shaders/present.wgsl` fills, for egui-wgpu's
+//! `register_native_texture`); [`Tracer::record`] records trace, shade (or water) and present
+//! into the caller's encoder; [`Tracer::run`] and [`Tracer::render`] submit, wait and read
+//! back.
 
 use std::sync::OnceLock;
 
@@ -8,7 +31,7 @@ use slosh_mls::Camera;
 use crate::bindings::{bind_entries, capacity, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
-use crate::layout::{DEFAULT_KEY_LIGHT, GpuHit, GpuSettings, status};
+use crate::layout::{GpuHit, GpuSettings, status};
 use crate::shaders::{
     FRAME_ARRAYS, PRESENT_ARRAYS, TEXTURE_BINDING, TRACE_STACK_SIZES, present_wgsl, shade_wgsl,
     trace_wgsl,
@@ -17,74 +40,15 @@ use crate::shaders::{
 /// The format of a frame's texture: the shaded pixels' bytes as they are (sRGB-encoded).
 pub const FRAME_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 use crate::upload::GpuStep;
+
 use bytemuck::Zeroable;
 
-/// What the shade pass draws.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum ShadeMode {
-    /// Blinn–Phong, coloured by the uploaded field if there is one.
-    #[default]
-    Shade,
-    /// Normals as colours.
-    Normals,
-    /// Status and iteration heat map: green converged, yellow iteration limit, red no
-    /// support or degenerate fit, blue droplet; brighter for more iterations.
-    Status,
-    /// Back-facing hits (normal along the ray) in magenta.
-    Backfaces,
-    /// Water over a checkerboard floor: Fresnel reflection and refraction by secondary
-    /// rays, and the floor shadowed under the key light (`shaders/water.wgsl`).
-    Water,
-}
+mod params;
+mod readback;
 
-/// Tracing parameters, passed to the shaders as uniforms.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TraceParams {
-    /// Iterations counting the initial polynomial (1 = the baked polynomial only).
-    pub iterations: u32,
-    /// Degree of the refinement fits (the baked polynomial keeps its own).
-    pub degree: u8,
-    /// Multiplies each ball's baked smoothing length during refinement.
-    pub h_factor: f32,
-    /// Support normals from the covariance instead of the data normals.
-    pub covariance: bool,
-    /// Converged when successive hits differ by less than `epsilon` · h.
-    pub epsilon: f32,
-    pub mode: ShadeMode,
-    /// The field values mapped to the ends of the colour map; `None`: the step's own range.
-    pub field_range: Option<(f32, f32)>,
-    /// Direction towards the key light (normalised here); `DEFAULT_KEY_LIGHT` by default.
-    pub key_light: [f32; 3],
-}
-
-impl Default for TraceParams {
-    /// One iteration, quadratic fits, the baked smoothing length, data normals, shaded, the
-    /// step's field range and the default key light.
-    fn default() -> TraceParams {
-        TraceParams {
-            iterations: 1,
-            degree: 2,
-            h_factor: 1.0,
-            covariance: false,
-            epsilon: 1e-4,
-            mode: ShadeMode::Shade,
-            field_range: None,
-            key_light: DEFAULT_KEY_LIGHT,
-        }
-    }
-}
-
-impl TraceParams {
-    /// The step's baked settings with `iterations`.
-    pub fn for_step(step: &GpuStep, iterations: u32) -> TraceParams {
-        TraceParams {
-            iterations,
-            degree: step.info.degree,
-            covariance: step.info.covariance,
-            ..TraceParams::default()
-        }
-    }
-}
+pub use params::{ShadeMode, TraceParams, settings};
+use readback::read;
+pub use readback::read_buffer;
 
 /// A rendered frame read back from the GPU.
 #[derive(Debug, Clone)]
@@ -226,59 +190,6 @@ fn shader_module(
     match pollster::block_on(scope.pop()) {
         Some(e) => Err(Error::Validation(e.to_string())),
         None => Ok(module),
-    }
-}
-
-fn to_f32(a: [f64; 3]) -> [f32; 3] {
-    a.map(|c| c as f32)
-}
-
-/// The uniforms of a frame: the camera moved into the step's local coordinates.
-pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSettings {
-    let basis = camera.basis();
-    let info = &step.info;
-    let eye = info.transform.to_local(camera.eye);
-    let (field_min, field_max) = params
-        .field_range
-        .or(step.field.as_ref().map(|f| (f.1, f.2)))
-        .unwrap_or((0.0, 0.0));
-    GpuSettings {
-        eye: to_f32(eye),
-        width: camera.width,
-        right: to_f32(basis.right),
-        height: camera.height,
-        up: to_f32(basis.up),
-        iterations: params.iterations.max(1),
-        forward: to_f32(basis.forward),
-        degree: u32::from(params.degree.min(3)),
-        epsilon: params.epsilon,
-        h_factor: params.h_factor,
-        normals_mode: u32::from(params.covariance || !info.has_normals),
-        has_normals: u32::from(info.has_normals),
-        point_count: info.point_count,
-        sphere_count: info.sphere_count,
-        cluster_size: info.cluster_size,
-        mode: params.mode as u32,
-        field_min,
-        field_max,
-        has_field: u32::from(step.field.is_some()),
-        mask_words: info.mask_words,
-        node_count: info.node_count,
-        item_count: info.item_count,
-        pad0: 0,
-        pad1: 0,
-        key_light: unit_or_default(params.key_light),
-        pad2: 0.0,
-    }
-}
-
-/// `v` normalised; the default key light where `v` has no direction.
-fn unit_or_default(v: [f32; 3]) -> [f32; 3] {
-    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    if len.is_finite() && len > 1e-6 {
-        v.map(|c| c / len)
-    } else {
-        DEFAULT_KEY_LIGHT
     }
 }
 
@@ -733,30 +644,4 @@ impl Tracer {
             rgba,
         })
     }
-}
-
-/// Maps a `MAP_READ` buffer, waits, and copies its contents out as `T`s.
-pub fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
-    read(gpu, buffer)
-}
-
-/// Maps a MAP_READ buffer and copies its contents out.
-fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
-    let slice = buffer.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    gpu.wait()?;
-    rx.recv()
-        .map_err(|e| Error::Readback(e.to_string()))?
-        .map_err(|e| Error::Readback(e.to_string()))?;
-    let out = {
-        let view = slice
-            .get_mapped_range()
-            .map_err(|e| Error::Readback(e.to_string()))?;
-        bytemuck::pod_collect_to_vec(&view)
-    };
-    buffer.unmap();
-    Ok(out)
 }

@@ -2,15 +2,11 @@
 //! another series, one bake holds a directory for its whole run, gaps and mixtures fail
 //! verification with or without a manifest, and concurrent demos do not mix their inputs.
 
-#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
-
-mod common;
-
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{bake_case, generate, slosh};
+use crate::util::{bake_case, generate, slosh};
 
 fn verify(dir: &Path) -> (bool, String) {
     let (ok, out, err) = slosh(&["inspect", dir.to_str().unwrap(), "--verify"]);

@@ -2,13 +2,9 @@
 //! geometry at any scale, EnSight cases slosh cannot read said as such, clouds of bare OBJ
 //! vertices.
 
-#![allow(clippy::unwrap_used)] // helpers of tests, where a failed unwrap is a failed test
-
-mod common;
-
 use std::path::Path;
 
-use common::{bake_case, slosh};
+use crate::util::{bake_case, slosh};
 
 /// A unit sphere of `n` points (a Fibonacci lattice) with outward normals, scaled by
 /// `scale`, as an ASCII PLY of doubles.

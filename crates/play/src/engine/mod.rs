@@ -4,18 +4,23 @@
 //! holds no widget state: an app or a benchmark drives it one frame at a time.
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use slosh_mls::Camera;
 use slosh_render::{
-    FrameTargets, Gpu, GpuStep, HostField, HostStep, StagingPool, TraceParams, Tracer,
-    UploadOptions,
+    FrameTargets, Gpu, GpuStep, HostField, StagingPool, StepPasses, TraceParams, Tracer,
 };
+
+mod gpu_source;
+mod wait;
+
+pub use gpu_source::{GpuSource, Prepared};
+pub use wait::Pace;
 
 use crate::error::{Error, Result};
 use crate::pool::{Admission, StepPool};
-use crate::prefetch::{Prefetcher, StepSource};
+use crate::prefetch::Prefetcher;
 use crate::refine::{Progress, Refinement, ViewKey};
 use crate::series::Series;
 use crate::timeline::{Direction, Looping, Timeline};
@@ -68,113 +73,6 @@ pub fn default_loaders() -> usize {
 /// rest for the frame, other apps and the driver), else 2 GiB.
 pub fn default_budget(gpu: &Gpu) -> u64 {
     gpu.device_memory().map_or(2 << 30, |bytes| bytes / 2)
-}
-
-/// A step a loader prepared: its buffers on the GPU, and the commands (copies and per-step
-/// passes) that fill them, to be submitted before any frame that reads it.
-#[derive(Debug)]
-pub struct Prepared {
-    pub step: GpuStep,
-    pub commands: wgpu::CommandBuffer,
-    /// The field the step was loaded with.
-    pub field: Option<String>,
-}
-
-/// The loaders' view of the series: paths by bake index, and the field to load.
-#[derive(Debug)]
-pub struct GpuSource {
-    gpu: Arc<Gpu>,
-    /// What a step must be to belong to the series: the manifest's entries where it has one
-    /// (a bake in progress may not yet), and the series' key (the manifest's, else the first
-    /// readable step's).
-    belongs: Mutex<(
-        Option<slosh_cache::Manifest>,
-        Option<slosh_cache::SeriesKey>,
-    )>,
-    staging: StagingPool,
-    delay: Option<std::time::Duration>,
-    paths: Mutex<HashMap<usize, PathBuf>>,
-    field: Mutex<Option<String>>,
-}
-
-impl GpuSource {
-    fn path(&self, index: usize) -> Option<PathBuf> {
-        let paths = self.paths.lock().unwrap_or_else(PoisonError::into_inner);
-        paths.get(&index).cloned()
-    }
-
-    fn field(&self) -> Option<String> {
-        self.field
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone()
-    }
-}
-
-impl StepSource for GpuSource {
-    type Step = Prepared;
-
-    fn load(
-        &self,
-        index: usize,
-        withdrawn: &(dyn Fn() -> bool + Sync),
-    ) -> std::result::Result<Prepared, String> {
-        let path = self
-            .path(index)
-            .ok_or_else(|| format!("step {index} is not in the series"))?;
-        if let Some(delay) = self.delay {
-            std::thread::sleep(delay);
-        }
-        let field = self.field();
-        let host = HostStep::open(&path, field.as_deref()).map_err(|e| e.to_string())?;
-        // A file must hold the step its name says, be of the series (its input, settings
-        // and steps), and, where the manifest lists the step, be the file it describes.
-        let (manifest, key) = self
-            .belongs
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone();
-        let header = host.file().header();
-        let problems = match (&manifest, &key) {
-            (Some(m), _) if m.steps.iter().any(|s| s.index == index) => {
-                m.step_problems(index, host.file())
-            }
-            (_, Some(key)) => key.differences(index, header),
-            _ if header.source.step != index => vec![format!(
-                "holds step {} of its source, not step {index} as its name says",
-                header.source.step
-            )],
-            _ => Vec::new(),
-        };
-        if !problems.is_empty() {
-            return Err(format!(
-                "{}: not step {index} of this series: {}",
-                path.display(),
-                problems.join("; ")
-            ));
-        }
-        let mut encoder = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("step upload"),
-            });
-        if withdrawn() {
-            return Err("withdrawn".into());
-        }
-        let options = UploadOptions {
-            staging: Some(&self.staging),
-            cancelled: Some(withdrawn),
-            ..UploadOptions::default()
-        };
-        let step = GpuStep::create_in(&self.gpu, &host, &mut encoder, options)
-            .map_err(|e| e.to_string())?;
-        Ok(Prepared {
-            step,
-            commands: encoder.finish(),
-            field,
-        })
-    }
 }
 
 /// What a frame asks for.
@@ -261,6 +159,7 @@ impl Engine {
             gpu: gpu.clone(),
             belongs: Mutex::new((None, None)),
             staging: StagingPool::new(options.loaders + 2),
+            passes: StepPasses::new(&gpu),
             delay: options.load_delay,
             paths: Mutex::new(HashMap::new()),
             field: Mutex::new(options.field.clone()),

@@ -1,4 +1,5 @@
-//! What the CLI test suites share: running the binary, generating a case, baking it.
+//! What the CLI and window suites share: running the binary, generating a case, baking it,
+//! and whether a tool is on the PATH.
 
 #![allow(dead_code, clippy::unwrap_used)] // each suite uses its own part of the kit
 
@@ -16,6 +17,22 @@ pub fn slosh(args: &[&str]) -> (bool, String, String) {
         String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
+}
+
+/// Runs `slosh ARGS…`, which must succeed: its stdout and stderr together.
+pub fn slosh_ok(args: &[&str]) -> String {
+    let (ok, out, err) = slosh(args);
+    let text = format!("{out}{err}");
+    assert!(ok, "slosh {args:?}: {text}");
+    text
+}
+
+/// Whether `tool` is on the PATH.
+pub fn have(tool: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .output()
+        .is_ok_and(|o| o.status.success())
 }
 
 /// `slosh gen ARGS… --out DIR`, which must succeed.

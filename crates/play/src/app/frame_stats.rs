@@ -1,0 +1,82 @@
+//! What the status bar reports of the frames: their interval, trace and upload times, and
+//! how many were drawn.
+
+use std::time::Instant;
+
+use crate::engine::{Engine, FrameReport};
+
+/// Timings of the UI's frames, as the status bar shows them.
+#[derive(Debug, Clone)]
+pub struct FrameStats {
+    last_frame: Instant,
+    /// Milliseconds between the last two UI frames: what a person sees as the frame time.
+    pub frame_ms: f64,
+    pub trace_ms: Option<f64>,
+    pub upload_ms: f64,
+    /// Frames drawn so far.
+    pub frames: u64,
+    /// UI passes so far.
+    pub passes: u64,
+}
+
+impl Default for FrameStats {
+    fn default() -> FrameStats {
+        FrameStats {
+            last_frame: Instant::now(),
+            frame_ms: 0.0,
+            trace_ms: None,
+            upload_ms: 0.0,
+            frames: 0,
+            passes: 0,
+        }
+    }
+}
+
+impl FrameStats {
+    /// Seconds since the last frame began, and a new frame begun.
+    pub fn begin_frame(&mut self) -> f64 {
+        let seconds = self.last_frame.elapsed().as_secs_f64();
+        self.last_frame = Instant::now();
+        self.frame_ms = seconds * 1e3;
+        seconds
+    }
+
+    /// Takes in a frame's report: a drawn frame and its trace time (`None` where the device
+    /// has no timestamps), an upload's host time.
+    pub fn record(&mut self, report: &FrameReport, trace_ms: Option<Option<f64>>) {
+        if report.drawn.is_some() {
+            self.frames += 1;
+            if let Some(t) = trace_ms {
+                self.trace_ms = t;
+            }
+        }
+        if !report.uploaded.is_empty() {
+            self.upload_ms = report.upload_host_ms + report.upload_record_ms;
+        }
+    }
+
+    /// The status bar's first line: times, residency, refinement and the step on screen.
+    pub fn status_line(&self, engine: &Engine, last: &FrameReport) -> String {
+        let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
+        let progress = last.progress.map_or(String::new(), |p| {
+            format!(" · refined {}/{}", p.done, p.target)
+        });
+        let index = |p: usize| engine.bake_index(p).unwrap_or(p);
+        let shown = match (last.shown, last.stand_in) {
+            (Some(s), true) => format!(" · showing step {} for {}", index(s), index(last.wanted)),
+            (Some(s), false) => format!(" · step {}", index(s)),
+            (None, _) => " · nothing resident yet".into(),
+        };
+        format!(
+            "frame {:.1} ms · trace {} · upload {:.1} ms · {} / {} steps resident · {:.2} / {:.2} GiB{progress}{shown} · {} frames",
+            self.frame_ms,
+            self.trace_ms.map_or("–".into(), |t| format!("{t:.2} ms")),
+            self.upload_ms,
+            engine.resident().len(),
+            engine.timeline().len(),
+            gib(engine.used_bytes()),
+            gib(engine.budget()),
+            self.frames,
+        )
+    }
+}

@@ -1,0 +1,223 @@
+//! How the player shows the surface: shading, refinement, scale, up axis, light and the
+//! colour field with its range, and the panel that edits them.
+
+use eframe::egui;
+use slosh_render::{ShadeMode, TraceParams, colormap};
+
+use crate::engine::Engine;
+
+/// Field range on the colour map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RangeMode {
+    /// Each step's own range.
+    Step,
+    /// The widest range seen over the steps shown so far.
+    Series,
+    Fixed(f32, f32),
+}
+
+/// The view's settings, as the controls edit them.
+#[derive(Debug, Clone)]
+pub struct ViewSettings {
+    pub mode: ShadeMode,
+    /// Iterations refined to once the view is still.
+    pub iterations: u32,
+    /// Viewport pixels traced per physical pixel, per axis.
+    pub render_scale: f32,
+    pub up_axis: usize,
+    /// The key light's azimuth and elevation about the up axis, in degrees.
+    pub light: (f32, f32),
+    pub field: Option<String>,
+    pub range_mode: RangeMode,
+    /// The widest field range of the steps shown since the field was chosen.
+    pub series_range: Option<(f32, f32)>,
+}
+
+/// What the view panel asks of the player after a pass.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ViewChange {
+    /// The up axis changed or "reset view" was pressed: frame the data again.
+    pub reframe: bool,
+}
+
+/// Azimuth and elevation (degrees) of the default key light about z.
+pub fn default_light() -> (f32, f32) {
+    let [x, y, z] = slosh_render::DEFAULT_KEY_LIGHT;
+    (
+        y.atan2(x).to_degrees(),
+        z.clamp(-1.0, 1.0).asin().to_degrees(),
+    )
+}
+
+/// The unit vector along `axis`.
+pub fn axis_vector(axis: usize) -> [f64; 3] {
+    std::array::from_fn(|a| if a == axis { 1.0 } else { 0.0 })
+}
+
+/// The axis `up` points along most.
+pub fn dominant_axis(up: [f64; 3]) -> usize {
+    (0..3)
+        .max_by(|&a, &b| up[a].abs().total_cmp(&up[b].abs()))
+        .unwrap_or(2)
+}
+
+impl ViewSettings {
+    /// The key light's direction: azimuth and elevation about the chosen up axis (for z up,
+    /// the default is `DEFAULT_KEY_LIGHT`).
+    pub fn key_light(&self) -> [f32; 3] {
+        let (az, el) = (self.light.0.to_radians(), self.light.1.to_radians());
+        let mut d = [0.0f32; 3];
+        d[(self.up_axis + 1) % 3] = el.cos() * az.cos();
+        d[(self.up_axis + 2) % 3] = el.cos() * az.sin();
+        d[self.up_axis] = el.sin();
+        d
+    }
+
+    /// Trace settings for the step on screen (its baked degree and normals, or the defaults
+    /// before any).
+    pub fn params(&self, engine: &Engine) -> TraceParams {
+        let (degree, covariance) = engine
+            .shown_step()
+            .map_or((2, false), |(_, s)| (s.info.degree, s.info.covariance));
+        let field_range = match self.range_mode {
+            RangeMode::Step => None,
+            RangeMode::Series => self.series_range,
+            RangeMode::Fixed(lo, hi) => Some((lo, hi)),
+        };
+        TraceParams {
+            iterations: self.iterations,
+            degree,
+            h_factor: 1.0,
+            covariance,
+            epsilon: 1e-4,
+            mode: self.mode,
+            field_range,
+            key_light: self.key_light(),
+        }
+    }
+
+    /// Widens the series range by the shown step's field range.
+    pub fn track_field_range(&mut self, engine: &Engine) {
+        if let Some((_, step)) = engine.shown_step()
+            && let Some((_, lo, hi)) = &step.field
+        {
+            self.series_range = Some(match self.series_range {
+                Some((a, b)) => (a.min(*lo), b.max(*hi)),
+                None => (*lo, *hi),
+            });
+        }
+    }
+
+    /// The View and Colour sections of the controls; a new field is set on `engine`.
+    pub fn controls(
+        &mut self,
+        ui: &mut egui::Ui,
+        engine: &mut Engine,
+        fields: &[String],
+    ) -> ViewChange {
+        ui.heading("View");
+        ui.horizontal(|ui| {
+            for (mode, name) in [
+                (ShadeMode::Shade, "shade"),
+                (ShadeMode::Normals, "normals"),
+                (ShadeMode::Status, "status"),
+                (ShadeMode::Water, "water"),
+            ] {
+                ui.selectable_value(&mut self.mode, mode, name);
+            }
+        });
+        ui.add(egui::Slider::new(&mut self.iterations, 1..=8).text("iterations when still"));
+        ui.add(egui::Slider::new(&mut self.render_scale, 0.25..=2.0).text("render scale"));
+        let before = self.up_axis;
+        ui.horizontal(|ui| {
+            ui.label("up");
+            for (axis, name) in ["x", "y", "z"].iter().enumerate() {
+                ui.selectable_value(&mut self.up_axis, axis, *name);
+            }
+        });
+        ui.add(egui::Slider::new(&mut self.light.0, -180.0..=180.0).text("light azimuth °"));
+        ui.add(egui::Slider::new(&mut self.light.1, -10.0..=90.0).text("light elevation °"));
+        if ui.small_button("default light").clicked() {
+            self.light = default_light();
+        }
+        let change = ViewChange {
+            reframe: before != self.up_axis || ui.button("reset view").clicked(),
+        };
+        ui.separator();
+        ui.heading("Colour");
+        let mut choice = self.field.clone();
+        egui::ComboBox::from_label("field")
+            .selected_text(choice.as_deref().unwrap_or("none"))
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut choice, None, "none");
+                for f in fields {
+                    ui.selectable_value(&mut choice, Some(f.clone()), f);
+                }
+            });
+        if choice != self.field {
+            engine.set_field(choice.clone());
+            self.field = choice;
+            self.series_range = None;
+        }
+        if self.field.is_some() {
+            ui.horizontal(|ui| {
+                let mut mode = self.range_mode;
+                ui.selectable_value(&mut mode, RangeMode::Series, "series");
+                ui.selectable_value(&mut mode, RangeMode::Step, "step");
+                let fixed = match mode {
+                    RangeMode::Fixed(..) => mode,
+                    _ => {
+                        let (lo, hi) = self.series_range.unwrap_or((0.0, 1.0));
+                        RangeMode::Fixed(lo, hi)
+                    }
+                };
+                ui.selectable_value(&mut mode, fixed, "fixed");
+                self.range_mode = mode;
+            });
+            if let RangeMode::Fixed(mut lo, mut hi) = self.range_mode {
+                ui.horizontal(|ui| {
+                    ui.add(egui::DragValue::new(&mut lo).speed(0.01).prefix("min "));
+                    ui.add(egui::DragValue::new(&mut hi).speed(0.01).prefix("max "));
+                });
+                self.range_mode = RangeMode::Fixed(lo, hi);
+            }
+            self.legend(ui, engine);
+        }
+        change
+    }
+
+    /// The colour map with the range it spans.
+    fn legend(&self, ui: &mut egui::Ui, engine: &Engine) {
+        let (rect, _) =
+            ui.allocate_exact_size(egui::vec2(ui.available_width(), 14.0), egui::Sense::hover());
+        let steps = 64;
+        for k in 0..steps {
+            let t = k as f32 / (steps - 1) as f32;
+            // The shade pass encodes the map's values to sRGB; so does egui's `Rgba`.
+            let [r, g, b] = colormap::viridis(t);
+            let colour: egui::Color32 = egui::Rgba::from_rgb(r, g, b).into();
+            let x0 = rect.left() + rect.width() * k as f32 / steps as f32;
+            let x1 = rect.left() + rect.width() * (k + 1) as f32 / steps as f32;
+            ui.painter().rect_filled(
+                egui::Rect::from_min_max(egui::pos2(x0, rect.top()), egui::pos2(x1, rect.bottom())),
+                0.0,
+                colour,
+            );
+        }
+        let range = match self.range_mode {
+            RangeMode::Fixed(lo, hi) => Some((lo, hi)),
+            RangeMode::Series => self.series_range,
+            RangeMode::Step => engine
+                .shown_step()
+                .and_then(|(_, s)| s.field.as_ref().map(|f| (f.1, f.2))),
+        };
+        if let Some((lo, hi)) = range {
+            ui.horizontal(|ui| {
+                ui.monospace(format!("{lo:.4e}"));
+                ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+                    ui.monospace(format!("{hi:.4e}"));
+                });
+            });
+        }
+    }
+}

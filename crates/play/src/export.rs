@@ -1,0 +1,154 @@
+//! Frames of a range of steps written as PNGs by a job on a thread of its own, with a tracer
+//! of its own, so that the window stays live while it runs: the player's export. The trace
+//! of one step file ([`trace_file`]) is shared with `slosh render`.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, TryRecvError, channel};
+
+use slosh_cache::CacheFile;
+use slosh_mls::Camera;
+use slosh_render::{Frame, Gpu, GpuStep, StepPasses, TraceParams, Tracer};
+
+/// One step file on the GPU and traced: uploaded (with `field`, if named), rendered and read
+/// back, waiting for the device.
+pub fn trace_file(
+    gpu: &Gpu,
+    tracer: &Tracer,
+    passes: &StepPasses,
+    file: &CacheFile,
+    field: Option<&str>,
+    camera: &Camera,
+    params: &TraceParams,
+) -> slosh_render::Result<(GpuStep, Frame)> {
+    let step = GpuStep::upload(gpu, passes, file, field)?;
+    let frame = tracer.render(gpu, &step, camera, params)?;
+    Ok((step, frame))
+}
+
+/// What to export: steps by bake index and file, one camera and trace settings for all.
+#[derive(Debug, Clone)]
+pub struct ExportRequest {
+    pub steps: Vec<(usize, PathBuf)>,
+    pub camera: Camera,
+    pub params: TraceParams,
+    pub field: Option<String>,
+    /// Frames go here as `NNNNN.png`, by bake index; created as needed.
+    pub dir: PathBuf,
+}
+
+/// Where frame `index` of an export into `dir` goes.
+pub fn frame_path(dir: &Path, index: usize) -> PathBuf {
+    dir.join(format!("{index:05}.png"))
+}
+
+/// How an export stands.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ExportState {
+    Running {
+        done: usize,
+        total: usize,
+    },
+    Finished {
+        frames: usize,
+        dir: PathBuf,
+    },
+    /// The first frame that failed, and why; nothing more is written.
+    Failed(String),
+}
+
+/// An export running on its own thread; dropping it stops the thread after its current frame.
+#[derive(Debug)]
+pub struct ExportJob {
+    progress: Receiver<Result<PathBuf, String>>,
+    done: usize,
+    total: usize,
+    dir: PathBuf,
+}
+
+impl ExportJob {
+    /// Starts `request` on a new thread; an error where it names no step.
+    pub fn spawn(gpu: Arc<Gpu>, request: ExportRequest) -> Result<ExportJob, String> {
+        if request.steps.is_empty() {
+            return Err("no readable step".into());
+        }
+        let (tx, rx) = channel();
+        let (total, dir) = (request.steps.len(), request.dir.clone());
+        std::thread::spawn(move || {
+            let tracer = match Tracer::new(&gpu) {
+                Ok(t) => t,
+                Err(e) => {
+                    let _ = tx.send(Err(e.to_string()));
+                    return;
+                }
+            };
+            let passes = StepPasses::new(&gpu);
+            if let Err(e) = std::fs::create_dir_all(&request.dir) {
+                let _ = tx.send(Err(format!("{}: {e}", request.dir.display())));
+                return;
+            }
+            for (index, path) in &request.steps {
+                let out = frame_path(&request.dir, *index);
+                let written = CacheFile::open(path)
+                    .map_err(slosh_render::Error::from)
+                    .and_then(|file| {
+                        let field = request.field.as_deref();
+                        trace_file(
+                            &gpu,
+                            &tracer,
+                            &passes,
+                            &file,
+                            field,
+                            &request.camera,
+                            &request.params,
+                        )
+                    })
+                    .and_then(|(_, frame)| slosh_render::write_frame_png(&out, &frame));
+                let failed = written.is_err();
+                let sent = tx.send(written.map(|()| out).map_err(|e| e.to_string()));
+                if sent.is_err() || failed {
+                    return;
+                }
+            }
+        });
+        Ok(ExportJob {
+            progress: rx,
+            done: 0,
+            total,
+            dir,
+        })
+    }
+
+    /// Frames written so far, of the total.
+    pub fn progress(&self) -> (usize, usize) {
+        (self.done, self.total)
+    }
+
+    /// Takes in what the thread finished since the last call, without waiting.
+    pub fn poll(&mut self) -> ExportState {
+        let stopped = loop {
+            match self.progress.try_recv() {
+                Ok(Ok(_)) => self.done += 1,
+                Ok(Err(why)) => return ExportState::Failed(why),
+                Err(TryRecvError::Empty) => break false,
+                Err(TryRecvError::Disconnected) => break true,
+            }
+        };
+        if self.done == self.total {
+            ExportState::Finished {
+                frames: self.total,
+                dir: self.dir.clone(),
+            }
+        } else if stopped {
+            ExportState::Failed(format!(
+                "the export stopped after {} of {} frames",
+                self.done, self.total
+            ))
+        } else {
+            ExportState::Running {
+                done: self.done,
+                total: self.total,
+            }
+        }
+    }
+}

@@ -1,0 +1,144 @@
+//! The checks a step's sections pass before the GPU sees them: a tree the trace walk can
+//! finish, neighbour-mask offsets the shaders can index, and a field's finite range.
+
+use slosh_cache::names;
+
+/// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
+/// tree has 31 levels, each stacking up to three slots.
+pub const MAX_BVH_DEPTH: u64 = 62;
+
+/// The traversal stack packs a node as `first | count << 28` (trace.wgsl: `link`), so a
+/// leaf holds at most this many items and `first` stays below 2^28.
+pub const MAX_LINK_FIRST: u32 = (1 << 28) - 1;
+pub const MAX_LEAF_LINK_COUNT: u32 = u32::MAX >> MAX_LINK_FIRST.count_ones();
+
+/// Checks that the `bvh_nodes` section is a tree the trace pass can walk: every node packs
+/// into a stack link, a leaf's items lie in the item list, and an inner node's children come
+/// after it (so every descent ends: trace.wgsl is compiled without loop guards,
+/// `Tracer`'s `trace_module`).
+pub(super) fn check_tree(nodes: &[u8], items: u64) -> Result<(), String> {
+    let word = |c: &[u8], at: usize| u32::from_le_bytes([c[at], c[at + 1], c[at + 2], c[at + 3]]);
+    let node_count = (nodes.len() / 32) as u64;
+    for (i, node) in nodes.chunks_exact(32).enumerate() {
+        let (count, first) = (word(node, 12), word(node, 28));
+        let (wide, first64) = (u64::from(count), u64::from(first));
+        let problem = if count > MAX_LEAF_LINK_COUNT || first > MAX_LINK_FIRST {
+            format!(
+                "has count {count} and first {first}; the tracer takes leaves of at most {MAX_LEAF_LINK_COUNT} items and indices below {}",
+                MAX_LINK_FIRST + 1
+            )
+        } else if count > 0 && first64 + wide > items {
+            format!(
+                "holds items {first}..{} of a list of {items}",
+                first64 + wide
+            )
+        } else if count == 0 && (first64 <= i as u64 || first64 + 1 >= node_count) {
+            format!(
+                "has children {first} and {} in a tree of {node_count} nodes (children must follow their parent)",
+                first64 + 1
+            )
+        } else {
+            continue;
+        };
+        return Err(format!(
+            "BVH node {i} (byte {} of section '{}') {problem}",
+            i * 32,
+            names::BVH_NODES
+        ));
+    }
+    Ok(())
+}
+
+/// The first row of cluster `cluster`'s neighbour-mask words, `first` being its first
+/// candidate slot: `mask_row` in shaders/step.wgsl, which explains the layout.
+pub fn mask_row(cluster: u64, first: u64) -> u64 {
+    (first + 31 * cluster) / 32
+}
+
+/// The neighbour masks' layout: the most words any cluster needs, and the rows of
+/// `cluster_size` words that hold every cluster's. An error where the cluster offsets are not
+/// monotone from 0 to the candidate count (the shaders rely on it) or the masks would not be
+/// indexable by u32.
+pub(super) fn mask_layout(
+    cluster_start: &[u8],
+    cluster_size: u32,
+    candidates: u64,
+) -> Result<(u32, u64), String> {
+    let starts: Vec<u64> = cluster_start
+        .chunks_exact(4)
+        .map(|c| u64::from(u32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+        .collect();
+    if starts.first().is_some_and(|&s| s != 0)
+        || starts.windows(2).any(|w| w[0] > w[1])
+        || starts.last().is_some_and(|&s| s != candidates)
+    {
+        return Err(format!(
+            "section '{}' is not monotone from 0 to the {candidates} candidates of '{}'",
+            names::CLUSTER_START,
+            names::CLUSTER_NEIGHBOURS
+        ));
+    }
+    let most = starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    let clusters = starts.len().saturating_sub(1) as u64;
+    let rows = mask_row(clusters, starts.last().copied().unwrap_or(0));
+    if rows * u64::from(cluster_size) > u64::from(u32::MAX) {
+        return Err(format!(
+            "{rows} rows of neighbour masks exceed the tracer's 32-bit indices"
+        ));
+    }
+    Ok((most.div_ceil(32) as u32, rows))
+}
+
+/// Finite minimum and maximum of little-endian f32s (0, 0 when there are none).
+pub(super) fn finite_range(bytes: &[u8]) -> (f32, f32) {
+    let (lo, hi) = bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_tree;
+
+    /// A node as the `bvh_nodes` section stores it: lo, count, hi, first.
+    fn node(count: u32, first: u32) -> Vec<u8> {
+        let mut out = Vec::new();
+        for v in [0.0f32, 0.0, 0.0] {
+            out.extend(v.to_le_bytes());
+        }
+        out.extend(count.to_le_bytes());
+        for v in [1.0f32, 1.0, 1.0] {
+            out.extend(v.to_le_bytes());
+        }
+        out.extend(first.to_le_bytes());
+        out
+    }
+
+    #[test]
+    fn trees_the_walk_could_not_finish_are_refused() {
+        let tree = |nodes: &[(u32, u32)]| -> Vec<u8> {
+            nodes.iter().flat_map(|&(c, f)| node(c, f)).collect()
+        };
+        // Root with two leaves of 3 and 2 items.
+        assert_eq!(check_tree(&tree(&[(0, 1), (3, 0), (2, 3)]), 5), Ok(()));
+        let cycle = check_tree(&tree(&[(0, 1), (0, 0), (2, 3)]), 5).unwrap_err();
+        assert!(
+            cycle.contains("BVH node 1 (byte 32") && cycle.contains("follow"),
+            "{cycle}"
+        );
+        let outside = check_tree(&tree(&[(0, 1), (3, 0), (2, 4)]), 5).unwrap_err();
+        assert!(outside.contains("items 4..6 of a list of 5"), "{outside}");
+        let wide = check_tree(&tree(&[(16, 0)]), 16).unwrap_err();
+        assert!(wide.contains("at most 15 items"), "{wide}");
+        let dangling = check_tree(&tree(&[(0, 1), (3, 0)]), 5).unwrap_err();
+        assert!(
+            dangling.contains("children 1 and 2 in a tree of 2 nodes"),
+            "{dangling}"
+        );
+    }
+}

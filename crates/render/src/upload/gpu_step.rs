@@ -1,0 +1,454 @@
+//! The GPU half of an upload: the step's buffers created and filled, its per-step passes
+//! recorded, its bind group made.
+
+use std::time::Instant;
+
+use bytemuck::Zeroable;
+use slosh_cache::{CacheFile, names};
+
+use super::fill::storage_buffers;
+use super::host::{HostField, HostStep, Source, StepInfo};
+use super::{EMPTY_BINDING, SECTIONS, field_buffer_size, invalid, lead};
+use crate::bindings::{bind_entries, needs_split};
+use crate::context::Gpu;
+use crate::error::{Error, Result};
+use crate::expand::{ExpandInputs, StepPasses};
+use crate::layout::ExpandSettings;
+use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS, step_array};
+use crate::staging::StagingPool;
+
+/// The storage buffers of one step.
+#[derive(Debug)]
+pub struct StepBuffers {
+    pub points: wgpu::Buffer,
+    pub normals: wgpu::Buffer,
+    /// Read by the neighbour-mask pass only.
+    pub reach: wgpu::Buffer,
+    /// Written by the neighbour-mask pass at upload: a block of words per cluster (see
+    /// [`mask_row`]).
+    pub masks: wgpu::Buffer,
+    pub cluster_start: wgpu::Buffer,
+    pub cluster_ids: wgpu::Buffer,
+    pub balls: wgpu::Buffer,
+    pub spheres: wgpu::Buffer,
+    pub bvh_nodes: wgpu::Buffer,
+    pub bvh_items: wgpu::Buffer,
+    pub field: wgpu::Buffer,
+    /// Written by the leaf-sphere pass at upload: each BVH item's sphere, 16 bytes.
+    pub leaf_spheres: wgpu::Buffer,
+    /// Written by the widening pass at upload: the 4-wide tree the walk descends, one
+    /// `WIDE_NODE_BYTES` entry per BVH2 node (a leaf's unused).
+    pub wide_nodes: wgpu::Buffer,
+}
+
+impl StepBuffers {
+    /// The buffers of the trace and shade passes' step bind group, in `STEP_ARRAYS`' order.
+    pub fn in_binding_order(&self) -> [&wgpu::Buffer; STEP_ARRAYS.len()] {
+        [
+            &self.points,
+            &self.normals,
+            &self.masks,
+            &self.cluster_start,
+            &self.cluster_ids,
+            &self.balls,
+            &self.spheres,
+            &self.bvh_nodes,
+            &self.bvh_items,
+            &self.field,
+            &self.leaf_spheres,
+            &self.wide_nodes,
+        ]
+    }
+
+    /// Every byte the step holds on the GPU: sections, field and derived buffers.
+    pub fn bytes(&self) -> u64 {
+        self.in_binding_order()
+            .iter()
+            .map(|b| b.size())
+            .sum::<u64>()
+            + self.reach.size()
+    }
+}
+
+/// Where the time of an upload went.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UploadStats {
+    /// Decoded bytes placed on the GPU.
+    pub bytes: u64,
+    /// Bytes read from the file (compressed where the section is).
+    pub stored_bytes: u64,
+    /// The host half: checksums of the raw sections, the tree check and the sections it
+    /// reads.
+    pub host_seconds: f64,
+    /// The GPU half's recording: buffers created, the staging buffer filled (compressed
+    /// sections decoded into it), passes recorded.
+    pub record_seconds: f64,
+    /// Staging to device-local copies and the per-step passes, from submit to completion
+    /// (zero where the caller submits).
+    pub gpu_seconds: f64,
+    /// Open to ready, everything included.
+    pub total_seconds: f64,
+}
+
+impl UploadStats {
+    /// Decoded bytes per second of the whole upload, in GB/s.
+    pub fn gigabytes_per_second(&self) -> f64 {
+        self.bytes as f64 / self.total_seconds.max(1e-12) / 1e9
+    }
+}
+
+/// How [`GpuStep::create_in`] records and where it takes its memory from.
+#[derive(Default)]
+pub struct UploadOptions<'a> {
+    /// Records the per-step passes here instead of after the copies: submitted in that
+    /// order, the two can be timed apart.
+    pub passes: Option<&'a mut wgpu::CommandEncoder>,
+    /// A timestamp query set of 6: each of the three passes writes its begin and end there
+    /// (masks 0–1, leaves 2–3, widen 4–5).
+    pub timestamps: Option<&'a wgpu::QuerySet>,
+    /// Takes the staging memory from this pool; hand it back with
+    /// [`GpuStep::take_staging`] and [`StagingPool::recycle`] once the copies are submitted.
+    pub staging: Option<&'a StagingPool>,
+    /// Asked between pieces of the staging fill: `true` abandons the upload with
+    /// [`Error::Cancelled`] (a prefetch that a jump made stale).
+    pub cancelled: Option<&'a (dyn Fn() -> bool + Sync)>,
+}
+
+impl std::fmt::Debug for UploadOptions<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("UploadOptions")
+            .field("passes", &self.passes.is_some())
+            .field("timestamps", &self.timestamps)
+            .field("staging", &self.staging)
+            .field("cancelled", &self.cancelled.is_some())
+            .finish()
+    }
+}
+
+/// A step on the GPU, with what the passes need to know about it and its bind group.
+#[derive(Debug)]
+pub struct GpuStep {
+    pub buffers: StepBuffers,
+    pub info: StepInfo,
+    /// Whether an array spans more than one storage binding (see shaders.rs).
+    pub split: bool,
+    /// The shaded field's name and its finite range.
+    pub field: Option<(String, f32, f32)>,
+    pub upload: UploadStats,
+    /// The trace and shade passes' group 0, made for `binding_limit`.
+    bind_group: wgpu::BindGroup,
+    binding_limit: u64,
+    /// The pooled staging buffer of the upload, until taken back.
+    staging: Option<wgpu::Buffer>,
+}
+
+/// How the passes bind each section of `SECTIONS`: the reach is read only by the per-step
+/// passes; a name that is no section is an error, never a guess.
+fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
+    Ok(match name {
+        names::POINTS => &step_array::POINTS,
+        names::NORMALS => &step_array::NORMALS,
+        names::REACH => &EXPAND_ARRAYS[2],
+        names::CLUSTER_START => &step_array::CLUSTER_START,
+        names::CLUSTER_NEIGHBOURS => &step_array::CLUSTER_IDS,
+        names::BALLS => &step_array::BALLS,
+        names::SPHERES => &step_array::SPHERES,
+        names::BVH_NODES => &step_array::BVH_NODES,
+        names::BVH_ITEMS => &step_array::BVH_ITEMS,
+        other => {
+            return Err(invalid(
+                file,
+                format!("no GPU binding for section '{other}'"),
+            ));
+        }
+    })
+}
+
+/// Whether an array of `bytes` needs more than one binding (split into ranges); an error
+/// naming it where it cannot be bound at all.
+fn needs_ranges(
+    gpu: &Gpu,
+    file: &CacheFile,
+    what: &str,
+    array: &RangedArray,
+    bytes: u64,
+) -> Result<bool> {
+    needs_split(
+        &gpu.device,
+        &gpu.describe(),
+        gpu.max_binding(),
+        array,
+        what,
+        bytes,
+    )
+    .map_err(|problem| invalid(file, problem))
+}
+
+/// A storage buffer a per-step pass writes (readable back for tests and tools).
+fn derived(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+impl GpuStep {
+    /// Opens, uploads and waits: both halves in one call, `file`'s GPU sections and `field`'s
+    /// values, if named.
+    pub fn upload(
+        gpu: &Gpu,
+        passes: &StepPasses,
+        file: &CacheFile,
+        field: Option<&str>,
+    ) -> Result<GpuStep> {
+        let start = Instant::now();
+        let host = HostStep::read(file, field)?;
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("upload"),
+            });
+        let mut step = GpuStep::create(gpu, passes, &host, &mut encoder)?;
+        let submitted = Instant::now();
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        gpu.queue.submit([encoder.finish()]);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
+        }
+        gpu.wait()?;
+        step.upload.gpu_seconds = submitted.elapsed().as_secs_f64();
+        step.upload.total_seconds = start.elapsed().as_secs_f64();
+        Ok(step)
+    }
+
+    /// The GPU half: buffers created and filled through staging, the copies and the per-step
+    /// passes recorded into `encoder`. Nothing is submitted or waited for; the step is ready
+    /// for frames recorded after it in the same or a later submission.
+    pub fn create(
+        gpu: &Gpu,
+        passes: &StepPasses,
+        host: &HostStep<'_>,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<GpuStep> {
+        GpuStep::create_in(gpu, passes, host, encoder, UploadOptions::default())
+    }
+
+    /// [`GpuStep::create`] with the copies recorded into `copies`, and `options`.
+    pub fn create_in(
+        gpu: &Gpu,
+        step_passes: &StepPasses,
+        host: &HostStep<'_>,
+        copies: &mut wgpu::CommandEncoder,
+        options: UploadOptions<'_>,
+    ) -> Result<GpuStep> {
+        let UploadOptions {
+            passes,
+            timestamps,
+            staging,
+            cancelled,
+        } = options;
+        let encoder = copies;
+        let start = Instant::now();
+        let file = host.file();
+        let info = host.info.clone();
+        // Every array, sections and the three the passes derive, within RANGES bindings.
+        let mut split = false;
+        for (slot, name) in SECTIONS.iter().enumerate() {
+            let bytes = lead(name) + host.section_source(slot).len();
+            split |= needs_ranges(gpu, file, name, array_of(file, name)?, bytes)?;
+        }
+        if let Some(field) = &host.field {
+            split |= needs_ranges(
+                gpu,
+                file,
+                "field",
+                &step_array::FIELD,
+                field.bytes.len() as u64,
+            )?;
+        }
+        let [mask_bytes, leaf_bytes, wide_bytes] = info.derived_bytes();
+        split |= needs_ranges(
+            gpu,
+            file,
+            "neighbour masks",
+            &step_array::NEIGHBOUR_MASKS,
+            mask_bytes,
+        )?;
+        split |= needs_ranges(
+            gpu,
+            file,
+            "leaf spheres",
+            &step_array::LEAF_SPHERES,
+            leaf_bytes,
+        )?;
+        split |= needs_ranges(gpu, file, "wide nodes", &step_array::WIDE_NODES, wide_bytes)?;
+        let mut stats = UploadStats {
+            stored_bytes: host.stored_bytes,
+            host_seconds: host.host_seconds,
+            ..UploadStats::default()
+        };
+        let mut arrays: Vec<(&str, Source<'_>, u64)> = SECTIONS
+            .iter()
+            .enumerate()
+            .map(|(slot, name)| (*name, host.section_source(slot), lead(name)))
+            .collect();
+        if let Some(f) = &host.field {
+            arrays.push(("field", Source::Bytes(&f.bytes), 0));
+        }
+        stats.bytes = arrays.iter().map(|(_, b, _)| b.len()).sum();
+        let (mut sections, staging) =
+            storage_buffers(gpu, file, &arrays, encoder, staging, cancelled)?;
+        let field_values = match &host.field {
+            Some(_) => sections
+                .pop()
+                .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))?,
+            None => derived(gpu, "no field", EMPTY_BINDING),
+        };
+        let mut it = sections.into_iter();
+        let mut next = || {
+            it.next()
+                .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))
+        };
+        let (points, normals, reach) = (next()?, next()?, next()?);
+        let (cluster_start, cluster_ids) = (next()?, next()?);
+        let (balls, spheres, bvh_nodes, bvh_items) = (next()?, next()?, next()?, next()?);
+        let masks = derived(gpu, "neighbour masks", mask_bytes);
+        let leaf_spheres = derived(gpu, "leaf spheres", leaf_bytes);
+        let wide_nodes = derived(gpu, "wide nodes", wide_bytes);
+        step_passes.encode(
+            &gpu.device,
+            &ExpandInputs {
+                points: &points,
+                normals: &normals,
+                reach: &reach,
+                cluster_start: &cluster_start,
+                cluster_ids: &cluster_ids,
+                masks: &masks,
+                bvh_items: &bvh_items,
+                spheres: &spheres,
+                leaf_spheres: &leaf_spheres,
+                bvh_nodes: &bvh_nodes,
+                wide_nodes: &wide_nodes,
+            },
+            ExpandSettings {
+                point_count: info.point_count,
+                cluster_size: info.cluster_size,
+                mask_words: info.mask_words,
+                has_normals: u32::from(info.has_normals),
+                sphere_count: info.sphere_count,
+                item_count: info.item_count,
+                cluster_id_count: info.cluster_id_count,
+                node_count: info.node_count - 1,
+                ..ExpandSettings::zeroed()
+            },
+            split,
+            match passes {
+                Some(passes) => passes,
+                None => encoder,
+            },
+            timestamps,
+        )?;
+        let buffers = StepBuffers {
+            points,
+            normals,
+            reach,
+            masks,
+            cluster_start,
+            cluster_ids,
+            balls,
+            spheres,
+            bvh_nodes,
+            bvh_items,
+            field: field_values,
+            leaf_spheres,
+            wide_nodes,
+        };
+        let binding_limit = gpu.max_binding();
+        let bind_group = step_group(gpu, &buffers, binding_limit);
+        stats.record_seconds = start.elapsed().as_secs_f64();
+        stats.total_seconds = stats.host_seconds + stats.record_seconds;
+        Ok(GpuStep {
+            buffers,
+            info,
+            split,
+            field: host.field.as_ref().map(|f| (f.name.clone(), f.min, f.max)),
+            upload: stats,
+            bind_group,
+            binding_limit,
+            staging,
+        })
+    }
+
+    /// The pooled staging buffer the upload's copies read, to recycle once they are
+    /// submitted.
+    pub fn take_staging(&mut self) -> Option<wgpu::Buffer> {
+        self.staging.take()
+    }
+
+    /// Replaces the colour field (or drops it with `None`): only the field's buffer is
+    /// uploaded (through `queue.write_buffer`, ordered before the next submission) and the
+    /// bind group remade.
+    pub fn set_field(&mut self, gpu: &Gpu, field: Option<&HostField>) -> Result<()> {
+        let buffer = match field {
+            Some(f) => {
+                if f.bytes.len() as u64 != u64::from(self.info.point_count) * 4 {
+                    return Err(Error::Validation(format!(
+                        "field '{}' has {} bytes for a step of {} points",
+                        f.name,
+                        f.bytes.len(),
+                        self.info.point_count
+                    )));
+                }
+                needs_split(
+                    &gpu.device,
+                    &gpu.describe(),
+                    self.binding_limit,
+                    &step_array::FIELD,
+                    "field",
+                    f.bytes.len() as u64,
+                )
+                .map_err(Error::Validation)?;
+                let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("field"),
+                    size: field_buffer_size(&f.bytes),
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                gpu.queue.write_buffer(&buffer, 0, &f.bytes);
+                buffer
+            }
+            None => derived(gpu, "no field", EMPTY_BINDING),
+        };
+        self.buffers.field = buffer;
+        self.field = field.map(|f| (f.name.clone(), f.min, f.max));
+        self.bind_group = step_group(gpu, &self.buffers, self.binding_limit);
+        Ok(())
+    }
+
+    /// The trace and shade passes' group 0 for this step.
+    pub fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+
+    /// The binding limit the step's bind group was made for.
+    pub fn binding_limit(&self) -> u64 {
+        self.binding_limit
+    }
+
+    /// Every byte the step holds on the GPU.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.buffers.bytes()
+    }
+}
+
+/// The step bind group of `buffers`, under the device's shared layout.
+fn step_group(gpu: &Gpu, buffers: &StepBuffers, limit: u64) -> wgpu::BindGroup {
+    let entries = bind_entries(&STEP_ARRAYS, &buffers.in_binding_order(), None, limit);
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("step"),
+        layout: gpu.step_layout(),
+        entries: &entries,
+    })
+}

@@ -1,0 +1,330 @@
+//! The host half of an upload: the file checked and its sections read or checksummed in
+//! place, with no device.
+
+use std::path::Path;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
+
+use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mask_layout};
+use super::{
+    EMPTY_BINDING, HOST_READS, SECTIONS, WIDE_NODE_BYTES, field_buffer_size, invalid, lead, slot_of,
+};
+use crate::error::Result;
+
+/// What the passes need to know about a step, read from its header and sections.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepInfo {
+    pub point_count: u32,
+    pub sphere_count: u32,
+    pub cluster_size: u32,
+    /// Depth of the step's BVH (the traversal stack needs one entry more).
+    pub bvh_depth: u64,
+    /// Entries of the BVH's node buffer (the blank lead node included) and item list.
+    pub node_count: u32,
+    pub item_count: u32,
+    /// Entries of the cluster candidate list.
+    pub cluster_id_count: u32,
+    /// Words of neighbour mask of the largest cluster: its candidates over 32.
+    pub mask_words: u32,
+    /// Rows of `cluster_size` mask words that hold every cluster's block (see [`mask_row`]).
+    pub mask_rows: u64,
+    pub has_normals: bool,
+    /// The degree the balls were fitted at, and "mean" or "covariance".
+    pub degree: u8,
+    pub covariance: bool,
+    /// Local = (world − origin) / scale.
+    pub transform: Transform,
+    pub bounds: [[f64; 3]; 2],
+    /// Mean nearest-neighbour spacing in world units.
+    pub spacing: f64,
+}
+
+impl StepInfo {
+    /// Bytes of the neighbour masks, leaf spheres and wide nodes the per-step passes derive.
+    pub fn derived_bytes(&self) -> [u64; 3] {
+        let masks = self.mask_rows * u64::from(self.cluster_size) * 4;
+        let leaves = u64::from(self.item_count) * 16;
+        let wide = u64::from(self.node_count - 1) * WIDE_NODE_BYTES;
+        [
+            masks.max(EMPTY_BINDING),
+            leaves.max(EMPTY_BINDING),
+            wide.max(WIDE_NODE_BYTES),
+        ]
+    }
+}
+
+/// A scalar field's values, ready for the GPU, with their finite range.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostField {
+    pub name: String,
+    /// Little-endian f32s, one per point.
+    pub bytes: Vec<u8>,
+    pub min: f32,
+    pub max: f32,
+}
+
+impl HostField {
+    /// Decodes field `name` of `file`; an error listing the baked fields where it has none.
+    pub fn read(file: &CacheFile, name: &str) -> Result<HostField> {
+        let section = format!("{}{name}", names::FIELD_PREFIX);
+        let Some(entry) = file.section(&section) else {
+            let available: Vec<&str> = file
+                .header()
+                .sections
+                .iter()
+                .filter_map(|s| s.name.strip_prefix(names::FIELD_PREFIX))
+                .collect();
+            return Err(invalid(
+                file,
+                format!(
+                    "no field '{name}' in this cache; baked fields: {}",
+                    if available.is_empty() {
+                        "none (bake with --fields NAME)".to_string()
+                    } else {
+                        available.join(", ")
+                    }
+                ),
+            ));
+        };
+        let points = file.header().points;
+        if entry.raw != points * 4 {
+            return Err(invalid(
+                file,
+                format!(
+                    "field '{name}' holds {} bytes for {points} points (4 bytes each expected)",
+                    entry.raw
+                ),
+            ));
+        }
+        let mut bytes = vec![0u8; entry.raw as usize];
+        file.decode_into(entry, &mut bytes, &mut Vec::new())?;
+        let (min, max) = finite_range(&bytes);
+        Ok(HostField {
+            name: name.to_string(),
+            bytes,
+            min,
+            max,
+        })
+    }
+}
+
+/// The cache file a host step reads its raw sections from: owned (a prefetched step) or
+/// borrowed (a caller that keeps the file).
+#[derive(Debug)]
+enum HeldFile<'a> {
+    Owned(Box<CacheFile>),
+    Borrowed(&'a CacheFile),
+}
+
+impl HeldFile<'_> {
+    fn get(&self) -> &CacheFile {
+        match self {
+            HeldFile::Owned(f) => f,
+            HeldFile::Borrowed(f) => f,
+        }
+    }
+}
+
+/// Where a section's bytes come from when the GPU half copies them.
+#[derive(Debug)]
+enum SectionData {
+    Absent,
+    /// Raw in the file, checksummed in place: copied straight from the map.
+    Stored,
+    /// Decoded by the host half, which reads it (the tree, the cluster offsets).
+    Decoded(Vec<u8>),
+    /// Compressed, decoded run by run straight into the staging memory by the GPU half: a
+    /// run decodes into a cache-sized buffer and is copied on while hot, so the section is
+    /// never written to and read back from main memory in full.
+    Deferred,
+}
+
+/// The host half of an upload: the file checked, the sections it reads decoded (the BVH
+/// nodes, the cluster offsets), its raw sections checksummed in place, the tree checked.
+/// Needs no device. The other compressed sections are checked and decoded in parallel
+/// straight into the staging memory by [`GpuStep::create`].
+#[derive(Debug)]
+pub struct HostStep<'a> {
+    file: HeldFile<'a>,
+    /// Each `SECTIONS` slot's bytes, or where they come from.
+    sections: Vec<SectionData>,
+    pub field: Option<HostField>,
+    pub info: StepInfo,
+    pub host_seconds: f64,
+    pub stored_bytes: u64,
+}
+
+impl HostStep<'static> {
+    /// Opens `path` and runs the host half on it.
+    pub fn open(path: &Path, field: Option<&str>) -> Result<HostStep<'static>> {
+        let start = Instant::now();
+        let mut step = HostStep::prepare(HeldFile::Owned(Box::new(CacheFile::open(path)?)), field)?;
+        step.host_seconds = start.elapsed().as_secs_f64();
+        Ok(step)
+    }
+}
+
+impl<'a> HostStep<'a> {
+    /// The host half over a file the caller keeps.
+    pub fn read(file: &'a CacheFile, field: Option<&str>) -> Result<HostStep<'a>> {
+        HostStep::prepare(HeldFile::Borrowed(file), field)
+    }
+
+    pub fn file(&self) -> &CacheFile {
+        self.file.get()
+    }
+
+    /// Where the bytes of `SECTIONS[slot]` come from.
+    pub(super) fn section_source(&self, slot: usize) -> Source<'_> {
+        let file = self.file.get();
+        match (&self.sections[slot], file.section(SECTIONS[slot])) {
+            (SectionData::Decoded(d), _) => Source::Bytes(d),
+            (SectionData::Stored, Some(e)) => Source::Bytes(file.stored(e)),
+            (SectionData::Deferred, Some(entry)) => Source::Runs { file, entry },
+            _ => Source::Bytes(&[]),
+        }
+    }
+
+    /// The bytes of a section the host half decoded or found raw (empty otherwise).
+    fn host_bytes(&self, slot: usize) -> &[u8] {
+        match self.section_source(slot) {
+            Source::Bytes(b) => b,
+            Source::Runs { .. } => &[],
+        }
+    }
+
+    /// Every byte the step will hold on the GPU (what [`StepBuffers::bytes`] reports once it
+    /// is there), known before the upload.
+    pub fn gpu_bytes(&self) -> u64 {
+        let sections: u64 = (0..SECTIONS.len())
+            .map(|slot| {
+                lead(SECTIONS[slot])
+                    + self
+                        .section_source(slot)
+                        .len()
+                        .max(EMPTY_BINDING)
+                        .next_multiple_of(4)
+            })
+            .sum();
+        let field = self
+            .field
+            .as_ref()
+            .map_or(EMPTY_BINDING, |f| field_buffer_size(&f.bytes));
+        sections + field + self.info.derived_bytes().iter().sum::<u64>()
+    }
+
+    fn prepare(file: HeldFile<'a>, field: Option<&str>) -> Result<HostStep<'a>> {
+        let start = Instant::now();
+        let f = file.get();
+        let header = f.header();
+        if header.stats.bvh_depth > MAX_BVH_DEPTH {
+            return Err(invalid(
+                f,
+                format!(
+                    "BVH depth {} exceeds the tracer's stack ({MAX_BVH_DEPTH})",
+                    header.stats.bvh_depth
+                ),
+            ));
+        }
+        let entries: Vec<Option<&SectionEntry>> = SECTIONS.iter().map(|n| f.section(n)).collect();
+        for (name, entry) in SECTIONS.iter().zip(&entries) {
+            if entry.is_none() && *name != names::NORMALS {
+                return Err(invalid(f, format!("no section '{name}'")));
+            }
+        }
+        let point_count = u32::try_from(header.points)
+            .map_err(|_| invalid(f, format!("{} points exceed u32", header.points)))?;
+        // Raw sections are checksummed in place and those the host reads decoded, all in
+        // parallel; the field alongside.
+        let (sections, field) = rayon::join(
+            || {
+                SECTIONS
+                    .par_iter()
+                    .zip(&entries)
+                    .map(|(name, entry)| -> Result<SectionData> {
+                        match entry {
+                            Some(e) if e.encoding == Encoding::Raw => {
+                                f.checked_stored(e)?;
+                                Ok(SectionData::Stored)
+                            }
+                            Some(e) if HOST_READS.contains(name) => {
+                                let mut out = vec![0u8; e.raw as usize];
+                                f.decode_into(e, &mut out, &mut Vec::new())?;
+                                Ok(SectionData::Decoded(out))
+                            }
+                            Some(_) => Ok(SectionData::Deferred),
+                            None => Ok(SectionData::Absent),
+                        }
+                    })
+                    .collect::<Result<Vec<_>>>()
+            },
+            || field.map(|name| HostField::read(f, name)).transpose(),
+        );
+        let (sections, field) = (sections?, field?);
+        let count = |name: &str| f.section(name).map_or(0, |e| e.count);
+        let info = StepInfo {
+            point_count,
+            sphere_count: count(names::SPHERES) as u32,
+            cluster_size: header.neighbour_cluster.max(1),
+            bvh_depth: header.stats.bvh_depth,
+            node_count: count(names::BVH_NODES) as u32 + 1,
+            item_count: count(names::BVH_ITEMS) as u32,
+            cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
+            mask_words: 0,
+            mask_rows: 0,
+            has_normals: f.section(names::NORMALS).is_some(),
+            degree: header.mls.degree,
+            covariance: header.mls.normals == "covariance",
+            transform: header.transform,
+            bounds: header.bounds,
+            spacing: header.spacing * header.transform.scale,
+        };
+        let stored_bytes = entries.iter().flatten().map(|e| e.stored).sum::<u64>()
+            + field
+                .as_ref()
+                .and_then(|fd| f.section(&format!("{}{}", names::FIELD_PREFIX, fd.name)))
+                .map_or(0, |e| e.stored);
+        let mut step = HostStep {
+            file,
+            sections,
+            field,
+            info,
+            host_seconds: 0.0,
+            stored_bytes,
+        };
+        let items = u64::from(step.info.item_count);
+        check_tree(step.host_bytes(slot_of(names::BVH_NODES)), items)
+            .map_err(|problem| invalid(step.file(), problem))?;
+        let (words, rows) = mask_layout(
+            step.host_bytes(slot_of(names::CLUSTER_START)),
+            step.info.cluster_size,
+            u64::from(step.info.cluster_id_count),
+        )
+        .map_err(|problem| invalid(step.file(), problem))?;
+        (step.info.mask_words, step.info.mask_rows) = (words, rows);
+        step.host_seconds = start.elapsed().as_secs_f64();
+        Ok(step)
+    }
+}
+
+/// The bytes of an array the GPU half uploads: in memory (decoded, the field, or raw in the
+/// mapped file), or a compressed section's runs, decoded straight into the staging memory.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Source<'a> {
+    Bytes(&'a [u8]),
+    Runs {
+        file: &'a CacheFile,
+        entry: &'a SectionEntry,
+    },
+}
+
+impl Source<'_> {
+    pub(super) fn len(&self) -> u64 {
+        match self {
+            Source::Bytes(b) => b.len() as u64,
+            Source::Runs { entry, .. } => entry.raw,
+        }
+    }
+}

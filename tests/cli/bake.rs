@@ -1,0 +1,566 @@
+//! The CLI end to end: bake, inspect and render end to end: shards, kills and resumes, SLURM, manifests, series.
+
+use std::path::Path;
+use std::process::Command;
+
+use serde_json::Value;
+
+use crate::util::{bake_case, generate, have, in_ci, slosh};
+
+fn step_sums(dir: &Path) -> Vec<(String, Vec<String>)> {
+    let mut names: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| slosh_cache::parse_step_file_name(n).is_some())
+        .collect();
+    names.sort();
+    names
+        .into_iter()
+        .map(|n| {
+            let f = slosh_cache::CacheFile::open(&dir.join(&n)).unwrap();
+            let sums = f.header().sections.iter().map(|s| s.xxh3.clone()).collect();
+            (n, sums)
+        })
+        .collect()
+}
+
+#[test]
+fn bake_then_inspect_and_render_a_tank() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("tank");
+    generate(&case_dir, &["tank", "--points", "20000", "--steps", "4"]);
+    let case = case_dir.join("tank.case");
+    let cache = dir.path().join("cache");
+    let (ok, out, err) = bake_case(&case, &cache, &["--fields", "pressure", "--quiet"]);
+    assert!(ok, "bake failed: {err}");
+    assert!(out.contains("baked 4 steps"), "{out}");
+    let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
+    assert!(ok, "{out}{err}");
+    assert_eq!(out.matches("verified").count(), 4, "{out}");
+
+    let step1 = cache.join("step-00001.slc");
+    let (ok, out, _) = slosh(&["inspect", step1.to_str().unwrap(), "--json", "--verify"]);
+    assert!(ok);
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["verify"]["ok"], true);
+    assert_eq!(v["header"]["source"]["step"], 1);
+    let points = v["header"]["points"].as_u64().unwrap();
+    // The tank flags its free surface; only those particles are baked.
+    let read = v["header"]["stats"]["input_points"].as_u64().unwrap();
+    assert!(points > 100 && points < read / 4, "{points} of {read}");
+    assert!(v["statistics"]["neighbours"]["mean"].as_f64().unwrap() > 10.0);
+    let names: Vec<&str> = v["header"]["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["name"].as_str().unwrap())
+        .collect();
+    assert!(names.contains(&"field.pressure") && names.contains(&"bvh_nodes"));
+
+    let (ok, out, _) = slosh(&["inspect", step1.to_str().unwrap(), "--point", "7"]);
+    assert!(ok);
+    let rec: Value = serde_json::from_str(&out).unwrap();
+    assert!(!rec["neighbours"].as_array().unwrap().is_empty());
+    assert!(rec["fields"]["pressure"].as_f64().is_some());
+
+    let png = dir.path().join("frame.png");
+    let npy = dir.path().join("hits.npy");
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--cpu",
+        "--size",
+        "48x32",
+        "--iterations",
+        "2",
+        "--out",
+        png.to_str().unwrap(),
+        "--aov",
+        npy.to_str().unwrap(),
+    ]);
+    assert!(ok, "render failed: {err}");
+    assert!(out.contains("hit pixels"), "{out}");
+    let npy_bytes = std::fs::read(&npy).unwrap();
+    assert_eq!(npy_bytes.len(), 128 + 48 * 32 * 8 * 4);
+    assert!(String::from_utf8_lossy(&npy_bytes[..128]).contains("'shape': (32, 48, 8)"));
+    let values: &[f32] = bytemuck::cast_slice(&npy_bytes[128..]);
+    let hits = values.chunks_exact(8).filter(|px| px[7] > 0.0).count();
+    assert!(hits > 48 * 32 / 10, "{hits} hit pixels");
+    assert!(values.iter().all(|v| v.is_finite()));
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+
+    // Water needs secondary rays, which only the GPU traces.
+    let (ok, _, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--cpu",
+        "--mode",
+        "water",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("--mode water"), "{err}");
+    // The GPU renders a sequence in it (required when CI=true).
+    let pattern = dir.path().join("frames").join("{:05}.png");
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--steps",
+        "0..=1",
+        "--size",
+        "48x32",
+        "--iterations",
+        "2",
+        "--mode",
+        "water",
+        "--out",
+        pattern.to_str().unwrap(),
+    ]);
+    if ok {
+        for name in ["00000.png", "00001.png"] {
+            let frame = std::fs::read(dir.path().join("frames").join(name)).unwrap();
+            assert!(frame.starts_with(b"\x89PNG"), "{name}: {out}");
+        }
+    } else if in_ci() {
+        panic!("GPU render failed: {err}");
+    } else {
+        eprintln!("skipping the GPU render: {err}");
+    }
+
+    // A flipped byte is caught by --verify, naming the file.
+    let mut bytes = std::fs::read(&step1).unwrap();
+    let mid = bytes.len() / 3;
+    bytes[mid] ^= 0x10;
+    std::fs::write(&step1, bytes).unwrap();
+    let (ok, out, err) = slosh(&["inspect", step1.to_str().unwrap(), "--verify"]);
+    assert!(!ok);
+    assert!(
+        format!("{out}{err}").contains("step-00001.slc"),
+        "{out}{err}"
+    );
+
+    // A missing step file: the batch goes on, reports it, exits non-zero.
+    std::fs::remove_file(case_dir.join("tank.geo00002")).unwrap();
+    let cache2 = dir.path().join("cache2");
+    let (ok, out, err) = bake_case(&case, &cache2, &["--quiet"]);
+    assert!(!ok);
+    assert!(out.contains("baked 3 steps"), "{out}");
+    assert!(
+        err.contains("step 2") && err.contains("tank.geo00002"),
+        "{err}"
+    );
+    let manifest: Value =
+        serde_json::from_slice(&std::fs::read(cache2.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["steps"].as_array().unwrap().len(), 3);
+}
+
+#[test]
+fn shards_make_the_caches_of_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("sphere");
+    generate(&case_dir, &["sphere", "--points", "1500", "--steps", "7"]);
+    let case = case_dir.join("sphere.case");
+    let one = dir.path().join("one");
+    let (ok, _, err) = bake_case(&case, &one, &["--quiet"]);
+    assert!(ok, "{err}");
+    let sharded = dir.path().join("sharded");
+    for shard in ["0/3", "1/3", "2/3"] {
+        let (ok, out, err) = bake_case(&case, &sharded, &["--shard", shard, "--quiet"]);
+        assert!(ok, "{err}");
+        let expect = if shard == "0/3" {
+            "baked 3 steps"
+        } else {
+            "baked 2 steps"
+        };
+        assert!(out.contains(expect), "{shard}: {out}");
+    }
+    let (ok, out, _) = slosh(&["bake", "--manifest-only", sharded.to_str().unwrap()]);
+    assert!(ok && out.contains("7 steps"), "{out}");
+    assert_eq!(step_sums(&one), step_sums(&sharded));
+    let (ok, _, err) = slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        "x",
+        "--shard",
+        "3/3",
+    ]);
+    assert!(!ok && err.contains("--shard 3/3"), "{err}");
+}
+
+#[test]
+fn a_killed_bake_leaves_only_valid_caches_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("sphere");
+    generate(&case_dir, &["sphere", "--points", "4000", "--steps", "16"]);
+    let case = case_dir.join("sphere.case");
+    let reference = dir.path().join("reference");
+    let (ok, _, err) = bake_case(&case, &reference, &["--quiet"]);
+    assert!(ok, "{err}");
+    let cache = dir.path().join("cache");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        .args([
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--quiet",
+            "--jobs",
+            "1",
+        ])
+        .spawn()
+        .unwrap();
+    // Kill -9 once the first steps are written, in the middle of the series.
+    let start = std::time::Instant::now();
+    while !cache.join("step-00002.slc").exists() && start.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let present = step_sums(&cache);
+    eprintln!("killed with {} of 16 step files written", present.len());
+    assert!(
+        present.len() >= 3 && present.len() < 16,
+        "killed with {} of 16 steps written",
+        present.len()
+    );
+    // Everything that looks like a step verifies and equals the reference bake; the series
+    // as a whole fails verification, naming the steps still missing (issue 25, item 3).
+    let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
+    assert!(!ok, "{out}{err}");
+    assert!(
+        out.contains(&format!(
+            "{} of the series' steps 0..=15 (16 steps) are missing",
+            16 - present.len()
+        )),
+        "{out}"
+    );
+    assert_eq!(
+        out.lines().filter(|l| l.ends_with("verified")).count(),
+        present.len(),
+        "{out}"
+    );
+    let full = step_sums(&reference);
+    for (name, sums) in &present {
+        assert_eq!(
+            Some(sums),
+            full.iter().find(|(n, _)| n == name).map(|(_, s)| s),
+            "{name}"
+        );
+    }
+    // A manifest write killed half-way leaves its temporary file (a process long gone).
+    std::fs::write(cache.join(".manifest.json.tmp-4194300-0"), b"{\"half\": ").unwrap();
+    let (ok, out, err) = bake_case(&case, &cache, &["--quiet"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains(&format!(
+            "baked {} steps, kept {}",
+            16 - present.len(),
+            present.len()
+        )),
+        "{out}"
+    );
+    assert_eq!(step_sums(&cache), full);
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(&cache)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+/// A step whose cache the verifier would reject is reported and never written, so a re-run
+/// cannot keep it (issue 14, item 2): at an offset of 1e8 the points of a small sphere
+/// coincide in f32.
+#[test]
+fn a_bake_never_writes_what_its_verifier_rejects() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("case");
+    generate(
+        &case_dir,
+        &[
+            "sphere", "--points", "2000", "--steps", "1", "--offset", "1e8",
+        ],
+    );
+    let cache = dir.path().join("cache");
+    for _ in 0..2 {
+        let (ok, out, err) = bake_case(&case_dir.join("sphere.case"), &cache, &[]);
+        assert!(!ok, "{out}");
+        // In f32 at 1e8 every particle of the unit sphere lands on one position: refused by
+        // name (issue 25, item 14) before anything is encoded, and nothing is written.
+        assert!(err.contains("step 0") && err.contains("coincide"), "{err}");
+        assert!(!cache.join("step-00000.slc").exists());
+    }
+}
+
+/// Resume keeps a step only when its input is the same: another case or regenerated data
+/// into the same directory is baked again (issue 14, item 1).
+#[test]
+fn resume_rebakes_when_the_input_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let bake = |case: &Path| {
+        let (ok, out, err) = bake_case(case, &cache, &["--quiet"]);
+        assert!(ok, "{out}{err}");
+        out
+    };
+    let sphere = dir.path().join("in");
+    generate(&sphere, &["sphere", "--points", "1500", "--steps", "3"]);
+    assert!(bake(&sphere.join("sphere.case")).contains("baked 3 steps, kept 0"));
+    assert!(bake(&sphere.join("sphere.case")).contains("baked 0 steps, kept 3"));
+    // The same case path, regenerated with other data.
+    std::fs::remove_dir_all(&sphere).unwrap();
+    generate(&sphere, &["sphere", "--points", "2500", "--steps", "3"]);
+    assert!(bake(&sphere.join("sphere.case")).contains("baked 3 steps, kept 0"));
+}
+
+/// A partial re-bake with other settings is refused before anything is written, naming the
+/// step it would leave behind (issue 14, item 3).
+#[test]
+fn a_partial_rebake_with_other_settings_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "1500", "--steps", "2"]);
+    let case = case_dir.join("sphere.case");
+    let cache = dir.path().join("cache");
+    let (ok, _, err) = bake_case(&case, &cache, &["--quiet"]);
+    assert!(ok, "{err}");
+    let before = std::fs::read(cache.join("step-00000.slc")).unwrap();
+    let (ok, out, err) = bake_case(&case, &cache, &["--steps", "0..=0", "--k", "8"]);
+    assert!(!ok, "{out}");
+    assert!(
+        err.contains("step-00001.slc") && err.contains("nothing was written"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(cache.join("step-00000.slc")).unwrap(), before);
+}
+
+/// Bakes finishing side by side take turns at the manifest: one that finds the directory's
+/// manifest lock held waits for it, then scans, so the last manifest written has seen every
+/// step file (issue 14, item 5).
+#[test]
+fn manifest_rebuilds_take_turns() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "800", "--steps", "1"]);
+    let cache = dir.path().join("cache");
+    std::fs::create_dir_all(&cache).unwrap();
+    let lock = std::fs::File::create(cache.join(slosh_cache::MANIFEST_LOCK_NAME)).unwrap();
+    lock.lock().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        .args([
+            "bake",
+            case_dir.join("sphere.case").to_str().unwrap(),
+            "--out",
+            cache.to_str().unwrap(),
+            "--quiet",
+        ])
+        .spawn()
+        .unwrap();
+    // The step is baked, but the manifest waits for the lock.
+    let start = std::time::Instant::now();
+    while !cache.join("step-00000.slc").exists() && start.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the bake did not wait for the lock"
+    );
+    assert!(!cache.join(slosh_cache::MANIFEST_NAME).exists());
+    lock.unlock().unwrap();
+    assert!(child.wait().unwrap().success());
+    let manifest = slosh_cache::Manifest::read(&cache).unwrap();
+    assert_eq!(manifest.steps.len(), 1);
+}
+
+/// A manifest that cannot be written does not hide the failed steps, and a bake with every
+/// step current leaves an up-to-date manifest untouched (so read-only storage is fine)
+/// (issue 14, item 8).
+#[test]
+fn manifest_failures_do_not_hide_step_failures() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "800", "--steps", "3"]);
+    let case = case_dir.join("sphere.case");
+    let cache = dir.path().join("cache");
+    let bake = || bake_case(&case, &cache, &["--quiet"]);
+    let (ok, _, err) = bake();
+    assert!(ok, "{err}");
+    let manifest = cache.join(slosh_cache::MANIFEST_NAME);
+    let written = std::fs::metadata(&manifest).unwrap().modified().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    let (ok, out, err) = bake();
+    assert!(ok && out.contains("kept 3"), "{out}{err}");
+    assert_eq!(
+        std::fs::metadata(&manifest).unwrap().modified().unwrap(),
+        written,
+        "an up-to-date manifest was rewritten"
+    );
+    // Step 1's geometry goes missing, and the manifest's place is taken by a directory.
+    std::fs::remove_file(case_dir.join("sphere.geo00001")).unwrap();
+    std::fs::remove_file(cache.join("step-00001.slc")).unwrap();
+    std::fs::remove_file(&manifest).unwrap();
+    std::fs::create_dir(&manifest).unwrap();
+    let (ok, _, err) = bake();
+    assert!(!ok);
+    assert!(
+        err.contains("step 1:") && err.contains("sphere.geo00001"),
+        "{err}"
+    );
+    assert!(err.contains("manifest:"), "{err}");
+    assert!(err.contains("the manifest was not written"), "{err}");
+}
+
+/// `inspect --verify DIR` verifies the series as a whole, and `render` refuses a step that
+/// is not of its series (issue 14, item 6).
+#[test]
+fn a_series_is_verified_as_a_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "800", "--steps", "3"]);
+    let case = case_dir.join("sphere.case");
+    let bake = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        let (ok, _, err) = slosh(&args);
+        assert!(ok, "{err}");
+    };
+    let cache = dir.path().join("cache");
+    bake(&cache, &[]);
+    let verify = |d: &Path| slosh(&["inspect", d.to_str().unwrap(), "--verify"]);
+    assert!(verify(&cache).0);
+    let step = |i: usize| cache.join(format!("step-0000{i}.slc"));
+    let original = std::fs::read(step(1)).unwrap();
+
+    // Step 2 copied over step 1.
+    std::fs::copy(step(2), step(1)).unwrap();
+    let (ok, out, _) = verify(&cache);
+    assert!(
+        !ok && out.contains("holds step 2 of its source, not step 1"),
+        "{out}"
+    );
+    let (ok, _, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--cpu",
+        "--size",
+        "16x16",
+        "--out",
+        dir.path().join("x.png").to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("step-00001.slc: not step 1 of the series"),
+        "{err}"
+    );
+
+    // One step baked with other settings among the rest.
+    let other = dir.path().join("other");
+    bake(&other, &["--k", "8"]);
+    std::fs::copy(other.join("step-00001.slc"), step(1)).unwrap();
+    let (ok, out, _) = verify(&cache);
+    assert!(!ok && out.contains("baked with parameter hash"), "{out}");
+    std::fs::write(step(1), &original).unwrap();
+    assert!(verify(&cache).0);
+
+    // A manifest that is not one is invalid, not missing.
+    let manifest = cache.join(slosh_cache::MANIFEST_NAME);
+    let good = std::fs::read(&manifest).unwrap();
+    std::fs::write(&manifest, b"{ not json").unwrap();
+    let (ok, out, _) = verify(&cache);
+    assert!(!ok && out.contains("manifest INVALID"), "{out}");
+    std::fs::write(&manifest, good).unwrap();
+
+    // A directory without steps verifies nothing, so it fails.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let (ok, out, _) = verify(&empty);
+    assert!(!ok && out.contains("holds no step files"), "{out}");
+}
+
+/// A case that promises far more steps than it has files fails with a summary, not a line
+/// per missing step (issue 14, item 12).
+#[test]
+fn many_failed_steps_are_summarised() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("in");
+    generate(&case_dir, &["sphere", "--points", "300", "--steps", "3"]);
+    let case = case_dir.join("sphere.case");
+    let text = std::fs::read_to_string(&case).unwrap();
+    let times: Vec<String> = (0..500)
+        .map(|i| format!("{}", f64::from(i) * 0.05))
+        .collect();
+    let head = text.split("number of steps").next().unwrap();
+    std::fs::write(
+        &case,
+        format!(
+            "{head}number of steps: 500\nfilename start number: 0\nfilename increment: 1\ntime values:\n{}\n",
+            times.join(" ")
+        ),
+    )
+    .unwrap();
+    let (ok, out, err) = bake_case(&case, &dir.path().join("cache"), &["--quiet"]);
+    assert!(!ok);
+    assert!(
+        out.contains("baked 3 steps") && out.contains("497 failed"),
+        "{out}"
+    );
+    assert!(err.contains("… and 477 more failed steps"), "{err}");
+    assert!(err.contains("(497 in all)"), "{err}");
+    assert!(err.lines().count() < 30, "{} lines", err.lines().count());
+    assert!(err.len() < 8000, "{} bytes", err.len());
+}
+
+/// A real SLURM on this machine (`scripts/slurm/test.sh`: munged, slurmctld and slurmd with a
+/// private configuration): a 4-task job array bakes a series whose every section equals a
+/// single-process bake, a dependent job rebuilds the manifest, and a task cancelled mid-way
+/// resumes when the array is resubmitted, keeping the steps it finished. The daemons need
+/// root and Debian's slurm-wlm and munge (`.ci/run` installs them); required when CI=true.
+#[test]
+fn slurm_job_arrays_bake_like_one_process_and_resume() {
+    let root = Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+    let tools = ["slurmctld", "slurmd", "sbatch", "munged", "python3"]
+        .iter()
+        .all(|t| have(t));
+    if !(tools && root) {
+        assert!(
+            !in_ci(),
+            "CI=true but SLURM cannot run here (root: {root}, slurm-wlm and munge installed: \
+             {tools}; .ci/run installs them)"
+        );
+        eprintln!("skipping: SLURM needs root and slurm-wlm, munge");
+        return;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/slurm/test.sh");
+    let out = Command::new("bash")
+        .arg(&script)
+        .env("SLOSH", env!("CARGO_BIN_EXE_slosh"))
+        .output()
+        .expect("run scripts/slurm/test.sh");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    eprintln!("{stdout}");
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("every section identical to the single-process bake"));
+    assert!(stdout.contains("== SLURM test passed"));
+}
