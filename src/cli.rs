@@ -475,6 +475,9 @@ impl From<ModeArg> for slosh_render::ShadeMode {
     }
 }
 
+/// `slosh render`'s vertical field of view unless `--fov` says otherwise, in degrees.
+pub const DEFAULT_FOV: f64 = 40.0;
+
 #[derive(Debug, Args)]
 pub struct RenderArgs {
     /// A cache directory or one step file.
@@ -495,7 +498,7 @@ pub struct RenderArgs {
     #[arg(long, allow_hyphen_values = true)]
     pub up: Option<String>,
     /// Vertical field of view in degrees.
-    #[arg(long, default_value_t = 40.0)]
+    #[arg(long, default_value_t = DEFAULT_FOV)]
     pub fov: f64,
     /// Image size WxH.
     #[arg(long, default_value = "640x480")]

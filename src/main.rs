@@ -13,6 +13,7 @@ mod render;
 
 use anyhow::Result;
 use clap::Parser;
+use slosh_fileio::say;
 
 use crate::cli::{Cli, Command};
 
@@ -56,7 +57,13 @@ fn run_bench(command: cli::BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Accuracy(a) => slosh_bench::accuracy::run(&bench::accuracy(&a)),
         BenchCommand::Bake(a) => slosh_bench::bake::run(&bench::bake(&a)),
-        BenchCommand::Precision(a) => slosh_bench::precision::run(&bench::precision(&a)),
+        BenchCommand::Precision(a) => {
+            let settings = bench::precision(&a);
+            let report = slosh_bench::precision::run(&settings)?;
+            slosh_bench::report::write(&settings.out, &report)?;
+            say!("wrote {}", settings.out.display());
+            Ok(())
+        }
         BenchCommand::Gpu(a) => slosh_bench::gpu::run(&bench::gpu(&a)?),
         BenchCommand::Scrub(a) => slosh_bench::scrub::run(&bench::scrub(&a)?),
     }
@@ -69,7 +76,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
         Command::Inspect(args) => inspect::run(&args),
-        Command::Render(args) => render::run(&args),
+        Command::Render(args) => render::run(&config::render::RenderConfig::from_args(&args)?),
         Command::Play(args) => play::play(&args),
         Command::Demo(args) => play::demo(&args),
         Command::Info(args) => {

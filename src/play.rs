@@ -6,70 +6,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
-use slosh_play::EngineOptions;
-use slosh_play::app::{PlayOptions, run as run_player};
+use slosh_play::app::run as run_player;
 
 use crate::cli::{Cli, DemoArgs, PlayArgs};
-
-fn up_axis(s: &str) -> Result<[f64; 3]> {
-    Ok(match s {
-        "x" | "X" => [1.0, 0.0, 0.0],
-        "y" | "Y" => [0.0, 1.0, 0.0],
-        "z" | "Z" => [0.0, 0.0, 1.0],
-        other => bail!("--up {other}: expected x, y or z"),
-    })
-}
-
-fn window(s: &str) -> Result<(f32, f32)> {
-    let (w, h) = crate::render::parse_size(s)
-        .map_err(|_| anyhow::anyhow!("--window {s}: expected WxH, e.g. 1280x800"))?;
-    Ok((w as f32, h as f32))
-}
-
-fn options(args: &PlayArgs) -> Result<PlayOptions> {
-    if !args.dir.is_dir() {
-        bail!(
-            "{}: not a directory (give the --out directory of `slosh bake`)",
-            args.dir.display()
-        );
-    }
-    let budget = match args.budget {
-        Some(g) if g.is_finite() && g > 0.0 => Some((g * f64::from(1u32 << 30)) as u64),
-        Some(g) => bail!("--budget {g}: expected a positive number of GiB"),
-        None => None,
-    };
-    if !(0.25..=2.0).contains(&args.render_scale) {
-        bail!("--render-scale {}: expected 0.25 to 2", args.render_scale);
-    }
-    let mut engine = EngineOptions {
-        budget,
-        field: args.field.clone(),
-        load_delay: args.load_delay_ms.map(std::time::Duration::from_millis),
-        ..EngineOptions::default()
-    };
-    if let Some(n) = args.loaders {
-        engine.loaders = n.clamp(1, 64);
-    }
-    Ok(PlayOptions {
-        dir: args.dir.clone(),
-        adapter: args.adapter.clone(),
-        engine,
-        render_scale: args.render_scale,
-        up: args.up.as_deref().map(up_axis).transpose()?,
-        iterations: args.iterations.clamp(1, 8),
-        window: window(&args.window)?,
-        output: args.output.clone(),
-        log_frames: args.log_frames,
-        step_range: match args.field_range.as_str() {
-            "series" => false,
-            "step" => true,
-            other => bail!("--field-range {other}: expected series or step"),
-        },
-    })
-}
+use crate::config::play::play_options;
+use crate::config::render::{RenderConfig, ViewFlags};
 
 pub fn play(args: &PlayArgs) -> Result<()> {
-    Ok(run_player(options(args)?)?)
+    Ok(run_player(play_options(args)?)?)
 }
 
 /// `$XDG_CACHE_HOME/slosh/demo`, else `~/.cache/slosh/demo`.
@@ -185,7 +129,7 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
             load_delay_ms: None,
             log_frames: false,
         };
-        match run_player(options(&play_args)?) {
+        match run_player(play_options(&play_args)?) {
             Ok(()) => return Ok(()),
             Err(slosh_play::app::AppError::NoGpu(e)) => {
                 eprintln!("no Vulkan adapter ({e}); rendering frames with the CPU tracer instead")
@@ -206,32 +150,40 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
 fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
     std::fs::create_dir_all(frames).with_context(|| format!("creating {}", frames.display()))?;
     let gpu = slosh_render::Gpu::new(None);
-    let steps = format!("0..{count}");
-    let pattern = frames.join("{:05}.png");
-    let mut line = vec![
-        "render",
-        path(cache)?,
-        "--steps",
-        &steps,
-        "--size",
-        "640x400",
-        "--iterations",
-        "3",
-        "--out",
-        path(&pattern)?,
-    ];
-    match &gpu {
+    let cpu = match &gpu {
         Ok(g) => {
             say!("rendering {count} frames on {}", g.describe());
-            line.extend(["--field", "pressure"]);
+            false
         }
         Err(e) => {
             say!("rendering {count} frames with the CPU tracer (no GPU: {e})");
-            line.push("--cpu");
+            true
         }
-    }
+    };
     drop(gpu);
-    slosh(&line)?;
+    crate::render::run(&RenderConfig {
+        path: cache.to_path_buf(),
+        steps: (0..count).collect(),
+        sequence: true,
+        width: 640,
+        height: 400,
+        view: ViewFlags {
+            eye: None,
+            target: None,
+            up: None,
+            fov: crate::cli::DEFAULT_FOV,
+        },
+        iterations: 3,
+        mode: slosh_render::ShadeMode::Shade,
+        out: Some(frames.join("{:05}.png")),
+        aov: None,
+        cpu,
+        degree: None,
+        h_scale: None,
+        covariance: false,
+        field: (!cpu).then(|| "pressure".to_string()),
+        adapter: None,
+    })?;
     say!(
         "frames: {} ({count} PNG files, 00000.png to {:05}.png)",
         frames.display(),

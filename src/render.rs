@@ -10,33 +10,7 @@ use slosh_cache::{CacheFile, LoadedStep, step_file_name};
 use slosh_mls::{Camera, NormalsMode, Params};
 use slosh_render::{TraceParams, Tracer, cpu_shade};
 
-use crate::cli::{ModeArg, RenderArgs};
-
-fn parse_vec3(flag: &str, s: &str) -> Result<[f64; 3]> {
-    let parts: Vec<&str> = s.split(',').collect();
-    let bad = || anyhow::anyhow!("--{flag} {s}: expected X,Y,Z");
-    if parts.len() != 3 {
-        return Err(bad());
-    }
-    let mut v = [0.0f64; 3];
-    for (o, p) in v.iter_mut().zip(&parts) {
-        *o = p.trim().parse().map_err(|_| bad())?;
-        if !o.is_finite() {
-            return Err(bad());
-        }
-    }
-    Ok(v)
-}
-
-pub fn parse_size(s: &str) -> Result<(u32, u32)> {
-    let bad = || anyhow::anyhow!("--size {s}: expected WxH, e.g. 1280x800");
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (w, h): (u32, u32) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-    if w == 0 || h == 0 || u64::from(w) * u64::from(h) > 1 << 28 {
-        return Err(bad());
-    }
-    Ok((w, h))
-}
+use crate::config::render::RenderConfig;
 
 fn step_path(path: &Path, step: usize) -> PathBuf {
     if path.is_dir() {
@@ -81,12 +55,6 @@ fn expand_pattern(pattern: &Path, step: usize) -> PathBuf {
     ))
 }
 
-/// "A..B" (B excluded) or "A..=B".
-fn parse_steps(s: &str) -> Result<Vec<usize>> {
-    let (first, last) = crate::config::parse_step_range(s)?;
-    Ok((first..=last).collect())
-}
-
 /// A step rendered from a cache directory must belong to its series (`manifest`, read once
 /// per run where the directory has one).
 fn check_belongs(
@@ -110,126 +78,18 @@ fn check_belongs(
     Ok(())
 }
 
-/// Memory a rendered frame takes per pixel: hits and pixels on the device, their readback
-/// and the hit buffer written out.
-const BYTES_PER_PIXEL: u64 = 120;
-
-/// The validated settings of one `slosh render` run.
-struct RenderConfig {
-    steps: Vec<usize>,
-    sequence: bool,
-    width: u32,
-    height: u32,
-}
-
-impl RenderConfig {
-    fn from_args(args: &RenderArgs) -> Result<RenderConfig> {
-        if args.out.is_none() && args.aov.is_none() {
-            bail!("nothing to write: give --out frame.png and/or --aov hits.npy");
-        }
-        if args.iterations == 0 {
-            bail!("--iterations must be at least 1");
-        }
-        if args.h_scale.is_some_and(|h| !(h.is_finite() && h > 0.0)) {
-            bail!("--h-scale must be a positive number");
-        }
-        if args.cpu && args.field.is_some() {
-            bail!("--field colours on the GPU path only; drop --cpu");
-        }
-        if args.cpu && matches!(args.mode, ModeArg::Water) {
-            bail!("--mode water traces secondary rays on the GPU only; drop --cpu");
-        }
-        if !(args.fov.is_finite() && args.fov > 0.0 && args.fov < 180.0) {
-            bail!(
-                "--fov {}: expected a vertical field of view between 0 and 180 degrees, exclusive",
-                args.fov
-            );
-        }
-        if let (Some(out), Some(aov)) = (&args.out, &args.aov)
-            && out == aov
-        {
-            bail!(
-                "--out and --aov are both {}: the hit buffer would replace the picture",
-                out.display()
-            );
-        }
-        // Writing into the cache directory could replace the input itself.
-        let cache_dir = if args.path.is_dir() {
-            Some(args.path.as_path())
-        } else {
-            args.path.parent()
-        };
-        for (flag, path) in [("--out", &args.out), ("--aov", &args.aov)] {
-            if let (Some(p), Some(dir)) = (path, cache_dir)
-                && let Some(name) = p.file_name().and_then(|n| n.to_str())
-                && (name.ends_with(".slc") || name == slosh_cache::MANIFEST_NAME)
-                && p.parent().and_then(|d| d.canonicalize().ok()) == dir.canonicalize().ok()
-            {
-                bail!(
-                    "{flag} {}: that is a file of the cache being rendered; write the frame elsewhere",
-                    p.display()
-                );
-            }
-        }
-        let (width, height) = parse_size(&args.size)?;
-        // A frame holds its hits and pixels on the device and again in memory when read back
-        // (about 120 bytes a pixel): refuse what the machine cannot hold instead of aborting.
-        let needed = u64::from(width) * u64::from(height) * BYTES_PER_PIXEL;
-        if let Some(available) = slosh_bake::available_memory()
-            && needed > available
-        {
-            bail!(
-                "--size {}: a {width}×{height} frame needs about {:.1} GB for its buffers; this machine has {:.1} GB available",
-                args.size,
-                needed as f64 / 1e9,
-                available as f64 / 1e9
-            );
-        }
-        let (steps, sequence) = match &args.steps {
-            Some(range) => (parse_steps(range)?, true),
-            None => (vec![args.step], false),
-        };
-        if sequence {
-            for (flag, path) in [("--out", &args.out), ("--aov", &args.aov)] {
-                if let Some(p) = path
-                    && !p.to_string_lossy().contains('{')
-                {
-                    bail!(
-                        "{flag} {}: a sequence needs a pattern with {{}} or {{:05}} for the step number",
-                        p.display()
-                    );
-                }
-            }
-        }
-        Ok(RenderConfig {
-            steps,
-            sequence,
-            width,
-            height,
-        })
-    }
-}
-
 /// The framing camera of the step, up from `--up`, else from the data (the header's `up`),
 /// else z; `--eye` and `--target` replace the framing's.
-fn camera_for(
-    args: &RenderArgs,
-    header: &slosh_cache::Header,
-    width: u32,
-    height: u32,
-) -> Result<Camera> {
-    let up = match &args.up {
-        Some(u) => parse_vec3("up", u)?,
-        None => header.up.unwrap_or([0.0, 0.0, 1.0]),
-    };
-    let mut camera = Camera::framing(&header.bounds, args.fov, width, height, up);
+fn camera_for(cfg: &RenderConfig, header: &slosh_cache::Header) -> Result<Camera> {
+    let up = cfg.view.up.or(header.up).unwrap_or([0.0, 0.0, 1.0]);
+    let mut camera = Camera::framing(&header.bounds, cfg.view.fov, cfg.width, cfg.height, up);
     // An explicit up is taken as given (the framing snapped it to an axis).
     camera.up = up;
-    if let Some(e) = &args.eye {
-        camera.eye = parse_vec3("eye", e)?;
+    if let Some(eye) = cfg.view.eye {
+        camera.eye = eye;
     }
-    if let Some(t) = &args.target {
-        camera.target = parse_vec3("target", t)?;
+    if let Some(target) = cfg.view.target {
+        camera.target = target;
     }
     // A camera with no view direction, or an up along it, has no image plane.
     let view: [f64; 3] = std::array::from_fn(|a| camera.target[a] - camera.eye[a]);
@@ -248,13 +108,12 @@ fn camera_for(
     Ok(camera)
 }
 
-fn h_factor(args: &RenderArgs, baked: f64) -> f64 {
-    args.h_scale.map_or(1.0, |h| h / baked)
+fn h_factor(cfg: &RenderConfig, baked: f64) -> f64 {
+    cfg.h_scale.map_or(1.0, |h| h / baked)
 }
 
-pub fn run(args: &RenderArgs) -> Result<()> {
-    let config = RenderConfig::from_args(args)?;
-    let first = CacheFile::open(&step_path(&args.path, config.steps[0]))
+pub fn run(config: &RenderConfig) -> Result<()> {
+    let first = CacheFile::open(&step_path(&config.path, config.steps[0]))
         .with_context(|| format!("opening step {}", config.steps[0]))?;
     // The first step of the range with particles frames it (a Lagrangian run's first steps
     // may hold none, and an empty step has no extent).
@@ -263,20 +122,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .steps
             .iter()
             .skip(1)
-            .filter_map(|&s| CacheFile::open(&step_path(&args.path, s)).ok())
+            .filter_map(|&s| CacheFile::open(&step_path(&config.path, s)).ok())
             .find(|f| f.header().points > 0)
             .unwrap_or(first),
         _ => first,
     };
-    let camera = camera_for(args, framing.header(), config.width, config.height)?;
+    let camera = camera_for(config, framing.header())?;
     drop(framing);
-    let manifest = if args.path.is_dir() {
-        slosh_cache::Manifest::read(&args.path).ok()
+    let manifest = if config.path.is_dir() {
+        slosh_cache::Manifest::read(&config.path).ok()
     } else {
         None
     };
     // Output folders (e.g. frames/ of a sequence) are created as needed.
-    for pattern in [&args.out, &args.aov].into_iter().flatten() {
+    for pattern in [&config.out, &config.aov].into_iter().flatten() {
         if let Some(dir) = expand_pattern(pattern, 0).parent()
             && !dir.as_os_str().is_empty()
         {
@@ -285,15 +144,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let targets = |step: usize| {
         (
-            args.out.as_ref().map(|p| expand_pattern(p, step)),
-            args.aov.as_ref().map(|p| expand_pattern(p, step)),
+            config.out.as_ref().map(|p| expand_pattern(p, step)),
+            config.aov.as_ref().map(|p| expand_pattern(p, step)),
         )
     };
-    if args.cpu {
+    if config.cpu {
         for &step in &config.steps {
             let (out, aov) = targets(step);
             render_cpu(
-                args,
+                config,
                 manifest.as_ref(),
                 &camera,
                 step,
@@ -303,7 +162,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let gpu = slosh_render::Gpu::new(args.adapter.as_deref())?;
+    let gpu = slosh_render::Gpu::new(config.adapter.as_deref())?;
     let (tracer, passes) = (Tracer::new(&gpu)?, slosh_render::StepPasses::new(&gpu));
     if config.sequence {
         say!(
@@ -313,17 +172,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         );
     }
     for &step in &config.steps {
-        let path = step_path(&args.path, step);
+        let path = step_path(&config.path, step);
         let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
-        check_belongs(manifest.as_ref(), &args.path, step, &path, &file)?;
+        check_belongs(manifest.as_ref(), &config.path, step, &path, &file)?;
         let h = file.header();
         let params = TraceParams {
-            iterations: args.iterations,
-            degree: args.degree.unwrap_or(h.mls.degree),
-            h_factor: h_factor(args, h.mls.h_scale) as f32,
-            covariance: args.covariance || h.mls.normals == "covariance",
+            iterations: config.iterations,
+            degree: config.degree.unwrap_or(h.mls.degree),
+            h_factor: h_factor(config, h.mls.h_scale) as f32,
+            covariance: config.covariance || h.mls.normals == "covariance",
             epsilon: 1e-4,
-            mode: args.mode.into(),
+            mode: config.mode,
             field_range: None,
             key_light: slosh_render::DEFAULT_KEY_LIGHT,
         };
@@ -333,7 +192,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             &tracer,
             &passes,
             &file,
-            args.field.as_deref(),
+            config.field.as_deref(),
             &camera,
             &params,
         )?;
@@ -370,7 +229,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 }
 
 fn render_cpu(
-    args: &RenderArgs,
+    config: &RenderConfig,
     manifest: Option<&slosh_cache::Manifest>,
     camera: &Camera,
     step_index: usize,
@@ -378,21 +237,21 @@ fn render_cpu(
     aov: Option<&Path>,
 ) -> Result<()> {
     let (width, height) = (camera.width, camera.height);
-    let path = step_path(&args.path, step_index);
+    let path = step_path(&config.path, step_index);
     let file = CacheFile::open(&path).with_context(|| format!("opening step {step_index}"))?;
-    check_belongs(manifest, &args.path, step_index, &path, &file)?;
+    check_belongs(manifest, &config.path, step_index, &path, &file)?;
     let step = LoadedStep::load(&file)?;
     let h = file.header();
     let params = Params {
-        degree: args.degree.unwrap_or(h.mls.degree),
-        iterations: args.iterations,
+        degree: config.degree.unwrap_or(h.mls.degree),
+        iterations: config.iterations,
         epsilon: 1e-4,
-        normals: if args.covariance || h.mls.normals == "covariance" {
+        normals: if config.covariance || h.mls.normals == "covariance" {
             NormalsMode::Covariance
         } else {
             NormalsMode::Mean
         },
-        h_factor: h_factor(args, h.mls.h_scale) as f32,
+        h_factor: h_factor(config, h.mls.h_scale) as f32,
     };
     let start = std::time::Instant::now();
     let hits = step.render(camera, &params);
@@ -403,7 +262,7 @@ fn render_cpu(
         for (i, hit) in hits.iter().enumerate() {
             let (x, y) = (i as u32 % width, i as u32 / width);
             let colour = match hit {
-                Some(hit) => cpu_shade::shade(hit, camera.ray(x, y).1, args.mode.into()),
+                Some(hit) => cpu_shade::shade(hit, camera.ray(x, y).1, config.mode),
                 None => cpu_shade::background(y, height),
             };
             rgb.extend(colour.map(cpu_shade::srgb));
@@ -417,7 +276,7 @@ fn render_cpu(
         "step {} ({} points): {width}x{height}, {} iterations, {hit_count} hit pixels, traced in {seconds:.2} s on the CPU",
         h.source.step,
         h.points,
-        args.iterations
+        config.iterations
     );
     Ok(())
 }

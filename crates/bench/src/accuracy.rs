@@ -10,6 +10,7 @@ use slosh_mls::{Camera, NormalsMode, Params, Real, Surface, SurfaceParams, Trace
 use slosh_scenes::{DVec3, Scene, SceneKind, SceneSpec, TrueRay, Truth};
 
 use crate::plot::plot_png;
+use crate::report::write_bytes;
 use crate::stats::percentile;
 
 /// What `slosh bench accuracy` measures and where it writes.
@@ -369,9 +370,9 @@ pub fn run(args: &Settings) -> Result<()> {
         let report = format!(
             "# Accuracy on real SPH data\n\nWritten by `slosh bench accuracy --sph-only`.\n\n## Against the goals\n\n| goal | measured | met |\n|---|---|---|\n{goals}{section}"
         );
-        write_atomic(&args.out, report.as_bytes())?;
+        write_bytes(&args.out, report.as_bytes())?;
         if let Some(json) = &args.json {
-            write_atomic(json, serde_json::to_string_pretty(&results)?.as_bytes())?;
+            write_bytes(json, serde_json::to_string_pretty(&results)?.as_bytes())?;
         }
         slosh_fileio::stdout::print(&format!("wrote {}\n", args.out.display()))?;
         return Ok(());
@@ -605,7 +606,7 @@ pub fn run(args: &Settings) -> Result<()> {
         1,
     );
     let report = summary + &out + &sph_out;
-    write_atomic(&args.out, report.as_bytes())?;
+    write_bytes(&args.out, report.as_bytes())?;
     if let Some(json) = &args.json {
         let value = serde_json::json!({
             "worst_converged_rms": worst_converged,
@@ -614,7 +615,7 @@ pub fn run(args: &Settings) -> Result<()> {
             "worst_reversed_rms_ratio": worst_ratio,
             "sph": sph_results,
         });
-        write_atomic(json, serde_json::to_string_pretty(&value)?.as_bytes())?;
+        write_bytes(json, serde_json::to_string_pretty(&value)?.as_bytes())?;
     }
     plot_png(&args.plot, &plot)?;
     slosh_fileio::stdout::print(&format!(
@@ -627,12 +628,4 @@ pub fn run(args: &Settings) -> Result<()> {
 
 fn yes(ok: bool) -> &'static str {
     if ok { "yes" } else { "**no**" }
-}
-
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    slosh_ensight::atomic_write(path, bytes)?;
-    Ok(())
 }

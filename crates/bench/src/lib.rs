@@ -11,6 +11,7 @@ pub mod bake;
 pub mod gpu;
 mod plot;
 pub mod precision;
+pub mod report;
 pub mod scrub;
 mod sph;
 pub mod stats;

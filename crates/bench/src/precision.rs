@@ -13,6 +13,7 @@ use slosh_mls::{NormalsMode, Params};
 use slosh_scenes::SceneKind;
 
 use crate::accuracy::{Render, Scenario, metrics, scenario};
+use crate::report::Report;
 use crate::stats::percentile;
 
 /// What `slosh bench precision` measures and where it writes.
@@ -66,14 +67,42 @@ fn trace(case: &Scenario, baked: &Baked, iterations: u32) -> Render {
     ))
 }
 
-pub fn run(args: &Settings) -> Result<()> {
+/// One row of the table: a scene at one noise, iteration count and precision.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    pub scene: String,
+    pub noise: f64,
+    pub iterations: u32,
+    pub bits: u32,
+    /// The whole step file's bytes per point.
+    pub bytes_per_point: f64,
+    /// Error of the hits against the exact surface, in spacings (silhouettes excluded).
+    pub rms: f64,
+    pub p99: f64,
+    pub angle_mean: f64,
+    /// |Δt| against the bake stored exactly, in spacings, over pixels both hit.
+    pub moved_p99: f64,
+    pub moved_max: f64,
+    /// Pixels hit in one and missed in the other.
+    pub differ: usize,
+    pub pixels: usize,
+}
+
+/// What `slosh bench precision` measured.
+#[derive(Debug, Clone)]
+pub struct PrecisionReport {
+    pub settings: Settings,
+    pub rows: Vec<Row>,
+}
+
+pub fn run(args: &Settings) -> Result<PrecisionReport> {
     let scenes = [
         (SceneKind::Sphere, 0.0),
         (SceneKind::Sphere, 0.1),
         (SceneKind::Torus, 0.0),
         (SceneKind::Tank, 0.0),
     ];
-    let mut table = String::new();
+    let mut rows = Vec::new();
     for (kind, noise) in scenes {
         let case = scenario(kind, args.points, 3, noise, args.size)?;
         // Each precision baked once, traced at every iteration count.
@@ -110,46 +139,75 @@ pub fn run(args: &Settings) -> Result<()> {
                         _ => differ += 1,
                     }
                 }
-                let max = moved.iter().copied().fold(0.0, f64::max);
-                let _ = writeln!(
-                    table,
-                    "| {} | {noise} | {iterations} | {bits} | {bytes_per_point:.1} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {differ} of {} |",
-                    case.name,
-                    m.rms,
-                    m.p99,
-                    m.angle_mean,
-                    percentile(moved, 0.99),
-                    max,
-                    traced.hits.len(),
-                );
+                let moved_max = moved.iter().copied().fold(0.0, f64::max);
+                rows.push(Row {
+                    scene: case.name.clone(),
+                    noise,
+                    iterations,
+                    bits: *bits,
+                    bytes_per_point,
+                    rms: m.rms,
+                    p99: m.p99,
+                    angle_mean: m.angle_mean,
+                    moved_p99: percentile(moved, 0.99),
+                    moved_max,
+                    differ,
+                    pixels: traced.hits.len(),
+                });
             }
             say!("{} noise {noise}, {iterations} iterations: done", case.name);
         }
     }
-    let bits: Vec<String> = args.bits.iter().map(u32::to_string).collect();
-    let report = format!(
-        "# Stored precision: mantissa bits against accuracy and bytes\n\n\
-         Written by `slosh bench precision --points {} --size {} --bits {}`. Each scene \
-         ({} particles, time step 3, normals from the scene) is baked with `--mantissa-bits` \
-         at each value (the initial fits' normals and coefficients and the data normals \
-         rounded to that many mantissa bits; positions, radii and reach stay exact), then read \
-         back and traced by the CPU tracer, the GPU's reference, at {}×{} pixels, with 1 and \
-         3 iterations. Distances are in particle spacings: the error of each hit against the \
-         exact surface (RMS and p99, silhouette pixels excluded), and |Δt| of each hit \
-         against the same bake stored exactly (23 bits, every pixel both hit). The tracer in \
-         f32 is held to 1e-3 spacing against the f64 oracle (`crates/bake/tests/bake.rs`). \
-         Bytes per point are the whole step file at the default zstd level (−1).\n\n\
-         | scene | noise | iterations | bits | B/pt | RMS to surface | p99 to surface | normal ° | \
-         \\|Δt\\| p99 vs 23 bits | \\|Δt\\| max vs 23 bits | hit/miss differ vs 23 bits |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n{table}",
-        args.points,
-        args.size,
-        bits.join(","),
-        args.points,
-        args.size,
-        args.size,
-    );
-    slosh_fileio::atomic_write(&args.out, report.as_bytes())?;
-    say!("wrote {}", args.out.display());
-    Ok(())
+    Ok(PrecisionReport {
+        settings: args.clone(),
+        rows,
+    })
+}
+
+impl Report for PrecisionReport {
+    fn markdown(&self) -> String {
+        let args = &self.settings;
+        let mut table = String::new();
+        for r in &self.rows {
+            let _ = writeln!(
+                table,
+                "| {} | {} | {} | {} | {:.1} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {} of {} |",
+                r.scene,
+                r.noise,
+                r.iterations,
+                r.bits,
+                r.bytes_per_point,
+                r.rms,
+                r.p99,
+                r.angle_mean,
+                r.moved_p99,
+                r.moved_max,
+                r.differ,
+                r.pixels,
+            );
+        }
+        let bits: Vec<String> = args.bits.iter().map(u32::to_string).collect();
+        format!(
+            "# Stored precision: mantissa bits against accuracy and bytes\n\n\
+             Written by `slosh bench precision --points {} --size {} --bits {}`. Each scene \
+             ({} particles, time step 3, normals from the scene) is baked with `--mantissa-bits` \
+             at each value (the initial fits' normals and coefficients and the data normals \
+             rounded to that many mantissa bits; positions, radii and reach stay exact), then read \
+             back and traced by the CPU tracer, the GPU's reference, at {}×{} pixels, with 1 and \
+             3 iterations. Distances are in particle spacings: the error of each hit against the \
+             exact surface (RMS and p99, silhouette pixels excluded), and |Δt| of each hit \
+             against the same bake stored exactly (23 bits, every pixel both hit). The tracer in \
+             f32 is held to 1e-3 spacing against the f64 oracle (`crates/bake/tests/bake.rs`). \
+             Bytes per point are the whole step file at the default zstd level (−1).\n\n\
+             | scene | noise | iterations | bits | B/pt | RMS to surface | p99 to surface | normal ° | \
+             \\|Δt\\| p99 vs 23 bits | \\|Δt\\| max vs 23 bits | hit/miss differ vs 23 bits |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|\n{table}",
+            args.points,
+            args.size,
+            bits.join(","),
+            args.points,
+            args.size,
+            args.size,
+        )
+    }
 }

@@ -1,0 +1,65 @@
+//! `slosh play` flags turned into the player's validated options.
+
+use anyhow::{Result, bail};
+use slosh_play::EngineOptions;
+use slosh_play::app::PlayOptions;
+
+use crate::cli::PlayArgs;
+
+fn up_axis(s: &str) -> Result<[f64; 3]> {
+    Ok(match s {
+        "x" | "X" => [1.0, 0.0, 0.0],
+        "y" | "Y" => [0.0, 1.0, 0.0],
+        "z" | "Z" => [0.0, 0.0, 1.0],
+        other => bail!("--up {other}: expected x, y or z"),
+    })
+}
+
+fn window(s: &str) -> Result<(f32, f32)> {
+    let (w, h) = super::render::parse_size(s)
+        .map_err(|_| anyhow::anyhow!("--window {s}: expected WxH, e.g. 1280x800"))?;
+    Ok((w as f32, h as f32))
+}
+
+/// The player's options from `slosh play`'s flags, every value checked.
+pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
+    if !args.dir.is_dir() {
+        bail!(
+            "{}: not a directory (give the --out directory of `slosh bake`)",
+            args.dir.display()
+        );
+    }
+    let budget = match args.budget {
+        Some(g) if g.is_finite() && g > 0.0 => Some((g * f64::from(1u32 << 30)) as u64),
+        Some(g) => bail!("--budget {g}: expected a positive number of GiB"),
+        None => None,
+    };
+    if !(0.25..=2.0).contains(&args.render_scale) {
+        bail!("--render-scale {}: expected 0.25 to 2", args.render_scale);
+    }
+    let mut engine = EngineOptions {
+        budget,
+        field: args.field.clone(),
+        load_delay: args.load_delay_ms.map(std::time::Duration::from_millis),
+        ..EngineOptions::default()
+    };
+    if let Some(n) = args.loaders {
+        engine.loaders = n.clamp(1, 64);
+    }
+    Ok(PlayOptions {
+        dir: args.dir.clone(),
+        adapter: args.adapter.clone(),
+        engine,
+        render_scale: args.render_scale,
+        up: args.up.as_deref().map(up_axis).transpose()?,
+        iterations: args.iterations.clamp(1, 8),
+        window: window(&args.window)?,
+        output: args.output.clone(),
+        log_frames: args.log_frames,
+        step_range: match args.field_range.as_str() {
+            "series" => false,
+            "step" => true,
+            other => bail!("--field-range {other}: expected series or step"),
+        },
+    })
+}
