@@ -13,6 +13,7 @@ mod render;
 
 use anyhow::Result;
 use clap::Parser;
+use slosh_bench::report::Report;
 use slosh_fileio::say;
 
 use crate::cli::{Cli, Command};
@@ -54,19 +55,68 @@ fn message(e: &anyhow::Error) -> String {
 fn run_bench(command: cli::BenchCommand) -> Result<()> {
     use cli::BenchCommand;
     use config::bench;
+    use slosh_bench::{bake, gpu, precision, scrub};
     match command {
-        BenchCommand::Accuracy(a) => slosh_bench::accuracy::run(&bench::accuracy(&a)),
-        BenchCommand::Bake(a) => slosh_bench::bake::run(&bench::bake(&a)),
+        BenchCommand::Accuracy(a) => accuracy(&bench::accuracy(&a)),
+        BenchCommand::Bake(a) => {
+            let settings = bench::bake(&a);
+            written(&settings.out, &bake::run(&settings)?, false)
+        }
         BenchCommand::Precision(a) => {
             let settings = bench::precision(&a);
-            let report = slosh_bench::precision::run(&settings)?;
-            slosh_bench::report::write(&settings.out, &report)?;
-            say!("wrote {}", settings.out.display());
-            Ok(())
+            written(&settings.out, &precision::run(&settings)?, false)
         }
-        BenchCommand::Gpu(a) => slosh_bench::gpu::run(&bench::gpu(&a)?),
-        BenchCommand::Scrub(a) => slosh_bench::scrub::run(&bench::scrub(&a)?),
+        BenchCommand::Gpu(a) => {
+            let settings = bench::gpu(&a)?;
+            written(&settings.out, &gpu::run(&settings)?, true)
+        }
+        BenchCommand::Scrub(a) => {
+            let settings = bench::scrub(&a)?;
+            written(&settings.out, &scrub::run(&settings)?, true)
+        }
     }
+}
+
+/// Writes a benchmark's report to `out`, then prints it (`echo`) or says where it went.
+fn written(out: &std::path::Path, report: &impl Report, echo: bool) -> Result<()> {
+    slosh_bench::report::write(out, report)?;
+    if echo {
+        slosh_fileio::stdout::say_text(&report.markdown());
+    } else {
+        say!("wrote {}", out.display());
+    }
+    Ok(())
+}
+
+/// `slosh bench accuracy`: the report, its JSON and plot where asked, or the SPH fixture.
+fn accuracy(settings: &slosh_bench::accuracy::Settings) -> Result<()> {
+    use slosh_bench::accuracy::Accuracy;
+    use slosh_bench::report::{write, write_bytes};
+    let json = |value: serde_json::Value| -> Result<()> {
+        match &settings.json {
+            Some(path) => write_bytes(path, serde_json::to_string_pretty(&value)?.as_bytes()),
+            None => Ok(()),
+        }
+    };
+    match slosh_bench::accuracy::run(settings)? {
+        Accuracy::Fixture(dir) => say!("wrote the fixture under {}", dir.display()),
+        Accuracy::SphOnly(report) => {
+            write(&settings.out, &report)?;
+            json(report.json())?;
+            say!("wrote {}", settings.out.display());
+        }
+        Accuracy::Full(report) => {
+            write(&settings.out, &report)?;
+            json(report.json())?;
+            report.write_plot(&settings.plot)?;
+            say!(
+                "wrote {} and {}",
+                settings.out.display(),
+                settings.plot.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 pub(crate) fn run(cli: Cli) -> Result<()> {

@@ -10,7 +10,7 @@ use slosh_mls::{Camera, NormalsMode, Params, Real, Surface, SurfaceParams, Trace
 use slosh_scenes::{DVec3, Scene, SceneKind, SceneSpec, TrueRay, Truth};
 
 use crate::plot::plot_png;
-use crate::report::write_bytes;
+use crate::report::Report;
 use crate::stats::percentile;
 
 /// What `slosh bench accuracy` measures and where it writes.
@@ -78,16 +78,17 @@ pub(crate) struct Render {
     orientation: slosh_mls::OrientationRepair,
 }
 
-#[derive(Debug, Default, Clone, Copy)]
-pub(crate) struct Metrics {
-    pub(crate) rms: f64,
-    pub(crate) p99: f64,
-    max: f64,
-    pub(crate) angle_mean: f64,
-    solver_rms: f64,
-    solver_p99: f64,
-    disagree_pct: f64,
-    us_per_ray: f64,
+/// A render against the truth and the converged solution, in spacings.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct Metrics {
+    pub rms: f64,
+    pub p99: f64,
+    pub max: f64,
+    pub angle_mean: f64,
+    pub solver_rms: f64,
+    pub solver_p99: f64,
+    pub disagree_pct: f64,
+    pub us_per_ray: f64,
 }
 
 pub(crate) fn scenario(
@@ -246,12 +247,14 @@ pub(crate) fn metrics(case: &Scenario, r: &Render, reference: &Render) -> Metric
     }
 }
 
-fn row(out: &mut String, case: &Scenario, label: &str, m: &Metrics) {
+fn row(out: &mut String, r: &MetricRow) {
+    let m = &r.metrics;
     let _ = writeln!(
         out,
-        "| {} | {} | {label} | {:.2e} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {:.2} | {:.2} |",
-        case.name,
-        case.noise,
+        "| {} | {} | {} | {:.2e} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {:.2} | {:.2} |",
+        r.scene,
+        r.noise,
+        r.setting,
         m.rms,
         m.p99,
         m.max,
@@ -268,10 +271,24 @@ const HEADER: &str = "| scene | noise | setting | RMS | p99 | max | normal ° | 
 /// Goals of the SPH comparison (issue 15): holes, false surface (%), p90 |Δt| (spacings).
 const SPH_GOALS: (f64, f64, f64) = (1.0, 5.0, 1.5);
 
-/// The SPH section: a table, the side-by-side images beside `plot`, and the goals' rows.
-fn sph_section(root: &Path, plot: &Path) -> Result<(String, String, Vec<crate::sph::SphResult>)> {
-    let mut out = String::new();
+/// Each SPH case under `root` compared with splashsurf, its side-by-side image written beside
+/// `plot`.
+fn sph_results(root: &Path, plot: &Path) -> Result<Vec<crate::sph::SphResult>> {
     let mut results = Vec::new();
+    for dir in crate::sph::cases(root)? {
+        let name = dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let image = plot.with_file_name(format!("sph-{name}.png"));
+        results.push(crate::sph::compare_case(&dir, Some(&image))?);
+    }
+    Ok(results)
+}
+
+/// The SPH section of a report (a table and the images) and the goals' rows.
+fn sph_markdown(results: &[crate::sph::SphResult]) -> (String, String) {
+    let mut out = String::new();
     let _ = writeln!(
         out,
         "\n## Real SPH data against splashsurf\n\n\
@@ -289,13 +306,7 @@ fn sph_section(root: &Path, plot: &Path) -> Result<(String, String, Vec<crate::s
         crate::sph::SPH_HEIGHT
     );
     let mut goals = String::new();
-    for dir in crate::sph::cases(root)? {
-        let name = dir
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let image = plot.with_file_name(format!("sph-{name}.png"));
-        let r = crate::sph::compare_case(&dir, Some(&image))?;
+    for r in results {
         let _ = writeln!(
             out,
             "| {} (t = {} s) | {} | {} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} | {} | {:.2} | {} |",
@@ -324,23 +335,139 @@ fn sph_section(root: &Path, plot: &Path) -> Result<(String, String, Vec<crate::s
             r.dt_p90,
             yes(r.holes_pct <= holes && r.false_pct <= false_pct && r.dt_p90 <= p90)
         );
-        results.push(r);
     }
     let _ = writeln!(
         out,
         "\nEach image: slosh | splashsurf | difference (red: holes, blue: false surface, grey: shared, darker with |Δt| up to a spacing)."
     );
-    for r in &results {
+    for r in results {
         let _ = writeln!(
             out,
             "\n![{} slosh, splashsurf, difference](img/sph-{}.png)",
             r.name, r.name
         );
     }
-    Ok((out, goals, results))
+    (out, goals)
 }
 
-pub fn run(args: &Settings) -> Result<()> {
+/// One render's metrics under one setting.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MetricRow {
+    pub scene: String,
+    pub noise: f64,
+    pub setting: String,
+    pub metrics: Metrics,
+}
+
+/// f32 against f64 on one scene and degree.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SingleRow {
+    pub scene: String,
+    pub noise: f64,
+    pub degree: u8,
+    /// Pixels both hit, those within 1e-3 spacing, the largest |Δt| (spacings).
+    pub shared: usize,
+    pub within: usize,
+    pub worst: f64,
+    /// Pixels one hit and the other missed.
+    pub differ: usize,
+    pub f32_us_per_ray: f64,
+    pub f64_us_per_ray: f64,
+}
+
+/// One scene with a fraction of its normals reversed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReversedRow {
+    pub scene: String,
+    pub points: usize,
+    pub reversed: f64,
+    pub metrics: Metrics,
+    pub spheres: usize,
+    pub flipped_points: usize,
+    pub patch_points: usize,
+    /// The RMS of the same scene with no normal reversed.
+    pub clean_rms: f64,
+}
+
+/// What `slosh bench accuracy` measured.
+#[derive(Debug, Clone)]
+pub struct AccuracyReport {
+    pub quick: bool,
+    /// Image side of the renders, and of the reversed-normals renders.
+    pub size: u32,
+    pub reversed_size: u32,
+    pub max_iterations: u32,
+    pub iterations: Vec<MetricRow>,
+    pub support: Vec<MetricRow>,
+    pub smoothing: Vec<MetricRow>,
+    pub single: Vec<SingleRow>,
+    pub reversed: Vec<ReversedRow>,
+    pub worst_converged: f64,
+    pub worst_one: f64,
+    pub worst_ratio: f64,
+    /// The real SPH cases, where `--sph` named a folder of them.
+    pub sph: Option<Vec<crate::sph::SphResult>>,
+    /// The plot's lines: RMS against µs per ray, per clean scene and degree.
+    pub plot: Vec<(String, Vec<(f64, f64)>)>,
+}
+
+/// The SPH cases alone (`--sph-only`).
+#[derive(Debug, Clone)]
+pub struct SphReport {
+    pub results: Vec<crate::sph::SphResult>,
+}
+
+/// What a `slosh bench accuracy` run made.
+#[derive(Debug, Clone)]
+pub enum Accuracy {
+    /// The SPH fixture the tests keep, written under this folder.
+    Fixture(PathBuf),
+    SphOnly(SphReport),
+    Full(AccuracyReport),
+}
+
+impl SphReport {
+    /// The values the JSON output holds.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!(self.results)
+    }
+}
+
+impl Report for SphReport {
+    fn markdown(&self) -> String {
+        let (section, goals) = sph_markdown(&self.results);
+        format!(
+            "# Accuracy on real SPH data\n\nWritten by `slosh bench accuracy --sph-only`.\n\n## Against the goals\n\n| goal | measured | met |\n|---|---|---|\n{goals}{section}"
+        )
+    }
+}
+
+impl AccuracyReport {
+    /// The f32 rays within 1e-3 spacing of f64, in %, and the hits compared.
+    fn single_within(&self) -> (f64, usize) {
+        let within: usize = self.single.iter().map(|r| r.within).sum();
+        let shared: usize = self.single.iter().map(|r| r.shared).sum();
+        (100.0 * within as f64 / shared.max(1) as f64, shared)
+    }
+
+    /// The values the JSON output holds.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "worst_converged_rms": self.worst_converged,
+            "worst_one_iteration_rms": self.worst_one,
+            "f32_within_pct": self.single_within().0,
+            "worst_reversed_rms_ratio": self.worst_ratio,
+            "sph": self.sph.clone().unwrap_or_default(),
+        })
+    }
+
+    /// The error-against-cost plot as a PNG.
+    pub fn write_plot(&self, path: &Path) -> Result<()> {
+        plot_png(path, &self.plot)
+    }
+}
+
+pub fn run(args: &Settings) -> Result<Accuracy> {
     if let (Some(root), Some(fixture)) = (&args.sph, &args.sph_fixture) {
         for dir in crate::sph::cases(root)? {
             let name = dir
@@ -361,21 +488,13 @@ pub fn run(args: &Settings) -> Result<()> {
             }
             crate::sph::write_reference_depth(&dir, &target.join("reference-depth.npy"))?;
         }
-        slosh_fileio::stdout::print(&format!("wrote the fixture under {}\n", fixture.display()))?;
-        return Ok(());
+        return Ok(Accuracy::Fixture(fixture.clone()));
     }
     if args.sph_only {
         let root = args.sph.as_deref().context("--sph-only needs --sph")?;
-        let (section, goals, results) = sph_section(root, &args.plot)?;
-        let report = format!(
-            "# Accuracy on real SPH data\n\nWritten by `slosh bench accuracy --sph-only`.\n\n## Against the goals\n\n| goal | measured | met |\n|---|---|---|\n{goals}{section}"
-        );
-        write_bytes(&args.out, report.as_bytes())?;
-        if let Some(json) = &args.json {
-            write_bytes(json, serde_json::to_string_pretty(&results)?.as_bytes())?;
-        }
-        slosh_fileio::stdout::print(&format!("wrote {}\n", args.out.display()))?;
-        return Ok(());
+        return Ok(Accuracy::SphOnly(SphReport {
+            results: sph_results(root, &args.plot)?,
+        }));
     }
     let size = if args.quick {
         args.size.min(32)
@@ -394,15 +513,15 @@ pub fn run(args: &Settings) -> Result<()> {
         }
     }
     let max_iter = if args.quick { 3 } else { 5 };
-    let mut out = String::new();
+    let metric_row = |c: &Scenario, setting: String, metrics: Metrics| MetricRow {
+        scene: c.name.clone(),
+        noise: c.noise,
+        setting,
+        metrics,
+    };
     let mut plot: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     let (mut worst_converged, mut worst_one) = (0.0f64, 0.0f64);
-
-    let _ = writeln!(
-        out,
-        "## Iterations and degree (mean normals, h = 1.5 × ρ₅₀, f64)\n"
-    );
-    out += HEADER;
+    let mut iteration_rows = Vec::new();
     for c in &cases {
         for degree in [2u8, 3] {
             let base = Config {
@@ -414,12 +533,11 @@ pub fn run(args: &Settings) -> Result<()> {
             for iterations in 1..=max_iter {
                 let cfg = Config { iterations, ..base };
                 let m = metrics(c, &render(c, &cfg)?, &reference);
-                row(
-                    &mut out,
+                iteration_rows.push(metric_row(
                     c,
-                    &format!("degree {degree}, {iterations} it."),
-                    &m,
-                );
+                    format!("degree {degree}, {iterations} it."),
+                    m,
+                ));
                 series.push((m.us_per_ray, m.rms));
                 if c.noise == 0.0 {
                     if iterations == 1 {
@@ -435,12 +553,7 @@ pub fn run(args: &Settings) -> Result<()> {
             }
         }
     }
-
-    let _ = writeln!(
-        out,
-        "\n## Support plane: mean normals (a) against covariance (b), degree 2, 3 iterations\n"
-    );
-    out += HEADER;
+    let mut support = Vec::new();
     for c in cases.iter().filter(|c| c.noise == 0.0) {
         for (mode, label) in [
             (NormalsMode::Mean, "(a) mean normals"),
@@ -451,15 +564,10 @@ pub fn run(args: &Settings) -> Result<()> {
                 ..Config::base()
             };
             let m = metrics(c, &render(c, &cfg)?, &reference(c, &cfg)?);
-            row(&mut out, c, label, &m);
+            support.push(metric_row(c, label.to_string(), m));
         }
     }
-
-    let _ = writeln!(
-        out,
-        "\n## Smoothing length h = scale × ρ₅₀ (the median ρ), degree 2, 3 iterations\n"
-    );
-    out += HEADER;
+    let mut smoothing = Vec::new();
     for c in cases.iter().filter(|c| c.noise == 0.0) {
         for h_scale in [1.0, 1.5, 2.5] {
             let cfg = Config {
@@ -467,16 +575,10 @@ pub fn run(args: &Settings) -> Result<()> {
                 ..Config::base()
             };
             let m = metrics(c, &render(c, &cfg)?, &reference(c, &cfg)?);
-            row(&mut out, c, &format!("h scale {h_scale}"), &m);
+            smoothing.push(metric_row(c, format!("h scale {h_scale}"), m));
         }
     }
-
-    let _ = writeln!(out, "\n## f32 against f64 (degree 2 and 3, 3 iterations)\n");
-    let _ = writeln!(
-        out,
-        "| scene | noise | degree | shared hits | |Δt| ≤ 1e-3 spacing | max |Δt| (spacings) | hit/miss differ | f32 µs/ray | f64 µs/ray |\n|---|---|---|---|---|---|---|---|---|"
-    );
-    let (mut within_all, mut shared_all) = (0usize, 0usize);
+    let mut single = Vec::new();
     for c in &cases {
         for degree in [2u8, 3] {
             let cfg = Config {
@@ -504,30 +606,20 @@ pub fn run(args: &Settings) -> Result<()> {
                     _ => differ += 1,
                 }
             }
-            within_all += within;
-            shared_all += shared;
-            let _ = writeln!(
-                out,
-                "| {} | {} | {degree} | {shared} | {:.3} % | {worst:.2e} | {differ} | {:.2} | {:.2} |",
-                c.name,
-                c.noise,
-                100.0 * within as f64 / shared.max(1) as f64,
-                r32.us_per_ray,
-                r64.us_per_ray
-            );
+            single.push(SingleRow {
+                scene: c.name.clone(),
+                noise: c.noise,
+                degree,
+                shared,
+                within,
+                worst,
+                differ,
+                f32_us_per_ray: r32.us_per_ray,
+                f64_us_per_ray: r64.us_per_ray,
+            });
         }
     }
-
-    let flip_size = if args.quick { size } else { size.max(256) };
-    let _ = writeln!(
-        out,
-        "\n## Reversed normals, repaired before use (degree 2, 5 iterations, {flip_size}×{flip_size})\n"
-    );
-    let _ = writeln!(
-        out,
-        "A fraction of the input normals reversed at random; the bake's orientation check (`docs/algorithm.md`, \"Orientation\") runs before anything uses them. RMS, p99 and max cover every hit, spurious ones included (silhouette pixels excluded). The image is not made here: `slosh render --iterations 5` of a 20,000-point torus (`slosh gen torus --flip-normals F`) baked before and after the check.\n\n![reversed normals, before and after](img/reversed-normals.png)\n\n\
-         | scene | reversed | RMS | p99 | max | normal ° | hit/miss % | droplet spheres | normals reversed back (in patches) | RMS / clean |\n|---|---|---|---|---|---|---|---|---|---|"
-    );
+    let reversed_size = if args.quick { size } else { size.max(256) };
     let mut worst_ratio = 0.0f64;
     let flip_scenes: &[(SceneKind, usize)] = if args.quick {
         &[(SceneKind::Sphere, 5000)]
@@ -538,6 +630,7 @@ pub fn run(args: &Settings) -> Result<()> {
             (SceneKind::Tank, 40_000),
         ]
     };
+    let mut reversed_rows = Vec::new();
     for &(kind, points) in flip_scenes {
         let cfg = Config {
             iterations: 5,
@@ -545,7 +638,7 @@ pub fn run(args: &Settings) -> Result<()> {
         };
         let mut clean_rms = 0.0;
         for reversed in [0.0, 0.1, 0.3] {
-            let c = scenario_reversed(kind, points, 0, 0.0, reversed, flip_size)?;
+            let c = scenario_reversed(kind, points, 0, 0.0, reversed, reversed_size)?;
             let r = render(&c, &cfg)?;
             let m = metrics(&c, &r, &r);
             if reversed == 0.0 {
@@ -553,77 +646,155 @@ pub fn run(args: &Settings) -> Result<()> {
             } else {
                 worst_ratio = worst_ratio.max(m.rms / clean_rms.max(f64::MIN_POSITIVE));
             }
+            reversed_rows.push(ReversedRow {
+                scene: c.name.clone(),
+                points,
+                reversed,
+                metrics: m,
+                spheres: r.spheres,
+                flipped_points: r.orientation.flipped_points,
+                patch_points: r.orientation.patch_points,
+                clean_rms,
+            });
+        }
+    }
+    let sph = args
+        .sph
+        .as_deref()
+        .map(|root| sph_results(root, &args.plot))
+        .transpose()?;
+    Ok(Accuracy::Full(AccuracyReport {
+        quick: args.quick,
+        size,
+        reversed_size,
+        max_iterations: max_iter,
+        iterations: iteration_rows,
+        support,
+        smoothing,
+        single,
+        reversed: reversed_rows,
+        worst_converged,
+        worst_one,
+        worst_ratio,
+        sph,
+        plot,
+    }))
+}
+
+impl Report for AccuracyReport {
+    fn markdown(&self) -> String {
+        let (size, max_iter) = (self.size, self.max_iterations);
+        let (worst_converged, worst_one, worst_ratio) =
+            (self.worst_converged, self.worst_one, self.worst_ratio);
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "## Iterations and degree (mean normals, h = 1.5 × ρ₅₀, f64)\n"
+        );
+        out += HEADER;
+        for r in &self.iterations {
+            row(&mut out, r);
+        }
+        let _ = writeln!(
+            out,
+            "\n## Support plane: mean normals (a) against covariance (b), degree 2, 3 iterations\n"
+        );
+        out += HEADER;
+        for r in &self.support {
+            row(&mut out, r);
+        }
+        let _ = writeln!(
+            out,
+            "\n## Smoothing length h = scale × ρ₅₀ (the median ρ), degree 2, 3 iterations\n"
+        );
+        out += HEADER;
+        for r in &self.smoothing {
+            row(&mut out, r);
+        }
+        let _ = writeln!(out, "\n## f32 against f64 (degree 2 and 3, 3 iterations)\n");
+        let _ = writeln!(
+            out,
+            "| scene | noise | degree | shared hits | |Δt| ≤ 1e-3 spacing | max |Δt| (spacings) | hit/miss differ | f32 µs/ray | f64 µs/ray |\n|---|---|---|---|---|---|---|---|---|"
+        );
+        for r in &self.single {
             let _ = writeln!(
                 out,
-                "| {} ({points} points) | {:.0} % | {:.2e} | {:.2e} | {:.2e} | {:.3} | {:.2} | {} | {} ({}) | {:.2} |",
-                c.name,
-                reversed * 100.0,
+                "| {} | {} | {} | {} | {:.3} % | {:.2e} | {} | {:.2} | {:.2} |",
+                r.scene,
+                r.noise,
+                r.degree,
+                r.shared,
+                100.0 * r.within as f64 / r.shared.max(1) as f64,
+                r.worst,
+                r.differ,
+                r.f32_us_per_ray,
+                r.f64_us_per_ray
+            );
+        }
+        let flip_size = self.reversed_size;
+        let _ = writeln!(
+            out,
+            "\n## Reversed normals, repaired before use (degree 2, 5 iterations, {flip_size}×{flip_size})\n"
+        );
+        let _ = writeln!(
+            out,
+            "A fraction of the input normals reversed at random; the bake's orientation check (`docs/algorithm.md`, \"Orientation\") runs before anything uses them. RMS, p99 and max cover every hit, spurious ones included (silhouette pixels excluded). The image is not made here: `slosh render --iterations 5` of a 20,000-point torus (`slosh gen torus --flip-normals F`) baked before and after the check.\n\n![reversed normals, before and after](img/reversed-normals.png)\n\n\
+             | scene | reversed | RMS | p99 | max | normal ° | hit/miss % | droplet spheres | normals reversed back (in patches) | RMS / clean |\n|---|---|---|---|---|---|---|---|---|---|"
+        );
+        for r in &self.reversed {
+            let m = &r.metrics;
+            let _ = writeln!(
+                out,
+                "| {} ({} points) | {:.0} % | {:.2e} | {:.2e} | {:.2e} | {:.3} | {:.2} | {} | {} ({}) | {:.2} |",
+                r.scene,
+                r.points,
+                r.reversed * 100.0,
                 m.rms,
                 m.p99,
                 m.max,
                 m.angle_mean,
                 m.disagree_pct,
                 r.spheres,
-                r.orientation.flipped_points,
-                r.orientation.patch_points,
-                m.rms / clean_rms.max(f64::MIN_POSITIVE)
+                r.flipped_points,
+                r.patch_points,
+                m.rms / r.clean_rms.max(f64::MIN_POSITIVE)
             );
         }
+        let (within_pct, shared_all) = self.single_within();
+        let within_all: usize = self.single.iter().map(|r| r.within).sum();
+        let summary = format!(
+            "# Accuracy of the MLS surface and its CPU tracer\n\n\
+             Written by `slosh bench accuracy{}` ({size}×{size} pixels per render). Distances are in units of the scene's \
+             mean particle spacing; *RMS, p99, max* are distances of hits to the **true** surface (modelling + solver error); \
+             *solver* is |t − t*| to the converged f64 MLS surface at the same settings (40 iterations, ε = 1e-10); *normal °* is \
+             the mean angle to the true normal; *hit/miss %* counts pixels where tracer and truth disagree, silhouette pixels \
+             (3×3 neighbourhoods with both) excluded. Costs are single-thread CPU µs per ray on the 2-core development machine, \
+             shared and noisy: compare them within this report only. Clean scenes are the tank surface particles, a 5000-point \
+             sphere and an 8000-point torus; noise is Gaussian with σ = 0.1 spacing.\n\n\
+             ## Against the goals\n\n\
+             | goal | measured | met |\n|---|---|---|\n\
+             | converged ({max_iter} it.) RMS ≤ 0.01 spacing on clean scenes | worst {worst_converged:.2e} | {} |\n\
+             | 1 iteration RMS ≤ 0.05 spacing on clean scenes | worst {worst_one:.2e} | {} |\n\
+             | f32 vs f64 |Δt| ≤ 1e-3 spacing for ≥ 99.9 % of rays | {:.3} % of {shared_all} shared hits | {} |\n\
+             | 10 % and 30 % of normals reversed: RMS ≤ 1.5 × the clean scene's | worst {worst_ratio:.2} × | {} |\n\n\
+             ![error against cost](img/accuracy.png)\n\n\
+             The plot shows RMS distance to the true surface against µs per ray, one point per iteration count (1 to {max_iter}) \
+             for each clean scene and degree.\n\n",
+            if self.quick { " --quick" } else { "" },
+            yes(worst_converged <= 0.01),
+            yes(worst_one <= 0.05),
+            within_pct,
+            yes(within_all as f64 >= 0.999 * shared_all as f64),
+            yes(worst_ratio <= 1.5),
+        );
+        let (sph_out, sph_goals) = self.sph.as_deref().map(sph_markdown).unwrap_or_default();
+        let summary = summary.replacen(
+            "\n\n![error against cost]",
+            &format!("\n{sph_goals}\n![error against cost]"),
+            1,
+        );
+        summary + &out + &sph_out
     }
-
-    let summary = format!(
-        "# Accuracy of the MLS surface and its CPU tracer\n\n\
-         Written by `slosh bench accuracy{}` ({size}×{size} pixels per render). Distances are in units of the scene's \
-         mean particle spacing; *RMS, p99, max* are distances of hits to the **true** surface (modelling + solver error); \
-         *solver* is |t − t*| to the converged f64 MLS surface at the same settings (40 iterations, ε = 1e-10); *normal °* is \
-         the mean angle to the true normal; *hit/miss %* counts pixels where tracer and truth disagree, silhouette pixels \
-         (3×3 neighbourhoods with both) excluded. Costs are single-thread CPU µs per ray on the 2-core development machine, \
-         shared and noisy: compare them within this report only. Clean scenes are the tank surface particles, a 5000-point \
-         sphere and an 8000-point torus; noise is Gaussian with σ = 0.1 spacing.\n\n\
-         ## Against the goals\n\n\
-         | goal | measured | met |\n|---|---|---|\n\
-         | converged ({max_iter} it.) RMS ≤ 0.01 spacing on clean scenes | worst {worst_converged:.2e} | {} |\n\
-         | 1 iteration RMS ≤ 0.05 spacing on clean scenes | worst {worst_one:.2e} | {} |\n\
-         | f32 vs f64 |Δt| ≤ 1e-3 spacing for ≥ 99.9 % of rays | {:.3} % of {shared_all} shared hits | {} |\n\
-         | 10 % and 30 % of normals reversed: RMS ≤ 1.5 × the clean scene's | worst {worst_ratio:.2} × | {} |\n\n\
-         ![error against cost](img/accuracy.png)\n\n\
-         The plot shows RMS distance to the true surface against µs per ray, one point per iteration count (1 to {max_iter}) \
-         for each clean scene and degree.\n\n",
-        if args.quick { " --quick" } else { "" },
-        yes(worst_converged <= 0.01),
-        yes(worst_one <= 0.05),
-        100.0 * within_all as f64 / shared_all.max(1) as f64,
-        yes(within_all as f64 >= 0.999 * shared_all as f64),
-        yes(worst_ratio <= 1.5),
-    );
-    let (sph_out, sph_goals, sph_results) = match &args.sph {
-        Some(root) => sph_section(root, &args.plot)?,
-        None => Default::default(),
-    };
-    let summary = summary.replacen(
-        "\n\n![error against cost]",
-        &format!("\n{sph_goals}\n![error against cost]"),
-        1,
-    );
-    let report = summary + &out + &sph_out;
-    write_bytes(&args.out, report.as_bytes())?;
-    if let Some(json) = &args.json {
-        let value = serde_json::json!({
-            "worst_converged_rms": worst_converged,
-            "worst_one_iteration_rms": worst_one,
-            "f32_within_pct": 100.0 * within_all as f64 / shared_all.max(1) as f64,
-            "worst_reversed_rms_ratio": worst_ratio,
-            "sph": sph_results,
-        });
-        write_bytes(json, serde_json::to_string_pretty(&value)?.as_bytes())?;
-    }
-    plot_png(&args.plot, &plot)?;
-    slosh_fileio::stdout::print(&format!(
-        "wrote {} and {}\n",
-        args.out.display(),
-        args.plot.display()
-    ))?;
-    Ok(())
 }
 
 fn yes(ok: bool) -> &'static str {

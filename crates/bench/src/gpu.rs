@@ -17,6 +17,7 @@ use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 
 use slosh_render::write_frame_png;
 
+use crate::report::Report;
 use crate::stats::median;
 
 /// A table of `slosh bench gpu`.
@@ -109,16 +110,42 @@ fn error(
     Some((d[d.len() / 2], d[(d.len() * 99 / 100).min(d.len() - 1)]))
 }
 
-struct Row {
-    table: &'static str,
-    scene: String,
-    size: (u32, u32),
-    degree: u8,
-    iterations: u32,
-    trace_ms: f64,
-    shade_ms: f64,
-    error: Option<(f64, f64)>,
-    thesis_fps: Option<f64>,
+/// One measured frame setup: GPU times of the passes, the error, the thesis's figure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    /// The thesis table it extends: "4.1", "4.5", "4.6" or "water".
+    pub table: &'static str,
+    pub scene: String,
+    pub size: (u32, u32),
+    pub degree: u8,
+    pub iterations: u32,
+    /// Medians over the timed frames.
+    pub trace_ms: f64,
+    pub shade_ms: f64,
+    /// Median and p99 distance to the truth (or the reference) in spacings.
+    pub error: Option<(f64, f64)>,
+    pub thesis_fps: Option<f64>,
+}
+
+/// One step's upload, timed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Upload {
+    pub label: String,
+    pub points: usize,
+    pub stats: slosh_render::UploadStats,
+}
+
+/// What `slosh bench gpu` measured.
+#[derive(Debug, Clone)]
+pub struct GpuReport {
+    /// The adapter, as `Gpu::describe` gives it.
+    pub adapter: String,
+    /// Timed frames per row.
+    pub frames: usize,
+    /// Whether the frames went to docs/img, which the report then links.
+    pub link_images: bool,
+    pub rows: Vec<Row>,
+    pub uploads: Vec<Upload>,
 }
 
 struct Runner<'a> {
@@ -201,7 +228,7 @@ const THESIS_POINTS_FPS: [(usize, [f64; 3]); 3] = [
     (100_000, [28.43, 1.47, 0.75]),
 ];
 
-pub fn run(args: &Settings) -> Result<()> {
+pub fn run(args: &Settings) -> Result<GpuReport> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
@@ -220,7 +247,7 @@ pub fn run(args: &Settings) -> Result<()> {
     };
     say!("GPU benchmark on {}", gpu.describe());
     let mut rows: Vec<Row> = Vec::new();
-    let mut uploads: Vec<(String, usize, slosh_render::UploadStats)> = Vec::new();
+    let mut uploads: Vec<Upload> = Vec::new();
     std::fs::create_dir_all(&args.images).ok();
     let wanted = |table| args.tables.is_empty() || args.tables.contains(&table);
 
@@ -285,7 +312,13 @@ pub fn run(args: &Settings) -> Result<()> {
     if wanted(Table::Points) {
         points_rows(args, &runner, &mut rows, &mut uploads)?;
     }
-    write_report(args, &gpu, &rows, &uploads)
+    Ok(GpuReport {
+        adapter: gpu.describe(),
+        frames: args.frames,
+        link_images: args.images == Path::new("docs/img"),
+        rows,
+        uploads,
+    })
 }
 
 /// Table 4.5 (the tank at four image sizes) and the water row.
@@ -361,7 +394,7 @@ fn points_rows(
     args: &Settings,
     runner: &Runner,
     rows: &mut Vec<Row>,
-    uploads: &mut Vec<(String, usize, slosh_render::UploadStats)>,
+    uploads: &mut Vec<Upload>,
 ) -> Result<()> {
     let counts: &[usize] = if !args.points.is_empty() {
         &args.points
@@ -384,7 +417,11 @@ fn points_rows(
             best.push(GpuStep::upload(runner.gpu, &runner.passes, &bench.file, None)?.upload);
         }
         best.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
-        uploads.push((bench.label.clone(), bench.points, best[2]));
+        uploads.push(Upload {
+            label: bench.label.clone(),
+            points: bench.points,
+            stats: best[2],
+        });
         let mut sizes = vec![(1280, 800)];
         if points >= 100_000 && !args.quick {
             sizes.push((1920, 1080));
@@ -479,94 +516,98 @@ fn write_goals(md: &mut String, rows: &[Row]) {
     md.push('\n');
 }
 
-fn write_report(
-    args: &Settings,
-    gpu: &Gpu,
-    rows: &[Row],
-    uploads: &[(String, usize, slosh_render::UploadStats)],
-) -> Result<()> {
-    let mut md = String::new();
-    let _ = writeln!(md, "# GPU results (`slosh bench gpu`)\n");
-    let _ = writeln!(
-        md,
-        "Measured on **{}**, with GPU timestamp queries around the trace and the shade pass: at least 10 warm-up frames and 0.5 s, then the median of {} frames. fps = 1000 / (trace + shade). Error: median and 99th percentile over hit pixels of the distance to the analytic surface in mean spacings (the bunny has no analytic surface: its error is |Δt| against 8 iterations of the same fit, in spacings).\n",
-        gpu.describe(),
-        args.frames
-    );
-    write_goals(&mut md, rows);
-    for (table, title) in [
-        (
-            "4.1",
-            "Thesis table 4.1: the bunny at 800×800 (thesis: OptiX, 35k-point bunny; here the 28k-vertex bunny.obj of the pymeshlab wheel)",
-        ),
-        ("4.5", "Thesis table 4.5: tank, image sizes"),
-        (
-            "water",
-            "Thesis figure 4.9: the water shader (reflection, refraction, shadows over a checkerboard; shade ms is the water pass with its secondary rays, which take each candidate's initial hit; thesis: 2 recursions, 4.59 s per frame)",
-        ),
-        (
-            "4.6",
-            "Thesis table 4.6: point counts at 1280×800 (sphere), extended to 1M points and 1920×1080",
-        ),
-    ] {
-        let rows: Vec<&Row> = rows.iter().filter(|r| r.table == table).collect();
-        if rows.is_empty() {
-            continue;
-        }
-        let _ = writeln!(md, "## {title}\n");
+impl Report for GpuReport {
+    fn markdown(&self) -> String {
+        let rows = &self.rows;
+        let mut md = String::new();
+        let _ = writeln!(md, "# GPU results (`slosh bench gpu`)\n");
         let _ = writeln!(
             md,
-            "| scene | image | degree | iterations | trace ms | shade ms | fps | thesis fps | speed-up | error median | error p99 |"
+            "Measured on **{}**, with GPU timestamp queries around the trace and the shade pass: at least 10 warm-up frames and 0.5 s, then the median of {} frames. fps = 1000 / (trace + shade). Error: median and 99th percentile over hit pixels of the distance to the analytic surface in mean spacings (the bunny has no analytic surface: its error is |Δt| against 8 iterations of the same fit, in spacings).\n",
+            self.adapter, self.frames
         );
-        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
-        for r in rows {
-            let fps = 1000.0 / (r.trace_ms + r.shade_ms);
-            let (thesis, speedup) = match r.thesis_fps {
-                Some(t) => (format!("{t:.2}"), format!("{:.0}×", fps / t)),
-                None => ("—".into(), "—".into()),
-            };
-            let (e50, e99) = r.error.map_or(("—".into(), "—".into()), |(a, b)| {
-                (format!("{a:.2e}"), format!("{b:.2e}"))
-            });
+        write_goals(&mut md, rows);
+        for (table, title) in [
+            (
+                "4.1",
+                "Thesis table 4.1: the bunny at 800×800 (thesis: OptiX, 35k-point bunny; here the 28k-vertex bunny.obj of the pymeshlab wheel)",
+            ),
+            ("4.5", "Thesis table 4.5: tank, image sizes"),
+            (
+                "water",
+                "Thesis figure 4.9: the water shader (reflection, refraction, shadows over a checkerboard; shade ms is the water pass with its secondary rays, which take each candidate's initial hit; thesis: 2 recursions, 4.59 s per frame)",
+            ),
+            (
+                "4.6",
+                "Thesis table 4.6: point counts at 1280×800 (sphere), extended to 1M points and 1920×1080",
+            ),
+        ] {
+            let rows: Vec<&Row> = rows.iter().filter(|r| r.table == table).collect();
+            if rows.is_empty() {
+                continue;
+            }
+            let _ = writeln!(md, "## {title}\n");
             let _ = writeln!(
                 md,
-                "| {} | {}×{} | {} | {} | {:.3} | {:.3} | {:.0} | {thesis} | {speedup} | {e50} | {e99} |",
-                r.scene, r.size.0, r.size.1, r.degree, r.iterations, r.trace_ms, r.shade_ms, fps
+                "| scene | image | degree | iterations | trace ms | shade ms | fps | thesis fps | speed-up | error median | error p99 |"
+            );
+            let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+            for r in rows {
+                let fps = 1000.0 / (r.trace_ms + r.shade_ms);
+                let (thesis, speedup) = match r.thesis_fps {
+                    Some(t) => (format!("{t:.2}"), format!("{:.0}×", fps / t)),
+                    None => ("—".into(), "—".into()),
+                };
+                let (e50, e99) = r.error.map_or(("—".into(), "—".into()), |(a, b)| {
+                    (format!("{a:.2e}"), format!("{b:.2e}"))
+                });
+                let _ = writeln!(
+                    md,
+                    "| {} | {}×{} | {} | {} | {:.3} | {:.3} | {:.0} | {thesis} | {speedup} | {e50} | {e99} |",
+                    r.scene,
+                    r.size.0,
+                    r.size.1,
+                    r.degree,
+                    r.iterations,
+                    r.trace_ms,
+                    r.shade_ms,
+                    fps
+                );
+            }
+            md.push('\n');
+        }
+        // The frames, linked relative to docs/ when they were written to the default docs/img.
+        if self.link_images {
+            let _ = writeln!(
+                md,
+                "## Frames\n\nThe bunny at 5 cubic iterations (800×800), the tank at 3 iterations (1600×800), and the tank in the water shader (1270×610):\n\n![bunny](img/bunny.png)\n\n![tank](img/tank.png)\n\n![tank, water shader](img/tank-water.png)\n"
             );
         }
-        md.push('\n');
-    }
-    // The frames, linked relative to docs/ when they were written to the default docs/img.
-    if args.images == Path::new("docs/img") {
         let _ = writeln!(
             md,
-            "## Frames\n\nThe bunny at 5 cubic iterations (800×800), the tank at 3 iterations (1600×800), and the tank in the water shader (1270×610):\n\n![bunny](img/bunny.png)\n\n![tank](img/tank.png)\n\n![tank, water shader](img/tank-water.png)\n"
+            "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree check), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
         );
-    }
-    let _ = writeln!(
-        md,
-        "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree check), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
-    );
-    let _ = writeln!(
-        md,
-        "| step | bytes on the GPU | bytes stored | host ms | record ms | GPU copy + passes ms | total ms | GB/s |"
-    );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
-    for (label, _, u) in uploads {
         let _ = writeln!(
             md,
-            "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
-            u.bytes,
-            u.stored_bytes,
-            u.host_seconds * 1e3,
-            u.record_seconds * 1e3,
-            u.gpu_seconds * 1e3,
-            u.total_seconds * 1e3,
-            u.gigabytes_per_second()
+            "| step | bytes on the GPU | bytes stored | host ms | record ms | GPU copy + passes ms | total ms | GB/s |"
         );
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+        for Upload {
+            label, stats: u, ..
+        } in &self.uploads
+        {
+            let _ = writeln!(
+                md,
+                "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                u.bytes,
+                u.stored_bytes,
+                u.host_seconds * 1e3,
+                u.record_seconds * 1e3,
+                u.gpu_seconds * 1e3,
+                u.total_seconds * 1e3,
+                u.gigabytes_per_second()
+            );
+        }
+        md
     }
-    slosh_fileio::atomic_write(&args.out, md.as_bytes())
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    slosh_fileio::stdout::say_text(&md);
-    Ok(())
 }

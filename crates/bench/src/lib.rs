@@ -1,5 +1,6 @@
 //! slosh's measurement harness: each benchmark takes its validated `Settings` (the binary maps
-//! flags to them), measures, and writes a markdown report beside the figures it quotes.
+//! flags to them), measures, and returns a [`report::Report`]: typed measurements with a
+//! markdown renderer, which the binary writes.
 //! Speed figures always stand next to the error of the same setting. Never part of what a
 //! user's bake, render or play runs; the library crates never depend on it.
 //!

@@ -18,6 +18,7 @@ use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest, Pace};
 use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
+use crate::report::Report;
 use crate::stats::{Spread, median, spread};
 
 /// What `slosh bench scrub` measures and where it writes.
@@ -147,12 +148,13 @@ fn show_timed(
 }
 
 /// One zstd level over a step's sections: stored bytes and single-core speeds.
-struct CodecRow {
-    level: i32,
-    raw: u64,
-    stored: u64,
-    encode_mb_s: f64,
-    decode_gb_s: f64,
+#[derive(Debug, Clone, PartialEq)]
+pub struct CodecRow {
+    pub level: i32,
+    pub raw: u64,
+    pub stored: u64,
+    pub encode_mb_s: f64,
+    pub decode_gb_s: f64,
 }
 
 /// Every compressed section of `path` re-encoded in chunks of `CHUNK_RAW` at each level (each
@@ -199,31 +201,33 @@ fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
     Ok(rows)
 }
 
-struct SeriesReport {
-    label: String,
-    points: usize,
-    steps: usize,
-    step_gpu_bytes: u64,
-    section_bytes: u64,
-    stored_bytes: u64,
-    host_ms: f64,
-    record_ms: f64,
-    copy_ms: f64,
-    pass_ms: f64,
+/// One series measured: a step's costs and floors, playback, jumps and the codec table.
+#[derive(Debug, Clone)]
+pub struct SeriesReport {
+    pub label: String,
+    pub points: usize,
+    pub steps: usize,
+    pub step_gpu_bytes: u64,
+    pub section_bytes: u64,
+    pub stored_bytes: u64,
+    pub host_ms: f64,
+    pub record_ms: f64,
+    pub copy_ms: f64,
+    pub pass_ms: f64,
     /// GPU time of the masks, leaves and widen passes (0 without timestamps).
-    each_pass_ms: [f64; 3],
-    read_ms: f64,
-    read_gbps: f64,
-    write_buffer_ms: f64,
-    trace_ms: f64,
-    sequential_steps_per_s: f64,
-    sequential: Spread,
+    pub each_pass_ms: [f64; 3],
+    pub read_ms: f64,
+    pub read_gbps: f64,
+    pub write_buffer_ms: f64,
+    pub trace_ms: f64,
+    pub sequential_steps_per_s: f64,
+    pub sequential: Spread,
     /// Medians of the loaders' host and record ms during sequential playback.
-    streaming_host_ms: f64,
-    streaming_record_ms: f64,
-    jumps_pool: Spread,
-    jumps_page_cache: Spread,
-    codecs: Vec<CodecRow>,
+    pub streaming_host_ms: f64,
+    pub streaming_record_ms: f64,
+    pub jumps_pool: Spread,
+    pub jumps_page_cache: Spread,
+    pub codecs: Vec<CodecRow>,
 }
 
 fn measure(
@@ -477,7 +481,19 @@ fn measure(
     })
 }
 
-pub fn run(args: &Settings) -> Result<()> {
+/// What `slosh bench scrub` measured.
+#[derive(Debug, Clone)]
+pub struct ScrubReport {
+    /// The adapter, as `Gpu::describe` gives it.
+    pub adapter: String,
+    pub cores: usize,
+    pub size: (u32, u32),
+    /// The settings it ran with.
+    pub settings: Settings,
+    pub series: Vec<SeriesReport>,
+}
+
+pub fn run(args: &Settings) -> Result<ScrubReport> {
     let size = if args.quick { (160, 100) } else { args.size };
     let counts: Vec<usize> = match (&args.points[..], args.quick) {
         ([], true) => vec![2_000],
@@ -528,158 +544,157 @@ pub fn run(args: &Settings) -> Result<()> {
         );
         reports.push(report);
     }
-    let md = markdown(&gpu, cores, size, args, &reports);
-    slosh_fileio::atomic_write(&args.out, md.as_bytes())
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    slosh_fileio::stdout::say_text(&md);
-    Ok(())
+    Ok(ScrubReport {
+        adapter: gpu.describe(),
+        cores,
+        size,
+        settings: args.clone(),
+        series: reports,
+    })
 }
 
-fn markdown(
-    gpu: &Gpu,
-    cores: usize,
-    size: (u32, u32),
-    args: &Settings,
-    reports: &[SeriesReport],
-) -> String {
-    let mut md = String::new();
-    let _ = writeln!(
-        md,
-        "# Scrubbing: the streaming engine\n\nWritten by `slosh bench scrub{}` on {} ({cores} host cores). Frames of {}×{} at 1 iteration (the baked polynomial), shaded; every file read from the page cache. {} loader threads; sequential playback and page-cache jumps stream through a pool of {} steps, pool jumps use a pool that holds the whole series. Latency is from the request (the timeline set to the step) to the frame that shows it finished on the GPU; frames run back to back meanwhile, each submitted and waited for. Each series starts with 2 s of frames, so that the GPU has left its idle clocks.\n",
-        if args.quick { " --quick" } else { "" },
-        gpu.describe(),
-        size.0,
-        size.1,
-        args.loaders.unwrap_or_else(slosh_play::default_loaders),
-        args.pool_steps.max(3)
-    );
-    let _ = writeln!(md, "## Throughput and latency\n");
-    let _ = writeln!(
-        md,
-        "| series | sequential steps/s | sequential latency p50 / p90 / p99 / max ms | jump in pool p50 / p99 ms | jump from page cache p50 / p99 / max ms | frame (trace + shade) ms |"
-    );
-    let _ = writeln!(md, "|---|---|---|---|---|---|");
-    for r in reports {
+impl Report for ScrubReport {
+    fn markdown(&self) -> String {
+        let (cores, size, args, reports) = (self.cores, self.size, &self.settings, &self.series);
+        let mut md = String::new();
         let _ = writeln!(
             md,
-            "| {} | {:.1} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} / {:.2} | {:.2} |",
-            r.label,
-            r.sequential_steps_per_s,
-            r.sequential.p50,
-            r.sequential.p90,
-            r.sequential.p99,
-            r.sequential.max,
-            r.jumps_pool.p50,
-            r.jumps_pool.p99,
-            r.jumps_page_cache.p50,
-            r.jumps_page_cache.p99,
-            r.jumps_page_cache.max,
-            r.trace_ms
+            "# Scrubbing: the streaming engine\n\nWritten by `slosh bench scrub{}` on {} ({cores} host cores). Frames of {}×{} at 1 iteration (the baked polynomial), shaded; every file read from the page cache. {} loader threads; sequential playback and page-cache jumps stream through a pool of {} steps, pool jumps use a pool that holds the whole series. Latency is from the request (the timeline set to the step) to the frame that shows it finished on the GPU; frames run back to back meanwhile, each submitted and waited for. Each series starts with 2 s of frames, so that the GPU has left its idle clocks.\n",
+            if args.quick { " --quick" } else { "" },
+            self.adapter,
+            size.0,
+            size.1,
+            args.loaders.unwrap_or_else(slosh_play::default_loaders),
+            args.pool_steps.max(3)
         );
-    }
-    let _ = writeln!(md, "\n### Goals (page cache, 1280×800, 1 iteration)\n");
-    let _ = writeln!(md, "| series | measure | goal | measured | met |");
-    let _ = writeln!(md, "|---|---|---|---|---|");
-    let met = |ok: bool| if ok { "yes" } else { "no" };
-    for r in reports {
-        // The goals: 1M points 60 steps/s and 33 ms; 100k points 240 and 8 ms.
-        let goal = match r.points {
-            p if p >= 1_000_000 => Some((60.0, 33.0)),
-            p if p >= 100_000 => Some((240.0, 8.0)),
-            _ => None,
-        };
-        if let Some((rate, jump)) = goal {
+        let _ = writeln!(md, "## Throughput and latency\n");
+        let _ = writeln!(
+            md,
+            "| series | sequential steps/s | sequential latency p50 / p90 / p99 / max ms | jump in pool p50 / p99 ms | jump from page cache p50 / p99 / max ms | frame (trace + shade) ms |"
+        );
+        let _ = writeln!(md, "|---|---|---|---|---|---|");
+        for r in reports {
             let _ = writeln!(
                 md,
-                "| {} | sequential steps/s | ≥ {rate} | {:.1} | {} |",
+                "| {} | {:.1} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} / {:.2} | {:.2} |",
                 r.label,
                 r.sequential_steps_per_s,
-                met(r.sequential_steps_per_s >= rate)
-            );
-            let _ = writeln!(
-                md,
-                "| {} | jump from page cache, p99 | ≤ {jump} ms | {:.2} ms | {} |",
-                r.label,
+                r.sequential.p50,
+                r.sequential.p90,
+                r.sequential.p99,
+                r.sequential.max,
+                r.jumps_pool.p50,
+                r.jumps_pool.p99,
+                r.jumps_page_cache.p50,
                 r.jumps_page_cache.p99,
-                met(r.jumps_page_cache.p99 <= jump)
+                r.jumps_page_cache.max,
+                r.trace_ms
             );
         }
-        let _ = writeln!(
-            md,
-            "| {} | jump to a resident step, p99 | ≤ 2 ms + frame ({:.2} ms) | {:.2} ms | {} |",
-            r.label,
-            2.0 + r.trace_ms,
-            r.jumps_pool.p99,
-            met(r.jumps_pool.p99 <= 2.0 + r.trace_ms)
-        );
-    }
-    let _ = writeln!(
-        md,
-        "\nJumps: {} in the pool and {} from the page cache per series (seed {}).\n",
-        reports.first().map_or(0, |r| r.jumps_pool.count),
-        reports.first().map_or(0, |r| r.jumps_page_cache.count),
-        args.seed
-    );
-    let _ = writeln!(md, "## A step, and the floors\n");
-    let _ = writeln!(
-        md,
-        "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
-    );
-    let _ = writeln!(
-        md,
-        "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | per-step passes ms (GPU: masks / leaves / widen) | fs::read ms (GB/s) | write_buffer ms |"
-    );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
-    for r in reports {
-        let _ = writeln!(
-            md,
-            "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2} / {:.2} / {:.2}) | {:.2} ({:.1}) | {:.2} |",
-            r.label,
-            r.section_bytes,
-            r.step_gpu_bytes,
-            r.stored_bytes,
-            r.host_ms,
-            r.record_ms,
-            r.streaming_host_ms,
-            r.streaming_record_ms,
-            r.copy_ms,
-            r.pass_ms,
-            r.each_pass_ms[0],
-            r.each_pass_ms[1],
-            r.each_pass_ms[2],
-            r.read_ms,
-            r.read_gbps,
-            r.write_buffer_ms
-        );
-    }
-    let _ = writeln!(
-        md,
-        "\nSteps per series: {}.",
-        reports.first().map_or(0, |r| r.steps)
-    );
-    let _ = writeln!(
-        md,
-        "\n## Codec\n\nThe compressed sections of each series' first step (their filters kept: byte shuffle, word delta) re-encoded with zstd at each level in chunks of 1 MiB, then decoded on one core. Bakes use level -1 by default.\n"
-    );
-    let _ = writeln!(
-        md,
-        "| series | zstd level | raw bytes | stored bytes | ratio | encode MB/s per core | decode GB/s per core |"
-    );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
-    for r in reports {
-        for c in &r.codecs {
+        let _ = writeln!(md, "\n### Goals (page cache, 1280×800, 1 iteration)\n");
+        let _ = writeln!(md, "| series | measure | goal | measured | met |");
+        let _ = writeln!(md, "|---|---|---|---|---|");
+        let met = |ok: bool| if ok { "yes" } else { "no" };
+        for r in reports {
+            // The goals: 1M points 60 steps/s and 33 ms; 100k points 240 and 8 ms.
+            let goal = match r.points {
+                p if p >= 1_000_000 => Some((60.0, 33.0)),
+                p if p >= 100_000 => Some((240.0, 8.0)),
+                _ => None,
+            };
+            if let Some((rate, jump)) = goal {
+                let _ = writeln!(
+                    md,
+                    "| {} | sequential steps/s | ≥ {rate} | {:.1} | {} |",
+                    r.label,
+                    r.sequential_steps_per_s,
+                    met(r.sequential_steps_per_s >= rate)
+                );
+                let _ = writeln!(
+                    md,
+                    "| {} | jump from page cache, p99 | ≤ {jump} ms | {:.2} ms | {} |",
+                    r.label,
+                    r.jumps_page_cache.p99,
+                    met(r.jumps_page_cache.p99 <= jump)
+                );
+            }
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {} | {:.2} | {:.0} | {:.2} |",
+                "| {} | jump to a resident step, p99 | ≤ 2 ms + frame ({:.2} ms) | {:.2} ms | {} |",
                 r.label,
-                c.level,
-                c.raw,
-                c.stored,
-                c.raw as f64 / c.stored.max(1) as f64,
-                c.encode_mb_s,
-                c.decode_gb_s
+                2.0 + r.trace_ms,
+                r.jumps_pool.p99,
+                met(r.jumps_pool.p99 <= 2.0 + r.trace_ms)
             );
         }
+        let _ = writeln!(
+            md,
+            "\nJumps: {} in the pool and {} from the page cache per series (seed {}).\n",
+            reports.first().map_or(0, |r| r.jumps_pool.count),
+            reports.first().map_or(0, |r| r.jumps_page_cache.count),
+            args.seed
+        );
+        let _ = writeln!(md, "## A step, and the floors\n");
+        let _ = writeln!(
+            md,
+            "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
+        );
+        let _ = writeln!(
+            md,
+            "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | per-step passes ms (GPU: masks / leaves / widen) | fs::read ms (GB/s) | write_buffer ms |"
+        );
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
+        for r in reports {
+            let _ = writeln!(
+                md,
+                "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2} / {:.2} / {:.2}) | {:.2} ({:.1}) | {:.2} |",
+                r.label,
+                r.section_bytes,
+                r.step_gpu_bytes,
+                r.stored_bytes,
+                r.host_ms,
+                r.record_ms,
+                r.streaming_host_ms,
+                r.streaming_record_ms,
+                r.copy_ms,
+                r.pass_ms,
+                r.each_pass_ms[0],
+                r.each_pass_ms[1],
+                r.each_pass_ms[2],
+                r.read_ms,
+                r.read_gbps,
+                r.write_buffer_ms
+            );
+        }
+        let _ = writeln!(
+            md,
+            "\nSteps per series: {}.",
+            reports.first().map_or(0, |r| r.steps)
+        );
+        let _ = writeln!(
+            md,
+            "\n## Codec\n\nThe compressed sections of each series' first step (their filters kept: byte shuffle, word delta) re-encoded with zstd at each level in chunks of 1 MiB, then decoded on one core. Bakes use level -1 by default.\n"
+        );
+        let _ = writeln!(
+            md,
+            "| series | zstd level | raw bytes | stored bytes | ratio | encode MB/s per core | decode GB/s per core |"
+        );
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+        for r in reports {
+            for c in &r.codecs {
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {} | {} | {:.2} | {:.0} | {:.2} |",
+                    r.label,
+                    c.level,
+                    c.raw,
+                    c.stored,
+                    c.raw as f64 / c.stored.max(1) as f64,
+                    c.encode_mb_s,
+                    c.decode_gb_s
+                );
+            }
+        }
+        md
     }
-    md
 }
