@@ -1,0 +1,320 @@
+//! What `slosh bench bake` measured, row by row, and its markdown.
+
+use std::fmt::Write as _;
+
+use super::{STAGE_COLUMNS, Settings};
+use crate::report::Report;
+
+/// One size's bake by stage, beside the bare core and the thesis (seconds).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StageRow {
+    pub points: usize,
+    /// kNN + radii, neighbour lists, initial fits, droplets, BVH, order + sections, encode.
+    pub stages: [f64; 7],
+    pub total: f64,
+    pub bare: f64,
+    /// The thesis's kNN, MLS and total seconds for this size, where it has them.
+    pub thesis: Option<(f64, f64, f64)>,
+}
+
+/// One size beside splashsurf: slosh's seconds, and the peer's seconds and triangles where
+/// it ran.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeerRow {
+    pub points: usize,
+    pub total: f64,
+    pub peer: Option<(f64, u64)>,
+}
+
+/// One size's stored bytes: the file, and each section's stored and raw bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SizeRow {
+    pub points: usize,
+    pub file_bytes: u64,
+    pub sections: Vec<(String, u64, u64)>,
+}
+
+/// One size's load times from the page cache (seconds).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadRow {
+    pub points: usize,
+    pub open: f64,
+    pub load: f64,
+    /// Raw bytes of every section.
+    pub raw_bytes: u64,
+    pub load_uncompressed: f64,
+    pub verify: f64,
+    pub cpu_ready: f64,
+}
+
+/// One section under one encoding: sizes and single-thread seconds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EncodingRow {
+    pub section: String,
+    pub raw_bytes: usize,
+    pub encoding: String,
+    pub chosen: bool,
+    pub stored_bytes: usize,
+    pub compress: f64,
+    pub decompress: f64,
+}
+
+/// One size on one thread count: each `STAGE_COLUMNS` stage and the total (seconds), and
+/// the total on the fewest threads.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScalingRow {
+    pub points: usize,
+    pub threads: usize,
+    pub stages: Vec<f64>,
+    pub total: f64,
+    pub fewest_threads_total: f64,
+}
+
+/// One size's series through the batch driver, beside one step alone (seconds).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SeriesRow {
+    pub points: usize,
+    pub jobs: usize,
+    pub wall: f64,
+    pub per_step: f64,
+    pub one_step: f64,
+}
+
+/// What `slosh bench bake` measured.
+#[derive(Debug, Clone)]
+pub struct BakeReport {
+    pub settings: Settings,
+    /// rayon's threads, and the machine's cores.
+    pub threads: usize,
+    pub cores: usize,
+    pub stages: Vec<StageRow>,
+    pub peers: Vec<PeerRow>,
+    pub sizes: Vec<SizeRow>,
+    pub loads: Vec<LoadRow>,
+    /// The size whose sections the encodings table measures.
+    pub encodings_points: usize,
+    pub encodings: Vec<EncodingRow>,
+    pub scaling: Vec<ScalingRow>,
+    pub series: Vec<SeriesRow>,
+}
+
+impl Report for BakeReport {
+    fn markdown(&self) -> String {
+        let args = &self.settings;
+        let mut md = String::new();
+        let threads = self.threads;
+        let _ = writeln!(
+            md,
+            "# Bake speed, size and load time\n\nWritten by `slosh bench bake{}` on this machine ({threads} threads). \
+             Point sets are sphere surfaces with normals from `crates/scenes` (every particle a surface particle); \
+             default parameters (k 6, h-scale 1.5, neighbour cap 128, quadratic, zstd level 1). Times are medians of \
+             {} runs (1 at 1M points), wall clock; the bare baseline and the bake alternate run by run so that \
+             their ratio compares like with like on this shared machine.\n",
+            if args.quick { " --quick" } else { "" },
+            args.runs
+        );
+        let _ = writeln!(md, "## Stages per step\n");
+        let _ = writeln!(
+            md,
+            "| points | read | kNN + radii | neighbour lists | initial fits | droplets | BVH | order + sections | compress + encode | **total** | bare kNN + lists + fits | total / bare | thesis kNN | thesis MLS | thesis total | speed-up |"
+        );
+        let _ = writeln!(
+            md,
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        );
+        let ms = |s: f64| format!("{:.1} ms", s * 1e3);
+        for r in &self.stages {
+            let [knn, lists, fits, droplets, bvh, sections, encode] = r.stages;
+            let _ = writeln!(
+                md,
+                "| {} | (in memory) | {} | {} | {} | {} | {} | {} | {} | **{}** | {} | {:.2} | {} | {} | {} | {} |",
+                r.points,
+                ms(knn),
+                ms(lists),
+                ms(fits),
+                ms(droplets),
+                ms(bvh),
+                ms(sections),
+                ms(encode),
+                ms(r.total),
+                ms(r.bare),
+                r.total / r.bare,
+                r.thesis.map_or("".into(), |t| format!("{:.3} s", t.0)),
+                r.thesis.map_or("".into(), |t| format!("{:.3} s", t.1)),
+                r.thesis.map_or("".into(), |t| format!("{:.3} s", t.2)),
+                r.thesis
+                    .map_or("".into(), |t| format!("{:.0}×", t.2 / r.total)),
+            );
+        }
+        let mut peer_rows = String::new();
+        for r in &self.peers {
+            let n = r.points;
+            let rate = |s: f64| format!("{:.0}k", n as f64 / s / 1e3);
+            let _ = match r.peer {
+                Some((seconds, triangles)) => writeln!(
+                    peer_rows,
+                    "| {n} | {:.3} s | {} | {seconds:.3} s ({triangles} triangles) | {} | {:.2}× |",
+                    r.total,
+                    rate(r.total),
+                    rate(seconds),
+                    seconds / r.total
+                ),
+                None => writeln!(
+                    peer_rows,
+                    "| {n} | {:.3} s | {} | not run: python3 cannot import pysplashsurf (pip install pysplashsurf==0.14.1) | — | — |",
+                    r.total,
+                    rate(r.total)
+                ),
+            };
+        }
+        let _ = writeln!(
+            md,
+            "\n*bare* is `Surface::build` alone (kiddo kNN and radii, neighbour lists, initial fits) in the same run; \
+             *total* adds selection, recentring, Morton order, droplets, BVH and section encoding (compression included). \
+             The thesis's rows are its table 4.7 (sloshing tank, 50 nearest neighbours, quadratic; 2012 CPU), \
+             its *total* including its OptiX scene graph and context compilation, which slosh does not need: \
+             a slosh step is ready when its sections are decoded (next table).\n"
+        );
+        let _ = writeln!(
+            md,
+            "## Beside the peer: splashsurf on the same particles and cores\n\n\
+             splashsurf (pysplashsurf 0.14.1, the field's standard SPH surface reconstruction) turns the same sphere particles \
+             into a triangle mesh on the same machine and threads: particle radius half the mean spacing, smoothing length 2r, \
+             marching-cubes cells 0.5r, iso 0.6 (given in particle radii, which pysplashsurf takes despite its docstring). The \
+             jobs differ (a memory-mappable cache of MLS balls and a BVH against a mesh), but each is the step that turns a \
+             step's particles into a viewable surface. Medians as above; the peer runs in its own process after slosh.\n\n\
+             | points | slosh bake | slosh points/s | splashsurf | splashsurf points/s | slosh faster by |\n|---|---|---|---|---|---|\n{peer_rows}"
+        );
+        md += &self.scaling_markdown();
+        md += &self.series_markdown();
+        let mut size_rows = String::new();
+        for r in &self.sizes {
+            let per = |b: u64| b as f64 / r.points as f64;
+            let mut cells = String::new();
+            for (name, stored, raw) in &r.sections {
+                let _ = write!(
+                    cells,
+                    "{name}: {:.1} ({:.1} raw); ",
+                    per(*stored),
+                    per(*raw)
+                );
+            }
+            let _ = writeln!(
+                size_rows,
+                "| {} | {:.1} | {cells} |",
+                r.points,
+                per(r.file_bytes)
+            );
+        }
+        let _ = writeln!(
+            md,
+            "## Stored bytes per point\n\n| points | total B/pt | per section: stored (raw) B/pt |\n|---|---|---|\n{size_rows}"
+        );
+        let mut load_rows = String::new();
+        for r in &self.loads {
+            let _ = writeln!(
+                load_rows,
+                "| {} | {:.2} ms | {:.2} ms | {:.2} GB/s | {:.2} ms | {:.1} ms | {:.1} ms |",
+                r.points,
+                r.open * 1e3,
+                r.load * 1e3,
+                r.raw_bytes as f64 / r.load / 1e9,
+                r.load_uncompressed * 1e3,
+                r.verify * 1e3,
+                r.cpu_ready * 1e3
+            );
+        }
+        let _ = writeln!(
+            md,
+            "## Load time (file in the page cache)\n\n| points | open (map + checks) | open + decode every section into ready buffers | effective rate (raw bytes) | same, written with `--compress none` | open + full verify | open + CPU tracer structures |\n|---|---|---|---|---|---|---|\n{load_rows}"
+        );
+        let n = self.encodings_points;
+        let _ = writeln!(
+            md,
+            "## Section encodings ({n} points, zstd level 1)\n\nRatio = raw / stored; speeds are raw bytes per second, single thread, median of 5.\n\n| section | raw B/pt | encoding | ratio | compress GB/s | decompress GB/s |\n|---|---|---|---|---|---|"
+        );
+        for e in &self.encodings {
+            let mark = if e.chosen { " (chosen)" } else { "" };
+            let _ = writeln!(
+                md,
+                "| {} | {:.1} | {}{mark} | {:.2} | {:.2} | {:.2} |",
+                e.section,
+                e.raw_bytes as f64 / n as f64,
+                e.encoding,
+                e.raw_bytes as f64 / e.stored_bytes.max(1) as f64,
+                e.raw_bytes as f64 / e.compress / 1e9,
+                e.raw_bytes as f64 / e.decompress / 1e9
+            );
+        }
+        md
+    }
+}
+
+impl BakeReport {
+    fn scaling_markdown(&self) -> String {
+        let cores = self.cores;
+        let mut scaling = String::new();
+        let _ = writeln!(
+            scaling,
+            "## Scaling with threads\n\nEach step baked and encoded on a rayon pool of that many threads \
+             ({cores} cores here); medians of {} runs (1 at 1M points and above). Speed-up is against \
+             the fewest threads of the same size.\n",
+            self.settings.runs
+        );
+        let heads: Vec<&str> = STAGE_COLUMNS.iter().map(|c| c.0).collect();
+        let _ = writeln!(
+            scaling,
+            "| points | threads | {} | **total** | points/s | speed-up |\n|{}",
+            heads.join(" | "),
+            "---|".repeat(heads.len() + 5)
+        );
+        for r in &self.scaling {
+            let cells: Vec<String> = r
+                .stages
+                .iter()
+                .map(|s| format!("{:.1} ms", s * 1e3))
+                .collect();
+            let _ = writeln!(
+                scaling,
+                "| {} | {} | {} | **{:.1} ms** | {:.0}k | {:.2}× |",
+                r.points,
+                r.threads,
+                cells.join(" | "),
+                r.total * 1e3,
+                r.points as f64 / r.total / 1e3,
+                r.fewest_threads_total / r.total
+            );
+        }
+        scaling
+    }
+
+    fn series_markdown(&self) -> String {
+        let mut series = String::new();
+        if self.settings.series == 0 {
+            return series;
+        }
+        let _ = writeln!(
+            series,
+            "\n## A series against one step alone\n\n{} steps of the moving sphere baked by the batch driver \
+             as `slosh bake` runs it (generated in memory instead of read; compressed, verified and written \
+             to a temporary directory), with the `--jobs` it would choose here, on all {} cores. \
+             *One step* is the same size's step alone on all cores, from the first table (baked and encoded, \
+             not verified or written).\n\n| points | jobs | wall | per step | points/s | one step | per step / one step |\n|---|---|---|---|---|---|---|",
+            self.settings.series, self.cores
+        );
+        for r in &self.series {
+            let _ = writeln!(
+                series,
+                "| {} | {} | {:.2} s | {:.1} ms | {:.0}k | {:.1} ms | {:.2}× |",
+                r.points,
+                r.jobs,
+                r.wall,
+                r.per_step * 1e3,
+                r.points as f64 / r.per_step / 1e3,
+                r.one_step * 1e3,
+                r.per_step / r.one_step
+            );
+        }
+        series
+    }
+}
