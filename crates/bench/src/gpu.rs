@@ -18,7 +18,7 @@ use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 use slosh_render::write_frame_png;
 
 use crate::report::Report;
-use crate::stats::median;
+use crate::stats::{median, spread};
 
 /// A table of `slosh bench gpu`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -106,8 +106,8 @@ fn error(
     if d.is_empty() {
         return None;
     }
-    d.sort_by(f64::total_cmp);
-    Some((d[d.len() / 2], d[(d.len() * 99 / 100).min(d.len() - 1)]))
+    let spread = spread(d);
+    Some((spread.p50, spread.p99))
 }
 
 /// One measured frame setup: GPU times of the passes, the error, the thesis's figure.
