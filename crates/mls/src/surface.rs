@@ -547,7 +547,9 @@ fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
 /// fits on noisy data ill-conditioned in f32 (`docs/accuracy.md`, f32 against f64).
 const H_QUANTILE: f64 = 0.5;
 
-/// The `q` quantile of `values` (nearest rank; 0 for none).
+/// The `q` quantile of `values`: the ⌊q·n⌋-th smallest, counting from 0 (for the median of
+/// an even count, the upper of the two middle values); 0 for none. The bake's rule for h
+/// (docs/algorithm.md), not a statistic of measurements (`slosh_bench::stats`).
 fn quantile(values: &[f64], q: f64) -> f64 {
     if values.is_empty() {
         return 0.0;
