@@ -11,7 +11,7 @@ use slosh_cache::{
     SectionEntry, SeriesKey, names, parse_step_file_name,
 };
 
-use crate::cli::InspectArgs;
+use crate::config::inspect::InspectConfig;
 use slosh_fileio::stdout::print;
 
 #[derive(Debug, Serialize)]
@@ -302,7 +302,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
     Ok(rec)
 }
 
-fn inspect_file(path: &Path, args: &InspectArgs) -> Result<bool> {
+fn inspect_file(path: &Path, args: &InspectConfig) -> Result<bool> {
     let file = CacheFile::open(path)?;
     if let Some(i) = args.point {
         let rec = point_record(&file, i)?;
@@ -377,7 +377,7 @@ struct DirReport {
     failed: usize,
 }
 
-fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
+fn inspect_dir(dir: &Path, args: &InspectConfig) -> Result<bool> {
     let mut files: Vec<(usize, PathBuf)> = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot list", dir.display()))?
         .filter_map(|e| e.ok())
@@ -543,11 +543,8 @@ fn inspect_dir(dir: &Path, args: &InspectArgs) -> Result<bool> {
     Ok(report.failed == 0)
 }
 
-pub fn run(args: &InspectArgs) -> Result<()> {
+pub fn run(args: &InspectConfig) -> Result<()> {
     let ok = if args.path.is_dir() {
-        if args.point.is_some() {
-            bail!("--point needs a step file, not a directory");
-        }
         inspect_dir(&args.path, args)?
     } else {
         inspect_file(&args.path, args)?

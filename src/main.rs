@@ -125,10 +125,10 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Bench(bench) => run_bench(bench),
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
-        Command::Inspect(args) => inspect::run(&args),
+        Command::Inspect(args) => inspect::run(&config::inspect::InspectConfig::from_args(&args)?),
         Command::Render(args) => render::run(&config::render::RenderConfig::from_args(&args)?),
         Command::Play(args) => play::play(&args),
-        Command::Demo(args) => play::demo(&args),
+        Command::Demo(args) => play::demo(&config::demo::DemoConfig::from_args(&args)?),
         Command::Info(args) => {
             let mut case = slosh_ensight::Case::open(&args.case)?;
             case.set_byte_order(args.byte_order.map(Into::into));

@@ -2,28 +2,19 @@
 //! render frames where there is no display).
 
 use slosh_fileio::say;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Parser;
 use slosh_play::app::run as run_player;
 
-use crate::cli::{Cli, DemoArgs, PlayArgs};
+use crate::cli::{Cli, PlayArgs};
+use crate::config::demo::DemoConfig;
 use crate::config::play::play_options;
 use crate::config::render::{RenderConfig, ViewFlags};
 
 pub fn play(args: &PlayArgs) -> Result<()> {
     Ok(run_player(play_options(args)?)?)
-}
-
-/// `$XDG_CACHE_HOME/slosh/demo`, else `~/.cache/slosh/demo`.
-fn demo_dir() -> Result<PathBuf> {
-    let base = std::env::var_os("XDG_CACHE_HOME")
-        .map(PathBuf::from)
-        .filter(|p| p.is_absolute())
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-        .context("neither XDG_CACHE_HOME nor HOME is set: give --dir")?;
-    Ok(base.join("slosh").join("demo"))
 }
 
 /// Runs a `slosh` command line in this process.
@@ -44,14 +35,8 @@ fn demo_ready(cache: &Path, steps: usize) -> bool {
         .is_ok_and(|m| m.steps.len() == steps && m.missing().is_empty())
 }
 
-pub fn demo(args: &DemoArgs) -> Result<()> {
-    if args.steps < 2 || args.points < 100 {
-        bail!("--steps must be at least 2 and --points at least 100");
-    }
-    let root = match &args.dir {
-        Some(d) => d.clone(),
-        None => demo_dir()?,
-    };
+pub fn demo(args: &DemoConfig) -> Result<()> {
+    let root = args.root.clone();
     let case_dir = root.join("case");
     let cache = root.join("cache");
     // One demo prepares the directory at a time: another waits, then finds it ready (two
@@ -139,11 +124,7 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
     } else if !args.headless {
         say!("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): rendering frames instead");
     }
-    headless(
-        &cache,
-        &root.join("frames"),
-        args.frames.clamp(1, args.steps),
-    )
+    headless(&cache, &root.join("frames"), args.frames)
 }
 
 /// A short sequence of frames, on the GPU where there is one, else the CPU tracer.

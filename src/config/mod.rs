@@ -1,6 +1,8 @@
 //! Validated settings built from parsed flags: every check on user input happens here, once.
 
 pub mod bench;
+pub mod demo;
+pub mod inspect;
 pub mod play;
 pub mod render;
 
