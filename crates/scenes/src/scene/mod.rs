@@ -1,22 +1,31 @@
 //! Scenes: what they are, how they move, and how they are sampled into particles.
 
-use std::f64::consts::PI;
 use std::str::FromStr;
 
-use glam::{DMat3, DVec3};
-use rand::{Rng, SeedableRng};
+use glam::DVec3;
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::sampling::{ellipsoid_area, fibonacci_sphere, fibonacci_torus, torus_area};
 use crate::truth::{Truth, Wave};
 
+mod bodies;
 mod flat;
 mod hard;
 mod tank;
 
-use flat::square_points;
-use tank::{TANK, tank_spacing, tank_waves};
+/// Scenes that share a module: how they are sampled, spaced and what their truth is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Family {
+    /// Closed bodies: sphere, torus, ellipsoid (`bodies.rs`).
+    Body,
+    /// The sloshing tank, with or without droplets (`tank.rs`).
+    Tank,
+    /// Flat squares: the thin sheet and the plane (`flat.rs`).
+    Flat,
+}
+
+use tank::{tank_spacing, tank_waves};
 
 /// Gravity used by the tank and the droplets (m/s²).
 pub const GRAVITY: f64 = 9.81;
@@ -49,6 +58,15 @@ impl SceneKind {
         SceneKind::Sheet,
         SceneKind::Plane,
     ];
+
+    /// The family whose module samples this scene and knows its truth.
+    fn family(self) -> Family {
+        match self {
+            SceneKind::Sphere | SceneKind::Torus | SceneKind::Ellipsoid => Family::Body,
+            SceneKind::Tank | SceneKind::Droplets => Family::Tank,
+            SceneKind::Sheet | SceneKind::Plane => Family::Flat,
+        }
+    }
 
     pub fn name(self) -> &'static str {
         match self {
@@ -265,13 +283,10 @@ impl Scene {
             )));
         }
         let n = spec.points as f64;
-        let spacing = match spec.kind {
-            SceneKind::Sphere => (4.0 * PI / n).sqrt(),
-            SceneKind::Torus => (torus_area(TORUS.0, TORUS.1) / n).sqrt(),
-            SceneKind::Ellipsoid => (ellipsoid_area(ELLIPSOID) / n).sqrt(),
-            SceneKind::Tank | SceneKind::Droplets => tank_spacing(spec.points),
-            SceneKind::Sheet => (2.0 * 4.0 / n).sqrt(),
-            SceneKind::Plane => (4.0 / n).sqrt(),
+        let spacing = match spec.kind.family() {
+            Family::Body => bodies::spacing(spec.kind, n),
+            Family::Tank => tank_spacing(spec.points),
+            Family::Flat => flat::spacing(spec.kind, n),
         };
         let waves = if matches!(spec.kind, SceneKind::Tank | SceneKind::Droplets) {
             tank_waves()
@@ -321,78 +336,12 @@ impl Scene {
 
     /// The true surface at `time`, offset included.
     pub fn truth(&self, time: f64) -> Truth {
-        let body = match self.spec.kind {
-            SceneKind::Sphere => Truth::Sphere {
-                center: sphere_center(time),
-                radius: 1.0,
-            },
-            SceneKind::Torus => Truth::Torus {
-                center: DVec3::ZERO,
-                rotation: torus_rotation(time),
-                major: TORUS.0,
-                minor: TORUS.1,
-            },
-            SceneKind::Ellipsoid => Truth::Ellipsoid {
-                center: DVec3::ZERO,
-                rotation: ellipsoid_rotation(time),
-                radii: ELLIPSOID,
-            },
-            SceneKind::Tank | SceneKind::Droplets => {
-                let field = Truth::HeightField {
-                    origin: DVec3::ZERO,
-                    size: TANK.size,
-                    depth: TANK.depth,
-                    time,
-                    waves: self.waves.clone(),
-                };
-                let spheres: Vec<Truth> = self
-                    .droplets
-                    .iter()
-                    .filter_map(|d| {
-                        self.droplet_center(d, time).map(|c| Truth::Sphere {
-                            center: c,
-                            radius: d.radius,
-                        })
-                    })
-                    .collect();
-                if spheres.is_empty() {
-                    field
-                } else {
-                    let mut parts = vec![field];
-                    parts.extend(spheres);
-                    Truth::Union { parts }
-                }
-            }
-            SceneKind::Sheet => {
-                let gap = self.sheet_gap();
-                let c = DVec3::new(0.0, 0.0, 0.1 * time);
-                Truth::Union {
-                    parts: vec![
-                        Truth::Square {
-                            center: c + DVec3::Z * gap / 2.0,
-                            normal: DVec3::Z,
-                            half: 1.0,
-                        },
-                        Truth::Square {
-                            center: c - DVec3::Z * gap / 2.0,
-                            normal: -DVec3::Z,
-                            half: 1.0,
-                        },
-                    ],
-                }
-            }
-            SceneKind::Plane => Truth::Square {
-                center: DVec3::new(0.05 * time, 0.0, 0.0),
-                normal: DVec3::Z,
-                half: 1.0,
-            },
+        let body = match self.spec.kind.family() {
+            Family::Body => self.body_truth(time),
+            Family::Tank => self.tank_truth(time),
+            Family::Flat => self.flat_truth(time),
         };
         body.translated(self.offset())
-    }
-
-    /// Gap of the thin sheet: half the mean spacing, well inside any smoothing length.
-    pub fn sheet_gap(&self) -> f64 {
-        0.5 * self.spacing
     }
 
     fn rng(&self, step: usize, stream: u64) -> ChaCha8Rng {
@@ -406,60 +355,10 @@ impl Scene {
         let t = self.time(step);
         let mut rng = self.rng(step, 1);
         let mut out = Particles::default();
-        match self.spec.kind {
-            SceneKind::Sphere => {
-                let c = sphere_center(t);
-                let spin = DMat3::from_rotation_z(0.3 * t) * self.pattern_rotation();
-                for d in fibonacci_sphere(self.spec.points) {
-                    let n = spin * d;
-                    out.push(c + n, n, c.z, true);
-                }
-            }
-            SceneKind::Torus => {
-                let rot = torus_rotation(t);
-                for uv in fibonacci_torus(self.spec.points, TORUS.0, TORUS.1) {
-                    let (su, cu) = uv.x.sin_cos();
-                    let (sv, cv) = uv.y.sin_cos();
-                    let n = DVec3::new(cv * cu, cv * su, sv);
-                    let p = DVec3::new(
-                        (TORUS.0 + TORUS.1 * cv) * cu,
-                        (TORUS.0 + TORUS.1 * cv) * su,
-                        TORUS.1 * sv,
-                    );
-                    out.push(rot * p, rot * n, 0.0, true);
-                }
-            }
-            SceneKind::Ellipsoid => {
-                let frame = ellipsoid_rotation(t);
-                for d in fibonacci_sphere(self.spec.points) {
-                    // Pattern on the unit sphere, mapped onto the body's ellipsoid.
-                    let local = self.pattern_rotation() * d * ELLIPSOID;
-                    let n = (frame * (local / (ELLIPSOID * ELLIPSOID))).normalize();
-                    out.push(frame * local, n, 0.0, true);
-                }
-            }
-            SceneKind::Tank | SceneKind::Droplets => self.tank_particles(t, &mut rng, &mut out),
-            SceneKind::Sheet => {
-                let gap = self.sheet_gap();
-                let c = DVec3::new(0.0, 0.0, 0.1 * t);
-                let half_n = self.spec.points / 2;
-                for (side, normal) in [(1.0, DVec3::Z), (-1.0, -DVec3::Z)] {
-                    for q in square_points(half_n, self.spacing, &mut rng) {
-                        out.push(
-                            c + DVec3::new(q.x, q.y, side * gap / 2.0),
-                            normal,
-                            c.z,
-                            true,
-                        );
-                    }
-                }
-            }
-            SceneKind::Plane => {
-                let c = DVec3::new(0.05 * t, 0.0, 0.0);
-                for q in square_points(self.spec.points, self.spacing, &mut rng) {
-                    out.push(c + DVec3::new(q.x, q.y, 0.0), DVec3::Z, 0.0, true);
-                }
-            }
+        match self.spec.kind.family() {
+            Family::Body => self.body_particles(t, &mut out),
+            Family::Tank => self.tank_particles(t, &mut rng, &mut out),
+            Family::Flat => self.flat_particles(t, &mut rng, &mut out),
         }
         for d in &self.droplets {
             self.droplet_particles(d, t, &mut out);
@@ -467,32 +366,4 @@ impl Scene {
         self.apply_hard_cases(step, &mut out);
         out
     }
-
-    /// A fixed random rotation of the sampling pattern (so that lattice axes do not line up
-    /// with the coordinate axes), drawn from the seed.
-    fn pattern_rotation(&self) -> DMat3 {
-        let mut rng = self.rng(0, 7);
-        let axis = DVec3::new(
-            rng.random_range(-1.0..1.0),
-            rng.random_range(-1.0..1.0),
-            rng.random_range(-1.0..1.0),
-        )
-        .normalize_or(DVec3::Z);
-        DMat3::from_axis_angle(axis, rng.random_range(0.0..PI))
-    }
-}
-
-const TORUS: (f64, f64) = (1.0, 0.35);
-const ELLIPSOID: DVec3 = DVec3::new(1.2, 0.8, 0.5);
-
-fn sphere_center(t: f64) -> DVec3 {
-    DVec3::new(0.25 * t.sin(), 0.1 * t, 0.0)
-}
-
-fn torus_rotation(t: f64) -> DMat3 {
-    DMat3::from_rotation_x(0.4 * t)
-}
-
-fn ellipsoid_rotation(t: f64) -> DMat3 {
-    DMat3::from_rotation_x(0.2 * t) * DMat3::from_rotation_z(0.5 * t)
 }

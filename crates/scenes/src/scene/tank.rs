@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::{Droplet, GRAVITY, Particles, Scene};
 use crate::sampling::{fibonacci_sphere, grid};
-use crate::truth::{Wave, height, height_gradient};
+use crate::truth::{Truth, Wave, height, height_gradient};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct TankShape {
@@ -23,6 +23,34 @@ pub(super) const TANK: TankShape = TankShape {
 };
 
 impl Scene {
+    /// The free surface's truth at `time`, with the droplets in flight.
+    pub(super) fn tank_truth(&self, time: f64) -> Truth {
+        let field = Truth::HeightField {
+            origin: DVec3::ZERO,
+            size: TANK.size,
+            depth: TANK.depth,
+            time,
+            waves: self.waves.clone(),
+        };
+        let spheres: Vec<Truth> = self
+            .droplets
+            .iter()
+            .filter_map(|d| {
+                self.droplet_center(d, time).map(|c| Truth::Sphere {
+                    center: c,
+                    radius: d.radius,
+                })
+            })
+            .collect();
+        if spheres.is_empty() {
+            field
+        } else {
+            let mut parts = vec![field];
+            parts.extend(spheres);
+            Truth::Union { parts }
+        }
+    }
+
     pub(super) fn tank_particles(&self, t: f64, rng: &mut ChaCha8Rng, out: &mut Particles) {
         let s = self.spacing;
         let [lx, ly] = TANK.size;
