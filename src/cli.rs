@@ -157,6 +157,9 @@ pub struct ScrubBenchArgs {
     /// GPU adapter whose name contains this.
     #[arg(long)]
     pub adapter: Option<String>,
+    /// Also jumps from storage: the page cache dropped before each (needs root).
+    #[arg(long)]
+    pub cold: bool,
 }
 
 #[derive(Debug, Args)]

@@ -20,21 +20,6 @@ fn step_path(path: &Path, step: usize) -> PathBuf {
     }
 }
 
-fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
-    Ok(slosh_render::write_rgb_png(path, width, height, rgb)?)
-}
-
-/// A GPU frame's RGBA pixels as an RGB PNG.
-pub fn write_frame_png(path: &Path, frame: &slosh_render::Frame) -> Result<()> {
-    Ok(slosh_render::write_frame_png(path, frame)?)
-}
-
-fn write_npy(path: &Path, height: u32, width: u32, channels: usize, data: &[f32]) -> Result<()> {
-    Ok(slosh_render::write_npy(
-        path, height, width, channels, data,
-    )?)
-}
-
 /// `{}` or `{:0N}` in `pattern` replaced by `step` (zero-padded to N digits).
 fn expand_pattern(pattern: &Path, step: usize) -> PathBuf {
     let text = pattern.to_string_lossy();
@@ -200,10 +185,10 @@ pub fn run(config: &RenderConfig) -> Result<()> {
         let seconds = start.elapsed().as_secs_f64() - gpu_step.upload.total_seconds;
         let (out, aov) = targets(step);
         if let Some(out) = &out {
-            write_frame_png(out, &frame)?;
+            slosh_render::write_frame_png(out, &frame)?;
         }
         if let Some(aov) = &aov {
-            write_npy(
+            slosh_render::write_npy(
                 aov,
                 frame.height,
                 frame.width,
@@ -267,10 +252,10 @@ fn render_cpu(
             };
             rgb.extend(colour.map(cpu_shade::srgb));
         }
-        write_png(out, width, height, &rgb)?;
+        slosh_render::write_rgb_png(out, width, height, &rgb)?;
     }
     if let Some(aov) = aov {
-        write_npy(aov, height, width, 8, &cpu_shade::cpu_hit_buffer(&hits))?;
+        slosh_render::write_npy(aov, height, width, 8, &cpu_shade::cpu_hit_buffer(&hits))?;
     }
     say!(
         "step {} ({} points): {width}x{height}, {} iterations, {hit_count} hit pixels, traced in {seconds:.2} s on the CPU",

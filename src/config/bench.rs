@@ -102,5 +102,6 @@ pub fn scrub(a: &ScrubBenchArgs) -> Result<scrub::Settings> {
         dir: a.dir.clone(),
         quick: a.quick,
         adapter: a.adapter.clone(),
+        cold: a.cold,
     })
 }

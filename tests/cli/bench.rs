@@ -111,8 +111,8 @@ fn scrub_bench_streams_a_series_on_the_engine() {
     assert!(rows[1][2].contains("jump to a resident step"), "{report}");
     let number = |s: &str| -> f64 { s.split_whitespace().next().unwrap().parse().unwrap() };
     let throughput = &rows[0];
-    assert!(number(throughput[2]) > 0.0, "steps/s: {report}");
-    for cell in &throughput[3..7] {
+    assert!(number(throughput[3]) > 0.0, "steps/s: {report}");
+    for cell in &throughput[4..8] {
         for part in cell.split('/') {
             assert!(number(part) > 0.0, "{cell}: {report}");
         }
@@ -121,6 +121,12 @@ fn scrub_bench_streams_a_series_on_the_engine() {
     assert!(
         number(all) > number(sections),
         "derived buffers count: {report}"
+    );
+    // Bytes per point on the GPU: the step's bytes over its 2000 points, to the decimal shown.
+    let per_point = number(throughput[2]);
+    assert!(
+        (per_point - number(all) / 2000.0).abs() <= 0.05,
+        "{per_point} B/pt against {all} bytes: {report}"
     );
     // The series it wrote is a verified cache series.
     let cache = series.join("sphere-2000-12");

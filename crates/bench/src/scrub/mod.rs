@@ -5,7 +5,6 @@
 //! floors: `std::fs::read` of the same files and a raw `Queue::write_buffer` of as many bytes.
 
 use slosh_fileio::say;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -18,8 +17,11 @@ use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest, Pace};
 use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
-use crate::report::Report;
-use crate::stats::{Spread, median, spread};
+use crate::stats::{median, spread};
+
+mod report;
+
+pub use report::{CodecRow, Cold, ScrubReport, SeriesReport};
 
 /// What `slosh bench scrub` measures and where it writes.
 #[derive(Debug, Clone)]
@@ -48,6 +50,8 @@ pub struct Settings {
     pub quick: bool,
     /// GPU adapter whose name contains this.
     pub adapter: Option<String>,
+    /// Also jumps read from storage: the page cache dropped before each (needs root).
+    pub cold: bool,
 }
 
 /// Percentiles of a sample, in the sample's unit.
@@ -147,16 +151,6 @@ fn show_timed(
     Ok(start.elapsed().as_secs_f64())
 }
 
-/// One zstd level over a step's sections: stored bytes and single-core speeds.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CodecRow {
-    pub level: i32,
-    pub raw: u64,
-    pub stored: u64,
-    pub encode_mb_s: f64,
-    pub decode_gb_s: f64,
-}
-
 /// Every compressed section of `path` re-encoded in chunks of `CHUNK_RAW` at each level (each
 /// keeps its filter: shuffle, delta), then decoded on one core.
 fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
@@ -199,35 +193,6 @@ fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
         });
     }
     Ok(rows)
-}
-
-/// One series measured: a step's costs and floors, playback, jumps and the codec table.
-#[derive(Debug, Clone)]
-pub struct SeriesReport {
-    pub label: String,
-    pub points: usize,
-    pub steps: usize,
-    pub step_gpu_bytes: u64,
-    pub section_bytes: u64,
-    pub stored_bytes: u64,
-    pub host_ms: f64,
-    pub record_ms: f64,
-    pub copy_ms: f64,
-    pub pass_ms: f64,
-    /// GPU time of the masks, leaves and widen passes (0 without timestamps).
-    pub each_pass_ms: [f64; 3],
-    pub read_ms: f64,
-    pub read_gbps: f64,
-    pub write_buffer_ms: f64,
-    pub trace_ms: f64,
-    pub sequential_steps_per_s: f64,
-    pub sequential: Spread,
-    /// Medians of the loaders' host and record ms during sequential playback.
-    pub streaming_host_ms: f64,
-    pub streaming_record_ms: f64,
-    pub jumps_pool: Spread,
-    pub jumps_page_cache: Spread,
-    pub codecs: Vec<CodecRow>,
 }
 
 fn measure(
@@ -429,32 +394,40 @@ fn measure(
         }
         page_cache.push(show(&mut engine, &mut request, target)? * 1e3);
     }
-    // Jumps to resident steps: a pool that holds the series, filled first.
+    // Jumps from storage: the page cache dropped before each one (root only).
+    let cold = if args.cold {
+        Some(cold_jumps(
+            &mut engine,
+            &mut request,
+            &mut rng,
+            &paths,
+            args.jumps,
+        )?)
+    } else {
+        None
+    };
+    // Jumps to resident steps: a pool that holds the series, filled first, where the device
+    // can hold it.
     drop(engine);
-    let mut engine = Engine::open(
-        gpu.clone(),
-        dir,
-        options(step_gpu_bytes * (steps as u64 + 2)),
-    )?;
-    for position in 0..steps {
-        show(&mut engine, &mut request, position)?;
-    }
-    if engine.resident().len() != steps {
-        bail!(
-            "the pool holds {} of {steps} steps after a pass",
-            engine.resident().len()
-        );
-    }
-    let mut pool = Vec::new();
-    let mut at = engine.timeline().current();
-    while pool.len() < args.jumps {
-        let target = rng.random_range(0..steps);
-        if target == at {
-            continue;
-        }
-        pool.push(show(&mut engine, &mut request, target)? * 1e3);
-        at = target;
-    }
+    let series_bytes = step_gpu_bytes * steps as u64;
+    let room = gpu.device_memory().map(|m| m / 10 * 9);
+    let jumps_pool = match room {
+        Some(room) if series_bytes > room => Err(format!(
+            "the series holds {:.1} GB on the GPU, over 90 % of its {:.1} GB",
+            series_bytes as f64 / 1e9,
+            room as f64 / 0.9 / 1e9
+        )),
+        _ => Ok(resident_jumps(
+            gpu,
+            dir,
+            &options,
+            &mut request,
+            &mut rng,
+            steps,
+            step_gpu_bytes,
+            args.jumps,
+        )?),
+    };
     Ok(SeriesReport {
         label,
         points,
@@ -475,22 +448,98 @@ fn measure(
         sequential: spread(sequential),
         streaming_host_ms: median(loads.host_ms),
         streaming_record_ms: median(loads.record_ms),
-        jumps_pool: spread(pool),
+        jumps_pool: jumps_pool.map(spread),
         jumps_page_cache: spread(page_cache),
+        cold,
         codecs: codec_table(&paths[0])?,
     })
 }
 
-/// What `slosh bench scrub` measured.
-#[derive(Debug, Clone)]
-pub struct ScrubReport {
-    /// The adapter, as `Gpu::describe` gives it.
-    pub adapter: String,
-    pub cores: usize,
-    pub size: (u32, u32),
-    /// The settings it ran with.
-    pub settings: Settings,
-    pub series: Vec<SeriesReport>,
+/// Jumps to random steps with the page cache dropped before each, and the disk's own floor:
+/// a step file read cold.
+fn cold_jumps(
+    engine: &mut Engine,
+    request: &mut FrameRequest,
+    rng: &mut rand_chacha::ChaCha8Rng,
+    paths: &[PathBuf],
+    jumps: usize,
+) -> Result<Cold> {
+    let steps = paths.len();
+    let (mut jump_ms, mut read_ms, mut read_bytes) = (Vec::new(), Vec::new(), 0u64);
+    let mut at = engine.timeline().current();
+    while jump_ms.len() < jumps {
+        let target = rng.random_range(0..steps);
+        if target == at
+            || engine.resident().contains(&target)
+            || engine.prefetching().contains(&target)
+        {
+            continue;
+        }
+        drop_page_cache()?;
+        jump_ms.push(show(engine, request, target)? * 1e3);
+        at = target;
+        drop_page_cache()?;
+        let t = Instant::now();
+        read_bytes += std::fs::read(&paths[target])?.len() as u64;
+        read_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let read_seconds: f64 = read_ms.iter().sum::<f64>() / 1e3;
+    Ok(Cold {
+        jumps: spread(jump_ms),
+        read_ms: median(read_ms),
+        read_gbps: read_bytes as f64 / read_seconds.max(1e-12) / 1e9,
+    })
+}
+
+/// Writes back dirty pages and drops the page cache, so that the next read comes from
+/// storage.
+fn drop_page_cache() -> Result<()> {
+    let synced = std::process::Command::new("sync").status();
+    if !synced.is_ok_and(|s| s.success()) {
+        bail!("--cold: `sync` failed before dropping the page cache");
+    }
+    std::fs::write("/proc/sys/vm/drop_caches", "3").context(
+        "--cold drops the page cache before each jump, which needs root (writing /proc/sys/vm/drop_caches)",
+    )
+}
+
+/// Jumps to random resident steps in a pool that holds the whole series, filled first.
+#[allow(clippy::too_many_arguments)]
+fn resident_jumps(
+    gpu: &Arc<Gpu>,
+    dir: &Path,
+    options: &dyn Fn(u64) -> EngineOptions,
+    request: &mut FrameRequest,
+    rng: &mut rand_chacha::ChaCha8Rng,
+    steps: usize,
+    step_gpu_bytes: u64,
+    jumps: usize,
+) -> Result<Vec<f64>> {
+    let mut engine = Engine::open(
+        gpu.clone(),
+        dir,
+        options(step_gpu_bytes * (steps as u64 + 2)),
+    )?;
+    for position in 0..steps {
+        show(&mut engine, request, position)?;
+    }
+    if engine.resident().len() != steps {
+        bail!(
+            "the pool holds {} of {steps} steps after a pass",
+            engine.resident().len()
+        );
+    }
+    let mut pool = Vec::new();
+    let mut at = engine.timeline().current();
+    while pool.len() < jumps {
+        let target = rng.random_range(0..steps);
+        if target == at {
+            continue;
+        }
+        pool.push(show(&mut engine, request, target)? * 1e3);
+        at = target;
+    }
+    Ok(pool)
 }
 
 pub fn run(args: &Settings) -> Result<ScrubReport> {
@@ -536,10 +585,13 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
         ensure_series(&dir, points, steps, distinct)?;
         let label = format!("{points} points, {steps} steps ({distinct} distinct shapes)");
         let report = measure(&gpu, &dir, points, label, size, &jumps_args)?;
+        let pool = report
+            .jumps_pool
+            .as_ref()
+            .map_or("not possible".into(), |j| format!("{:.2} ms", j.p99));
         say!(
-            "  sequential {:.1} steps/s; jumps p99: pool {:.2} ms, page cache {:.2} ms",
+            "  sequential {:.1} steps/s; jumps p99: pool {pool}, page cache {:.2} ms",
             report.sequential_steps_per_s,
-            report.jumps_pool.p99,
             report.jumps_page_cache.p99
         );
         reports.push(report);
@@ -551,150 +603,4 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
         settings: args.clone(),
         series: reports,
     })
-}
-
-impl Report for ScrubReport {
-    fn markdown(&self) -> String {
-        let (cores, size, args, reports) = (self.cores, self.size, &self.settings, &self.series);
-        let mut md = String::new();
-        let _ = writeln!(
-            md,
-            "# Scrubbing: the streaming engine\n\nWritten by `slosh bench scrub{}` on {} ({cores} host cores). Frames of {}×{} at 1 iteration (the baked polynomial), shaded; every file read from the page cache. {} loader threads; sequential playback and page-cache jumps stream through a pool of {} steps, pool jumps use a pool that holds the whole series. Latency is from the request (the timeline set to the step) to the frame that shows it finished on the GPU; frames run back to back meanwhile, each submitted and waited for. Each series starts with 2 s of frames, so that the GPU has left its idle clocks.\n",
-            if args.quick { " --quick" } else { "" },
-            self.adapter,
-            size.0,
-            size.1,
-            args.loaders.unwrap_or_else(slosh_play::default_loaders),
-            args.pool_steps.max(3)
-        );
-        let _ = writeln!(md, "## Throughput and latency\n");
-        let _ = writeln!(
-            md,
-            "| series | sequential steps/s | sequential latency p50 / p90 / p99 / max ms | jump in pool p50 / p99 ms | jump from page cache p50 / p99 / max ms | frame (trace + shade) ms |"
-        );
-        let _ = writeln!(md, "|---|---|---|---|---|---|");
-        for r in reports {
-            let _ = writeln!(
-                md,
-                "| {} | {:.1} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} / {:.2} | {:.2} |",
-                r.label,
-                r.sequential_steps_per_s,
-                r.sequential.p50,
-                r.sequential.p90,
-                r.sequential.p99,
-                r.sequential.max,
-                r.jumps_pool.p50,
-                r.jumps_pool.p99,
-                r.jumps_page_cache.p50,
-                r.jumps_page_cache.p99,
-                r.jumps_page_cache.max,
-                r.trace_ms
-            );
-        }
-        let _ = writeln!(md, "\n### Goals (page cache, 1280×800, 1 iteration)\n");
-        let _ = writeln!(md, "| series | measure | goal | measured | met |");
-        let _ = writeln!(md, "|---|---|---|---|---|");
-        let met = |ok: bool| if ok { "yes" } else { "no" };
-        for r in reports {
-            // The goals: 1M points 60 steps/s and 33 ms; 100k points 240 and 8 ms.
-            let goal = match r.points {
-                p if p >= 1_000_000 => Some((60.0, 33.0)),
-                p if p >= 100_000 => Some((240.0, 8.0)),
-                _ => None,
-            };
-            if let Some((rate, jump)) = goal {
-                let _ = writeln!(
-                    md,
-                    "| {} | sequential steps/s | ≥ {rate} | {:.1} | {} |",
-                    r.label,
-                    r.sequential_steps_per_s,
-                    met(r.sequential_steps_per_s >= rate)
-                );
-                let _ = writeln!(
-                    md,
-                    "| {} | jump from page cache, p99 | ≤ {jump} ms | {:.2} ms | {} |",
-                    r.label,
-                    r.jumps_page_cache.p99,
-                    met(r.jumps_page_cache.p99 <= jump)
-                );
-            }
-            let _ = writeln!(
-                md,
-                "| {} | jump to a resident step, p99 | ≤ 2 ms + frame ({:.2} ms) | {:.2} ms | {} |",
-                r.label,
-                2.0 + r.trace_ms,
-                r.jumps_pool.p99,
-                met(r.jumps_pool.p99 <= 2.0 + r.trace_ms)
-            );
-        }
-        let _ = writeln!(
-            md,
-            "\nJumps: {} in the pool and {} from the page cache per series (seed {}).\n",
-            reports.first().map_or(0, |r| r.jumps_pool.count),
-            reports.first().map_or(0, |r| r.jumps_page_cache.count),
-            args.seed
-        );
-        let _ = writeln!(md, "## A step, and the floors\n");
-        let _ = writeln!(
-            md,
-            "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
-        );
-        let _ = writeln!(
-            md,
-            "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | per-step passes ms (GPU: masks / leaves / widen) | fs::read ms (GB/s) | write_buffer ms |"
-        );
-        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
-        for r in reports {
-            let _ = writeln!(
-                md,
-                "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2} / {:.2} / {:.2}) | {:.2} ({:.1}) | {:.2} |",
-                r.label,
-                r.section_bytes,
-                r.step_gpu_bytes,
-                r.stored_bytes,
-                r.host_ms,
-                r.record_ms,
-                r.streaming_host_ms,
-                r.streaming_record_ms,
-                r.copy_ms,
-                r.pass_ms,
-                r.each_pass_ms[0],
-                r.each_pass_ms[1],
-                r.each_pass_ms[2],
-                r.read_ms,
-                r.read_gbps,
-                r.write_buffer_ms
-            );
-        }
-        let _ = writeln!(
-            md,
-            "\nSteps per series: {}.",
-            reports.first().map_or(0, |r| r.steps)
-        );
-        let _ = writeln!(
-            md,
-            "\n## Codec\n\nThe compressed sections of each series' first step (their filters kept: byte shuffle, word delta) re-encoded with zstd at each level in chunks of 1 MiB, then decoded on one core. Bakes use level -1 by default.\n"
-        );
-        let _ = writeln!(
-            md,
-            "| series | zstd level | raw bytes | stored bytes | ratio | encode MB/s per core | decode GB/s per core |"
-        );
-        let _ = writeln!(md, "|---|---|---|---|---|---|---|");
-        for r in reports {
-            for c in &r.codecs {
-                let _ = writeln!(
-                    md,
-                    "| {} | {} | {} | {} | {:.2} | {:.0} | {:.2} |",
-                    r.label,
-                    c.level,
-                    c.raw,
-                    c.stored,
-                    c.raw as f64 / c.stored.max(1) as f64,
-                    c.encode_mb_s,
-                    c.decode_gb_s
-                );
-            }
-        }
-        md
-    }
 }
