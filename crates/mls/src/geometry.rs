@@ -1,4 +1,4 @@
-//! Geometry every stage uses: bounding boxes.
+//! Geometry every stage uses: bounding boxes and the axis a direction points along.
 
 /// The axis-aligned bounding box (lo, hi) of `points`; infinite and empty for no points.
 pub fn bounds<'a>(points: impl IntoIterator<Item = &'a [f64; 3]>) -> ([f64; 3], [f64; 3]) {
@@ -11,4 +11,11 @@ pub fn bounds<'a>(points: impl IntoIterator<Item = &'a [f64; 3]>) -> ([f64; 3], 
         }
     }
     (lo, hi)
+}
+
+/// The axis `v` points along most (by |component|; the later axis on a tie).
+pub fn dominant_axis(v: [f64; 3]) -> usize {
+    (0..3)
+        .max_by(|&a, &b| v[a].abs().total_cmp(&v[b].abs()))
+        .unwrap_or(2)
 }

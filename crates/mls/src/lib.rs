@@ -30,7 +30,7 @@ mod up;
 pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use frame::LocalFrame;
-pub use geometry::bounds;
+pub use geometry::{bounds, dominant_axis};
 pub use grid::BallIndex;
 pub use intersect::{
     Ball, BallHit, HitStatus, InitialHit, Params, Ray, initial_fit, initial_hit, intersect_ball,

@@ -96,9 +96,7 @@ impl Camera {
         };
         // (right, front, up) = (0.45, -0.8, 0.4) in the frame whose third axis is `up`:
         // for z up that is x, y, z; for another axis the two others follow cyclically.
-        let axis = (0..3)
-            .max_by(|&a, &b| up[a].abs().total_cmp(&up[b].abs()))
-            .unwrap_or(2);
+        let axis = crate::geometry::dominant_axis(up);
         let sign = if up[axis] < 0.0 { -1.0 } else { 1.0 };
         let mut dir = [0.0f64; 3];
         dir[(axis + 1) % 3] = 0.45 * sign;

@@ -32,9 +32,7 @@ pub fn guess_up(points: &[[f64; 3]], normals: &[[f64; 3]]) -> Option<[f64; 3]> {
     let mean = mean.map(|m| m / normals.len() as f64);
     let length = (mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]).sqrt();
     if length >= OPEN_MEAN {
-        let axis = (0..3)
-            .max_by(|&a, &b| mean[a].abs().total_cmp(&mean[b].abs()))
-            .unwrap_or(2);
+        let axis = crate::geometry::dominant_axis(mean);
         return Some(unit(axis, mean[axis].signum()));
     } // A closed shape resting on a flat base: the base faces down.
     let (lo, hi) = crate::geometry::bounds(points);

@@ -16,8 +16,9 @@ use super::fit::fit_texture;
 use super::frame_stats::FrameStats;
 use super::options::PlayOptions;
 use super::timeline_panel;
-use super::view::{RangeMode, ViewSettings, axis_vector, default_light, dominant_axis};
+use super::view::{RangeMode, ViewSettings, axis_vector, default_light};
 use crate::engine::{Engine, FrameReport, FrameRequest};
+use slosh_mls::dominant_axis;
 
 /// Framed before the series has a step with particles.
 const NO_BOUNDS: [[f64; 3]; 2] = [[-1.0; 3], [1.0; 3]];

@@ -54,13 +54,6 @@ pub fn axis_vector(axis: usize) -> [f64; 3] {
     std::array::from_fn(|a| if a == axis { 1.0 } else { 0.0 })
 }
 
-/// The axis `up` points along most.
-pub fn dominant_axis(up: [f64; 3]) -> usize {
-    (0..3)
-        .max_by(|&a, &b| up[a].abs().total_cmp(&up[b].abs()))
-        .unwrap_or(2)
-}
-
 impl ViewSettings {
     /// The key light's direction: azimuth and elevation about the chosen up axis (for z up,
     /// the default is `DEFAULT_KEY_LIGHT`).
