@@ -57,6 +57,11 @@ impl StepPasses {
         StepPasses::for_device(&gpu.device, gpu.max_binding())
     }
 
+    /// The storage binding limit the passes were compiled for.
+    pub fn max_binding(&self) -> u64 {
+        self.max_binding
+    }
+
     fn for_device(device: &wgpu::Device, max_binding: u64) -> StepPasses {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("expand"),

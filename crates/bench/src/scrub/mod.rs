@@ -491,6 +491,9 @@ fn cold_jumps(
     })
 }
 
+/// Where Linux takes the order to drop its page cache.
+const DROP_CACHES: &str = "/proc/sys/vm/drop_caches";
+
 /// Writes back dirty pages and drops the page cache, so that the next read comes from
 /// storage.
 fn drop_page_cache() -> Result<()> {
@@ -498,9 +501,11 @@ fn drop_page_cache() -> Result<()> {
     if !synced.is_ok_and(|s| s.success()) {
         bail!("--cold: `sync` failed before dropping the page cache");
     }
-    std::fs::write("/proc/sys/vm/drop_caches", "3").context(
-        "--cold drops the page cache before each jump, which needs root (writing /proc/sys/vm/drop_caches)",
-    )
+    std::fs::write(DROP_CACHES, "3").with_context(|| {
+        format!(
+            "--cold drops the page cache before each jump, which needs root (writing {DROP_CACHES})"
+        )
+    })
 }
 
 /// Jumps to random resident steps in a pool that holds the whole series, filled first.
@@ -542,6 +547,11 @@ fn resident_jumps(
     Ok(pool)
 }
 
+/// The fewest steps a series needs: page-cache and storage jumps pick steps neither resident
+/// (a pool of 3 steps) nor being loaded (the window around the current step), and a shorter
+/// series would leave none to pick.
+const MIN_STEPS: usize = 8;
+
 pub fn run(args: &Settings) -> Result<ScrubReport> {
     let size = if args.quick { (160, 100) } else { args.size };
     let counts: Vec<usize> = match (&args.points[..], args.quick) {
@@ -554,8 +564,20 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
     } else {
         args.steps
     };
-    if steps < 2 || args.jumps == 0 {
-        bail!("--steps must be at least 2 and --jumps at least 1");
+    if steps < MIN_STEPS {
+        bail!(
+            "--steps {steps}: jumps need steps outside the page-cache pool (3 steps) and the loaders' window: give at least {MIN_STEPS}"
+        );
+    }
+    if args.jumps == 0 {
+        bail!("--jumps must be at least 1");
+    }
+    // Refused before any series is baked, not after.
+    if args.cold {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(DROP_CACHES)
+            .with_context(|| format!("--cold drops the page cache before each jump, which needs root (writing {DROP_CACHES})"))?;
     }
     let jumps_args = Settings {
         jumps: if args.quick {

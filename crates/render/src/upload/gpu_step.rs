@@ -250,6 +250,13 @@ impl GpuStep {
             cancelled,
         } = options;
         let encoder = copies;
+        if step_passes.max_binding() != gpu.max_binding() {
+            return Err(Error::Validation(format!(
+                "the per-step passes were built for storage bindings of {} bytes, and the device now binds {}: make StepPasses after Gpu::limit_bindings",
+                step_passes.max_binding(),
+                gpu.max_binding()
+            )));
+        }
         let start = Instant::now();
         let file = host.file();
         let info = host.info.clone();
