@@ -1,4 +1,4 @@
-// The per-step passes, run once after its upload.
+// The per-step pass, run once after its upload.
 //
 // `expand`: the neighbour masks: which of a point's cluster
 // candidates are its neighbours (clusters.rs: expand_one, the rule docs/algorithm.md gives):
@@ -6,11 +6,6 @@
 // Bit b of word w is candidate slot 32 w + b; a cluster writes only the words its own
 // candidates need, each member's side by side (step.wgsl: mask_row). The
 // refinement loops in mls.wgsl then visit only the set bits.
-//
-// `widen`: the 4-wide tree the trace walk descends (`Wide` in step.wgsl).
-//
-// `leaves`: each BVH item slot's sphere (a ball's centre and radius of trust, or a droplet),
-// so the trace walk reads a leaf's spheres beside its items instead of through them.
 
 // Mirrors `slosh_render::ExpandSettings`.
 struct ExpandSettings {
@@ -18,14 +13,8 @@ struct ExpandSettings {
     cluster_size: u32,
     mask_words: u32,
     has_normals: u32,
-    // Threads per row of the 2D dispatches (a 1D one would exceed the workgroup count limit).
-    row_threads: u32,
-    sphere_count: u32,
-    item_count: u32,
     // Entries of cluster_ids.
     cluster_id_count: u32,
-    // Nodes of the baked BVH2 (bvh_nodes holds them after one blank node).
-    node_count: u32,
     pad0: u32,
     pad1: u32,
     pad2: u32,
@@ -34,11 +23,6 @@ struct ExpandSettings {
 // The arrays (shaders.rs: EXPAND_ARRAYS) are read and written through accessors that
 // crates/render's shaders.rs generates over the ranges they are bound in.
 @group(0) @binding(100) var<uniform> expand_settings: ExpandSettings;
-
-// The thread's index in a 2D dispatch of full rows.
-fn thread(gid: vec3<u32>) -> u32 {
-    return gid.y * expand_settings.row_threads + gid.x;
-}
 
 // One workgroup per cluster: its candidates' positions and normals are read once into
 // workgroup memory, a tile of MASK_TILE at a time, and every (member, word) pair of the tile
@@ -134,80 +118,4 @@ fn expand(
         }
         workgroupBarrier();
     }
-}
-
-// A slot whose item is neither a ball nor a droplet gets radius −1, which the walk skips.
-@compute @workgroup_size(64, 1, 1)
-fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let cfg = expand_settings;
-    let k = thread(gid);
-    if k >= cfg.item_count {
-        return;
-    }
-    let item = bvh_items_at(k);
-    var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
-    if item < cfg.point_count {
-        let p = points_at(item);
-        sphere = vec4<f32>(p.position, p.radius);
-    } else if item - cfg.point_count < cfg.sphere_count {
-        let d = spheres_at(item - cfg.point_count);
-        sphere = vec4<f32>(d.centre, d.radius);
-    }
-    leaf_spheres_set(k, sphere);
-}
-
-const EMPTY_SLOT: f32 = 1e30;
-
-// Link of a slot: an inner node by its own index (its entry of wide_nodes), a leaf by its
-// `link`.
-fn wide_link(index: u32, n: BvhNode) -> u32 {
-    return select(index, link(n), n.count > 0u);
-}
-
-@compute @workgroup_size(64, 1, 1)
-fn widen(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let cfg = expand_settings;
-    let k = thread(gid);
-    if k >= cfg.node_count {
-        return;
-    }
-    let parent = bvh_nodes_at(k + 1u);
-    if parent.count > 0u || parent.first + 1u >= cfg.node_count {
-        return;
-    }
-    var w: Wide;
-    // An empty slot is the point (1e30, 1e30, 1e30): a unit ray (|1 / d| ≥ 1 per axis) would
-    // enter it beyond any t the walk accepts, or behind its origin.
-    w.lo_x = vec4<f32>(EMPTY_SLOT);
-    w.hi_x = vec4<f32>(EMPTY_SLOT);
-    w.lo_y = vec4<f32>(EMPTY_SLOT);
-    w.hi_y = vec4<f32>(EMPTY_SLOT);
-    w.lo_z = vec4<f32>(EMPTY_SLOT);
-    w.hi_z = vec4<f32>(EMPTY_SLOT);
-    var slot = 0u;
-    for (var c = 0u; c < 2u; c++) {
-        let ci = parent.first + c;
-        let child = bvh_nodes_at(ci + 1u);
-        var count = 1u;
-        if child.count == 0u && child.first + 1u < cfg.node_count {
-            count = 2u;
-        }
-        for (var g = 0u; g < count; g++) {
-            var index = ci;
-            var n = child;
-            if count == 2u {
-                index = child.first + g;
-                n = bvh_nodes_at(index + 1u);
-            }
-            w.lo_x[slot] = n.lo.x;
-            w.hi_x[slot] = n.hi.x;
-            w.lo_y[slot] = n.lo.y;
-            w.hi_y[slot] = n.hi.y;
-            w.lo_z[slot] = n.lo.z;
-            w.hi_z[slot] = n.hi.z;
-            w.links[slot] = wide_link(index, n);
-            slot++;
-        }
-    }
-    wide_nodes_set(k, w);
 }

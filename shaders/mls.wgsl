@@ -52,8 +52,8 @@ struct Settings {
     has_field: u32,
     // Words of neighbour mask of the largest cluster.
     mask_words: u32,
-    // Entries of bvh_nodes (the blank lead node included) and of bvh_items.
-    node_count: u32,
+    // Entries of the 4-wide tree and of bvh_items.
+    wide_count: u32,
     item_count: u32,
     pad0: u32,
     pad1: u32,

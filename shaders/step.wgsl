@@ -22,23 +22,17 @@ fn mask_row(cluster: u32, first: u32) -> u32 {
     return (first + 31u * cluster) / 32u;
 }
 
-// A droplet sphere and a BVH node (mirror `slosh_cache::GpuSphere` and `GpuBvhNode`).
+// A droplet sphere (mirrors `slosh_cache::GpuSphere`).
 struct Sphere {
     centre: vec3<f32>,
     radius: f32,
 }
 
-struct BvhNode {
-    lo: vec3<f32>,
-    count: u32,
-    hi: vec3<f32>,
-    first: u32,
-}
-
-// A node of the 4-wide tree the walk descends, built per step by expand.wgsl's `widen` from
-// the baked BVH2: slot i of entry k holds a grandchild of BVH2 node k (or a child that is a
-// leaf), its box per axis across the four lanes and its link (trace.wgsl); an empty slot is
-// the point (1e30, 1e30, 1e30), which no ray enters in time.
+// A node of the 4-wide tree the walk descends, made by the upload's host half from the baked
+// BVH2 (mirrors `slosh_render::layout::GpuWide`, crates/render/src/upload/wide.rs): each slot
+// holds a grandchild of the entry's BVH2 node (or a child that is a leaf), its box per axis
+// across the four lanes and its link; an empty slot is the point (1e30, 1e30, 1e30), which no
+// ray enters in time.
 struct Wide {
     lo_x: vec4<f32>,
     hi_x: vec4<f32>,
@@ -50,13 +44,9 @@ struct Wide {
     pad: vec4<u32>,
 }
 
-// A node as the trace walk stacks it and the wide tree links it: `first` in the low 28 bits
-// and the leaf's item count (0 for an inner node) above, so a pop needs no read of the node
-// itself. The upload refuses trees that do not fit (slosh_render::MAX_LEAF_LINK_COUNT,
+// A slot's link, as the trace walk stacks it: an inner node's entry, or a leaf's first item
+// in the low 28 bits and its item count above, so a pop needs no read of the node itself.
+// The upload refuses trees that do not fit (slosh_render::MAX_LEAF_LINK_COUNT,
 // MAX_LINK_FIRST). LINK_COUNT_SHIFT and LINK_FIRST are generated from MAX_LINK_FIRST by
 // shaders.rs (`shared_constants_wgsl`).
-
-fn link(node: BvhNode) -> u32 {
-    return node.first | (node.count << LINK_COUNT_SHIFT);
-}
 

@@ -1,5 +1,5 @@
-// The trace pass: one thread per pixel. Camera ray → the baked BVH2, walked as the 4-wide
-// tree expand.wgsl widens it into (stack based, nearest slot in hand, pruned by the best hit)
+// The trace pass: one thread per pixel. Camera ray → the 4-wide tree the upload widens the
+// baked BVH2 into (stack based, nearest slot in hand, pruned by the best hit)
 // → the nearest initial hit (a ball's baked polynomial inside its ball, or a droplet sphere;
 // an exact tie goes to the lower item) → with more iterations, refinement of that candidate
 // (mls.wgsl), handing over to the next initial hit when it leaves its ball. Droplet spheres
@@ -7,21 +7,11 @@
 // (the order of the walk differs; the nearest key does not). Appended to mls.wgsl;
 // water.wgsl reuses its walk for secondary rays.
 
-// bvh_nodes holds the step's nodes after one blank node (the upload puts it there), so that
-// every pair of siblings, slots 2k + 1 and 2k + 2 of the section, shares one 64-byte-aligned
-// line: node i is bvh_nodes_at(i + 1), read through `node`. leaf_spheres holds each item
-// slot's sphere (centre, radius; radius < 0 for no item), from expand.wgsl's `leaves` pass:
-// the walk reads it beside the item instead of through it.
-
 // Deeper trees are refused at upload (slosh_render::MAX_BVH_DEPTH).
 const STACK_SIZE: u32 = 64u;
 
-fn node(i: u32) -> BvhNode {
-    return bvh_nodes_at(i + 1u);
-}
-
 fn has_nodes() -> bool {
-    return settings.node_count > 1u;
+    return settings.wide_count > 0u;
 }
 
 // The ray as the slab tests take it: t = p / d − o / d per axis, one fused multiply-add. A
@@ -37,17 +27,6 @@ fn slab(ray: Ray) -> Slab {
     let tiny = select(vec3<f32>(1e-20), vec3<f32>(-1e-20), ray.dir < vec3<f32>(0.0));
     let inv_dir = 1.0 / select(ray.dir, tiny, abs(ray.dir) < vec3<f32>(1e-20));
     return Slab(inv_dir, ray.origin * inv_dir);
-}
-
-// Entry parameter of the ray (t ≥ 0) into a node's box if it enters by `t_max`, else −1.
-fn enter(node: BvhNode, s: Slab, t_max: f32) -> f32 {
-    let ta = fma(node.lo, s.inv_dir, -s.scaled_origin);
-    let tb = fma(node.hi, s.inv_dir, -s.scaled_origin);
-    let near = min(ta, tb);
-    let far = max(ta, tb);
-    let t0 = max(max(near.x, near.y), max(near.z, 0.0));
-    let t1 = min(min(far.x, far.y), min(far.z, t_max));
-    return select(-1.0, t0, t0 <= t1);
 }
 
 // Entry parameters of the ray into a wide node's four boxes, each if it enters by `t_max`,
@@ -104,13 +83,21 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
     let n = settings.point_count;
     let end = min(first + count, settings.item_count);
     for (var k = first; k < end; k++) {
-        let sphere = leaf_spheres_at(k);
+        // An item is a ball (its point's centre and radius of trust) or a droplet sphere;
+        // anything else is skipped.
+        let item = bvh_items_at(k);
+        var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
+        if item < n {
+            let p = points_at(item);
+            sphere = vec4<f32>(p.position, p.radius);
+        } else if item - n < settings.sphere_count {
+            let d = spheres_at(item - n);
+            sphere = vec4<f32>(d.centre, d.radius);
+        }
         let iv = ray_ball(ray, sphere.xyz, sphere.w);
         if !iv.ok || sphere.w < 0.0 {
             continue;
         }
-        // Most spheres of a leaf are missed: the item is read only for those crossed.
-        let item = bvh_items_at(k);
         if item >= n {
             // From inside a droplet the ray sees its far wall.
             let t = select(iv.t_out, iv.t_in, iv.t_in >= 0.0);
@@ -168,11 +155,8 @@ fn next_candidate(ray: Ray, after_t: f32, after_item: u32) -> Candidate {
     var current = 0u;
     var live = false;
     if has_nodes() && settings.point_count + settings.sphere_count > 0u {
-        // An inner root is entry 0 of the wide tree; a leaf root is its own link.
-        let root = node(0u);
-        let t_root = enter(root, ray_slab, FAR);
-        current = select(0u, link(root), root.count > 0u);
-        live = t_root >= 0.0;
+        // The walk starts at entry 0, the root (a lone leaf root is its one slot).
+        live = true;
     }
     loop {
         // Down the 4-wide tree until the node in hand is a leaf, or nothing below it is

@@ -9,7 +9,8 @@
 // The stage and optics (WATER_FLOOR_BELOW, WATER_IOR, WATER_ABSORPTION, …) are generated
 // from crates/render's water.rs, their one source, by shaders.rs.
 
-// The floor and the scale of the scene, from the BVH's root box (everything it holds).
+// The floor and the scale of the scene, from the root's box (everything the tree holds): the
+// union of entry 0's occupied slots.
 struct Stage {
     floor_z: f32,
     extent: f32,
@@ -19,10 +20,25 @@ struct Stage {
 // The floor lies a fraction of the scene's extent below its lowest point, under checker
 // squares of a fraction of the extent (slosh_render::water).
 fn stage() -> Stage {
-    let root = node(0u);
-    let size = root.hi - root.lo;
+    var lo = vec3<f32>(0.0);
+    var hi = vec3<f32>(0.0);
+    if has_nodes() {
+        let w = wide_nodes_at(0u);
+        let used = w.lo_x < vec4<f32>(0.5 * EMPTY_SLOT);
+        let low = vec4<f32>(EMPTY_SLOT);
+        let high = vec4<f32>(-EMPTY_SLOT);
+        let lx = select(low, w.lo_x, used);
+        let ly = select(low, w.lo_y, used);
+        let lz = select(low, w.lo_z, used);
+        let hx = select(high, w.hi_x, used);
+        let hy = select(high, w.hi_y, used);
+        let hz = select(high, w.hi_z, used);
+        lo = vec3<f32>(min(min(lx.x, lx.y), min(lx.z, lx.w)), min(min(ly.x, ly.y), min(ly.z, ly.w)), min(min(lz.x, lz.y), min(lz.z, lz.w)));
+        hi = vec3<f32>(max(max(hx.x, hx.y), max(hx.z, hx.w)), max(max(hy.x, hy.y), max(hy.z, hy.w)), max(max(hz.x, hz.y), max(hz.z, hz.w)));
+    }
+    let size = hi - lo;
     let extent = max(max(size.x, size.y), max(size.z, 1e-6));
-    return Stage(root.lo.z - WATER_FLOOR_BELOW * extent, extent, extent / WATER_SQUARES_PER_EXTENT);
+    return Stage(lo.z - WATER_FLOOR_BELOW * extent, extent, extent / WATER_SQUARES_PER_EXTENT);
 }
 
 // Whether anything of the fluid lies along the ray (its first candidate, iteration 1).

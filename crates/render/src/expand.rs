@@ -1,7 +1,6 @@
-//! The per-step passes of `shaders/expand.wgsl`, run once inside each upload: the neighbour
+//! The per-step pass of `shaders/expand.wgsl`, run once inside each upload: the neighbour
 //! masks (a bit per cluster candidate saying whether it is in the point's neighbour list, so
-//! the refinement loops visit the list itself instead of filtering every candidate each time)
-//! and the leaf spheres (each BVH item slot's sphere, read by the walk beside its item).
+//! the refinement loops visit the list itself instead of filtering every candidate each time).
 
 use std::sync::OnceLock;
 
@@ -11,14 +10,10 @@ use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
 use crate::shaders::{EXPAND_ARRAYS, expand_wgsl};
 
-const WORKGROUP: u32 = 64;
-
-/// The passes' pipelines for one module (arrays split in ranges or not).
+/// The pass's pipeline for one module (arrays split in ranges or not).
 #[derive(Debug)]
 struct Passes {
     masks: wgpu::ComputePipeline,
-    leaves: wgpu::ComputePipeline,
-    widen: wgpu::ComputePipeline,
 }
 
 /// The per-step passes' pipelines, compiled for one device and its binding limit (per split,
@@ -35,8 +30,8 @@ pub struct StepPasses {
     passes: [OnceLock<Passes>; 2],
 }
 
-/// The buffers the passes read and the two they write (`masks`, `leaf_spheres`), in the
-/// order of `EXPAND_ARRAYS`.
+/// The buffers the pass reads and the one it writes (`masks`), in the order of
+/// `EXPAND_ARRAYS`.
 pub(crate) struct ExpandInputs<'a> {
     pub points: &'a wgpu::Buffer,
     pub normals: &'a wgpu::Buffer,
@@ -44,11 +39,6 @@ pub(crate) struct ExpandInputs<'a> {
     pub cluster_start: &'a wgpu::Buffer,
     pub cluster_ids: &'a wgpu::Buffer,
     pub masks: &'a wgpu::Buffer,
-    pub bvh_items: &'a wgpu::Buffer,
-    pub spheres: &'a wgpu::Buffer,
-    pub leaf_spheres: &'a wgpu::Buffer,
-    pub bvh_nodes: &'a wgpu::Buffer,
-    pub wide_nodes: &'a wgpu::Buffer,
 }
 
 impl StepPasses {
@@ -86,27 +76,21 @@ impl StepPasses {
                 label: Some("expand"),
                 source: wgpu::ShaderSource::Wgsl(expand_wgsl(self.max_binding, split).into()),
             });
-            let pipeline = |entry| {
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
+            Passes {
+                masks: device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("expand"),
                     layout: Some(&self.pipeline_layout),
                     module: &module,
-                    entry_point: Some(entry),
+                    entry_point: Some("expand"),
                     compilation_options: wgpu::PipelineCompilationOptions::default(),
                     cache: None,
-                })
-            };
-            Passes {
-                masks: pipeline("expand"),
-                leaves: pipeline("leaves"),
-                widen: pipeline("widen"),
+                }),
             }
         })
     }
 
-    /// Records the passes that fill `inputs.masks` (rows of words, `mask_row`),
-    /// `inputs.leaf_spheres` (one per BVH item) and `inputs.wide_nodes` (one per BVH2 node);
-    /// `split` when an array spans several ranges.
+    /// Records the pass that fills `inputs.masks` (rows of words, `mask_row`); `split` when
+    /// an array spans several ranges.
     pub(crate) fn encode(
         &self,
         device: &wgpu::Device,
@@ -117,11 +101,6 @@ impl StepPasses {
         timestamps: Option<&wgpu::QuerySet>,
     ) -> Result<()> {
         let max_groups = device.limits().max_compute_workgroups_per_dimension;
-        // Rows are full width whenever a dispatch needs more than one.
-        let settings = ExpandSettings {
-            row_threads: max_groups * WORKGROUP,
-            ..settings
-        };
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("expand settings"),
             size: size_of::<ExpandSettings>() as u64,
@@ -141,11 +120,6 @@ impl StepPasses {
             inputs.cluster_start,
             inputs.cluster_ids,
             inputs.masks,
-            inputs.bvh_items,
-            inputs.spheres,
-            inputs.leaf_spheres,
-            inputs.bvh_nodes,
-            inputs.wide_nodes,
         ];
         let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), self.max_binding);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -154,38 +128,28 @@ impl StepPasses {
             entries: &entries,
         });
         let passes = self.passes(device, split);
-        // The masks pass runs one workgroup per cluster; the others a thread per element.
+        // One workgroup per cluster.
         let clusters = settings.point_count.div_ceil(settings.cluster_size.max(1));
-        let dispatches = [
-            (
-                &passes.masks,
-                if settings.mask_words == 0 {
-                    0
-                } else {
-                    clusters
-                },
-            ),
-            (&passes.leaves, settings.item_count.div_ceil(WORKGROUP)),
-            (&passes.widen, settings.node_count.div_ceil(WORKGROUP)),
-        ];
-        for (i, (pipeline, groups)) in dispatches.into_iter().enumerate() {
-            let timestamp_writes = timestamps.map(|set| wgpu::ComputePassTimestampWrites {
-                query_set: set,
-                beginning_of_pass_write_index: Some(2 * i as u32),
-                end_of_pass_write_index: Some(2 * i as u32 + 1),
-            });
-            // A timed pass runs even with nothing to do, so that its stamps are written.
-            if groups == 0 && timestamp_writes.is_none() {
-                continue;
-            }
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("per-step"),
-                timestamp_writes,
-            });
-            if groups == 0 {
-                continue;
-            }
-            pass.set_pipeline(pipeline);
+        let groups = if settings.mask_words == 0 {
+            0
+        } else {
+            clusters
+        };
+        let timestamp_writes = timestamps.map(|set| wgpu::ComputePassTimestampWrites {
+            query_set: set,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        });
+        // A timed pass runs even with nothing to do, so that its stamps are written.
+        if groups == 0 && timestamp_writes.is_none() {
+            return Ok(());
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("per-step"),
+            timestamp_writes,
+        });
+        if groups > 0 {
+            pass.set_pipeline(&passes.masks);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(groups.min(max_groups), groups.div_ceil(max_groups), 1);
         }

@@ -33,8 +33,8 @@ pub struct GpuSettings {
     pub has_field: u32,
     /// Words of neighbour mask of the largest cluster.
     pub mask_words: u32,
-    /// Entries of bvh_nodes on the GPU (the blank lead node included) and of bvh_items.
-    pub node_count: u32,
+    /// Entries of the 4-wide tree and of bvh_items.
+    pub wide_count: u32,
     pub item_count: u32,
     pub pad0: u32,
     pub pad1: u32,
@@ -48,8 +48,8 @@ pub struct GpuSettings {
 #[allow(clippy::excessive_precision)]
 pub const DEFAULT_KEY_LIGHT: [f32; 3] = [0.40561610, -0.30421208, 0.86193422];
 
-/// `struct ExpandSettings` in expand.wgsl: the uniforms of the per-step passes (neighbour
-/// masks and leaf spheres).
+/// `struct ExpandSettings` in expand.wgsl: the uniforms of the per-step pass (neighbour
+/// masks).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct ExpandSettings {
@@ -57,19 +57,33 @@ pub struct ExpandSettings {
     pub cluster_size: u32,
     pub mask_words: u32,
     pub has_normals: u32,
-    /// Threads per row of the 2D dispatches.
-    pub row_threads: u32,
-    pub sphere_count: u32,
-    /// Entries of the BVH's item list.
-    pub item_count: u32,
     /// Entries of cluster_ids.
     pub cluster_id_count: u32,
-    /// Nodes of the baked BVH2.
-    pub node_count: u32,
     pub pad0: u32,
     pub pad1: u32,
     pub pad2: u32,
 }
+
+/// `struct Wide` in step.wgsl: a node of the 4-wide tree the trace walk descends, made by
+/// the upload's host half from the baked BVH2 (`upload/wide.rs`). Slot i's box per axis
+/// across the four lanes, and its link (an inner node's entry, or a leaf's packed items);
+/// an empty slot is the point [`EMPTY_SLOT`] with link 0.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GpuWide {
+    pub lo_x: [f32; 4],
+    pub hi_x: [f32; 4],
+    pub lo_y: [f32; 4],
+    pub hi_y: [f32; 4],
+    pub lo_z: [f32; 4],
+    pub hi_z: [f32; 4],
+    pub links: [u32; 4],
+    pub pad: [u32; 4],
+}
+
+/// Where an empty slot of a [`GpuWide`] sits on every axis: a unit ray (|1 / d| ≥ 1 per
+/// axis) would enter it beyond any t the walk accepts, or behind its origin.
+pub const EMPTY_SLOT: f32 = 1e30;
 
 /// `struct Hit` in trace.wgsl: one pixel of the hit buffer, in the cache's local coordinates.
 #[repr(C)]

@@ -8,14 +8,14 @@
 //! `NAME_at(i)` (`NAME_set(i, v)` to write). A module built with `split` picks the range from
 //! the index's high bits; one built without reads range 0 alone, as a plain array.
 
-/// The step data types (Point, Normal, Sphere, BvhNode, Wide, stack links) every module
+/// The step data types (Point, Normal, Sphere, Wide, stack links) every module
 /// begins with.
 pub const STEP_WGSL: &str = include_str!("../../../shaders/step.wgsl");
 
 /// The shared MLS maths alone.
 pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
 
-/// The per-step passes, entry points `expand` (neighbour masks) and `leaves` (leaf spheres).
+/// The per-step pass, entry point `expand` (neighbour masks).
 pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
 
 /// The trace pass and the water pass, which traces secondary rays: mls.wgsl + trace.wgsl +
@@ -46,7 +46,7 @@ pub const TEXTURE_BINDING: u32 = 101;
 pub const TRACE_STACK_SIZES: [u32; 3] = [32, 64, 96];
 
 /// Bindings per storage array: an array may span this many of the adapter's largest
-/// bindings (3 × 128 MiB on lavapipe: the balls of 6M points). The 14 arrays then take 42
+/// bindings (3 × 128 MiB on lavapipe: the balls of 6M points). The 12 arrays then take 36
 /// storage bindings per stage, within lavapipe's 48.
 pub const RANGES: u32 = 3;
 
@@ -97,14 +97,12 @@ pub mod step_array {
     pub const CLUSTER_IDS: RangedArray = array("cluster_ids", "u32", 4, 0, 4, false);
     pub const BALLS: RangedArray = array("balls", "Ball", 64, 0, 5, false);
     pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 6, false);
-    pub const BVH_NODES: RangedArray = array("bvh_nodes", "BvhNode", 32, 0, 7, false);
-    pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 8, false);
-    pub const FIELD: RangedArray = array("field", "f32", 4, 0, 9, false);
-    pub const LEAF_SPHERES: RangedArray = array("leaf_spheres", "vec4<f32>", 16, 0, 10, false);
-    pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 11, false);
+    pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 7, false);
+    pub const FIELD: RangedArray = array("field", "f32", 4, 0, 8, false);
+    pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 9, false);
 }
 
-pub const STEP_ARRAYS: [RangedArray; 12] = [
+pub const STEP_ARRAYS: [RangedArray; 10] = [
     step_array::POINTS,
     step_array::NORMALS,
     step_array::NEIGHBOUR_MASKS,
@@ -112,10 +110,8 @@ pub const STEP_ARRAYS: [RangedArray; 12] = [
     step_array::CLUSTER_IDS,
     step_array::BALLS,
     step_array::SPHERES,
-    step_array::BVH_NODES,
     step_array::BVH_ITEMS,
     step_array::FIELD,
-    step_array::LEAF_SPHERES,
     step_array::WIDE_NODES,
 ];
 
@@ -128,19 +124,14 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
 /// The present pass's array (present.wgsl, group 0): the shaded image.
 pub const PRESENT_ARRAYS: [RangedArray; 1] = [array("image", "u32", 4, 0, 0, false)];
 
-/// The per-step passes' arrays (expand.wgsl, group 0).
-pub const EXPAND_ARRAYS: [RangedArray; 11] = [
+/// The per-step pass's arrays (expand.wgsl, group 0).
+pub const EXPAND_ARRAYS: [RangedArray; 6] = [
     array("points", "Point", 16, 0, 0, false),
     array("normals", "Normal", 16, 0, 1, false),
     array("reach", "f32", 4, 0, 2, false),
     array("cluster_start", "u32", 4, 0, 3, false),
     array("cluster_ids", "u32", 4, 0, 4, false),
     array("neighbour_masks", "u32", 4, 0, 5, true),
-    array("bvh_items", "u32", 4, 0, 6, false),
-    array("spheres", "Sphere", 16, 0, 7, false),
-    array("leaf_spheres", "vec4<f32>", 16, 0, 8, true),
-    array("bvh_nodes", "BvhNode", 32, 0, 9, false),
-    array("wide_nodes", "Wide", 128, 0, 10, true),
 ];
 
 /// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:
@@ -206,7 +197,8 @@ pub fn ranged_wgsl(arrays: &[RangedArray], limit: u64, split: bool) -> String {
 /// The constants the shaders share with Rust, written from the Rust definitions so that each
 /// has one source: the hit statuses ([`crate::status`]), the shade modes
 /// ([`crate::ShadeMode`]), the candidates a ray refines ([`slosh_mls::MAX_CANDIDATES`]) and
-/// the stack-link packing ([`crate::MAX_LINK_FIRST`]), and the water pass's stage
+/// the stack-link packing ([`crate::MAX_LINK_FIRST`]), the wide tree's empty slot
+/// ([`crate::layout::EMPTY_SLOT`]), and the water pass's stage
 /// ([`crate::water`]). Prepended to every module.
 pub fn shared_constants_wgsl() -> String {
     use crate::{ShadeMode, status};
@@ -232,6 +224,7 @@ pub fn shared_constants_wgsl() -> String {
     ] {
         constant(name, value);
     }
+    out += &format!("const EMPTY_SLOT: f32 = {:e};\n", crate::layout::EMPTY_SLOT);
     out + &crate::water::water_wgsl()
 }
 

@@ -299,7 +299,7 @@ macro_rules! check_layout {
 
 #[test]
 fn pod_structs_mirror_the_wgsl_layouts() {
-    use slosh_cache::{GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
+    use slosh_cache::{GpuBall, GpuNormal, GpuPoint, GpuSphere};
     use slosh_render::GpuSettings;
     let trace = validate("trace", &trace_wgsl(32, LIMITS[0], true));
     let shade = validate("shade", &shade_wgsl(LIMITS[0], true));
@@ -340,7 +340,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 field_max,
                 has_field,
                 mask_words,
-                node_count,
+                wide_count,
                 item_count,
                 pad0,
                 pad1,
@@ -361,18 +361,19 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             cluster_size,
             mask_words,
             has_normals,
-            row_threads,
-            sphere_count,
-            item_count,
             cluster_id_count,
-            node_count,
             pad0,
             pad1,
             pad2
         ]
     );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);
-    check_layout!(&trace, "BvhNode", GpuBvhNode, [lo, count, hi, first]);
+    check_layout!(
+        &trace,
+        "Wide",
+        slosh_render::layout::GpuWide,
+        [lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, links, pad]
+    );
 }
 
 fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {

@@ -255,22 +255,22 @@ fn measure(
     let staging = slosh_render::StagingPool::new(2);
     let (mut host_ms, mut record_ms) = (Vec::new(), Vec::new());
     let (mut copy_ms, mut pass_ms) = (Vec::new(), Vec::new());
-    // GPU timestamps of the three per-step passes, where the adapter has them.
-    let mut each_pass_ms: [Vec<f64>; 3] = Default::default();
+    // GPU timestamps of the per-step pass, where the adapter has them.
+    let mut mask_pass_ms = Vec::new();
     let stamps = gpu.timestamps.then(|| {
         let buffer = |usage| {
             gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("pass stamps"),
-                size: 48,
+                size: 16,
                 usage,
                 mapped_at_creation: false,
             })
         };
         (
             gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("per-step passes"),
+                label: Some("per-step pass"),
                 ty: wgpu::QueryType::Timestamp,
-                count: 6,
+                count: 2,
             }),
             buffer(wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC),
             buffer(wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
@@ -298,8 +298,8 @@ fn measure(
             },
         )?;
         if let Some((set, resolve, readback)) = &stamps {
-            passes.resolve_query_set(set, 0..6, resolve, 0);
-            passes.copy_buffer_to_buffer(resolve, 0, readback, 0, 48);
+            passes.resolve_query_set(set, 0..2, resolve, 0);
+            passes.copy_buffer_to_buffer(resolve, 0, readback, 0, 16);
         }
         let t = Instant::now();
         gpu.queue.submit([copies.finish()]);
@@ -316,9 +316,7 @@ fn measure(
         if let Some((_, _, readback)) = &stamps {
             let ticks: Vec<u64> = slosh_render::read_buffer(gpu, readback)?;
             let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
-            for (k, times) in each_pass_ms.iter_mut().enumerate() {
-                times.push(ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period);
-            }
+            mask_pass_ms.push(ticks[1].saturating_sub(ticks[0]) as f64 * period);
         }
         host_ms.push(step.upload.host_seconds * 1e3);
         record_ms.push(step.upload.record_seconds * 1e3);
@@ -439,7 +437,7 @@ fn measure(
         record_ms: median(record_ms),
         copy_ms: median(copy_ms),
         pass_ms: median(pass_ms),
-        each_pass_ms: each_pass_ms.map(median),
+        mask_pass_ms: median(mask_pass_ms),
         read_ms: median(read_ms),
         read_gbps,
         write_buffer_ms: median(write_ms),

@@ -29,8 +29,8 @@ pub struct SeriesReport {
     pub record_ms: f64,
     pub copy_ms: f64,
     pub pass_ms: f64,
-    /// GPU time of the masks, leaves and widen passes (0 without timestamps).
-    pub each_pass_ms: [f64; 3],
+    /// GPU time of the neighbour-mask pass (0 without timestamps).
+    pub mask_pass_ms: f64,
     pub read_ms: f64,
     pub read_gbps: f64,
     pub write_buffer_ms: f64,
@@ -186,17 +186,17 @@ impl Report for ScrubReport {
         let _ = writeln!(md, "## A step, and the floors\n");
         let _ = writeln!(
             md,
-            "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies, then the per-step passes (neighbour masks, leaf spheres, 4-wide tree), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
+            "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check, the 4-wide tree made). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies, then the per-step pass (neighbour masks), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
         );
         let _ = writeln!(
             md,
-            "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | per-step passes ms (GPU: masks / leaves / widen) | fs::read ms (GB/s) | write_buffer ms |"
+            "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | per-step pass ms (GPU) | fs::read ms (GB/s) | write_buffer ms |"
         );
         let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
         for r in reports {
             let _ = writeln!(
                 md,
-                "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2} / {:.2} / {:.2}) | {:.2} ({:.1}) | {:.2} |",
+                "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2}) | {:.2} ({:.1}) | {:.2} |",
                 r.label,
                 r.section_bytes,
                 r.step_gpu_bytes,
@@ -207,9 +207,7 @@ impl Report for ScrubReport {
                 r.streaming_record_ms,
                 r.copy_ms,
                 r.pass_ms,
-                r.each_pass_ms[0],
-                r.each_pass_ms[1],
-                r.each_pass_ms[2],
+                r.mask_pass_ms,
                 r.read_ms,
                 r.read_gbps,
                 r.write_buffer_ms

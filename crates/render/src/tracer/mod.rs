@@ -4,7 +4,7 @@
 //! `shaders/trace.wgsl`'s entry points share one BVH walk to the next candidate in the order
 //! of initial hits: `trace_initial` (one iteration, no refinement code, a small kernel) and
 //! `trace_refined` (Adamson & Alexa: refine that candidate, hand over to the next when the
-//! hit leaves its ball). The walk descends the 4-wide tree the upload's `widen` pass built
+//! hit leaves its ball). The walk descends the 4-wide tree the upload's host half built
 //! (four boxes per 128-byte read over half the levels), keeps the node in hand in registers
 //! and descends to a leaf before testing it (while-while, after Aila & Laine), stacking the
 //! other entered slots, farthest first, as packed (first, count) links, so a pop reads no

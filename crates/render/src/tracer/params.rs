@@ -107,7 +107,7 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         field_max,
         has_field: u32::from(step.field.is_some()),
         mask_words: info.mask_words,
-        node_count: info.node_count,
+        wide_count: info.wide_count,
         item_count: info.item_count,
         pad0: 0,
         pad1: 0,

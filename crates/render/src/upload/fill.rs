@@ -21,13 +21,13 @@ enum Piece<'a> {
     },
 }
 
-/// Device-local storage buffers for `arrays` (label, bytes, blank lead bytes), all filled
+/// Device-local storage buffers for `arrays` (label, bytes), all filled
 /// through one staging buffer (one allocation per step, not one per section), whose pieces
 /// are copied or decoded in parallel; the copies are recorded into `encoder`.
 pub(super) fn storage_buffers(
     gpu: &Gpu,
     file: &CacheFile,
-    arrays: &[(&str, Source<'_>, u64)],
+    arrays: &[(&str, Source<'_>)],
     encoder: &mut wgpu::CommandEncoder,
     pool: Option<&StagingPool>,
     cancelled: Option<&(dyn Fn() -> bool + Sync)>,
@@ -35,16 +35,16 @@ pub(super) fn storage_buffers(
     // Each array's place in the staging buffer, 256-byte aligned.
     let mut offsets = Vec::with_capacity(arrays.len());
     let mut total = 0u64;
-    for (_, source, _) in arrays {
+    for (_, source) in arrays {
         offsets.push(total);
         total += source.len().next_multiple_of(256);
     }
     let targets: Vec<wgpu::Buffer> = arrays
         .iter()
-        .map(|(label, source, lead)| {
+        .map(|(label, source)| {
             gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: lead + source.len().max(EMPTY_BINDING).next_multiple_of(4),
+                size: source.len().max(EMPTY_BINDING).next_multiple_of(4),
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             })
@@ -66,7 +66,7 @@ pub(super) fn storage_buffers(
     // filled on rayon's threads.
     let spans: Vec<Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>> = arrays
         .iter()
-        .map(|(_, source, _)| match source {
+        .map(|(_, source)| match source {
             Source::Runs { entry, .. } => entry.chunk_spans(),
             Source::Bytes(_) => Vec::new(),
         })
@@ -79,7 +79,7 @@ pub(super) fn storage_buffers(
             .get_mapped_range_mut()
             .map_err(|e| Error::Readback(e.to_string()))
     };
-    for (((_, source, _), &offset), spans) in arrays.iter().zip(&offsets).zip(&spans) {
+    for (((_, source), &offset), spans) in arrays.iter().zip(&offsets).zip(&spans) {
         match *source {
             Source::Bytes(bytes) => {
                 for (k, piece) in bytes.chunks(COPY_PIECE).enumerate() {
@@ -135,10 +135,10 @@ pub(super) fn storage_buffers(
         return Err(e);
     }
     staging.unmap();
-    for (((_, source, lead), offset), target) in arrays.iter().zip(&offsets).zip(&targets) {
+    for (((_, source), offset), target) in arrays.iter().zip(&offsets).zip(&targets) {
         if source.len() > 0 {
             let size = source.len().next_multiple_of(4);
-            encoder.copy_buffer_to_buffer(&staging, *offset, target, *lead, size);
+            encoder.copy_buffer_to_buffer(&staging, *offset, target, 0, size);
         }
     }
     Ok((targets, pool.map(|_| staging)))

@@ -7,8 +7,8 @@ use bytemuck::Zeroable;
 use slosh_cache::{CacheFile, names};
 
 use super::fill::storage_buffers;
-use super::host::{HostField, HostStep, Source, StepInfo};
-use super::{EMPTY_BINDING, SECTIONS, field_buffer_size, invalid, lead};
+use super::host::{HostField, HostStep, Source, StepInfo, WIDE_NODES};
+use super::{EMPTY_BINDING, field_buffer_size, invalid};
 use crate::bindings::{bind_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
@@ -31,13 +31,9 @@ pub struct StepBuffers {
     pub cluster_ids: wgpu::Buffer,
     pub balls: wgpu::Buffer,
     pub spheres: wgpu::Buffer,
-    pub bvh_nodes: wgpu::Buffer,
     pub bvh_items: wgpu::Buffer,
     pub field: wgpu::Buffer,
-    /// Written by the leaf-sphere pass at upload: each BVH item's sphere, 16 bytes.
-    pub leaf_spheres: wgpu::Buffer,
-    /// Written by the widening pass at upload: the 4-wide tree the walk descends, one
-    /// `WIDE_NODE_BYTES` entry per BVH2 node (a leaf's unused).
+    /// The 4-wide tree the walk descends, made by the host half from the baked BVH2.
     pub wide_nodes: wgpu::Buffer,
 }
 
@@ -52,10 +48,8 @@ impl StepBuffers {
             &self.cluster_ids,
             &self.balls,
             &self.spheres,
-            &self.bvh_nodes,
             &self.bvh_items,
             &self.field,
-            &self.leaf_spheres,
             &self.wide_nodes,
         ]
     }
@@ -103,8 +97,7 @@ pub struct UploadOptions<'a> {
     /// Records the per-step passes here instead of after the copies: submitted in that
     /// order, the two can be timed apart.
     pub passes: Option<&'a mut wgpu::CommandEncoder>,
-    /// A timestamp query set of 6: each of the three passes writes its begin and end there
-    /// (masks 0–1, leaves 2–3, widen 4–5).
+    /// A timestamp query set of 2: the mask pass writes its begin and end there.
     pub timestamps: Option<&'a wgpu::QuerySet>,
     /// Takes the staging memory from this pool; hand it back with
     /// [`GpuStep::take_staging`] and [`StagingPool::recycle`] once the copies are submitted.
@@ -142,8 +135,8 @@ pub struct GpuStep {
     staging: Option<wgpu::Buffer>,
 }
 
-/// How the passes bind each section of `SECTIONS`: the reach is read only by the per-step
-/// passes; a name that is no section is an error, never a guess.
+/// How the passes bind each array of [`HostStep::gpu_arrays`]: the reach is read only by the
+/// per-step pass; a name that is no array is an error, never a guess.
 fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
     Ok(match name {
         names::POINTS => &step_array::POINTS,
@@ -153,8 +146,8 @@ fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
         names::CLUSTER_NEIGHBOURS => &step_array::CLUSTER_IDS,
         names::BALLS => &step_array::BALLS,
         names::SPHERES => &step_array::SPHERES,
-        names::BVH_NODES => &step_array::BVH_NODES,
         names::BVH_ITEMS => &step_array::BVH_ITEMS,
+        WIDE_NODES => &step_array::WIDE_NODES,
         other => {
             return Err(invalid(
                 file,
@@ -260,11 +253,11 @@ impl GpuStep {
         let start = Instant::now();
         let file = host.file();
         let info = host.info.clone();
-        // Every array, sections and the three the passes derive, within RANGES bindings.
+        // Every array, sections, the wide tree and the masks, within RANGES bindings.
         let mut split = false;
-        for (slot, name) in SECTIONS.iter().enumerate() {
-            let bytes = lead(name) + host.section_source(slot).len();
-            split |= needs_ranges(gpu, file, name, array_of(file, name)?, bytes)?;
+        let gpu_arrays = host.gpu_arrays();
+        for (name, source) in &gpu_arrays {
+            split |= needs_ranges(gpu, file, name, array_of(file, name)?, source.len())?;
         }
         if let Some(field) = &host.field {
             split |= needs_ranges(
@@ -275,7 +268,7 @@ impl GpuStep {
                 field.bytes.len() as u64,
             )?;
         }
-        let [mask_bytes, leaf_bytes, wide_bytes] = info.derived_bytes();
+        let mask_bytes = info.mask_bytes();
         split |= needs_ranges(
             gpu,
             file,
@@ -283,28 +276,16 @@ impl GpuStep {
             &step_array::NEIGHBOUR_MASKS,
             mask_bytes,
         )?;
-        split |= needs_ranges(
-            gpu,
-            file,
-            "leaf spheres",
-            &step_array::LEAF_SPHERES,
-            leaf_bytes,
-        )?;
-        split |= needs_ranges(gpu, file, "wide nodes", &step_array::WIDE_NODES, wide_bytes)?;
         let mut stats = UploadStats {
             stored_bytes: host.stored_bytes,
             host_seconds: host.host_seconds,
             ..UploadStats::default()
         };
-        let mut arrays: Vec<(&str, Source<'_>, u64)> = SECTIONS
-            .iter()
-            .enumerate()
-            .map(|(slot, name)| (*name, host.section_source(slot), lead(name)))
-            .collect();
+        let mut arrays = gpu_arrays;
         if let Some(f) = &host.field {
-            arrays.push(("field", Source::Bytes(&f.bytes), 0));
+            arrays.push(("field", Source::Bytes(&f.bytes)));
         }
-        stats.bytes = arrays.iter().map(|(_, b, _)| b.len()).sum();
+        stats.bytes = arrays.iter().map(|(_, b)| b.len()).sum();
         let (mut sections, staging) =
             storage_buffers(gpu, file, &arrays, encoder, staging, cancelled)?;
         let field_values = match &host.field {
@@ -320,10 +301,8 @@ impl GpuStep {
         };
         let (points, normals, reach) = (next()?, next()?, next()?);
         let (cluster_start, cluster_ids) = (next()?, next()?);
-        let (balls, spheres, bvh_nodes, bvh_items) = (next()?, next()?, next()?, next()?);
+        let (balls, spheres, bvh_items, wide_nodes) = (next()?, next()?, next()?, next()?);
         let masks = derived(gpu, "neighbour masks", mask_bytes);
-        let leaf_spheres = derived(gpu, "leaf spheres", leaf_bytes);
-        let wide_nodes = derived(gpu, "wide nodes", wide_bytes);
         step_passes.encode(
             &gpu.device,
             &ExpandInputs {
@@ -333,21 +312,13 @@ impl GpuStep {
                 cluster_start: &cluster_start,
                 cluster_ids: &cluster_ids,
                 masks: &masks,
-                bvh_items: &bvh_items,
-                spheres: &spheres,
-                leaf_spheres: &leaf_spheres,
-                bvh_nodes: &bvh_nodes,
-                wide_nodes: &wide_nodes,
             },
             ExpandSettings {
                 point_count: info.point_count,
                 cluster_size: info.cluster_size,
                 mask_words: info.mask_words,
                 has_normals: u32::from(info.has_normals),
-                sphere_count: info.sphere_count,
-                item_count: info.item_count,
                 cluster_id_count: info.cluster_id_count,
-                node_count: info.node_count - 1,
                 ..ExpandSettings::zeroed()
             },
             split,
@@ -366,10 +337,8 @@ impl GpuStep {
             cluster_ids,
             balls,
             spheres,
-            bvh_nodes,
             bvh_items,
             field: field_values,
-            leaf_spheres,
             wide_nodes,
         };
         let binding_limit = gpu.max_binding();

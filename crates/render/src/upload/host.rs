@@ -8,9 +8,8 @@ use rayon::prelude::*;
 use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
 
 use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mask_layout};
-use super::{
-    EMPTY_BINDING, HOST_READS, SECTIONS, WIDE_NODE_BYTES, field_buffer_size, invalid, lead, slot_of,
-};
+use super::wide::wide_tree;
+use super::{EMPTY_BINDING, HOST_ONLY, HOST_READS, SECTIONS, field_buffer_size, invalid, slot_of};
 use crate::error::Result;
 
 /// What the passes need to know about a step, read from its header and sections.
@@ -21,8 +20,8 @@ pub struct StepInfo {
     pub cluster_size: u32,
     /// Depth of the step's BVH (the traversal stack needs one entry more).
     pub bvh_depth: u64,
-    /// Entries of the BVH's node buffer (the blank lead node included) and item list.
-    pub node_count: u32,
+    /// Entries of the 4-wide tree (`wide.rs`) and of the BVH's item list.
+    pub wide_count: u32,
     pub item_count: u32,
     /// Entries of the cluster candidate list.
     pub cluster_id_count: u32,
@@ -42,16 +41,9 @@ pub struct StepInfo {
 }
 
 impl StepInfo {
-    /// Bytes of the neighbour masks, leaf spheres and wide nodes the per-step passes derive.
-    pub fn derived_bytes(&self) -> [u64; 3] {
-        let masks = self.mask_rows * u64::from(self.cluster_size) * 4;
-        let leaves = u64::from(self.item_count) * 16;
-        let wide = u64::from(self.node_count - 1) * WIDE_NODE_BYTES;
-        [
-            masks.max(EMPTY_BINDING),
-            leaves.max(EMPTY_BINDING),
-            wide.max(WIDE_NODE_BYTES),
-        ]
+    /// Bytes of the neighbour masks the per-step pass derives.
+    pub fn mask_bytes(&self) -> u64 {
+        (self.mask_rows * u64::from(self.cluster_size) * 4).max(EMPTY_BINDING)
     }
 }
 
@@ -150,6 +142,8 @@ pub struct HostStep<'a> {
     file: HeldFile<'a>,
     /// Each `SECTIONS` slot's bytes, or where they come from.
     sections: Vec<SectionData>,
+    /// The 4-wide tree's entries (`GpuWide`), made from the BVH2 here.
+    wide: Vec<u8>,
     pub field: Option<HostField>,
     pub info: StepInfo,
     pub host_seconds: f64,
@@ -195,24 +189,30 @@ impl<'a> HostStep<'a> {
         }
     }
 
+    /// The arrays the GPU half uploads, by label: the sections in `SECTIONS`' order but the
+    /// BVH2 nodes, then the wide tree.
+    pub(super) fn gpu_arrays(&self) -> Vec<(&'static str, Source<'_>)> {
+        SECTIONS
+            .iter()
+            .filter(|name| **name != HOST_ONLY)
+            .map(|name| (*name, self.section_source(slot_of(name))))
+            .chain([(WIDE_NODES, Source::Bytes(&self.wide))])
+            .collect()
+    }
+
     /// Every byte the step will hold on the GPU (what [`StepBuffers::bytes`] reports once it
     /// is there), known before the upload.
     pub fn gpu_bytes(&self) -> u64 {
-        let sections: u64 = (0..SECTIONS.len())
-            .map(|slot| {
-                lead(SECTIONS[slot])
-                    + self
-                        .section_source(slot)
-                        .len()
-                        .max(EMPTY_BINDING)
-                        .next_multiple_of(4)
-            })
+        let arrays: u64 = self
+            .gpu_arrays()
+            .iter()
+            .map(|(_, source)| source.len().max(EMPTY_BINDING).next_multiple_of(4))
             .sum();
         let field = self
             .field
             .as_ref()
             .map_or(EMPTY_BINDING, |f| field_buffer_size(&f.bytes));
-        sections + field + self.info.derived_bytes().iter().sum::<u64>()
+        arrays + field + self.info.mask_bytes()
     }
 
     fn prepare(file: HeldFile<'a>, field: Option<&str>) -> Result<HostStep<'a>> {
@@ -269,7 +269,7 @@ impl<'a> HostStep<'a> {
             sphere_count: count(names::SPHERES) as u32,
             cluster_size: header.neighbour_cluster.max(1),
             bvh_depth: header.stats.bvh_depth,
-            node_count: count(names::BVH_NODES) as u32 + 1,
+            wide_count: 0,
             item_count: count(names::BVH_ITEMS) as u32,
             cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
             mask_words: 0,
@@ -289,14 +289,19 @@ impl<'a> HostStep<'a> {
         let mut step = HostStep {
             file,
             sections,
+            wide: Vec::new(),
             field,
             info,
             host_seconds: 0.0,
             stored_bytes,
         };
         let items = u64::from(step.info.item_count);
-        check_tree(step.host_bytes(slot_of(names::BVH_NODES)), items)
+        let nodes = step.host_bytes(slot_of(names::BVH_NODES));
+        let wide = check_tree(nodes, items)
+            .and_then(|()| wide_tree(nodes))
             .map_err(|problem| invalid(step.file(), problem))?;
+        step.info.wide_count = wide.len() as u32;
+        step.wide = bytemuck::cast_slice(&wide).to_vec();
         let (words, rows) = mask_layout(
             step.host_bytes(slot_of(names::CLUSTER_START)),
             step.info.cluster_size,
@@ -308,6 +313,9 @@ impl<'a> HostStep<'a> {
         Ok(step)
     }
 }
+
+/// The label of the wide tree's array among [`HostStep::gpu_arrays`].
+pub(super) const WIDE_NODES: &str = "wide nodes";
 
 /// The bytes of an array the GPU half uploads: in memory (decoded, the field, or raw in the
 /// mapped file), or a compressed section's runs, decoded straight into the staging memory.

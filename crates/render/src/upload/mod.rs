@@ -1,21 +1,23 @@
 //! A cache step streamed into GPU storage buffers, in two halves. The host half
 //! ([`HostStep`], `host.rs`) opens and checks the file, checksums its raw sections in place,
-//! decodes the two sections it reads (BVH nodes, cluster offsets) and checks the tree and the
-//! mask layout (`checks.rs`); it needs no device and runs on any thread. The GPU half
+//! decodes the two sections it reads (BVH nodes, cluster offsets), checks the tree and the
+//! mask layout (`checks.rs`) and widens the tree into the 4-wide one the walk descends
+//! (`wide.rs`; the BVH2 itself never goes to the GPU); it needs no device and runs on any
+//! thread. The GPU half
 //! ([`GpuStep::create`], `gpu_step.rs`) creates the buffers and fills one staging buffer
 //! (`fill.rs`; from a [`StagingPool`](crate::StagingPool), so its pages are already faulted
 //! in) on rayon's threads: raw sections copied from the map, compressed ones decoded run by
 //! run into a cache-sized buffer and copied on while hot (staging memory may be
 //! write-combined, and a decoder reads its own output), so a section never makes a round trip
 //! through main memory. It records the copies and the per-step passes (`expand.rs`) into the
-//! caller's encoder without waiting. The nodes go to the GPU after one blank node, which puts
-//! every sibling pair in one 64-byte line. A step owns its bind group (group 0); the colour
+//! caller's encoder without waiting. A step owns its bind group (group 0); the colour
 //! field has its own buffer, so switching fields uploads only the field.
 
 mod checks;
 mod fill;
 mod gpu_step;
 mod host;
+mod wide;
 
 use slosh_cache::{CacheFile, names};
 
@@ -37,6 +39,9 @@ const SECTIONS: [&str; 9] = [
     names::BVH_ITEMS,
 ];
 
+/// The one section the GPU never holds: the host half widens it (`wide.rs`).
+const HOST_ONLY: &str = names::BVH_NODES;
+
 /// The sections the host half reads (the tree check, the mask layout), so decodes itself.
 const HOST_READS: [&str; 2] = [names::BVH_NODES, names::CLUSTER_START];
 
@@ -51,19 +56,6 @@ const WIDE_NODE_BYTES: u64 = 128;
 /// absent or empty sections (a step without particles) bind this many zero bytes, the
 /// largest element any binding holds (the wide node).
 const EMPTY_BINDING: u64 = WIDE_NODE_BYTES;
-
-/// Bytes of the blank node before a step's BVH nodes on the GPU (one `GpuBvhNode`).
-const NODE_LEAD: u64 = 32;
-
-/// Bytes before a section's data in its GPU buffer: trace.wgsl reads the nodes after one
-/// blank node, which aligns sibling pairs.
-fn lead(name: &str) -> u64 {
-    if name == names::BVH_NODES {
-        NODE_LEAD
-    } else {
-        0
-    }
-}
 
 fn field_buffer_size(bytes: &[u8]) -> u64 {
     (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4)
