@@ -34,6 +34,7 @@ var<workgroup> tile_positions: array<vec4<f32>, MASK_TILE>;
 var<workgroup> tile_normals: array<vec4<f32>, MASK_TILE>;
 var<workgroup> cluster_first: u32;
 var<workgroup> cluster_count: u32;
+var<workgroup> cluster_base_word: u32;
 
 @compute @workgroup_size(256, 1, 1)
 fn expand(
@@ -52,8 +53,10 @@ fn expand(
         let last = min(cluster_start_at(c + 1u), cfg.cluster_id_count);
         cluster_first = first;
         cluster_count = select(0u, last - first, last > first);
+        cluster_base_word = cluster_base_at(c);
     }
     let first = workgroupUniformLoad(&cluster_first);
+    let words_base = workgroupUniformLoad(&cluster_base_word);
     // Candidates past the largest cluster's words are never tested.
     let count = min(workgroupUniformLoad(&cluster_count), cfg.mask_words * 32u);
     let members = min(size, cfg.point_count - c * size);
@@ -64,12 +67,12 @@ fn expand(
         var position = vec4<f32>(0.0);
         var normal = vec4<f32>(0.0);
         if k < count {
-            let j = cluster_ids_at(first + k);
+            let j = candidate(c * size, words_base, k);
             // w = 1 marks a candidate inside the point list.
             if j < cfg.point_count {
                 position = vec4<f32>(points_at(j).position, 1.0);
                 if cfg.has_normals != 0u {
-                    normal = vec4<f32>(normals_at(j).normal, 0.0);
+                    normal = vec4<f32>(normal_at(j), 0.0);
                 }
             }
         }
@@ -89,7 +92,7 @@ fn expand(
             let reach2 = r * r;
             var own_normal = vec3<f32>(0.0);
             if cfg.has_normals != 0u {
-                own_normal = normals_at(centre).normal;
+                own_normal = normal_at(centre);
             }
             let check_normals = dot(own_normal, own_normal) > 0.0;
             var bits = 0u;

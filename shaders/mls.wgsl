@@ -4,11 +4,13 @@
 // Shared by trace.wgsl and shade.wgsl, which are appended to this file.
 
 // A ball's initial support normal and polynomial (mirrors `slosh_cache::GpuBall`).
+// Mirrors `slosh_cache::GpuBall`: the support normal (octahedral), h, the ten coefficients as
+// half floats two to a word, and the state word (bits 0–1 the state, 2–3 the degree, 4–31
+// the droplet's sphere).
 struct Ball {
-    normal: vec3<f32>,
+    normal: u32,
     h: f32,
-    coeffs: array<f32, 10>,
-    degree: u32,
+    coeffs: array<u32, 5>,
     state: u32,
 }
 
@@ -151,7 +153,9 @@ fn normalized(v: vec3<f32>) -> Unit {
 // `mask_row * cluster_size + m * words` (step.wgsl). Visiting set bits in order visits the
 // list in index order, as the CPU does.
 struct Neighbourhood {
-    first: u32,
+    // The cluster's first point and its cluster_base entry (`candidate` in step.wgsl).
+    origin: u32,
+    base: u32,
     // Index of the member's word 0.
     mask: u32,
     words: u32,
@@ -165,7 +169,7 @@ fn neighbourhood(centre: u32) -> Neighbourhood {
     let count = select(0u, last - first, last > first);
     // The largest cluster's words bound any other's.
     let words = min((count + 31u) / 32u, settings.mask_words);
-    return Neighbourhood(first, mask_row(c, first) * size + (centre % size) * words, words);
+    return Neighbourhood(c * size, cluster_base_at(c), mask_row(c, first) * size + (centre % size) * words, words);
 }
 
 // Where a walk over a neighbourhood stands: the current word and its unvisited bits.
@@ -191,7 +195,7 @@ fn next_neighbour(nb: Neighbourhood, cursor: ptr<function, Cursor>) -> u32 {
     }
     let bits = (*cursor).bits;
     (*cursor).bits = bits & (bits - 1u);
-    return cluster_ids_at(nb.first + (*cursor).word * 32u + firstTrailingBit(bits));
+    return candidate(nb.origin, nb.base, (*cursor).word * 32u + firstTrailingBit(bits));
 }
 
 // ---- Local frame (frame.rs) -----------------------------------------------------------------
@@ -346,7 +350,7 @@ fn support_normal(r: vec3<f32>, nb: Neighbourhood, h: f32, toward: vec3<f32>) ->
         let w = weight(length_squared(points_at(j).position - r), h2);
         weight_sum += w;
         if use_normals {
-            let n = normalized(normals_at(j).normal);
+            let n = normalized(normal_at(j));
             if n.ok {
                 mean += n.v * w;
                 magnitude += w;
@@ -372,7 +376,7 @@ fn support_normal(r: vec3<f32>, nb: Neighbourhood, h: f32, toward: vec3<f32>) ->
             if j == NO_NEIGHBOUR {
                 break;
             }
-            let n = normalized(normals_at(j).normal);
+            let n = normalized(normal_at(j));
             if n.ok {
                 let w = weight(length_squared(points_at(j).position - r), h2);
                 vote += w * signum(dot(n.v, normal));
@@ -408,6 +412,48 @@ fn coefficient_count(degree: u32) -> u32 {
 struct Poly {
     degree: u32,
     c: array<f32, 10>,
+}
+
+// An IEEE half float (the low 16 bits of h) as f32, exactly, subnormals included: bit
+// arithmetic, so no adapter feature is needed and the value is the CPU's (`half`) bit for
+// bit. Infinities and NaN are never stored (the verifier refuses them).
+fn half_to_f32(h: u32) -> f32 {
+    let negative = (h & 0x8000u) != 0u;
+    let e = (h >> 10u) & 0x1fu;
+    let m = h & 0x3ffu;
+    var v = 0.0;
+    if e == 0u {
+        v = f32(m) * 5.9604645e-8; // m × 2^-24
+    } else {
+        v = bitcast<f32>(((e + 112u) << 23u) | (m << 13u));
+    }
+    return select(v, -v, negative);
+}
+
+// A ball's stored initial polynomial as f32, exactly the stored values (slosh_cache::GpuBall):
+// up to degree 2, six f32s cut to 24 bits (high halves in words 0–2, next bytes in words
+// 3–4); a cubic, ten half floats.
+fn ball_poly(b: Ball) -> Poly {
+    var p: Poly;
+    p.degree = (b.state >> 2u) & 3u;
+    let w = b.coeffs;
+    if p.degree <= 2u {
+        let hi = array<u32, 6>(w[0] << 16u, w[0] & 0xffff0000u, w[1] << 16u, w[1] & 0xffff0000u, w[2] << 16u, w[2] & 0xffff0000u);
+        let lo = array<u32, 6>(w[3] << 8u, w[3], w[3] >> 8u, w[3] >> 16u, w[4] << 8u, w[4]);
+        p.c = array<f32, 10>(
+            bitcast<f32>(hi[0] | (lo[0] & 0xff00u)), bitcast<f32>(hi[1] | (lo[1] & 0xff00u)),
+            bitcast<f32>(hi[2] | (lo[2] & 0xff00u)), bitcast<f32>(hi[3] | (lo[3] & 0xff00u)),
+            bitcast<f32>(hi[4] | (lo[4] & 0xff00u)), bitcast<f32>(hi[5] | (lo[5] & 0xff00u)),
+            0.0, 0.0, 0.0, 0.0,
+        );
+        return p;
+    }
+    p.c = array<f32, 10>(
+        half_to_f32(w[0]), half_to_f32(w[0] >> 16u), half_to_f32(w[1]), half_to_f32(w[1] >> 16u),
+        half_to_f32(w[2]), half_to_f32(w[2] >> 16u), half_to_f32(w[3]), half_to_f32(w[3] >> 16u),
+        half_to_f32(w[4]), half_to_f32(w[4] >> 16u),
+    );
+    return p;
 }
 
 fn poly_gradient(p: Poly, x: f32, y: f32) -> vec2<f32> {

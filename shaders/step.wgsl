@@ -7,9 +7,41 @@ struct Point {
     radius: f32,
 }
 
-struct Normal {
-    normal: vec3<f32>,
-    pad: f32,
+// A data normal, or a ball's support normal: one word, the octahedral map's two signed
+// 16-bit coordinates (slosh_cache::octahedral, which decodes in the same exact steps, so the
+// CPU and the shaders get the same vector bit for bit). Not normalised: |x| + |y| + |z| = 1,
+// or zero for no normal (a first coordinate of −32768). OCTAHEDRAL_STEP_BITS is generated
+// from slosh_cache::octahedral::OCTAHEDRAL_STEP by shaders.rs.
+fn octahedral(w: u32) -> vec3<f32> {
+    if (w & 0xffffu) == 0x8000u {
+        return vec3<f32>(0.0);
+    }
+    let step = bitcast<f32>(OCTAHEDRAL_STEP_BITS);
+    let x = f32(bitcast<i32>(w << 16u) >> 16u) * step;
+    let y = f32(bitcast<i32>(w) >> 16u) * step;
+    let z = 1.0 - abs(x) - abs(y);
+    if z >= 0.0 {
+        return vec3<f32>(x, y, z);
+    }
+    return vec3<f32>((1.0 - abs(y)) * select(-1.0, 1.0, x >= 0.0), (1.0 - abs(x)) * select(-1.0, 1.0, y >= 0.0), z);
+}
+
+// Point j's data normal, decoded.
+fn normal_at(j: u32) -> vec3<f32> {
+    return octahedral(normals_at(j));
+}
+
+// Candidate slot k of a cluster whose first point is `origin` and whose cluster_base entry is
+// `base` (slosh_cache::candidates): a wide cluster stores 32-bit indices, a narrow one 16-bit
+// offsets from its first point, biased by NARROW_BIAS, two to a word. WIDE_CLUSTER and
+// NARROW_BIAS are generated from slosh_cache::candidates by shaders.rs.
+fn candidate(origin: u32, base: u32, k: u32) -> u32 {
+    let at = base & ~WIDE_CLUSTER;
+    if (base & WIDE_CLUSTER) != 0u {
+        return cluster_ids_at(at + k);
+    }
+    let word = cluster_ids_at(at + (k >> 1u));
+    return origin + ((word >> ((k & 1u) << 4u)) & 0xffffu) - NARROW_BIAS;
 }
 
 // The neighbour masks give each cluster a block of `cluster_size` rows' worth of words: a

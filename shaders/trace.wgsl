@@ -43,6 +43,12 @@ fn enter_wide(w: Wide, s: Slab, t_max: f32) -> vec4<f32> {
     return select(vec4<f32>(FAR), near, near <= far);
 }
 
+// The frame of a ball's stored support normal (normalised from the octahedron).
+fn ball_frame(b: Ball) -> Frame {
+    let n = normalized(octahedral(b.normal));
+    return frame_from_normal(select(vec3<f32>(0.0, 0.0, 1.0), n.v, n.ok));
+}
+
 // Two (entry, link) pairs in ascending entry.
 struct Ordered {
     t_lo: f32,
@@ -120,10 +126,7 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
         if (ball.state & 3u) >= 2u {
             continue;
         }
-        var initial: Poly;
-        initial.degree = min(ball.degree, 3u);
-        initial.c = ball.coeffs;
-        let hit = intersect_poly(ray, sphere.xyz, frame_from_normal(ball.normal), initial, ball.h, t_lo, iv.t_out);
+        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball), ball.h, t_lo, iv.t_out);
         if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
             && key_before(hit.t, item, (*best).t, (*best).item) {
             (*best).found = true;
@@ -222,11 +225,9 @@ fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
         return out;
     }
     let ball = balls_at(c.item);
-    var initial: Poly;
-    initial.degree = min(ball.degree, 3u);
-    initial.c = ball.coeffs;
+    let initial = ball_poly(ball);
     out.status = STATUS_ITERATION_LIMIT;
-    out.normal = hit_normal(frame_from_normal(ball.normal), initial, c.x, c.y);
+    out.normal = hit_normal(ball_frame(ball), initial, c.x, c.y);
     out.iterations = 1u;
     out.degree = initial.degree;
     out.degraded = initial.degree < settings.degree;

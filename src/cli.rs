@@ -106,7 +106,7 @@ pub enum BenchCommand {
     Accuracy(AccuracyArgs),
     /// Bake stage times against the thesis, bytes per point, section encodings, load times.
     Bake(BakeBenchArgs),
-    /// Stored precision: each analytic scene baked with fewer mantissa bits, traced from the
+    /// Stored precision: each analytic scene baked in the compact layout and as computed, traced from the
     /// cache against the exact surface and the exact cache, with bytes per point.
     Precision(PrecisionBenchArgs),
     /// GPU frame times (timestamp queries) against the thesis's tables, with upload times and
@@ -160,6 +160,9 @@ pub struct ScrubBenchArgs {
     /// Also jumps from storage: the page cache dropped before each (needs root).
     #[arg(long)]
     pub cold: bool,
+    /// Series stored without compression (`bake --compress none`): a load is then a copy.
+    #[arg(long)]
+    pub raw: bool,
 }
 
 #[derive(Debug, Args)]
@@ -221,9 +224,6 @@ pub struct PrecisionBenchArgs {
     /// Image size in pixels (square) of every render.
     #[arg(long, default_value_t = 128)]
     pub size: u32,
-    /// Mantissa bits to compare (23: exact).
-    #[arg(long, value_delimiter = ',', default_value = "23,16,14,12,10")]
-    pub bits: Vec<u32>,
 }
 
 #[derive(Debug, Args)]
@@ -419,11 +419,6 @@ pub struct BakeArgs {
     /// (`docs/cache-format.md`).
     #[arg(long, default_value = "-1", allow_hyphen_values = true)]
     pub compress: String,
-    /// Mantissa bits kept in the stored fits and normals, 8 to 23 (23: exact f32). The default
-    /// moves hits by under 1e-3 of the spacing (p99 under 1e-4) and saves 15–20 % of the
-    /// bytes (`docs/results-precision.md`).
-    #[arg(long, default_value_t = slosh_bake::DEFAULT_MANTISSA_BITS)]
-    pub mantissa_bits: u32,
     /// Force the byte order of binary EnSight files instead of detecting it.
     #[arg(long, value_enum)]
     pub byte_order: Option<ByteOrderArg>,

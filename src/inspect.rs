@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use slosh_cache::{
-    BallState, Bvh, CacheFile, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, Header, Manifest,
-    SectionEntry, SeriesKey, names, parse_step_file_name,
+    BallState, Bvh, CacheFile, GpuBall, GpuBvhNode, GpuPoint, Header, Manifest, SectionEntry,
+    SeriesKey, names, parse_step_file_name,
 };
 
 use crate::config::inspect::InspectConfig;
@@ -64,6 +64,9 @@ struct Statistics {
     bvh_nodes: u64,
     bvh_leaves: u64,
     bvh_depth: u64,
+    /// Clusters, and those storing 32-bit candidate indices (the others store 16-bit offsets).
+    clusters: u64,
+    wide_clusters: u64,
 }
 
 #[derive(Debug, Serialize)]
@@ -88,6 +91,8 @@ fn statistics(file: &CacheFile) -> Result<Statistics> {
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
     let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
     let nodes: Vec<GpuBvhNode> = file.decode(names::BVH_NODES)?;
+    let base: Vec<u32> = file.decode(names::CLUSTER_BASE)?;
+    let wide = slosh_cache::candidates::WIDE_CLUSTER;
     let counts: Vec<u32> = start
         .windows(2)
         .map(|w| w[1].saturating_sub(w[0]))
@@ -99,7 +104,7 @@ fn statistics(file: &CacheFile) -> Result<Statistics> {
     let mut degrees = [0u64; 4];
     for b in &balls {
         if matches!(b.kind(), BallState::Full | BallState::Degraded) {
-            degrees[(b.degree as usize).min(3)] += 1;
+            degrees[usize::from(b.degree())] += 1;
         }
     }
     let bvh = Bvh {
@@ -123,6 +128,8 @@ fn statistics(file: &CacheFile) -> Result<Statistics> {
         bvh_leaves: bvh.nodes.iter().filter(|n| n.count > 0).count() as u64,
         bvh_nodes: bvh.nodes.len() as u64,
         bvh_depth: bvh.depth().unwrap_or(0) as u64,
+        clusters: base.len() as u64,
+        wide_clusters: base.iter().filter(|&&b| b & wide != 0).count() as u64,
     })
 }
 
@@ -209,6 +216,16 @@ fn human_file(r: &FileReport) -> String {
     for s in &h.sections {
         line(section_row(s));
     }
+    let per_point = |f: fn(&SectionEntry) -> u64| {
+        h.sections.iter().map(f).sum::<u64>() as f64 / h.points.max(1) as f64
+    };
+    line(format!(
+        "           {:.1} bytes per point as the GPU holds them, {:.1} stored; {} of {} clusters store 32-bit candidates, the rest 16-bit offsets",
+        per_point(|s| s.raw),
+        per_point(|s| s.stored),
+        st.wide_clusters,
+        st.clusters
+    ));
     line(format!(
         "neighbours per point min {} mean {:.1} max {}; capped at {}: {} points ({:.1} %)",
         st.neighbours.min,
@@ -279,15 +296,15 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
         "world": h.transform.to_world(local),
         "radius_local": p.radius,
         "ball": {
-            "normal": b.normal, "h": b.h, "degree": b.degree,
+            "normal": b.normal(), "h": b.h, "degree": b.degree(),
             "state": format!("{:?}", b.kind()), "sphere": b.sphere(),
-            "coefficients": b.coeffs,
+            "coefficients": b.coeffs(),
         },
         "neighbours": &neighbours[start[i] as usize..start[i + 1] as usize],
     });
     if file.section(names::NORMALS).is_some() {
-        let ns: Vec<GpuNormal> = file.decode(names::NORMALS)?;
-        rec["normal"] = serde_json::json!(ns[i].normal);
+        let ns: Vec<u32> = file.decode(names::NORMALS)?;
+        rec["normal"] = serde_json::json!(slosh_cache::octahedral::decode_unit(ns[i]));
     }
     for s in &h.sections {
         if let Some(field) = s.name.strip_prefix(names::FIELD_PREFIX) {

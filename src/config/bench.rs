@@ -40,7 +40,6 @@ pub fn precision(a: &PrecisionBenchArgs) -> precision::Settings {
         out: a.out.clone(),
         points: a.points,
         size: a.size,
-        bits: a.bits.clone(),
     }
 }
 
@@ -103,5 +102,6 @@ pub fn scrub(a: &ScrubBenchArgs) -> Result<scrub::Settings> {
         quick: a.quick,
         adapter: a.adapter.clone(),
         cold: a.cold,
+        raw: a.raw,
     })
 }

@@ -251,12 +251,6 @@ impl BakeConfig {
                 slosh_cache::Compression::Level(level)
             }
         };
-        if !(8..=slosh_cache::F32_MANTISSA_BITS).contains(&a.mantissa_bits) {
-            bail!(
-                "--mantissa-bits {}: expected 8 to 23 (23 stores fits and normals exactly)",
-                a.mantissa_bits
-            );
-        }
         let ext = a
             .input
             .extension()
@@ -361,7 +355,6 @@ impl BakeConfig {
             .unwrap_or(slosh_mls::coefficient_count(a.degree));
         params.fields = a.fields.clone();
         params.compression = compression;
-        params.mantissa_bits = a.mantissa_bits;
         // Each job holds a whole step in memory and is parallel inside: more jobs than a few
         // per core only cost memory and threads.
         let cores = slosh_bake::cores();

@@ -57,27 +57,6 @@ fn closed_or_full_stdout_is_not_a_panic() {
     }
 }
 
-/// A stored precision outside 8 to 23 mantissa bits is refused by name.
-#[test]
-fn impossible_mantissa_bits_are_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    generate(
-        &dir.path().join("case"),
-        &["sphere", "--points", "500", "--steps", "1"],
-    );
-    let case = dir.path().join("case/sphere.case");
-    for bits in ["7", "24"] {
-        let cache = dir.path().join("cache");
-        let (ok, _, err) = bake_case(&case, &cache, &["--mantissa-bits", bits]);
-        assert!(!ok, "--mantissa-bits {bits} was accepted");
-        assert!(
-            err.contains(&format!("--mantissa-bits {bits}: expected 8 to 23")),
-            "{err}"
-        );
-        assert!(!cache.join("step-00000.slc").exists());
-    }
-}
-
 /// `--jobs` outside what the machine can use is refused by name, not obeyed (issue 14,
 /// item 10).
 #[test]

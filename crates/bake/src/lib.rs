@@ -19,10 +19,10 @@ pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
 pub use ensight_source::{EnsightSource, canonical_label};
 pub use jobs::{available_memory, cores, default_jobs};
-pub use params::{BAKE_REVISION, BakeParams, DEFAULT_MANTISSA_BITS, NormalSource, SurfaceSelect};
+pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
 pub use point_cloud::{PointCloud, PointCloudError, read_point_cloud};
 pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
 };
 pub use slosh_mls::morton_order;
-pub use step::{BakeError, BakedStep, bake_step};
+pub use step::{BakeError, BakedStep, bake_step, bake_step_parts};

@@ -38,18 +38,10 @@ pub struct BakeParams {
     /// Variables stored per point, in this order.
     pub fields: Vec<String>,
     pub compression: Compression,
-    /// Mantissa bits kept in the stored initial fits (ball normals and coefficients) and data
-    /// normals; 23 stores them exactly as f32 (`slosh_cache::round_mantissa`).
-    pub mantissa_bits: u32,
 }
 
-/// The stored precision by default: chosen with `slosh bench precision`
-/// (`docs/results-precision.md`), where hits move by far less than the f32 tracer's own
-/// tolerance against the f64 oracle.
-pub const DEFAULT_MANTISSA_BITS: u32 = 14;
-
 /// Bumped whenever the bake's output for the same input and parameters changes.
-pub const BAKE_REVISION: u32 = 4;
+pub const BAKE_REVISION: u32 = 5;
 
 impl BakeParams {
     /// Parameters with the MLS defaults and the normals mode matching `normals`.
@@ -67,7 +59,6 @@ impl BakeParams {
             normals,
             fields: Vec::new(),
             compression: Compression::Level(-1),
-            mantissa_bits: DEFAULT_MANTISSA_BITS,
         }
     }
 
@@ -80,7 +71,6 @@ impl BakeParams {
             "surface": self.surface,
             "normals": self.normals,
             "fields": self.fields,
-            "mantissa_bits": self.mantissa_bits,
             "compression": match self.compression {
                 Compression::None => "none".to_string(),
                 Compression::Level(l) => format!("zstd level {l}"),

@@ -3,8 +3,8 @@
 
 use rayon::prelude::*;
 use slosh_cache::{
-    BallState, Element, Encoding, GpuBall, GpuNormal, GpuPoint, GpuSphere, Header, MlsSettings,
-    SectionInput, Source, StepStats, Transform, names,
+    BallState, Element, Encoding, GpuBall, GpuPoint, GpuSphere, Header, MAX_SPHERES, MlsSettings,
+    SectionInput, Source, StepStats, Transform, candidates, names, octahedral,
 };
 use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
@@ -76,13 +76,17 @@ fn by_element(element: Element) -> Encoding {
     Encoding::shuffled_elements(element.size())
 }
 
+/// A step's sections in the GPU layouts, but for the BVH's, its field sections, and each
+/// ball's state as stored.
+type Sections = (Vec<SectionInput>, Vec<SectionInput>, Vec<BallState>);
+
 /// A step's sections in the GPU layouts, but for the BVH's, and its field sections.
 fn gpu_sections(
     surface: &SurfaceParts<f64>,
     input: &StepInput,
     source_index: &[u32],
     params: &BakeParams,
-) -> Result<(Vec<SectionInput>, Vec<SectionInput>), BakeError> {
+) -> Result<Sections, BakeError> {
     let n = surface.len();
     let input_err = |problem: String| BakeError::Input {
         step: input.index,
@@ -96,8 +100,14 @@ fn gpu_sections(
             radius: surface.radii[i] as f32,
         })
         .collect();
-    // Fits and normals at the stored precision (`docs/cache-format.md`, "Stored precision").
-    let rounded = |v: f32| slosh_cache::round_mantissa(v, params.mantissa_bits);
+    // The compact layout (`docs/cache-format.md`, "Balls"): a fit whose coefficients a half
+    // float cannot hold is stored unfitted, and the BVH is rebuilt without it.
+    if surface.spheres.len() as u64 > u64::from(MAX_SPHERES) {
+        return Err(input_err(format!(
+            "{} droplets; a cache holds at most {MAX_SPHERES}",
+            surface.spheres.len()
+        )));
+    }
     let balls: Vec<GpuBall> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -108,18 +118,22 @@ fn gpu_sections(
                 BallFit::Fitted(FitStatus::Failed) | BallFit::None => (BallState::Unfitted, 0),
                 BallFit::Droplet(d) => (BallState::Droplet, d),
             };
-            GpuBall {
-                normal: f32x3(b.normal).map(rounded),
-                h: b.h as f32,
-                coeffs: b.poly.c.map(|c| rounded(c as f32)),
-                degree: u32::from(b.poly.degree),
-                state: GpuBall::state_word(kind, sphere),
-            }
+            let normal = [b.normal.x, b.normal.y, b.normal.z];
+            let coeffs = b.poly.c.map(|c| c as f32);
+            GpuBall::new(normal, b.h as f32, coeffs, b.poly.degree, kind, sphere)
+                .unwrap_or_else(|| GpuBall::unfitted(b.h as f32))
         })
         .collect();
     // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
     // rounded up to f32 keeps every stored list within its distance filter.
     let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
+    let (cluster_base, cluster_words) =
+        candidates::pack(&cluster_start, &cluster_ids, NEIGHBOUR_CLUSTER).ok_or_else(|| {
+            input_err(format!(
+                "{} cluster candidates exceed the cache's 31-bit word offsets",
+                cluster_ids.len()
+            ))
+        })?;
     // The reach as f32, raised where needed so that the expansion, which measures distances
     // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
     let stored: Vec<slosh_mls::V3<f32>> = points
@@ -170,10 +184,16 @@ fn gpu_sections(
             Encoding::Delta4Shuffle4Zstd,
         ),
         SectionInput::new(
+            names::CLUSTER_BASE,
+            Element::U32,
+            &cluster_base,
+            Encoding::Delta4Shuffle4Zstd,
+        ),
+        SectionInput::new(
             names::CLUSTER_NEIGHBOURS,
             Element::U32,
-            &cluster_ids,
-            Encoding::Delta4Shuffle4Zstd,
+            &cluster_words,
+            Encoding::Shuffle4Zstd,
         ),
         SectionInput::new(
             names::SPHERES,
@@ -183,20 +203,17 @@ fn gpu_sections(
         ),
     ];
     if let Some(ns) = &surface.normals {
-        let normals: Vec<GpuNormal> = ns
+        let normals: Vec<u32> = ns
             .par_iter()
-            .map(|v| GpuNormal {
-                normal: f32x3(*v).map(rounded),
-                pad: 0.0,
-            })
+            .map(|v| octahedral::encode([v.x, v.y, v.z]))
             .collect();
         sections.insert(
             1,
             SectionInput::new(
                 names::NORMALS,
-                Element::Normal,
+                Element::Octahedral,
                 &normals,
-                by_element(Element::Normal),
+                Encoding::Shuffle4Zstd,
             ),
         );
     }
@@ -228,7 +245,8 @@ fn gpu_sections(
             }
         });
     }
-    Ok((sections, fields))
+    let kinds = balls.par_iter().map(GpuBall::kind).collect();
+    Ok((sections, fields, kinds))
 }
 
 fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
@@ -236,6 +254,16 @@ fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
 }
 
 pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
+    bake_step_parts(input, params).map(|(baked, _)| baked)
+}
+
+/// [`bake_step`] with the parts the bake computed, in f64, before the cache's layout stored
+/// them (in the cache's point order and local coordinates): what `slosh bench precision`
+/// compares the stored step with.
+pub fn bake_step_parts(
+    input: &StepInput,
+    params: &BakeParams,
+) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
     let mut clock = StageClock::start();
     let step = input.index;
     let input_err = |problem: String| BakeError::Input { step, problem };
@@ -253,7 +281,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
     }
 
     if n_in == 0 {
-        return empty_step(input, params);
+        return Ok((empty_step(input, params)?, SurfaceParts::empty(&params.mls)));
     }
 
     // 1. Select: finite positions, then the surface.
@@ -393,19 +421,27 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
                 .map_err(|source| BakeError::Surface { step, source })?;
         // Sections, in the GPU layouts (the BVH's are added once it is built).
         let sections_start = std::time::Instant::now();
-        let (sections, fields) = gpu_sections(&surface, input, &source_index, params)?;
+        let (sections, fields, kinds) = gpu_sections(&surface, input, &source_index, params)?;
         let sections_seconds = sections_start.elapsed().as_secs_f64();
-        Ok((surface, build_laps, sections, fields, sections_seconds))
+        Ok((
+            surface,
+            build_laps,
+            sections,
+            fields,
+            kinds,
+            sections_seconds,
+        ))
     });
-    let (surface, build_laps, mut sections, fields, sections_seconds) = built?;
+    let (surface, build_laps, mut sections, fields, kinds, sections_seconds) = built?;
+    let candidate = |i: usize| matches!(kinds[i], BallState::Full | BallState::Degraded);
     clock.extend(&build_laps);
     let n = surface.len();
     let (bvh, bvh_seconds) = match speculative.into_inner().ok().flatten() {
-        Some(built) if !surface.ball_fits.par_iter().any(|f| *f == BallFit::None) => built,
+        Some(built) if !kinds.par_iter().any(|k| *k == BallState::Unfitted) => built,
         _ => {
             let start = std::time::Instant::now();
             let items = bvh_items(
-                |i| matches!(surface.ball_fits[i], BallFit::Fitted(_)),
+                candidate,
                 |i| {
                     let c = surface.points[i];
                     [c.x, c.y, c.z]
@@ -432,12 +468,13 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         bvh_depth: bvh.depth().unwrap_or(0) as u64,
         ..StepStats::default()
     };
-    for fit in &surface.ball_fits {
-        match fit {
-            BallFit::Fitted(FitStatus::Full) => stats.fit_full += 1,
-            BallFit::Fitted(FitStatus::Degraded { .. }) => stats.fit_degraded += 1,
-            BallFit::Fitted(FitStatus::Failed) | BallFit::None => stats.fit_none += 1,
-            BallFit::Droplet(_) => stats.droplet_points += 1,
+    // As stored: a fit the layout could not hold counts as none.
+    for kind in &kinds {
+        match kind {
+            BallState::Full => stats.fit_full += 1,
+            BallState::Degraded => stats.fit_degraded += 1,
+            BallState::Unfitted => stats.fit_none += 1,
+            BallState::Droplet => stats.droplet_points += 1,
         }
     }
     // The BVH's own wall time: it ran beside the fits.
@@ -458,7 +495,7 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
         up,
         ..step_header(input, params)
     };
-    Ok(BakedStep { header, sections })
+    Ok((BakedStep { header, sections }, surface))
 }
 
 /// The header fields every step of `input` shares, whatever it holds.
@@ -511,7 +548,7 @@ fn bvh_sections(bvh: &slosh_cache::Bvh) -> [SectionInput; 2] {
 /// step with every section empty, shown as empty and counted as such, not a failure.
 fn empty_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
     let surface = SurfaceParts::<f64>::empty(&params.mls);
-    let (mut sections, fields) = gpu_sections(&surface, input, &[], params)?;
+    let (mut sections, fields, _) = gpu_sections(&surface, input, &[], params)?;
     sections.extend(bvh_sections(&slosh_cache::Bvh::default()));
     sections.extend(fields);
     Ok(BakedStep {

@@ -1,7 +1,9 @@
-//! `slosh bench precision`: what storing the fits and normals with fewer mantissa bits
-//! (`--mantissa-bits`) costs. Each analytic scene is baked at each precision and the cache,
-//! read back, is traced by the CPU tracer (the GPU's reference): error against the exact
-//! surface, hits against the cache stored exactly (23 bits), and bytes per point.
+//! `slosh bench precision`: what the compact layout of a step (format 4: octahedral normals,
+//! half-float coefficients, lists recovered from the stored normals) costs. Each analytic
+//! scene is baked once; its cache, read back, and the same step stored exactly (the bake's
+//! own values in f32, `slosh_testkit::bake_exact_and_stored`) are traced by the CPU tracer
+//! (the GPU's reference): error against the exact surface, hits against each other, and
+//! bytes per point.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -25,37 +27,37 @@ pub struct Settings {
     pub points: usize,
     /// Image side in pixels.
     pub size: u32,
-    /// Mantissa bits compared (23 is exact f32).
-    pub bits: Vec<u32>,
 }
 use slosh_fileio::say;
 
-/// One scene baked at one precision and read back: the step and its file's size.
+/// The step as stored and as computed, and the cache's bytes per point.
 struct Baked {
-    step: LoadedStep,
+    stored: LoadedStep,
+    exact: LoadedStep,
     bytes_per_point: f64,
 }
 
-fn bake(case: &Scenario, bits: u32) -> Result<Baked> {
+fn bake(case: &Scenario) -> Result<Baked> {
     let input = StepInput {
         source: case.name.clone(),
         positions: case.positions.clone(),
         normals: Some(case.normals.clone()),
         ..StepInput::default()
     };
-    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
-    params.mantissa_bits = bits;
-    let file = slosh_testkit::bake_in_memory(&input, &params, Path::new("precision.slc"))?;
+    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    let (exact, file) =
+        slosh_testkit::bake_exact_and_stored(&input, &params, Path::new("precision.slc"))?;
     let bytes_per_point = file.bytes().len() as f64 / case.positions.len() as f64;
     file.verify()?;
     Ok(Baked {
-        step: LoadedStep::load(&file)?,
+        stored: LoadedStep::load(&file)?,
+        exact,
         bytes_per_point,
     })
 }
 
-fn trace(case: &Scenario, baked: &Baked, iterations: u32) -> Render {
-    Render::from_hits(baked.step.render(
+fn trace(case: &Scenario, step: &LoadedStep, iterations: u32) -> Render {
+    Render::from_hits(step.render(
         &case.camera,
         &Params::<f32> {
             degree: 2,
@@ -73,14 +75,16 @@ pub struct Row {
     pub scene: String,
     pub noise: f64,
     pub iterations: u32,
-    pub bits: u32,
     /// The whole step file's bytes per point.
     pub bytes_per_point: f64,
-    /// Error of the hits against the exact surface, in spacings (silhouettes excluded).
+    /// Error of the hits against the exact surface, in spacings (silhouettes excluded):
+    /// stored exactly, then as stored.
+    pub exact_rms: f64,
+    pub exact_p99: f64,
     pub rms: f64,
     pub p99: f64,
     pub angle_mean: f64,
-    /// |Δt| against the bake stored exactly, in spacings, over pixels both hit.
+    /// |Δt| against the step stored exactly, in spacings, over pixels both hit.
     pub moved_p99: f64,
     pub moved_max: f64,
     /// Pixels hit in one and missed in the other.
@@ -105,56 +109,37 @@ pub fn run(args: &Settings) -> Result<PrecisionReport> {
     let mut rows = Vec::new();
     for (kind, noise) in scenes {
         let case = scenario(kind, args.points, 3, noise, args.size)?;
-        // Each precision baked once, traced at every iteration count.
-        let exact = bake(&case, slosh_cache::F32_MANTISSA_BITS)?;
-        let rounded: Vec<(u32, Option<Baked>)> = args
-            .bits
-            .iter()
-            .map(|&bits| {
-                let baked = (bits != slosh_cache::F32_MANTISSA_BITS)
-                    .then(|| bake(&case, bits))
-                    .transpose()?;
-                Ok((bits, baked))
-            })
-            .collect::<Result<_>>()?;
+        let baked = bake(&case)?;
         for iterations in [1, 3] {
-            let exact_render = trace(&case, &exact, iterations);
-            for (bits, baked) in &rounded {
-                let own;
-                let (traced, bytes_per_point) = match baked {
-                    Some(b) => {
-                        own = trace(&case, b, iterations);
-                        (&own, b.bytes_per_point)
-                    }
-                    None => (&exact_render, exact.bytes_per_point),
-                };
-                let m = metrics(&case, traced, &exact_render);
-                // Against the exact cache, pixel by pixel (silhouettes included).
-                let mut moved = Vec::new();
-                let mut differ = 0usize;
-                for (a, b) in traced.hits.iter().zip(&exact_render.hits) {
-                    match (a, b) {
-                        (Some(a), Some(b)) => moved.push((a.t - b.t).abs() / case.spacing),
-                        (None, None) => {}
-                        _ => differ += 1,
-                    }
+            let exact = trace(&case, &baked.exact, iterations);
+            let stored = trace(&case, &baked.stored, iterations);
+            let m = metrics(&case, &stored, &exact);
+            let exact_m = metrics(&case, &exact, &exact);
+            let mut moved = Vec::new();
+            let mut differ = 0usize;
+            for (a, b) in stored.hits.iter().zip(&exact.hits) {
+                match (a, b) {
+                    (Some(a), Some(b)) => moved.push((a.t - b.t).abs() / case.spacing),
+                    (None, None) => {}
+                    _ => differ += 1,
                 }
-                let moved_max = moved.iter().copied().fold(0.0, f64::max);
-                rows.push(Row {
-                    scene: case.name.clone(),
-                    noise,
-                    iterations,
-                    bits: *bits,
-                    bytes_per_point,
-                    rms: m.rms,
-                    p99: m.p99,
-                    angle_mean: m.angle_mean,
-                    moved_p99: percentile(moved, 0.99),
-                    moved_max,
-                    differ,
-                    pixels: traced.hits.len(),
-                });
             }
+            let moved_max = moved.iter().copied().fold(0.0, f64::max);
+            rows.push(Row {
+                scene: case.name.clone(),
+                noise,
+                iterations,
+                bytes_per_point: baked.bytes_per_point,
+                exact_rms: exact_m.rms,
+                exact_p99: exact_m.p99,
+                rms: m.rms,
+                p99: m.p99,
+                angle_mean: m.angle_mean,
+                moved_p99: percentile(moved, 0.99),
+                moved_max,
+                differ,
+                pixels: stored.hits.len(),
+            });
             say!("{} noise {noise}, {iterations} iterations: done", case.name);
         }
     }
@@ -171,13 +156,14 @@ impl Report for PrecisionReport {
         for r in &self.rows {
             let _ = writeln!(
                 table,
-                "| {} | {} | {} | {} | {:.1} | {:.2e} | {:.2e} | {:.3} | {:.2e} | {:.2e} | {} of {} |",
+                "| {} | {} | {} | {:.1} | {:.2e} / {:.2e} | {:.2e} / {:.2e} | {:.3} | {:.2e} | {:.2e} | {} of {} |",
                 r.scene,
                 r.noise,
                 r.iterations,
-                r.bits,
                 r.bytes_per_point,
+                r.exact_rms,
                 r.rms,
+                r.exact_p99,
                 r.p99,
                 r.angle_mean,
                 r.moved_p99,
@@ -186,28 +172,24 @@ impl Report for PrecisionReport {
                 r.pixels,
             );
         }
-        let bits: Vec<String> = args.bits.iter().map(u32::to_string).collect();
         format!(
-            "# Stored precision: mantissa bits against accuracy and bytes\n\n\
-             Written by `slosh bench precision --points {} --size {} --bits {}`. Each scene \
-             ({} particles, time step 3, normals from the scene) is baked with `--mantissa-bits` \
-             at each value (the initial fits' normals and coefficients and the data normals \
-             rounded to that many mantissa bits; positions, radii and reach stay exact), then read \
-             back and traced by the CPU tracer, the GPU's reference, at {}×{} pixels, with 1 and \
-             3 iterations. Distances are in particle spacings: the error of each hit against the \
-             exact surface (RMS and p99, silhouette pixels excluded), and |Δt| of each hit \
-             against the same bake stored exactly (23 bits, every pixel both hit). The tracer in \
-             f32 is held to 1e-3 spacing against the f64 oracle (`crates/bake/tests/bake.rs`). \
-             Bytes per point are the whole step file at the default zstd level (−1).\n\n\
-             | scene | noise | iterations | bits | B/pt | RMS to surface | p99 to surface | normal ° | \
-             \\|Δt\\| p99 vs 23 bits | \\|Δt\\| max vs 23 bits | hit/miss differ vs 23 bits |\n\
-             |---|---|---|---|---|---|---|---|---|---|---|\n{table}",
-            args.points,
-            args.size,
-            bits.join(","),
-            args.points,
-            args.size,
-            args.size,
+            "# Stored precision: the compact layout against the step stored exactly\n\n\
+             Written by `slosh bench precision --points {} --size {}`. Each scene ({} \
+             particles, time step 3, normals from the scene) is baked once; its cache (format \
+             4: octahedral support and data normals, half-float coefficients, neighbour lists \
+             recovered from the stored normals) is read back, and the same step is also kept \
+             exactly (the bake's own normals, coefficients and lists in f32). Both are traced \
+             by the CPU tracer, the GPU's reference, at {}×{} pixels, with 1 and 3 iterations. \
+             Distances are in particle spacings: the error of each hit against the exact \
+             surface (RMS and p99, silhouette pixels excluded; exact / stored), and |Δt| of \
+             each hit of the stored step against the exact one (every pixel both hit). The \
+             tracer in f32 is held to 1e-3 spacing against the f64 oracle \
+             (`crates/bake/tests/bake.rs`). Bytes per point are the whole step file at the \
+             default zstd level (−1).\n\n\
+             | scene | noise | iterations | B/pt | RMS to surface (exact / stored) | p99 to surface (exact / stored) | normal ° | \
+             \\|Δt\\| p99 vs exact | \\|Δt\\| max vs exact | hit/miss differ |\n\
+             |---|---|---|---|---|---|---|---|---|---|\n{table}",
+            args.points, args.size, args.points, args.size, args.size,
         )
     }
 }

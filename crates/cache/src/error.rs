@@ -25,6 +25,22 @@ pub enum Error {
         found_minor: u16,
         supported: u16,
     },
+    #[error(
+        "{}: cache format version {found_major}.{found_minor} is older than this slosh reads \
+         ({supported_major}.{supported_minor}: steps stored in the compact GPU layout); \
+         re-bake it: slosh bake {case} --out {}",
+        path.display(),
+        path.parent().map_or_else(|| ".".into(), |d| d.display().to_string())
+    )]
+    OlderVersion {
+        path: PathBuf,
+        found_major: u16,
+        found_minor: u16,
+        supported_major: u16,
+        supported_minor: u16,
+        /// The case the file was baked from, as its header names it.
+        case: String,
+    },
     /// A section failed its checksum, its decoding or a structural check.
     #[error("{}: section '{section}' (at byte {offset}): {problem}", path.display())]
     Section {

@@ -8,9 +8,10 @@ use serde::{Deserialize, Serialize};
 pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
 /// Footer magic.
 pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
-/// Readers refuse files with a larger major version; minor versions only add.
-pub const MAJOR: u16 = 3;
-pub const MINOR: u16 = 1;
+/// Readers refuse files of another major version (older ones with the command that re-bakes
+/// them); minor versions only add.
+pub const MAJOR: u16 = 4;
+pub const MINOR: u16 = 0;
 /// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
 /// element size.

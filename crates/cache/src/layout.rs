@@ -11,26 +11,20 @@ pub struct GpuPoint {
     pub radius: f32,
 }
 
-/// `struct Normal { normal: vec3<f32>, pad: f32 }`: a unit data normal (zero when unusable).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
-pub struct GpuNormal {
-    pub normal: [f32; 3],
-    pub pad: f32,
-}
-
-/// `struct Ball { normal: vec3<f32>, h: f32, coeffs: array<f32, 10>, degree: u32, state: u32 }`:
-/// the initial support normal and polynomial of a ball (coefficients in coordinates scaled
-/// by 1/h, unused ones zero).
+/// `struct Ball { normal: u32, h: f32, coeffs: array<u32, 5>, state: u32 }` (32 bytes,
+/// format 4): the initial support normal (octahedral, [`crate::octahedral`]), the smoothing
+/// length, the initial polynomial's coefficients in coordinates scaled by 1/h, and the state
+/// word: bits 0–1 [`BallState`], bits 2–3 the degree fitted, bits 4–31 the droplet's sphere
+/// index. A polynomial of degree ≤ 2 has six coefficients, each an f32 rounded to 15 mantissa
+/// bits: its high 16 bits in the halves of words 0–2 (coefficient 2k low in word k), its next
+/// 8 bits in the bytes of words 3–4 (coefficient k in byte k % 4 of word 3 + k / 4). A cubic
+/// has ten, IEEE half floats two to a word (coefficient 2k in the low half of word k).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuBall {
-    pub normal: [f32; 3],
+    pub normal: u32,
     pub h: f32,
-    pub coeffs: [f32; 10],
-    /// Degree of the stored polynomial (lower than requested where the data could not carry it).
-    pub degree: u32,
-    /// Low 2 bits: [`BallState`]; for droplets, bits 2.. hold the sphere index.
+    pub coeffs: [u32; 5],
     pub state: u32,
 }
 
@@ -59,7 +53,7 @@ pub struct GpuBvhNode {
 pub enum BallState {
     /// Fitted at the requested degree.
     Full = 0,
-    /// Fitted at a lower degree (`GpuBall::degree`).
+    /// Fitted at a lower degree ([`GpuBall::degree`]).
     Degraded = 1,
     /// No support plane or fit: never a candidate.
     Unfitted = 2,
@@ -67,7 +61,72 @@ pub enum BallState {
     Droplet = 3,
 }
 
+/// Coefficients of a polynomial of degree ≤ 2.
+const QUADRATIC_COEFFS: usize = 6;
+
+/// `x` rounded to the nearest f32 with 15 mantissa bits (ties away from zero), as bits whose
+/// low 8 are zero; `None` where that overflows.
+fn round_to_24_bits(x: f32) -> Option<u32> {
+    let sign = x.to_bits() & (1 << 31);
+    // A finite magnitude is below 0x7f80_0000: adding half a unit cannot overflow u32.
+    let magnitude = ((x.to_bits() & !(1 << 31)) + 0x80) & !0xff;
+    let rounded = f32::from_bits(sign | magnitude);
+    rounded.is_finite().then_some(rounded.to_bits())
+}
+
+/// Droplet spheres a ball's state word can name.
+pub const MAX_SPHERES: u32 = 1 << 28;
+
 impl GpuBall {
+    /// A ball from its parts: the normal encoded, the coefficients rounded to half floats;
+    /// `None` where a coefficient is not finite or beyond a half float's range (the caller
+    /// stores the ball unfitted), or the sphere index does not fit.
+    pub fn new(
+        normal: [f64; 3],
+        h: f32,
+        coeffs: [f32; 10],
+        degree: u8,
+        kind: BallState,
+        sphere: u32,
+    ) -> Option<GpuBall> {
+        if sphere >= MAX_SPHERES || degree > 3 || coeffs.iter().any(|c| !c.is_finite()) {
+            return None;
+        }
+        let mut words = [0u32; 5];
+        if degree <= 2 {
+            for (k, &c) in coeffs[..QUADRATIC_COEFFS].iter().enumerate() {
+                let bits = round_to_24_bits(c)?;
+                words[k / 2] |= (bits >> 16) << (16 * (k % 2));
+                words[3 + k / 4] |= ((bits >> 8) & 0xff) << (8 * (k % 4));
+            }
+        } else {
+            for (k, &c) in coeffs.iter().enumerate() {
+                let half = half::f16::from_f32(c);
+                if !half.is_finite() {
+                    return None;
+                }
+                words[k / 2] |= u32::from(half.to_bits()) << (16 * (k % 2));
+            }
+        }
+        Some(GpuBall {
+            normal: crate::octahedral::encode(normal),
+            h,
+            coeffs: words,
+            state: kind as u32 | (u32::from(degree) << 2) | (sphere << 4),
+        })
+    }
+
+    /// A ball that is never a candidate: no support plane or fit, or one that could not be
+    /// stored.
+    pub fn unfitted(h: f32) -> GpuBall {
+        GpuBall {
+            normal: crate::octahedral::NO_NORMAL,
+            h,
+            coeffs: [0; 5],
+            state: BallState::Unfitted as u32,
+        }
+    }
+
     pub fn kind(&self) -> BallState {
         match self.state & 3 {
             0 => BallState::Full,
@@ -77,13 +136,44 @@ impl GpuBall {
         }
     }
 
-    /// The droplet sphere this ball belongs to.
-    pub fn sphere(&self) -> Option<u32> {
-        (self.kind() == BallState::Droplet).then_some(self.state >> 2)
+    /// Degree of the stored polynomial (lower than requested where the data could not
+    /// carry it).
+    pub fn degree(&self) -> u8 {
+        ((self.state >> 2) & 3) as u8
     }
 
-    pub fn state_word(kind: BallState, sphere: u32) -> u32 {
-        kind as u32 | (sphere << 2)
+    /// The droplet sphere this ball belongs to.
+    pub fn sphere(&self) -> Option<u32> {
+        (self.kind() == BallState::Droplet).then_some(self.sphere_bits())
+    }
+
+    /// The state word's sphere field (zero unless the ball is a droplet's).
+    pub fn sphere_bits(&self) -> u32 {
+        self.state >> 4
+    }
+
+    /// The support normal, normalised (zero where none was stored).
+    pub fn normal(&self) -> [f32; 3] {
+        crate::octahedral::decode_unit(self.normal)
+    }
+
+    /// The ten coefficients as f32 (exactly the stored values; unused ones zero).
+    pub fn coeffs(&self) -> [f32; 10] {
+        let w = &self.coeffs;
+        if self.degree() <= 2 {
+            std::array::from_fn(|k| {
+                if k >= QUADRATIC_COEFFS {
+                    return 0.0;
+                }
+                let high = (w[k / 2] >> (16 * (k % 2))) & 0xffff;
+                let low = (w[3 + k / 4] >> (8 * (k % 4))) & 0xff;
+                f32::from_bits((high << 16) | (low << 8))
+            })
+        } else {
+            std::array::from_fn(|k| {
+                half::f16::from_bits((w[k / 2] >> (16 * (k % 2))) as u16).to_f32()
+            })
+        }
     }
 }
 
@@ -91,7 +181,8 @@ impl GpuBall {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Element {
     Point,
-    Normal,
+    /// A unit vector in one word ([`crate::octahedral`]).
+    Octahedral,
     Ball,
     Sphere,
     BvhNode,
@@ -103,7 +194,7 @@ pub enum Element {
 impl Element {
     pub const ALL: [Element; 8] = [
         Element::Point,
-        Element::Normal,
+        Element::Octahedral,
         Element::Ball,
         Element::Sphere,
         Element::BvhNode,
@@ -115,7 +206,7 @@ impl Element {
     pub fn name(self) -> &'static str {
         match self {
             Element::Point => "point",
-            Element::Normal => "normal",
+            Element::Octahedral => "octahedral",
             Element::Ball => "ball",
             Element::Sphere => "sphere",
             Element::BvhNode => "bvh_node",
@@ -127,14 +218,59 @@ impl Element {
 
     pub fn size(self) -> usize {
         match self {
-            Element::Point | Element::Normal | Element::Sphere | Element::Vec4 => 16,
+            Element::Point | Element::Sphere | Element::Vec4 => 16,
             Element::Ball => size_of::<GpuBall>(),
             Element::BvhNode => size_of::<GpuBvhNode>(),
-            Element::U32 | Element::F32 => 4,
+            Element::Octahedral | Element::U32 | Element::F32 => 4,
         }
     }
 
     pub fn from_name(name: &str) -> Option<Element> {
         Element::ALL.into_iter().find(|e| e.name() == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn balls_keep_their_state_and_the_nearest_stored_coefficients() {
+        let c: [f32; 10] = [0.1, -2.5e-3, 3.0, -7.25, 1e-6, 40.0, 0.5, -0.25, 1e3, 2e-5];
+        let quadratic = GpuBall::new([0.0, 0.6, 0.8], 0.02, c, 2, BallState::Degraded, 0).unwrap();
+        assert_eq!(
+            (quadratic.kind(), quadratic.degree()),
+            (BallState::Degraded, 2)
+        );
+        let got = quadratic.coeffs();
+        for k in 0..6 {
+            // 15 mantissa bits: within half a unit of the last.
+            assert!(
+                (got[k] - c[k]).abs() <= c[k].abs() * 2f32.powi(-16),
+                "{k}: {}",
+                got[k]
+            );
+        }
+        assert_eq!(&got[6..], &[0.0; 4], "a quadratic stores six");
+        let cubic = GpuBall::new([0.0, 0.0, -1.0], 0.02, c, 3, BallState::Droplet, 12345).unwrap();
+        assert_eq!(
+            (cubic.kind(), cubic.sphere(), cubic.degree()),
+            (BallState::Droplet, Some(12345), 3)
+        );
+        for (k, (&g, &x)) in cubic.coeffs().iter().zip(&c).enumerate() {
+            assert_eq!(g, half::f16::from_f32(x).to_f32(), "{k}");
+        }
+        let n = cubic.normal();
+        assert!(n[2] < -0.999_999 && n[0].abs() < 1e-6, "{n:?}");
+        // What a half float cannot hold, a quadratic can; neither takes a NaN.
+        let mut big = c;
+        big[3] = 1e6;
+        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 3, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 2, BallState::Full, 0).is_some());
+        big[0] = f32::NAN;
+        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 2, BallState::Full, 0).is_none());
+        assert!(
+            GpuBall::new([0.0, 0.0, 1.0], 0.02, c, 2, BallState::Droplet, MAX_SPHERES).is_none()
+        );
     }
 }

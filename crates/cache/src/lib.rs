@@ -4,6 +4,7 @@
 //! `slosh bake` and the renderers; `docs/cache-format.md` specifies it byte by byte.
 
 mod bvh;
+pub mod candidates;
 mod codec;
 mod error;
 mod format;
@@ -12,7 +13,7 @@ pub mod fuzzing;
 mod layout;
 mod manifest;
 pub mod names;
-mod precision;
+pub mod octahedral;
 mod reader;
 mod step;
 mod verify;
@@ -29,12 +30,11 @@ pub use format::{
     ALIGN, CHUNK_RAW, ChunkEntry, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings,
     PREAMBLE_LEN, SectionEntry, SeriesRecord, Source, StepStats, Transform, hex64,
 };
-pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
+pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MAX_SPHERES};
 pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,
     step_file_name,
 };
-pub use precision::{F32_MANTISSA_BITS, round_mantissa};
 pub use reader::CacheFile;
 pub use step::LoadedStep;
 pub use verify::VerifyReport;

@@ -11,7 +11,7 @@ use xxhash_rust::xxh3::xxh3_64;
 use crate::codec::decode_into;
 use crate::error::{Error, Result};
 use crate::format::{
-    ALIGN, FOOTER_LEN, FOOTER_MAGIC, Footer, Header, MAGIC, MAJOR, PREAMBLE_LEN, Preamble,
+    ALIGN, FOOTER_LEN, FOOTER_MAGIC, Footer, Header, MAGIC, MAJOR, MINOR, PREAMBLE_LEN, Preamble,
     SectionEntry, hex64,
 };
 use crate::layout::Element;
@@ -28,17 +28,22 @@ pub struct CacheFile {
     skip_checksums: bool,
 }
 
-/// The chunk table of a section: none in format 1; from format 2, one chunk per `chunk_raw`
-/// raw bytes (a positive multiple of 4 and of the encoding's shuffle width), their stored
-/// sizes adding up to the section's, each raw chunk stored as it is.
-fn check_chunks(s: &SectionEntry, major: u16) -> std::result::Result<(), String> {
-    if major < 2 {
-        return if s.chunks.is_empty() && s.chunk_raw == 0 {
-            Ok(())
-        } else {
-            Err("a format 1 file has a chunk table".into())
-        };
-    }
+/// The source case an older file names in its header, for the re-bake command ("CASE" where
+/// its header cannot be read).
+fn older_source(bytes: &[u8], preamble: &Preamble) -> String {
+    let header = usize::try_from(preamble.header_len)
+        .ok()
+        .and_then(|len| bytes.get(PREAMBLE_LEN..PREAMBLE_LEN.checked_add(len)?));
+    header
+        .and_then(|h| serde_json::from_slice::<serde_json::Value>(h).ok())
+        .and_then(|v| v["source"]["path"].as_str().map(str::to_string))
+        .unwrap_or_else(|| "CASE".into())
+}
+
+/// The chunk table of a section: one chunk per `chunk_raw` raw bytes (a positive multiple
+/// of 4 and of the encoding's shuffle width), their stored sizes adding up to the section's,
+/// each raw chunk stored as it is.
+fn check_chunks(s: &SectionEntry) -> std::result::Result<(), String> {
     let width = s.encoding.shuffle_width().unwrap_or(4) as u64;
     // Every shuffle width is a multiple of 4.
     if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(width) {
@@ -126,12 +131,15 @@ impl CacheFile {
                 supported: MAJOR,
             });
         }
-        if preamble.major == 0 {
-            return Err(format(
-                8,
-                &format!("major version 1 to {MAJOR}"),
-                "0".into(),
-            ));
+        if preamble.major < MAJOR {
+            return Err(Error::OlderVersion {
+                case: older_source(&bytes, &preamble),
+                path,
+                found_major: preamble.major,
+                found_minor: preamble.minor,
+                supported_major: MAJOR,
+                supported_minor: MINOR,
+            });
         }
         let foot = len - FOOTER_LEN;
         if bytes[foot..foot + 8] != FOOTER_MAGIC {
@@ -226,7 +234,7 @@ impl CacheFile {
                     s.stored, s.raw
                 )));
             }
-            check_chunks(s, preamble.major).map_err(bad)?;
+            check_chunks(s).map_err(bad)?;
             end = stop.unwrap_or(foot);
         }
         Ok(CacheFile {

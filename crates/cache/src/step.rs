@@ -9,9 +9,10 @@ use slosh_mls::{
 use crate::bvh::Bvh;
 use crate::error::{Error, Result};
 use crate::format::{MlsSettings, Transform};
-use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuNormal, GpuPoint, GpuSphere};
+use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere};
 use crate::names;
 use crate::reader::CacheFile;
+use crate::{candidates, octahedral};
 
 impl MlsSettings {
     pub fn from_params(p: &SurfaceParams) -> MlsSettings {
@@ -61,7 +62,7 @@ struct Geometry {
 impl CacheFile {
     fn geometry(&self) -> Result<Geometry> {
         let points: Vec<GpuPoint> = self.decode(names::POINTS)?;
-        let normals: Option<Vec<GpuNormal>> = self
+        let normals: Option<Vec<u32>> = self
             .section(names::NORMALS)
             .map(|_| self.decode(names::NORMALS))
             .transpose()?;
@@ -80,7 +81,9 @@ impl CacheFile {
         }
         Ok(Geometry {
             positions: points.iter().map(|p| v3(p.position)).collect(),
-            normals: normals.map(|ns| ns.iter().map(|n| v3(n.normal)).collect()),
+            // As the shaders decode them: on the octahedron, not normalised (the neighbour rule
+            // tests signs; the fits normalise).
+            normals: normals.map(|ns| ns.iter().map(|&n| v3(octahedral::decode(n))).collect()),
             points,
             reach,
         })
@@ -88,7 +91,7 @@ impl CacheFile {
 
     fn expand(&self, g: &Geometry) -> Result<(Vec<u32>, Vec<u32>)> {
         let cluster_start: Vec<u32> = self.decode(names::CLUSTER_START)?;
-        let cluster_ids: Vec<u32> = self.decode(names::CLUSTER_NEIGHBOURS)?;
+        let cluster_ids = self.cluster_candidates(&cluster_start)?;
         Ok(slosh_mls::expand_clusters(
             &g.positions,
             g.normals.as_deref(),
@@ -97,6 +100,23 @@ impl CacheFile {
             &cluster_start,
             &cluster_ids,
         ))
+    }
+
+    /// Every cluster's candidates as 32-bit indices (CSR over `cluster_start`), unpacked from
+    /// their narrow or wide words (`candidates.rs`).
+    pub fn cluster_candidates(&self, cluster_start: &[u32]) -> Result<Vec<u32>> {
+        let base: Vec<u32> = self.decode(names::CLUSTER_BASE)?;
+        let words: Vec<u32> = self.decode(names::CLUSTER_NEIGHBOURS)?;
+        candidates::unpack(
+            cluster_start,
+            &base,
+            &words,
+            self.header().neighbour_cluster.max(1),
+        )
+        .map_err(|problem| Error::Invalid {
+            path: self.path().to_path_buf(),
+            problem: format!("section '{}': {problem}", names::CLUSTER_BASE),
+        })
     }
 
     /// Every point's neighbour list (CSR), recovered from the cluster lists by the rule in
@@ -153,10 +173,10 @@ impl LoadedStep {
                 BallState::Full => BallFit::Fitted(FitStatus::Full),
                 BallState::Degraded => BallFit::Fitted(FitStatus::Degraded {
                     requested,
-                    used: b.degree as u8,
+                    used: b.degree(),
                 }),
                 BallState::Unfitted => BallFit::None,
-                BallState::Droplet => BallFit::Droplet(b.state >> 2),
+                BallState::Droplet => BallFit::Droplet(b.sphere_bits()),
             })
             .collect();
         let surface = Surface::from_parts(SurfaceParts {
@@ -184,10 +204,10 @@ impl LoadedStep {
                     centre: v3(p.position),
                     radius: p.radius,
                     h: b.h,
-                    normal: v3(b.normal),
+                    normal: v3(b.normal()),
                     poly: Poly {
-                        degree: b.degree.min(3) as u8,
-                        c: b.coeffs,
+                        degree: b.degree(),
+                        c: b.coeffs(),
                     },
                 })
                 .collect(),

@@ -85,7 +85,7 @@ impl CacheFile {
         let spheres: Vec<GpuSphere> = self.decode(names::SPHERES).map_err(decode_err)?;
         let reach: Vec<f32> = self.decode(names::REACH).map_err(decode_err)?;
         let start: Vec<u32> = self.decode(names::CLUSTER_START).map_err(decode_err)?;
-        let neighbours: Vec<u32> = self.decode(names::CLUSTER_NEIGHBOURS).map_err(decode_err)?;
+        let neighbours = self.cluster_candidates(&start).map_err(decode_err)?;
         let size = header.neighbour_cluster as usize;
         if size == 0 {
             return Err("the neighbour cluster size is 0".into());
@@ -147,12 +147,9 @@ impl CacheFile {
             ));
         }
         if let Some(i) = balls.par_iter().position_first(|b| {
-            let finite = b.normal.iter().chain(&b.coeffs).all(|c| c.is_finite()) && b.h > 0.0;
+            let finite = b.coeffs().iter().all(|c| c.is_finite()) && b.h.is_finite() && b.h > 0.0;
             let sphere_ok = b.sphere().is_none_or(|s| (s as usize) < spheres.len());
-            !finite
-                || b.degree > 3
-                || !sphere_ok
-                || (b.state >> 2 != 0 && b.kind() != BallState::Droplet)
+            !finite || !sphere_ok || (b.sphere_bits() != 0 && b.kind() != BallState::Droplet)
         }) {
             return Err(format!("ball {i} is invalid: {:?}", balls[i]));
         }

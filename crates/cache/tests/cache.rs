@@ -106,9 +106,9 @@ fn truncation_at_any_length_is_a_clear_error() {
 #[test]
 fn a_newer_major_version_is_refused_by_name() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8..12].copy_from_slice(&[4, 0, 0, 0]);
+    bytes[8..12].copy_from_slice(&[5, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
-    assert!(err.contains("newer") && err.contains("4.0"), "{err}");
+    assert!(err.contains("newer") && err.contains("5.0"), "{err}");
 }
 
 #[test]
@@ -180,8 +180,8 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
         SectionInput::new(
             "balls",
             Element::Ball,
-            bytemuck::cast_slice::<f32, [f32; 16]>(&floats[..n / 16 * 16]),
-            Encoding::Shuffle64Zstd,
+            bytemuck::cast_slice::<f32, [f32; 8]>(&floats[..n / 8 * 8]),
+            Encoding::Shuffle32Zstd,
         ),
     ];
     let bytes = encode_step(header(), &sections, Compression::Level(1)).unwrap();
@@ -253,54 +253,16 @@ fn every_single_byte_flip_is_detected() {
     }
 }
 
-/// A format 1.0 file: the same sections as one run each, no chunk table, major version 1.
-fn as_format_1(bytes: &[u8]) -> Vec<u8> {
-    let header_len = u64::from_le_bytes(bytes[16..24].try_into().unwrap()) as usize;
-    let mut header: serde_json::Value =
-        serde_json::from_slice(&bytes[PREAMBLE_LEN..PREAMBLE_LEN + header_len]).unwrap();
-    for s in header["sections"].as_array_mut().unwrap() {
-        let s = s.as_object_mut().unwrap();
-        assert!(
-            s["chunks"].as_array().unwrap().len() <= 1,
-            "one run per section"
-        );
-        s.remove("chunks");
-        s.remove("chunk_raw");
-    }
-    let json = serde_json::to_vec(&header).unwrap();
-    assert!(json.len() <= header_len);
-    let mut out = bytes[..bytes.len() - FOOTER_LEN].to_vec();
-    out[8..12].copy_from_slice(&[1, 0, 0, 0]);
-    out[16..24].copy_from_slice(&(json.len() as u64).to_le_bytes());
-    out[24..32].copy_from_slice(&xxhash_rust::xxh3::xxh3_64(&json).to_le_bytes());
-    out[PREAMBLE_LEN..PREAMBLE_LEN + header_len].fill(0);
-    out[PREAMBLE_LEN..PREAMBLE_LEN + json.len()].copy_from_slice(&json);
-    let body = xxhash_rust::xxh3::xxh3_64(&out);
-    out.extend_from_slice(b"SLC-END\n");
-    out.extend_from_slice(&((out.len() + 24) as u64).to_le_bytes());
-    out.extend_from_slice(&body.to_le_bytes());
-    out.extend_from_slice(&[0u8; 8]);
-    out
-}
-
+/// A file of an older major version (format 3.1 stored f32 fits and normals, 64-byte
+/// balls) is refused with both versions and the command that re-bakes it from its source.
 #[test]
-fn format_1_files_still_open_and_decode() {
-    let sections = sample_sections();
-    let bytes = encode_step(header(), &sections, Compression::Level(3)).unwrap();
-    let old = open(as_format_1(&bytes)).unwrap();
-    assert_eq!(old.version(), (1, 0));
-    assert!(old.body_intact());
-    for (entry, input) in old.header().sections.iter().zip(&sections) {
-        assert!(entry.chunks.is_empty());
-        let mut out = vec![0u8; entry.raw as usize];
-        old.decode_into(entry, &mut out, &mut Vec::new()).unwrap();
-        assert!(out == input.bytes, "{}", entry.name);
+fn an_older_major_version_is_refused_with_the_rebake_command() {
+    let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
+    bytes[8..12].copy_from_slice(&[3, 0, 1, 0]);
+    let err = open(bytes).unwrap_err().to_string();
+    for part in ["test.slc", "3.1", "4.0", "older", "slosh bake test --out"] {
+        assert!(err.contains(part), "{part}: {err}");
     }
-    // A format 1 file with a chunk table is malformed.
-    let mut v2_as_1 = bytes.clone();
-    v2_as_1[8..10].copy_from_slice(&1u16.to_le_bytes());
-    let err = open(v2_as_1).unwrap_err().to_string();
-    assert!(err.contains("format 1 file has a chunk table"), "{err}");
 }
 
 /// A step file truncated under its map (`cp`, `rsync --inplace`, NFS) or rewritten in place:

@@ -39,6 +39,7 @@ pub(crate) struct ExpandInputs<'a> {
     pub cluster_start: &'a wgpu::Buffer,
     pub cluster_ids: &'a wgpu::Buffer,
     pub masks: &'a wgpu::Buffer,
+    pub cluster_base: &'a wgpu::Buffer,
 }
 
 impl StepPasses {
@@ -120,6 +121,7 @@ impl StepPasses {
             inputs.cluster_start,
             inputs.cluster_ids,
             inputs.masks,
+            inputs.cluster_base,
         ];
         let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), self.max_binding);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {

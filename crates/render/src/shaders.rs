@@ -46,7 +46,7 @@ pub const TEXTURE_BINDING: u32 = 101;
 pub const TRACE_STACK_SIZES: [u32; 3] = [32, 64, 96];
 
 /// Bindings per storage array: an array may span this many of the adapter's largest
-/// bindings (3 × 128 MiB on lavapipe: the balls of 6M points). The 12 arrays then take 36
+/// bindings (3 × 128 MiB on lavapipe: the balls of 12M points). The 13 arrays then take 39
 /// storage bindings per stage, within lavapipe's 48.
 pub const RANGES: u32 = 3;
 
@@ -91,18 +91,19 @@ pub mod step_array {
     use super::{RangedArray, array};
 
     pub const POINTS: RangedArray = array("points", "Point", 16, 0, 0, false);
-    pub const NORMALS: RangedArray = array("normals", "Normal", 16, 0, 1, false);
+    pub const NORMALS: RangedArray = array("normals", "u32", 4, 0, 1, false);
     pub const NEIGHBOUR_MASKS: RangedArray = array("neighbour_masks", "u32", 4, 0, 2, false);
     pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 3, false);
     pub const CLUSTER_IDS: RangedArray = array("cluster_ids", "u32", 4, 0, 4, false);
-    pub const BALLS: RangedArray = array("balls", "Ball", 64, 0, 5, false);
+    pub const BALLS: RangedArray = array("balls", "Ball", 32, 0, 5, false);
     pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 6, false);
     pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 7, false);
     pub const FIELD: RangedArray = array("field", "f32", 4, 0, 8, false);
     pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 9, false);
+    pub const CLUSTER_BASE: RangedArray = array("cluster_base", "u32", 4, 0, 10, false);
 }
 
-pub const STEP_ARRAYS: [RangedArray; 10] = [
+pub const STEP_ARRAYS: [RangedArray; 11] = [
     step_array::POINTS,
     step_array::NORMALS,
     step_array::NEIGHBOUR_MASKS,
@@ -113,6 +114,7 @@ pub const STEP_ARRAYS: [RangedArray; 10] = [
     step_array::BVH_ITEMS,
     step_array::FIELD,
     step_array::WIDE_NODES,
+    step_array::CLUSTER_BASE,
 ];
 
 /// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.
@@ -125,13 +127,14 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
 pub const PRESENT_ARRAYS: [RangedArray; 1] = [array("image", "u32", 4, 0, 0, false)];
 
 /// The per-step pass's arrays (expand.wgsl, group 0).
-pub const EXPAND_ARRAYS: [RangedArray; 6] = [
+pub const EXPAND_ARRAYS: [RangedArray; 7] = [
     array("points", "Point", 16, 0, 0, false),
-    array("normals", "Normal", 16, 0, 1, false),
+    array("normals", "u32", 4, 0, 1, false),
     array("reach", "f32", 4, 0, 2, false),
     array("cluster_start", "u32", 4, 0, 3, false),
     array("cluster_ids", "u32", 4, 0, 4, false),
     array("neighbour_masks", "u32", 4, 0, 5, true),
+    array("cluster_base", "u32", 4, 0, 6, false),
 ];
 
 /// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:
@@ -198,7 +201,8 @@ pub fn ranged_wgsl(arrays: &[RangedArray], limit: u64, split: bool) -> String {
 /// has one source: the hit statuses ([`crate::status`]), the shade modes
 /// ([`crate::ShadeMode`]), the candidates a ray refines ([`slosh_mls::MAX_CANDIDATES`]) and
 /// the stack-link packing ([`crate::MAX_LINK_FIRST`]), the wide tree's empty slot
-/// ([`crate::layout::EMPTY_SLOT`]), and the water pass's stage
+/// ([`crate::layout::EMPTY_SLOT`]), the octahedral step and the narrow candidates' constants
+/// (`slosh_cache::octahedral`, `slosh_cache::candidates`), and the water pass's stage
 /// ([`crate::water`]). Prepended to every module.
 pub fn shared_constants_wgsl() -> String {
     use crate::{ShadeMode, status};
@@ -221,10 +225,17 @@ pub fn shared_constants_wgsl() -> String {
         ("MAX_CANDIDATES", slosh_mls::MAX_CANDIDATES),
         ("LINK_COUNT_SHIFT", crate::MAX_LINK_FIRST.count_ones()),
         ("LINK_FIRST", crate::MAX_LINK_FIRST),
+        (
+            "OCTAHEDRAL_STEP_BITS",
+            slosh_cache::octahedral::OCTAHEDRAL_STEP.to_bits(),
+        ),
+        ("WIDE_CLUSTER", slosh_cache::candidates::WIDE_CLUSTER),
+        ("NARROW_BIAS", slosh_cache::candidates::NARROW_BIAS),
     ] {
         constant(name, value);
     }
     out += &format!("const EMPTY_SLOT: f32 = {:e};\n", crate::layout::EMPTY_SLOT);
+
     out + &crate::water::water_wgsl()
 }
 

@@ -299,14 +299,13 @@ macro_rules! check_layout {
 
 #[test]
 fn pod_structs_mirror_the_wgsl_layouts() {
-    use slosh_cache::{GpuBall, GpuNormal, GpuPoint, GpuSphere};
+    use slosh_cache::{GpuBall, GpuPoint, GpuSphere};
     use slosh_render::GpuSettings;
     let trace = validate("trace", &trace_wgsl(32, LIMITS[0], true));
     let shade = validate("shade", &shade_wgsl(LIMITS[0], true));
     for module in [&trace, &shade] {
         check_layout!(module, "Point", GpuPoint, [position, radius]);
-        check_layout!(module, "Normal", GpuNormal, [normal, pad]);
-        check_layout!(module, "Ball", GpuBall, [normal, h, coeffs, degree, state]);
+        check_layout!(module, "Ball", GpuBall, [normal, h, coeffs, state]);
         check_layout!(
             module,
             "Hit",
@@ -351,7 +350,6 @@ fn pod_structs_mirror_the_wgsl_layouts() {
     }
     let expand = validate("expand", &expand_wgsl(LIMITS[0], true));
     check_layout!(&expand, "Point", GpuPoint, [position, radius]);
-    check_layout!(&expand, "Normal", GpuNormal, [normal, pad]);
     check_layout!(
         &expand,
         "ExpandSettings",
@@ -810,25 +808,46 @@ fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, source: &wgpu::Buffer) -> Vec<T> {
 /// rule docs/algorithm.md gives), on a scene whose flipped normals exercise the normal test.
 #[test]
 fn neighbour_masks_equal_the_cpu_lists() {
-    use slosh_cache::{GpuNormal, GpuPoint, names};
+    use slosh_cache::{GpuPoint, names};
     use slosh_mls::V3;
     let Some(dev) = device() else { return };
-    for case in cases() {
+    // 70k points in Morton order: clusters on either side of a top-level octant boundary
+    // have candidates more than 32768 points away, so they store wide indices.
+    let wide = Case {
+        name: "wide clusters: a 70k-point sphere",
+        spec: SceneSpec::new(SceneKind::Sphere, 70_000, 7),
+    };
+    for case in cases().into_iter().chain([wide]) {
         let input = input_of(&case.spec);
         let (file, _) = bake(&input, 2);
+        let base: Vec<u32> = file.decode(names::CLUSTER_BASE).unwrap();
+        let wide_clusters = base
+            .iter()
+            .filter(|&&b| b & slosh_cache::candidates::WIDE_CLUSTER != 0)
+            .count();
+        if case.name.starts_with("wide") {
+            assert!(
+                wide_clusters > 0 && wide_clusters * 4 < base.len(),
+                "{wide_clusters} of {} clusters wide",
+                base.len()
+            );
+        }
         let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
         let masks: Vec<u32> = read_buffer(&dev.gpu, &step.buffers.masks);
         let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
-        let normals: Option<Vec<GpuNormal>> = file
+        let normals: Option<Vec<u32>> = file
             .section(names::NORMALS)
             .map(|_| file.decode(names::NORMALS).unwrap());
         let reach: Vec<f32> = file.decode(names::REACH).unwrap();
         let start: Vec<u32> = file.decode(names::CLUSTER_START).unwrap();
-        let ids: Vec<u32> = file.decode(names::CLUSTER_NEIGHBOURS).unwrap();
+        let ids = file.cluster_candidates(&start).unwrap();
         let v = |a: [f32; 3]| V3::new(a[0], a[1], a[2]);
         let positions: Vec<V3<f32>> = points.iter().map(|p| v(p.position)).collect();
-        let normals: Option<Vec<V3<f32>>> =
-            normals.map(|ns| ns.iter().map(|n| v(n.normal)).collect());
+        let normals: Option<Vec<V3<f32>>> = normals.map(|ns| {
+            ns.iter()
+                .map(|&n| v(slosh_cache::octahedral::decode(n)))
+                .collect()
+        });
         let size = file.header().neighbour_cluster as usize;
         let words = step.info.mask_words as usize;
         let mut list = Vec::new();

@@ -5,6 +5,10 @@
 
 use std::path::Path;
 
+mod exact;
+
+pub use exact::bake_exact_and_stored;
+
 use slosh_bake::{BakeError, BakeParams, StepInput, bake_step};
 use slosh_cache::{CacheFile, encode_step};
 use slosh_fileio::FileBytes;

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use rand::{Rng, SeedableRng};
 use slosh_bake::{BakeParams, NormalSource, SurfaceSelect, bake_step};
-use slosh_cache::{Manifest, step_file_name, write_step};
+use slosh_cache::{Compression, Manifest, step_file_name, write_step};
 use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest, Pace};
 use slosh_render::{Gpu, GpuStep, HostStep, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
@@ -52,24 +52,41 @@ pub struct Settings {
     pub adapter: Option<String>,
     /// Also jumps read from storage: the page cache dropped before each (needs root).
     pub cold: bool,
+    /// Steps stored without compression (`--compress none`), so a load is a copy.
+    pub raw: bool,
 }
 
 /// Percentiles of a sample, in the sample's unit.
+/// How the series are baked: the sphere's own normals, the bake's defaults.
+fn series_params() -> BakeParams {
+    BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()))
+}
+
 /// A series of `steps` cache files of a moving sphere of `points` surface points: `distinct`
 /// instants baked, cycled over the steps (each step its own file, time values increasing).
 /// Reused when `dir` already holds that series.
-fn ensure_series(dir: &Path, points: usize, steps: usize, distinct: usize) -> Result<()> {
+fn ensure_series(
+    dir: &Path,
+    points: usize,
+    steps: usize,
+    distinct: usize,
+    compression: Compression,
+) -> Result<()> {
+    let params = BakeParams {
+        compression,
+        ..series_params()
+    };
     if let Ok(m) = Manifest::read(dir)
         && m.steps.len() == steps
         && m.steps.iter().all(|s| s.points == points as u64)
         && m.bake.get("scrub_distinct").and_then(|v| v.as_u64()) == Some(distinct as u64)
+        && m.bake.get("compression") == params.record().get("compression")
     {
         say!("  reusing the series in {}", dir.display());
         return Ok(());
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))?;
-    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     let start = Instant::now();
     let mut baked = Vec::with_capacity(distinct);
     for d in 0..distinct {
@@ -600,10 +617,18 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
             .distinct
             .unwrap_or(if points <= 200_000 { steps } else { 8 })
             .clamp(1, steps);
-        let dir = root.join(format!("sphere-{points}-{steps}"));
-        say!("series: {points} points, {steps} steps ({distinct} distinct)");
-        ensure_series(&dir, points, steps, distinct)?;
-        let label = format!("{points} points, {steps} steps ({distinct} distinct shapes)");
+        let (compression, stored) = if args.raw {
+            (Compression::None, ", stored raw")
+        } else {
+            (series_params().compression, "")
+        };
+        let dir = root.join(format!(
+            "sphere-{points}-{steps}{}",
+            if args.raw { "-raw" } else { "" }
+        ));
+        say!("series: {points} points, {steps} steps ({distinct} distinct{stored})");
+        ensure_series(&dir, points, steps, distinct, compression)?;
+        let label = format!("{points} points, {steps} steps ({distinct} distinct shapes{stored})");
         let report = measure(&gpu, &dir, points, label, size, &jumps_args)?;
         let pool = report
             .jumps_pool

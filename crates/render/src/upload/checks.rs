@@ -55,29 +55,34 @@ pub fn mask_row(cluster: u64, first: u64) -> u64 {
     (first + 31 * cluster) / 32
 }
 
-/// The neighbour masks' layout: the most words any cluster needs, and the rows of
-/// `cluster_size` words that hold every cluster's. An error where the cluster offsets are not
-/// monotone from 0 to the candidate count (the shaders rely on it) or the masks would not be
-/// indexable by u32.
+fn words(bytes: &[u8]) -> Vec<u32> {
+    bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+/// The neighbour masks' layout and the candidates': the most mask words any cluster needs,
+/// the rows of `cluster_size` words that hold every cluster's, and the candidate count. An
+/// error where the cluster offsets are not monotone from 0, the clusters' candidate words do
+/// not follow each other to the end of `cluster_neighbours` (`candidate_words` words), or
+/// the masks would not be indexable by u32: the shaders rely on all three.
 pub(super) fn mask_layout(
     cluster_start: &[u8],
+    cluster_base: &[u8],
+    candidate_words: u64,
     cluster_size: u32,
-    candidates: u64,
-) -> Result<(u32, u64), String> {
-    let starts: Vec<u64> = cluster_start
-        .chunks_exact(4)
-        .map(|c| u64::from(u32::from_le_bytes([c[0], c[1], c[2], c[3]])))
-        .collect();
-    if starts.first().is_some_and(|&s| s != 0)
-        || starts.windows(2).any(|w| w[0] > w[1])
-        || starts.last().is_some_and(|&s| s != candidates)
-    {
+) -> Result<(u32, u64, u32), String> {
+    let start32 = words(cluster_start);
+    let starts: Vec<u64> = start32.iter().map(|&s| u64::from(s)).collect();
+    if starts.first().is_some_and(|&s| s != 0) || starts.windows(2).any(|w| w[0] > w[1]) {
         return Err(format!(
-            "section '{}' is not monotone from 0 to the {candidates} candidates of '{}'",
-            names::CLUSTER_START,
-            names::CLUSTER_NEIGHBOURS
+            "section '{}' is not monotone from 0",
+            names::CLUSTER_START
         ));
     }
+    slosh_cache::candidates::check_layout(&start32, &words(cluster_base), candidate_words as usize)
+        .map_err(|problem| format!("section '{}': {problem}", names::CLUSTER_BASE))?;
     let most = starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
     let clusters = starts.len().saturating_sub(1) as u64;
     let rows = mask_row(clusters, starts.last().copied().unwrap_or(0));
@@ -86,7 +91,8 @@ pub(super) fn mask_layout(
             "{rows} rows of neighbour masks exceed the tracer's 32-bit indices"
         ));
     }
-    Ok((most.div_ceil(32) as u32, rows))
+    let candidates = starts.last().copied().unwrap_or(0) as u32;
+    Ok((most.div_ceil(32) as u32, rows, candidates))
 }
 
 /// Finite minimum and maximum of little-endian f32s (0, 0 when there are none).

@@ -28,6 +28,9 @@ pub struct StepBuffers {
     /// [`mask_row`]).
     pub masks: wgpu::Buffer,
     pub cluster_start: wgpu::Buffer,
+    /// Each cluster's first word of `cluster_ids` and whether it is wide.
+    pub cluster_base: wgpu::Buffer,
+    /// The clusters' candidates, narrow or wide (`slosh_cache::candidates`).
     pub cluster_ids: wgpu::Buffer,
     pub balls: wgpu::Buffer,
     pub spheres: wgpu::Buffer,
@@ -51,6 +54,7 @@ impl StepBuffers {
             &self.bvh_items,
             &self.field,
             &self.wide_nodes,
+            &self.cluster_base,
         ]
     }
 
@@ -143,6 +147,7 @@ fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
         names::NORMALS => &step_array::NORMALS,
         names::REACH => &EXPAND_ARRAYS[2],
         names::CLUSTER_START => &step_array::CLUSTER_START,
+        names::CLUSTER_BASE => &step_array::CLUSTER_BASE,
         names::CLUSTER_NEIGHBOURS => &step_array::CLUSTER_IDS,
         names::BALLS => &step_array::BALLS,
         names::SPHERES => &step_array::SPHERES,
@@ -300,7 +305,7 @@ impl GpuStep {
                 .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))
         };
         let (points, normals, reach) = (next()?, next()?, next()?);
-        let (cluster_start, cluster_ids) = (next()?, next()?);
+        let (cluster_start, cluster_base, cluster_ids) = (next()?, next()?, next()?);
         let (balls, spheres, bvh_items, wide_nodes) = (next()?, next()?, next()?, next()?);
         let masks = derived(gpu, "neighbour masks", mask_bytes);
         step_passes.encode(
@@ -312,6 +317,7 @@ impl GpuStep {
                 cluster_start: &cluster_start,
                 cluster_ids: &cluster_ids,
                 masks: &masks,
+                cluster_base: &cluster_base,
             },
             ExpandSettings {
                 point_count: info.point_count,
@@ -334,6 +340,7 @@ impl GpuStep {
             reach,
             masks,
             cluster_start,
+            cluster_base,
             cluster_ids,
             balls,
             spheres,

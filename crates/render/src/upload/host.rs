@@ -23,7 +23,7 @@ pub struct StepInfo {
     /// Entries of the 4-wide tree (`wide.rs`) and of the BVH's item list.
     pub wide_count: u32,
     pub item_count: u32,
-    /// Entries of the cluster candidate list.
+    /// Candidates of all clusters (the last `cluster_start`).
     pub cluster_id_count: u32,
     /// Words of neighbour mask of the largest cluster: its candidates over 32.
     pub mask_words: u32,
@@ -271,7 +271,7 @@ impl<'a> HostStep<'a> {
             bvh_depth: header.stats.bvh_depth,
             wide_count: 0,
             item_count: count(names::BVH_ITEMS) as u32,
-            cluster_id_count: count(names::CLUSTER_NEIGHBOURS) as u32,
+            cluster_id_count: 0,
             mask_words: 0,
             mask_rows: 0,
             has_normals: f.section(names::NORMALS).is_some(),
@@ -281,6 +281,7 @@ impl<'a> HostStep<'a> {
             bounds: header.bounds,
             spacing: header.spacing * header.transform.scale,
         };
+        let candidate_words = count(names::CLUSTER_NEIGHBOURS);
         let stored_bytes = entries.iter().flatten().map(|e| e.stored).sum::<u64>()
             + field
                 .as_ref()
@@ -302,13 +303,15 @@ impl<'a> HostStep<'a> {
             .map_err(|problem| invalid(step.file(), problem))?;
         step.info.wide_count = wide.len() as u32;
         step.wide = bytemuck::cast_slice(&wide).to_vec();
-        let (words, rows) = mask_layout(
+        let (words, rows, candidates) = mask_layout(
             step.host_bytes(slot_of(names::CLUSTER_START)),
+            step.host_bytes(slot_of(names::CLUSTER_BASE)),
+            candidate_words,
             step.info.cluster_size,
-            u64::from(step.info.cluster_id_count),
         )
         .map_err(|problem| invalid(step.file(), problem))?;
         (step.info.mask_words, step.info.mask_rows) = (words, rows);
+        step.info.cluster_id_count = candidates;
         step.host_seconds = start.elapsed().as_secs_f64();
         Ok(step)
     }

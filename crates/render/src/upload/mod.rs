@@ -27,11 +27,12 @@ pub use checks::{MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, mask_row};
 pub use gpu_step::{GpuStep, StepBuffers, UploadOptions, UploadStats};
 pub use host::{HostField, HostStep, StepInfo};
 
-const SECTIONS: [&str; 9] = [
+const SECTIONS: [&str; 10] = [
     names::POINTS,
     names::NORMALS,
     names::REACH,
     names::CLUSTER_START,
+    names::CLUSTER_BASE,
     names::CLUSTER_NEIGHBOURS,
     names::BALLS,
     names::SPHERES,
@@ -42,8 +43,9 @@ const SECTIONS: [&str; 9] = [
 /// The one section the GPU never holds: the host half widens it (`wide.rs`).
 const HOST_ONLY: &str = names::BVH_NODES;
 
-/// The sections the host half reads (the tree check, the mask layout), so decodes itself.
-const HOST_READS: [&str; 2] = [names::BVH_NODES, names::CLUSTER_START];
+/// The sections the host half reads (the tree check, the mask and candidate layouts), so
+/// decodes itself.
+const HOST_READS: [&str; 3] = [names::BVH_NODES, names::CLUSTER_START, names::CLUSTER_BASE];
 
 fn slot_of(name: &str) -> usize {
     SECTIONS.iter().position(|n| *n == name).unwrap_or_default()
