@@ -642,7 +642,8 @@ fn unreadable_steps_and_a_tiny_budget_are_said() {
     let cache = series(dir.path(), 2);
     let out = dir.path().join("budget-out");
     std::fs::create_dir_all(&out).unwrap();
-    let player = Player::start(&display, &cache, &out, &["--budget", "0.0001"]);
+    // 10 kB: a step of 755 points holds about 100 kB on the GPU.
+    let player = Player::start(&display, &cache, &out, &["--budget", "0.00001"]);
     wait_for("the budget failure", Duration::from_secs(120), || {
         failures(&player.log(), 0)
             .iter()
