@@ -585,7 +585,7 @@ impl Report for GpuReport {
         }
         let _ = writeln!(
             md,
-            "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree check), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, then the per-step passes of `shaders/expand.wgsl` (neighbour masks, leaf spheres, the 4-wide tree), waited for. Median of 5. Bytes on the GPU count the sections; the passes' outputs come on top.\n"
+            "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree checked and widened into the 4-wide tree), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, then the per-step pass of `shaders/expand.wgsl` (neighbour masks), waited for. Median of 5. Bytes on the GPU count the sections and the wide tree; the masks come on top.\n"
         );
         let _ = writeln!(
             md,

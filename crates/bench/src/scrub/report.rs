@@ -227,8 +227,9 @@ impl Report for ScrubReport {
             "| series | zstd level | raw bytes | stored bytes | ratio | encode MB/s per core | decode GB/s per core |"
         );
         let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+        // A series stored raw has no compressed section to re-encode.
         for r in reports {
-            for c in &r.codecs {
+            for c in r.codecs.iter().filter(|c| c.raw > 0) {
                 let _ = writeln!(
                     md,
                     "| {} | {} | {} | {} | {:.2} | {:.0} | {:.2} |",
