@@ -11,6 +11,7 @@ use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mask_layout};
 use super::wide::wide_tree;
 use super::{EMPTY_BINDING, HOST_ONLY, HOST_READS, SECTIONS, field_buffer_size, invalid, slot_of};
 use crate::error::Result;
+use crate::layout::GpuWide;
 
 /// What the passes need to know about a step, read from its header and sections.
 #[derive(Debug, Clone, PartialEq)]
@@ -142,8 +143,8 @@ pub struct HostStep<'a> {
     file: HeldFile<'a>,
     /// Each `SECTIONS` slot's bytes, or where they come from.
     sections: Vec<SectionData>,
-    /// The 4-wide tree's entries (`GpuWide`), made from the BVH2 here.
-    wide: Vec<u8>,
+    /// The 4-wide tree's entries, made from the BVH2 here.
+    wide: Vec<GpuWide>,
     pub field: Option<HostField>,
     pub info: StepInfo,
     pub host_seconds: f64,
@@ -196,7 +197,7 @@ impl<'a> HostStep<'a> {
             .iter()
             .filter(|name| **name != HOST_ONLY)
             .map(|name| (*name, self.section_source(slot_of(name))))
-            .chain([(WIDE_NODES, Source::Bytes(&self.wide))])
+            .chain([(WIDE_NODES, Source::Bytes(bytemuck::cast_slice(&self.wide)))])
             .collect()
     }
 
@@ -302,7 +303,7 @@ impl<'a> HostStep<'a> {
             .and_then(|()| wide_tree(nodes))
             .map_err(|problem| invalid(step.file(), problem))?;
         step.info.wide_count = wide.len() as u32;
-        step.wide = bytemuck::cast_slice(&wide).to_vec();
+        step.wide = wide;
         let (words, rows, candidates) = mask_layout(
             step.host_bytes(slot_of(names::CLUSTER_START)),
             step.host_bytes(slot_of(names::CLUSTER_BASE)),
