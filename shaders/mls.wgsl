@@ -66,7 +66,8 @@ struct Settings {
 
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's
 // shaders.rs generates over the ranges they are bound in. Among them: neighbour_masks, bit
-// masks over each point's cluster candidates, written per step by expand.wgsl.
+// masks over each point's cluster candidates (group 2), written by expand.wgsl before a step's
+// first refined frame.
 // The uniforms belong to the frame (group 1), so a step's bind group (group 0) is made once
 // per step and serves any frame.
 @group(1) @binding(100) var<uniform> settings: Settings;

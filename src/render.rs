@@ -148,7 +148,7 @@ pub fn run(config: &RenderConfig) -> Result<()> {
         return Ok(());
     }
     let gpu = slosh_render::Gpu::new(config.adapter.as_deref())?;
-    let (tracer, passes) = (Tracer::new(&gpu)?, slosh_render::StepPasses::new(&gpu));
+    let tracer = Tracer::new(&gpu)?;
     if config.sequence {
         say!(
             "rendering {} steps on {}",
@@ -175,7 +175,6 @@ pub fn run(config: &RenderConfig) -> Result<()> {
         let (gpu_step, frame) = slosh_play::export::trace_file(
             &gpu,
             &tracer,
-            &passes,
             &file,
             config.field.as_deref(),
             &camera,

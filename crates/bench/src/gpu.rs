@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect};
 use slosh_cache::{CacheFile, Compression};
 use slosh_mls::Camera;
-use slosh_render::{Gpu, GpuStep, ShadeMode, StepPasses, TraceParams, Tracer, status};
+use slosh_render::{Gpu, GpuStep, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{Scene, SceneKind, SceneSpec, Truth};
 
 use slosh_render::write_frame_png;
@@ -151,7 +151,6 @@ pub struct GpuReport {
 struct Runner<'a> {
     gpu: &'a Gpu,
     tracer: Tracer,
-    passes: StepPasses,
     frames: usize,
 }
 
@@ -242,7 +241,6 @@ pub fn run(args: &Settings) -> Result<GpuReport> {
     let runner = Runner {
         gpu: &gpu,
         tracer: Tracer::new(&gpu)?,
-        passes: StepPasses::new(&gpu),
         frames: args.frames,
     };
     say!("GPU benchmark on {}", gpu.describe());
@@ -261,7 +259,7 @@ pub fn run(args: &Settings) -> Result<GpuReport> {
                 degree,
                 None,
             )?;
-            let step = GpuStep::upload(&gpu, &runner.passes, &bench.file, None)?;
+            let step = GpuStep::upload(&gpu, &bench.file, None)?;
             let (_, _, reference) = runner.time(
                 &bench,
                 &step,
@@ -335,7 +333,7 @@ fn tank_rows(
         if args.quick { 60_000 } else { 250_000 },
         2,
     )?;
-    let tank_step = GpuStep::upload(gpu, &runner.passes, &tank.file, None)?;
+    let tank_step = GpuStep::upload(gpu, &tank.file, None)?;
     let sizes: &[(u32, u32)] = if !sizes_table {
         &[]
     } else if args.quick {
@@ -410,11 +408,11 @@ fn points_rows(
             "  sphere {points}: baked in {:.1} s",
             start.elapsed().as_secs_f64()
         );
-        let step = GpuStep::upload(runner.gpu, &runner.passes, &bench.file, None)?;
+        let step = GpuStep::upload(runner.gpu, &bench.file, None)?;
         // Upload: the median of 5 uploads of the same in-memory step.
         let mut best = Vec::new();
         for _ in 0..5 {
-            best.push(GpuStep::upload(runner.gpu, &runner.passes, &bench.file, None)?.upload);
+            best.push(GpuStep::upload(runner.gpu, &bench.file, None)?.upload);
         }
         best.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
         uploads.push(Upload {
@@ -585,11 +583,11 @@ impl Report for GpuReport {
         }
         let _ = writeln!(
             md,
-            "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree checked and widened into the 4-wide tree), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, then the per-step pass of `shaders/expand.wgsl` (neighbour masks), waited for. Median of 5. Bytes on the GPU count the sections and the wide tree; the masks come on top.\n"
+            "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree checked and widened into the 4-wide tree), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, waited for (no pass runs per upload: the tracer derives the neighbour masks of the step it refines, before its first refined frame). Median of 5. Bytes on the GPU count the sections and the wide tree.\n"
         );
         let _ = writeln!(
             md,
-            "| step | bytes on the GPU | bytes stored | host ms | record ms | GPU copy + passes ms | total ms | GB/s |"
+            "| step | bytes on the GPU | bytes stored | host ms | record ms | GPU copy ms | total ms | GB/s |"
         );
         let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
         for Upload {

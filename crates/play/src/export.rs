@@ -8,20 +8,19 @@ use std::sync::mpsc::{Receiver, TryRecvError, channel};
 
 use slosh_cache::CacheFile;
 use slosh_mls::Camera;
-use slosh_render::{Frame, Gpu, GpuStep, StepPasses, TraceParams, Tracer};
+use slosh_render::{Frame, Gpu, GpuStep, TraceParams, Tracer};
 
 /// One step file on the GPU and traced: uploaded (with `field`, if named), rendered and read
 /// back, waiting for the device.
 pub fn trace_file(
     gpu: &Gpu,
     tracer: &Tracer,
-    passes: &StepPasses,
     file: &CacheFile,
     field: Option<&str>,
     camera: &Camera,
     params: &TraceParams,
 ) -> slosh_render::Result<(GpuStep, Frame)> {
-    let step = GpuStep::upload(gpu, passes, file, field)?;
+    let step = GpuStep::upload(gpu, file, field)?;
     let frame = tracer.render(gpu, &step, camera, params)?;
     Ok((step, frame))
 }
@@ -82,7 +81,6 @@ impl ExportJob {
                     return;
                 }
             };
-            let passes = StepPasses::new(&gpu);
             if let Err(e) = std::fs::create_dir_all(&request.dir) {
                 let _ = tx.send(Err(format!("{}: {e}", request.dir.display())));
                 return;
@@ -96,7 +94,6 @@ impl ExportJob {
                         trace_file(
                             &gpu,
                             &tracer,
-                            &passes,
                             &file,
                             field,
                             &request.camera,

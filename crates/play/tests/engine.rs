@@ -12,7 +12,7 @@ use slosh_cache::{Manifest, step_file_name, write_step};
 use slosh_mls::Camera;
 use slosh_play::export::{ExportJob, ExportRequest, ExportState, frame_path, trace_file};
 use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest, Pace};
-use slosh_render::{Gpu, GpuStep, HostStep, StepPasses, TraceParams, Tracer};
+use slosh_render::{Gpu, GpuStep, HostStep, TraceParams, Tracer};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn gpu() -> Option<Arc<Gpu>> {
@@ -97,7 +97,7 @@ fn step_bytes(dir: &Path, gpu: &Gpu, index: usize) -> u64 {
     let mut encoder = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    let step = GpuStep::create(gpu, &StepPasses::new(gpu), &host, &mut encoder).unwrap();
+    let step = GpuStep::create(gpu, &host, &mut encoder).unwrap();
     assert_eq!(step.gpu_bytes(), host.gpu_bytes(), "predicted bytes differ");
     step.gpu_bytes()
 }
@@ -195,7 +195,7 @@ fn finished_refinement_equals_a_direct_render() {
     let targets = engine.targets().unwrap();
     let refined = engine.tracer().read_frame(&gpu, targets).unwrap();
     let file = slosh_cache::CacheFile::open(&dir.path().join(step_file_name(1))).unwrap();
-    let step = GpuStep::upload(&gpu, &StepPasses::new(&gpu), &file, None).unwrap();
+    let step = GpuStep::upload(&gpu, &file, None).unwrap();
     let mut params = request.params;
     params.iterations = 3;
     let direct = engine
@@ -300,11 +300,10 @@ fn an_export_job_writes_each_step_as_a_direct_render() {
         dir: request.dir.clone(),
     };
     assert_eq!(ended, expected);
-    let (tracer, passes) = (Tracer::new(&gpu).unwrap(), StepPasses::new(&gpu));
+    let tracer = Tracer::new(&gpu).unwrap();
     for (i, path) in &request.steps {
         let file = slosh_cache::CacheFile::open(path).unwrap();
-        let (_, frame) =
-            trace_file(&gpu, &tracer, &passes, &file, None, &camera(), &params).unwrap();
+        let (_, frame) = trace_file(&gpu, &tracer, &file, None, &camera(), &params).unwrap();
         let lit = frame.hits.iter().filter(|h| h.status != 0).count();
         assert!(lit > 200, "step {i}: {lit} hit pixels");
         let direct = out.path().join(format!("direct-{i}.png"));

@@ -4,11 +4,12 @@ use std::sync::OnceLock;
 
 use crate::bindings::layout_entries;
 use crate::error::{Error, Result};
-use crate::shaders::{FRAME_ARRAYS, RANGES, STEP_ARRAYS};
+use crate::shaders::{DERIVED_ARRAYS, FRAME_ARRAYS, RANGES, STEP_ARRAYS};
 
-/// Storage buffers bound per shader stage by the step and frame bind groups: every array in
-/// `RANGES` bindings.
-pub const STORAGE_BUFFERS_NEEDED: u32 = (STEP_ARRAYS.len() + FRAME_ARRAYS.len()) as u32 * RANGES;
+/// Storage buffers bound per shader stage by the step, frame and derived bind groups: every
+/// array in `RANGES` bindings.
+pub const STORAGE_BUFFERS_NEEDED: u32 =
+    (STEP_ARRAYS.len() + FRAME_ARRAYS.len() + DERIVED_ARRAYS.len()) as u32 * RANGES;
 
 /// The smallest binding limit [`Gpu::limit_bindings`] takes (ranges stay aligned above it).
 pub const MIN_BINDING_LIMIT: u64 = 1 << 16;
@@ -221,8 +222,7 @@ impl Gpu {
 
     /// Binds storage in slices of at most `bytes` (at least [`MIN_BINDING_LIMIT`], at most
     /// the adapter's limit): how the splitting of large arrays is tested on small scenes.
-    /// Applies to steps uploaded and tracers and [`StepPasses`](crate::StepPasses) built
-    /// afterwards.
+    /// Applies to steps uploaded and tracers built afterwards.
     pub fn limit_bindings(&mut self, bytes: u64) {
         let adapter = self.device.limits().max_storage_buffer_binding_size;
         self.binding_limit = bytes.clamp(MIN_BINDING_LIMIT.min(adapter), adapter);

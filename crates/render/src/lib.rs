@@ -1,6 +1,6 @@
-//! The GPU half of slosh: a cache step streamed into wgpu storage buffers (with its neighbour
-//! masks built by `shaders/expand.wgsl`), the MLS ray tracer (`shaders/trace.wgsl` over
-//! `shaders/mls.wgsl`), the shade pass (`shaders/shade.wgsl`) or the water pass with secondary
+//! The GPU half of slosh: a cache step streamed into wgpu storage buffers, the MLS ray tracer
+//! (`shaders/trace.wgsl` over `shaders/mls.wgsl`, with the leaf spheres and neighbour masks of
+//! the step it draws derived by `shaders/expand.wgsl`), the shade pass (`shaders/shade.wgsl`) or the water pass with secondary
 //! rays (`shaders/water.wgsl`) as compute shaders, and frames read back for files or timed
 //! with GPU timestamps. The WGSL is a port of `slosh_mls`; the tests hold it to the CPU f64
 //! oracle.
@@ -9,8 +9,8 @@ mod bindings;
 pub mod colormap;
 mod context;
 pub mod cpu_shade;
+mod derived;
 mod error;
-mod expand;
 pub mod layout;
 mod output;
 pub mod shaders;
@@ -21,7 +21,6 @@ pub mod water;
 
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
-pub use expand::StepPasses;
 pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, status};
 pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use staging::StagingPool;

@@ -15,7 +15,8 @@ pub const STEP_WGSL: &str = include_str!("../../../shaders/step.wgsl");
 /// The shared MLS maths alone.
 pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
 
-/// The per-step pass, entry point `expand` (neighbour masks).
+/// The passes that derive the tracer's arrays of the step it draws (derived.rs): `leaves`
+/// before its first frame, `expand` (neighbour masks) before its first refined frame.
 pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
 
 /// The trace pass and the water pass, which traces secondary rays: mls.wgsl + trace.wgsl +
@@ -46,7 +47,7 @@ pub const TEXTURE_BINDING: u32 = 101;
 pub const TRACE_STACK_SIZES: [u32; 3] = [32, 64, 96];
 
 /// Bindings per storage array: an array may span this many of the adapter's largest
-/// bindings (3 × 128 MiB on lavapipe: the balls of 12M points). The 13 arrays then take 39
+/// bindings (3 × 128 MiB on lavapipe: the balls of 12M points). The 14 arrays then take 42
 /// storage bindings per stage, within lavapipe's 48.
 pub const RANGES: u32 = 3;
 
@@ -92,21 +93,19 @@ pub mod step_array {
 
     pub const POINTS: RangedArray = array("points", "Point", 16, 0, 0, false);
     pub const NORMALS: RangedArray = array("normals", "u32", 4, 0, 1, false);
-    pub const NEIGHBOUR_MASKS: RangedArray = array("neighbour_masks", "u32", 4, 0, 2, false);
-    pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 3, false);
-    pub const CLUSTER_IDS: RangedArray = array("cluster_ids", "u32", 4, 0, 4, false);
-    pub const BALLS: RangedArray = array("balls", "Ball", 32, 0, 5, false);
-    pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 6, false);
-    pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 7, false);
-    pub const FIELD: RangedArray = array("field", "f32", 4, 0, 8, false);
-    pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 9, false);
-    pub const CLUSTER_BASE: RangedArray = array("cluster_base", "u32", 4, 0, 10, false);
+    pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 2, false);
+    pub const CLUSTER_IDS: RangedArray = array("cluster_ids", "u32", 4, 0, 3, false);
+    pub const BALLS: RangedArray = array("balls", "Ball", 32, 0, 4, false);
+    pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 5, false);
+    pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 6, false);
+    pub const FIELD: RangedArray = array("field", "f32", 4, 0, 7, false);
+    pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 8, false);
+    pub const CLUSTER_BASE: RangedArray = array("cluster_base", "u32", 4, 0, 9, false);
 }
 
-pub const STEP_ARRAYS: [RangedArray; 11] = [
+pub const STEP_ARRAYS: [RangedArray; 10] = [
     step_array::POINTS,
     step_array::NORMALS,
-    step_array::NEIGHBOUR_MASKS,
     step_array::CLUSTER_START,
     step_array::CLUSTER_IDS,
     step_array::BALLS,
@@ -117,6 +116,19 @@ pub const STEP_ARRAYS: [RangedArray; 11] = [
     step_array::CLUSTER_BASE,
 ];
 
+/// What the tracer derives from the step it draws, as the trace and shade passes bind it
+/// (group 2; derived.rs): each BVH item slot's sphere, and the neighbour masks (refined
+/// frames only).
+pub mod derived_array {
+    use super::{RangedArray, array};
+
+    pub const LEAF_SPHERES: RangedArray = array("leaf_spheres", "vec4<f32>", 16, 2, 0, false);
+    pub const NEIGHBOUR_MASKS: RangedArray = array("neighbour_masks", "u32", 4, 2, 1, false);
+}
+
+pub const DERIVED_ARRAYS: [RangedArray; 2] =
+    [derived_array::LEAF_SPHERES, derived_array::NEIGHBOUR_MASKS];
+
 /// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.
 pub const FRAME_ARRAYS: [RangedArray; 2] = [
     array("hits", "vec4<u32>", 16, 1, 0, true),
@@ -126,8 +138,8 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
 /// The present pass's array (present.wgsl, group 0): the shaded image.
 pub const PRESENT_ARRAYS: [RangedArray; 1] = [array("image", "u32", 4, 0, 0, false)];
 
-/// The per-step pass's arrays (expand.wgsl, group 0).
-pub const EXPAND_ARRAYS: [RangedArray; 7] = [
+/// The derived arrays' passes' arrays (expand.wgsl, group 0).
+pub const EXPAND_ARRAYS: [RangedArray; 10] = [
     array("points", "Point", 16, 0, 0, false),
     array("normals", "u32", 4, 0, 1, false),
     array("reach", "f32", 4, 0, 2, false),
@@ -135,6 +147,9 @@ pub const EXPAND_ARRAYS: [RangedArray; 7] = [
     array("cluster_ids", "u32", 4, 0, 4, false),
     array("neighbour_masks", "u32", 4, 0, 5, true),
     array("cluster_base", "u32", 4, 0, 6, false),
+    array("bvh_items", "u32", 4, 0, 7, false),
+    array("spheres", "Sphere", 16, 0, 8, false),
+    array("leaf_spheres", "vec4<f32>", 16, 0, 9, true),
 ];
 
 /// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:
@@ -262,7 +277,7 @@ pub fn mls_wgsl(limit: u64, split: bool) -> String {
     frame_module(MLS_WGSL, limit, split)
 }
 
-/// The per-step passes' module.
+/// The derived arrays' module (entry points `leaves` and `expand`).
 pub fn expand_wgsl(limit: u64, split: bool) -> String {
     format!(
         "{}{STEP_WGSL}{}{EXPAND_WGSL}",
@@ -280,7 +295,12 @@ pub fn present_wgsl(limit: u64, split: bool) -> String {
 }
 
 fn frame_module(source: &str, limit: u64, split: bool) -> String {
-    let arrays: Vec<RangedArray> = STEP_ARRAYS.iter().chain(&FRAME_ARRAYS).copied().collect();
+    let arrays: Vec<RangedArray> = STEP_ARRAYS
+        .iter()
+        .chain(&FRAME_ARRAYS)
+        .chain(&DERIVED_ARRAYS)
+        .copied()
+        .collect();
     format!(
         "{}{STEP_WGSL}{}{source}",
         shared_constants_wgsl(),

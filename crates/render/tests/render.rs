@@ -49,15 +49,12 @@ use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{CacheFile, encode_step};
 use slosh_fileio::FileBytes;
 use slosh_mls::{Camera, HitStatus, NormalsMode, Params, Surface, TraceHit};
-use slosh_render::{
-    Frame, Gpu, GpuHit, GpuStep, ShadeMode, StepPasses, TraceParams, Tracer, status,
-};
+use slosh_render::{Frame, Gpu, GpuHit, GpuStep, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
 
 struct Device {
     gpu: Gpu,
     tracer: Tracer,
-    passes: StepPasses,
 }
 
 /// The shared GPU, or `None` (with a message) where there is none; with `CI=true` a missing
@@ -69,12 +66,7 @@ fn device() -> Option<&'static Device> {
             let gpu = slosh_testkit::gpu_or_skip(Gpu::new(slosh_testkit::adapter().as_deref()))?;
             eprintln!("GPU tests on {}", gpu.describe());
             let tracer = Tracer::new(&gpu).unwrap();
-            let passes = StepPasses::new(&gpu);
-            Some(Device {
-                gpu,
-                tracer,
-                passes,
-            })
+            Some(Device { gpu, tracer })
         })
         .as_ref()
 }
@@ -203,7 +195,7 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
         let camera = slosh_testkit::framing_camera(&input.positions, SIZE);
         for degree in [2u8, 3] {
             let (file, params) = bake(&input, degree);
-            let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
+            let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
             let oracle =
                 Surface::<f64>::build(&input.positions, input.normals.as_deref(), &params.mls)
                     .unwrap();
@@ -360,9 +352,9 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             mask_words,
             has_normals,
             cluster_id_count,
-            pad0,
-            pad1,
-            pad2
+            row_threads,
+            sphere_count,
+            item_count
         ]
     );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);
@@ -402,7 +394,7 @@ fn shaded_frame_matches_the_golden_image() {
     let input = input_of(&SceneSpec::new(SceneKind::Torus, 4000, 7));
     let camera = slosh_testkit::framing_camera(&input.positions, 96);
     let (file, _) = bake(&input, 2);
-    let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
+    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let mut params = TraceParams::for_step(&step, 3);
     params.mode = ShadeMode::Shade;
     let frame: Frame = dev
@@ -463,7 +455,7 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
     };
     let input = input_of(&spec);
     let (file, _) = bake(&input, 2);
-    let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
+    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let loaded = slosh_cache::LoadedStep::load(&file).unwrap();
     // The stage from its one source (slosh_render::water, which water.wgsl is generated
     // from): the floor under the BVH root box, the checker squares, the key light. What the
@@ -607,11 +599,10 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
     let mut capped = Gpu::new(slosh_testkit::adapter().as_deref()).unwrap();
     capped.limit_bindings(slosh_render::MIN_BINDING_LIMIT);
     let capped_tracer = Tracer::new(&capped).unwrap();
-    let capped_passes = StepPasses::new(&capped);
     let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 5));
     let (file, _) = bake(&input, 2);
-    let whole = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
-    let split = GpuStep::upload(&capped, &capped_passes, &file, None).unwrap();
+    let whole = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+    let split = GpuStep::upload(&capped, &file, None).unwrap();
     assert!(!whole.split, "the unsplit device split the step");
     assert!(
         split.split,
@@ -645,7 +636,7 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
     // 5000 points: 320 KB of balls (and more neighbour ids), past 3 ranges of 64 KiB.
     let big = input_of(&SceneSpec::new(SceneKind::Sphere, 5000, 5));
     let (file, _) = bake(&big, 2);
-    let message = GpuStep::upload(&capped, &capped_passes, &file, None)
+    let message = GpuStep::upload(&capped, &file, None)
         .unwrap_err()
         .to_string();
     eprintln!("refused: {message}");
@@ -714,8 +705,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     let mut camera = slosh_testkit::framing_camera(&input.positions, 64);
     camera.height = 48;
     for mode in [ShadeMode::Shade, ShadeMode::Water] {
-        let reference_step =
-            GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("pressure")).unwrap();
+        let reference_step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();
         let mut trace = TraceParams::for_step(&reference_step, 3);
         trace.mode = mode;
         let reference = dev
@@ -734,7 +724,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        let step = GpuStep::create(&dev.gpu, &dev.passes, &host, &mut encoder).unwrap();
+        let step = GpuStep::create(&dev.gpu, &host, &mut encoder).unwrap();
         dev.tracer
             .record(&dev.gpu, &step, &targets, &camera, &trace, &mut encoder)
             .unwrap();
@@ -755,10 +745,10 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     }
     // Switching the field uploads the field alone and draws what a step uploaded with that
     // field draws.
-    let mut step = GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("pressure")).unwrap();
+    let mut step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();
     let x = slosh_render::HostField::read(&file, "x").unwrap();
     step.set_field(&dev.gpu, Some(&x)).unwrap();
-    let direct = GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("x")).unwrap();
+    let direct = GpuStep::upload(&dev.gpu, &file, Some("x")).unwrap();
     assert_eq!(step.field, direct.field);
     let trace = TraceParams::for_step(&step, 2);
     let switched = dev.tracer.render(&dev.gpu, &step, &camera, &trace).unwrap();
@@ -772,7 +762,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     );
     let before = dev.tracer.render(
         &dev.gpu,
-        &GpuStep::upload(&dev.gpu, &dev.passes, &file, Some("pressure")).unwrap(),
+        &GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap(),
         &camera,
         &trace,
     );
@@ -832,8 +822,17 @@ fn neighbour_masks_equal_the_cpu_lists() {
                 base.len()
             );
         }
-        let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
-        let masks: Vec<u32> = read_buffer(&dev.gpu, &step.buffers.masks);
+        let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
+        let mut encoder = dev
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let buffer = dev
+            .tracer
+            .neighbour_masks(&dev.gpu, &step, &mut encoder, None)
+            .unwrap();
+        dev.gpu.queue.submit([encoder.finish()]);
+        let masks: Vec<u32> = read_buffer(&dev.gpu, &buffer);
         let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
         let normals: Option<Vec<u32>> = file
             .section(names::NORMALS)
@@ -899,7 +898,7 @@ fn the_key_light_comes_from_where_it_is_set() {
     let Some(dev) = device() else { return };
     let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 7));
     let (file, _) = bake(&input, 2);
-    let step = GpuStep::upload(&dev.gpu, &dev.passes, &file, None).unwrap();
+    let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let (lo, hi) = slosh_mls::bounds(&input.positions);
     let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
     // Looking along +y at the sphere's centre, z up in the image.
@@ -936,4 +935,67 @@ fn the_key_light_comes_from_where_it_is_set() {
     assert!(top > bottom * 3 / 2, "lit from above: {top} vs {bottom}");
     let (top, bottom) = halves([0.0, -0.2, -1.0]);
     assert!(bottom > top * 3 / 2, "lit from below: {top} vs {bottom}");
+}
+
+/// The tracer holds the neighbour masks of one step, the one it last refined: refined frames
+/// of two steps taken in turn equal those of a tracer that saw only one of them (stale masks
+/// would refine with another step's neighbour lists), a one-iteration frame derives none, and
+/// what it holds is one buffer, as large as the larger step's masks.
+#[test]
+fn the_tracer_derives_the_masks_of_the_step_it_refines() {
+    let Some(dev) = device() else { return };
+    let steps: Vec<(Camera, GpuStep)> = [(SceneKind::Sphere, 3000, 5), (SceneKind::Torus, 4000, 9)]
+        .into_iter()
+        .map(|(kind, n, seed)| {
+            let input = input_of(&SceneSpec::new(kind, n, seed));
+            let (file, _) = bake(&input, 2);
+            let camera = slosh_testkit::framing_camera(&input.positions, 64);
+            (camera, GpuStep::upload(&dev.gpu, &file, None).unwrap())
+        })
+        .collect();
+    let refined = |step: &GpuStep| TraceParams::for_step(step, 3);
+    let alone: Vec<Frame> = steps
+        .iter()
+        .map(|(camera, step)| {
+            Tracer::new(&dev.gpu)
+                .unwrap()
+                .render(&dev.gpu, step, camera, &refined(step))
+                .unwrap()
+        })
+        .collect();
+    let shared = Tracer::new(&dev.gpu).unwrap();
+    let (camera, step) = &steps[0];
+    shared
+        .render(&dev.gpu, step, camera, &TraceParams::for_step(step, 1))
+        .unwrap();
+    assert_eq!(
+        shared.mask_bytes(),
+        0,
+        "a one-iteration frame derived masks"
+    );
+    let largest = steps
+        .iter()
+        .map(|(_, s)| s.info.mask_bytes())
+        .max()
+        .unwrap();
+    for round in 0..2 {
+        for (k, (camera, step)) in steps.iter().enumerate() {
+            let frame = shared
+                .render(&dev.gpu, step, camera, &refined(step))
+                .unwrap();
+            let hits = frame
+                .hits
+                .iter()
+                .filter(|h| h.status != status::MISS)
+                .count();
+            let held = shared.mask_bytes();
+            eprintln!("round {round}, step {k}: {hits} hits, {held} bytes of masks held");
+            assert!(hits > 500, "{hits} hit pixels");
+            assert!(frame.hits == alone[k].hits && frame.rgba == alone[k].rgba);
+            assert!(
+                held >= step.info.mask_bytes() && held <= largest,
+                "{held} bytes held"
+            );
+        }
+    }
 }

@@ -272,8 +272,8 @@ fn measure(
     let staging = slosh_render::StagingPool::new(2);
     let (mut host_ms, mut record_ms) = (Vec::new(), Vec::new());
     let (mut copy_ms, mut pass_ms) = (Vec::new(), Vec::new());
-    // GPU timestamps of the per-step pass, where the adapter has them.
-    let mut mask_pass_ms = Vec::new();
+    // GPU timestamps of the mask pass, where the adapter has them.
+    let (mut mask_pass_ms, mut mask_bytes) = (Vec::new(), 0);
     let stamps = gpu.timestamps.then(|| {
         let buffer = |usage| {
             gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -285,7 +285,7 @@ fn measure(
         };
         (
             gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("per-step pass"),
+                label: Some("mask pass"),
                 ty: wgpu::QueryType::Timestamp,
                 count: 2,
             }),
@@ -294,7 +294,8 @@ fn measure(
         )
     });
     let (mut step_gpu_bytes, mut section_bytes, mut stored_bytes) = (0, 0, 0);
-    let step_passes = slosh_render::StepPasses::new(gpu);
+    // The mask pass a step's first refined frame records, timed alone.
+    let tracer = slosh_render::Tracer::new(gpu)?;
     for p in &sample {
         let host = HostStep::open(p, None)?;
         let encoder = || {
@@ -302,34 +303,37 @@ fn measure(
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None })
         };
         let (mut copies, mut passes) = (encoder(), encoder());
-        let step = GpuStep::create_in(
+        let mut step = GpuStep::create_in(
             gpu,
-            &step_passes,
             &host,
             &mut copies,
             slosh_render::UploadOptions {
-                passes: Some(&mut passes),
-                timestamps: stamps.as_ref().map(|(set, _, _)| set),
                 staging: Some(&staging),
                 cancelled: None,
             },
+        )?;
+        let t = Instant::now();
+        gpu.queue.submit([copies.finish()]);
+        gpu.wait()?;
+        copy_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        if let Some(buffer) = step.take_staging() {
+            staging.recycle(buffer);
+        }
+        let masks = tracer.neighbour_masks(
+            gpu,
+            &step,
+            &mut passes,
+            stamps.as_ref().map(|(set, _, _)| set),
         )?;
         if let Some((set, resolve, readback)) = &stamps {
             passes.resolve_query_set(set, 0..2, resolve, 0);
             passes.copy_buffer_to_buffer(resolve, 0, readback, 0, 16);
         }
         let t = Instant::now();
-        gpu.queue.submit([copies.finish()]);
-        gpu.wait()?;
-        copy_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        let mut step = step;
-        if let Some(buffer) = step.take_staging() {
-            staging.recycle(buffer);
-        }
-        let t = Instant::now();
         gpu.queue.submit([passes.finish()]);
         gpu.wait()?;
         pass_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        mask_bytes = masks.size();
         if let Some((_, _, readback)) = &stamps {
             let ticks: Vec<u64> = slosh_render::read_buffer(gpu, readback)?;
             let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
@@ -455,6 +459,7 @@ fn measure(
         copy_ms: median(copy_ms),
         pass_ms: median(pass_ms),
         mask_pass_ms: median(mask_pass_ms),
+        mask_bytes,
         read_ms: median(read_ms),
         read_gbps,
         write_buffer_ms: median(write_ms),

@@ -29,8 +29,10 @@ pub struct SeriesReport {
     pub record_ms: f64,
     pub copy_ms: f64,
     pub pass_ms: f64,
-    /// GPU time of the neighbour-mask pass (0 without timestamps).
+    /// GPU time of the neighbour-mask pass (0 without timestamps), which a step's first
+    /// refined frame records, and the bytes of the masks (the tracer holds one step's).
     pub mask_pass_ms: f64,
+    pub mask_bytes: u64,
     pub read_ms: f64,
     pub read_gbps: f64,
     pub write_buffer_ms: f64,
@@ -186,17 +188,17 @@ impl Report for ScrubReport {
         let _ = writeln!(md, "## A step, and the floors\n");
         let _ = writeln!(
             md,
-            "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check, the 4-wide tree made). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; passes recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies, then the per-step pass (neighbour masks), each submitted and waited for. Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
+            "Host: `HostStep::open` (map, checks, raw sections checksummed, the BVH nodes and cluster offsets decoded, tree check, the 4-wide tree made). Record: `GpuStep::create` (buffers; the staging buffer filled in parallel, compressed sections decoded run by run straight into it; copies recorded). Both halves timed alone, and as the engine's loaders reported them during sequential playback (several loads at once, beside the frame loop). GPU copies submitted and waited for; then, apart, the neighbour-mask pass that a step's first refined frame records (no upload runs it; the tracer holds the masks of one step, the bytes in the last column). Floors in the same run: `std::fs::read` of each step file, and one `Queue::write_buffer` of as many bytes as the step holds on the GPU, waited for. Medians.\n"
         );
         let _ = writeln!(
             md,
-            "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | per-step pass ms (GPU) | fs::read ms (GB/s) | write_buffer ms |"
+            "| series | bytes on the GPU (sections / all) | bytes stored | host ms | record ms | host / record ms while streaming | GPU copies ms | mask pass ms (GPU) | fs::read ms (GB/s) | write_buffer ms | mask bytes |"
         );
-        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
         for r in reports {
             let _ = writeln!(
                 md,
-                "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2}) | {:.2} ({:.1}) | {:.2} |",
+                "| {} | {} / {} | {} | {:.2} | {:.2} | {:.2} / {:.2} | {:.2} | {:.2} ({:.2}) | {:.2} ({:.1}) | {:.2} | {} |",
                 r.label,
                 r.section_bytes,
                 r.step_gpu_bytes,
@@ -210,7 +212,8 @@ impl Report for ScrubReport {
                 r.mask_pass_ms,
                 r.read_ms,
                 r.read_gbps,
-                r.write_buffer_ms
+                r.write_buffer_ms,
+                r.mask_bytes
             );
         }
         let _ = writeln!(

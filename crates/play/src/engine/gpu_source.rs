@@ -5,12 +5,12 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use slosh_render::{Gpu, GpuStep, HostStep, StagingPool, StepPasses, UploadOptions};
+use slosh_render::{Gpu, GpuStep, HostStep, StagingPool, UploadOptions};
 
 use crate::prefetch::StepLoader;
 
-/// A step a loader prepared: its buffers on the GPU, and the commands (copies and per-step
-/// passes) that fill them, to be submitted before any frame that reads it.
+/// A step a loader prepared: its buffers on the GPU, and the commands (copies) that fill
+/// them, to be submitted before any frame that reads it.
 #[derive(Debug)]
 pub struct Prepared {
     pub step: GpuStep,
@@ -31,8 +31,6 @@ pub struct GpuSource {
         Option<slosh_cache::SeriesKey>,
     )>,
     pub(super) staging: StagingPool,
-    /// The per-step passes every load records.
-    pub(super) passes: StepPasses,
     pub(super) delay: Option<std::time::Duration>,
     pub(super) paths: Mutex<HashMap<usize, PathBuf>>,
     pub(super) field: Mutex<Option<String>>,
@@ -106,9 +104,8 @@ impl StepLoader for GpuSource {
         let options = UploadOptions {
             staging: Some(&self.staging),
             cancelled: Some(withdrawn),
-            ..UploadOptions::default()
         };
-        let step = GpuStep::create_in(&self.gpu, &self.passes, &host, &mut encoder, options)
+        let step = GpuStep::create_in(&self.gpu, &host, &mut encoder, options)
             .map_err(|e| e.to_string())?;
         Ok(Prepared {
             step,

@@ -8,9 +8,7 @@ use std::path::Path;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use slosh_mls::Camera;
-use slosh_render::{
-    FrameTargets, Gpu, GpuStep, HostField, StagingPool, StepPasses, TraceParams, Tracer,
-};
+use slosh_render::{FrameTargets, Gpu, GpuStep, HostField, StagingPool, TraceParams, Tracer};
 
 mod gpu_source;
 mod wait;
@@ -159,7 +157,6 @@ impl Engine {
             gpu: gpu.clone(),
             belongs: Mutex::new((None, None)),
             staging: StagingPool::new(options.loaders + 2),
-            passes: StepPasses::new(&gpu),
             delay: options.load_delay,
             paths: Mutex::new(HashMap::new()),
             field: Mutex::new(options.field.clone()),

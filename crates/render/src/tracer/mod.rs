@@ -22,7 +22,8 @@
 //! group 1, and an `Rgba8Unorm` texture that `shaders/present.wgsl` fills, for egui-wgpu's
 //! `register_native_texture`); [`Tracer::record`] records trace, shade (or water) and present
 //! into the caller's encoder; [`Tracer::run`] and [`Tracer::render`] submit, wait and read
-//! back.
+//! back. The tracer holds what it derives from the step it drew last (`derived.rs`, group 2):
+//! its leaf spheres and, once a frame refined, its neighbour masks.
 
 use std::sync::OnceLock;
 
@@ -30,6 +31,7 @@ use slosh_mls::Camera;
 
 use crate::bindings::{bind_entries, capacity, layout_entries, needs_split};
 use crate::context::Gpu;
+use crate::derived::{DerivedArrays, derived_buffer};
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings, status};
 use crate::shaders::{
@@ -96,6 +98,7 @@ pub struct Tracer {
     present_layout: wgpu::BindGroupLayout,
     present_pipeline_layout: wgpu::PipelineLayout,
     frame_layout: wgpu::BindGroupLayout,
+    derived: DerivedArrays,
     /// The binding limit the modules and bind groups are made for (`Gpu::max_binding` when
     /// the tracer was built).
     limit: u64,
@@ -202,9 +205,14 @@ impl Tracer {
             label: Some("frame"),
             entries: &layout_entries(&FRAME_ARRAYS, true),
         });
+        let derived = DerivedArrays::new(gpu, gpu.max_binding());
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("slosh"),
-            bind_group_layouts: &[Some(step_layout), Some(&frame_layout)],
+            bind_group_layouts: &[
+                Some(step_layout),
+                Some(&frame_layout),
+                Some(&derived.layout),
+            ],
             immediate_size: 0,
         });
         let mut present_entries = layout_entries(&PRESENT_ARRAYS, false);
@@ -239,6 +247,7 @@ impl Tracer {
             present_layout,
             present_pipeline_layout,
             frame_layout,
+            derived,
             limit: gpu.max_binding(),
         };
         // The shade pass is built now: a device that cannot take the layout fails here.
@@ -475,6 +484,7 @@ impl Tracer {
         &self,
         step: &GpuStep,
         targets: &FrameTargets,
+        derived: &wgpu::BindGroup,
         passes: [&wgpu::ComputePipeline; 3],
         encoder: &mut wgpu::CommandEncoder,
     ) {
@@ -497,6 +507,7 @@ impl Tracer {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, step.bind_group(), &[]);
             pass.set_bind_group(1, &targets.frame_group, &[]);
+            pass.set_bind_group(2, derived, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         {
@@ -516,6 +527,8 @@ impl Tracer {
 
     /// Records one frame of `step` into `encoder` (trace, shade, and the image into the
     /// targets' texture) without submitting or waiting: the way an app embeds the tracer.
+    /// A frame of a step other than the last one drawn first records the step's leaf pass,
+    /// and a refined frame whose step has no masks yet its mask pass.
     /// The frame's uniforms go through `queue.write_buffer`, so they are in place for the
     /// next submission; one frame per targets per submission.
     pub fn record(
@@ -527,13 +540,7 @@ impl Tracer {
         params: &TraceParams,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<()> {
-        if step.binding_limit() != self.limit {
-            return Err(Error::Validation(format!(
-                "the step was uploaded for bindings of {} bytes, the tracer built for {}",
-                step.binding_limit(),
-                self.limit
-            )));
-        }
+        self.check_limit(step)?;
         let mut camera = *camera;
         camera.width = targets.width;
         camera.height = targets.height;
@@ -551,7 +558,49 @@ impl Tracer {
             self.shade_pipeline(gpu, split)?
         };
         let present = self.present_pipeline(gpu, targets.split)?;
-        self.encode(step, targets, [trace, shade, present], encoder);
+        let derived = self
+            .derived
+            .group_for(gpu, step, params.iterations > 1, encoder)?;
+        self.encode(step, targets, &derived, [trace, shade, present], encoder);
+        Ok(())
+    }
+
+    /// Bytes the tracer holds of what it derived from the step it drew last: its leaf
+    /// spheres and, once a frame refined, its neighbour masks.
+    pub fn derived_bytes(&self) -> u64 {
+        self.derived.held_bytes()
+    }
+
+    /// Bytes of those that are neighbour masks of the step drawn (0 until a frame refined).
+    pub fn mask_bytes(&self) -> u64 {
+        self.derived.mask_bytes()
+    }
+
+    /// `step`'s neighbour masks in a new buffer, their pass recorded into `encoder` and
+    /// timed into `timestamps` (a set of 2) where given: what a step's first refined frame
+    /// records, for tests that check the masks and benches that time the pass.
+    pub fn neighbour_masks(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        encoder: &mut wgpu::CommandEncoder,
+        timestamps: Option<&wgpu::QuerySet>,
+    ) -> Result<wgpu::Buffer> {
+        self.check_limit(step)?;
+        let masks = derived_buffer(gpu, "neighbour masks", step.info.mask_bytes());
+        self.derived
+            .record_masks(gpu, step, &masks, encoder, timestamps)?;
+        Ok(masks)
+    }
+
+    fn check_limit(&self, step: &GpuStep) -> Result<()> {
+        if step.binding_limit() != self.limit {
+            return Err(Error::Validation(format!(
+                "the step was uploaded for bindings of {} bytes, the tracer built for {}",
+                step.binding_limit(),
+                self.limit
+            )));
+        }
         Ok(())
     }
 

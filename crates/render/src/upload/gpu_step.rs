@@ -1,9 +1,9 @@
-//! The GPU half of an upload: the step's buffers created and filled, its per-step passes
-//! recorded, its bind group made.
+//! The GPU half of an upload: the step's buffers created and filled, its copies recorded,
+//! its bind group made.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use bytemuck::Zeroable;
 use slosh_cache::{CacheFile, names};
 
 use super::fill::storage_buffers;
@@ -12,9 +12,7 @@ use super::{EMPTY_BINDING, field_buffer_size, invalid};
 use crate::bindings::{bind_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
-use crate::expand::{ExpandInputs, StepPasses};
-use crate::layout::ExpandSettings;
-use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS, step_array};
+use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS, derived_array, step_array};
 use crate::staging::StagingPool;
 
 /// The storage buffers of one step.
@@ -22,11 +20,8 @@ use crate::staging::StagingPool;
 pub struct StepBuffers {
     pub points: wgpu::Buffer,
     pub normals: wgpu::Buffer,
-    /// Read by the neighbour-mask pass only.
+    /// Read by the neighbour-mask pass only (the tracer's, before a refined frame).
     pub reach: wgpu::Buffer,
-    /// Written by the neighbour-mask pass at upload: a block of words per cluster (see
-    /// [`mask_row`]).
-    pub masks: wgpu::Buffer,
     pub cluster_start: wgpu::Buffer,
     /// Each cluster's first word of `cluster_ids` and whether it is wide.
     pub cluster_base: wgpu::Buffer,
@@ -46,7 +41,6 @@ impl StepBuffers {
         [
             &self.points,
             &self.normals,
-            &self.masks,
             &self.cluster_start,
             &self.cluster_ids,
             &self.balls,
@@ -58,7 +52,7 @@ impl StepBuffers {
         ]
     }
 
-    /// Every byte the step holds on the GPU: sections, field and derived buffers.
+    /// Every byte the step holds on the GPU: sections, the wide tree and the field.
     pub fn bytes(&self) -> u64 {
         self.in_binding_order()
             .iter()
@@ -79,10 +73,10 @@ pub struct UploadStats {
     /// reads.
     pub host_seconds: f64,
     /// The GPU half's recording: buffers created, the staging buffer filled (compressed
-    /// sections decoded into it), passes recorded.
+    /// sections decoded into it), copies recorded.
     pub record_seconds: f64,
-    /// Staging to device-local copies and the per-step passes, from submit to completion
-    /// (zero where the caller submits).
+    /// Staging to device-local copies, from submit to completion (zero where the caller
+    /// submits).
     pub gpu_seconds: f64,
     /// Open to ready, everything included.
     pub total_seconds: f64,
@@ -98,11 +92,6 @@ impl UploadStats {
 /// How [`GpuStep::create_in`] records and where it takes its memory from.
 #[derive(Default)]
 pub struct UploadOptions<'a> {
-    /// Records the per-step passes here instead of after the copies: submitted in that
-    /// order, the two can be timed apart.
-    pub passes: Option<&'a mut wgpu::CommandEncoder>,
-    /// A timestamp query set of 2: the mask pass writes its begin and end there.
-    pub timestamps: Option<&'a wgpu::QuerySet>,
     /// Takes the staging memory from this pool; hand it back with
     /// [`GpuStep::take_staging`] and [`StagingPool::recycle`] once the copies are submitted.
     pub staging: Option<&'a StagingPool>,
@@ -114,8 +103,6 @@ pub struct UploadOptions<'a> {
 impl std::fmt::Debug for UploadOptions<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("UploadOptions")
-            .field("passes", &self.passes.is_some())
-            .field("timestamps", &self.timestamps)
             .field("staging", &self.staging)
             .field("cancelled", &self.cancelled.is_some())
             .finish()
@@ -125,6 +112,8 @@ impl std::fmt::Debug for UploadOptions<'_> {
 /// A step on the GPU, with what the passes need to know about it and its bind group.
 #[derive(Debug)]
 pub struct GpuStep {
+    /// Unique among the process's steps: what the tracer's held masks belong to.
+    id: u64,
     pub buffers: StepBuffers,
     pub info: StepInfo,
     /// Whether an array spans more than one storage binding (see shaders.rs).
@@ -140,7 +129,7 @@ pub struct GpuStep {
 }
 
 /// How the passes bind each array of [`HostStep::gpu_arrays`]: the reach is read only by the
-/// per-step pass; a name that is no array is an error, never a guess.
+/// mask pass; a name that is no array is an error, never a guess.
 fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
     Ok(match name {
         names::POINTS => &step_array::POINTS,
@@ -182,25 +171,26 @@ fn needs_ranges(
     .map_err(|problem| invalid(file, problem))
 }
 
-/// A storage buffer a per-step pass writes (readable back for tests and tools).
-fn derived(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
+/// An empty field's binding.
+fn no_field(gpu: &Gpu) -> wgpu::Buffer {
     gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        label: Some("no field"),
+        size: EMPTY_BINDING,
+        usage: wgpu::BufferUsages::STORAGE,
         mapped_at_creation: false,
     })
+}
+
+/// The next step id.
+fn next_id() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 impl GpuStep {
     /// Opens, uploads and waits: both halves in one call, `file`'s GPU sections and `field`'s
     /// values, if named.
-    pub fn upload(
-        gpu: &Gpu,
-        passes: &StepPasses,
-        file: &CacheFile,
-        field: Option<&str>,
-    ) -> Result<GpuStep> {
+    pub fn upload(gpu: &Gpu, file: &CacheFile, field: Option<&str>) -> Result<GpuStep> {
         let start = Instant::now();
         let host = HostStep::read(file, field)?;
         let mut encoder = gpu
@@ -208,7 +198,7 @@ impl GpuStep {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("upload"),
             });
-        let mut step = GpuStep::create(gpu, passes, &host, &mut encoder)?;
+        let mut step = GpuStep::create(gpu, &host, &mut encoder)?;
         let submitted = Instant::now();
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         gpu.queue.submit([encoder.finish()]);
@@ -221,44 +211,30 @@ impl GpuStep {
         Ok(step)
     }
 
-    /// The GPU half: buffers created and filled through staging, the copies and the per-step
-    /// passes recorded into `encoder`. Nothing is submitted or waited for; the step is ready
-    /// for frames recorded after it in the same or a later submission.
+    /// The GPU half: buffers created and filled through staging, the copies recorded into
+    /// `encoder`. Nothing is submitted or waited for; the step is ready for frames recorded
+    /// after it in the same or a later submission.
     pub fn create(
         gpu: &Gpu,
-        passes: &StepPasses,
         host: &HostStep<'_>,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<GpuStep> {
-        GpuStep::create_in(gpu, passes, host, encoder, UploadOptions::default())
+        GpuStep::create_in(gpu, host, encoder, UploadOptions::default())
     }
 
     /// [`GpuStep::create`] with the copies recorded into `copies`, and `options`.
     pub fn create_in(
         gpu: &Gpu,
-        step_passes: &StepPasses,
         host: &HostStep<'_>,
-        copies: &mut wgpu::CommandEncoder,
+        encoder: &mut wgpu::CommandEncoder,
         options: UploadOptions<'_>,
     ) -> Result<GpuStep> {
-        let UploadOptions {
-            passes,
-            timestamps,
-            staging,
-            cancelled,
-        } = options;
-        let encoder = copies;
-        if step_passes.max_binding() != gpu.max_binding() {
-            return Err(Error::Validation(format!(
-                "the per-step passes were built for storage bindings of {} bytes, and the device now binds {}: make StepPasses after Gpu::limit_bindings",
-                step_passes.max_binding(),
-                gpu.max_binding()
-            )));
-        }
+        let UploadOptions { staging, cancelled } = options;
         let start = Instant::now();
         let file = host.file();
         let info = host.info.clone();
-        // Every array, sections, the wide tree and the masks, within RANGES bindings.
+        // Every array, sections, the wide tree and what the tracer derives from them, within
+        // RANGES bindings: one split decides how every pass of the step's frames reads.
         let mut split = false;
         let gpu_arrays = host.gpu_arrays();
         for (name, source) in &gpu_arrays {
@@ -274,13 +250,20 @@ impl GpuStep {
             )?;
         }
         let mask_bytes = info.mask_bytes();
-        split |= needs_ranges(
-            gpu,
-            file,
-            "neighbour masks",
-            &step_array::NEIGHBOUR_MASKS,
-            mask_bytes,
-        )?;
+        for (what, array, bytes) in [
+            (
+                "neighbour masks",
+                &derived_array::NEIGHBOUR_MASKS,
+                mask_bytes,
+            ),
+            (
+                "leaf spheres",
+                &derived_array::LEAF_SPHERES,
+                info.leaf_bytes(),
+            ),
+        ] {
+            split |= needs_ranges(gpu, file, what, array, bytes)?;
+        }
         let mut stats = UploadStats {
             stored_bytes: host.stored_bytes,
             host_seconds: host.host_seconds,
@@ -297,7 +280,7 @@ impl GpuStep {
             Some(_) => sections
                 .pop()
                 .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))?,
-            None => derived(gpu, "no field", EMPTY_BINDING),
+            None => no_field(gpu),
         };
         let mut it = sections.into_iter();
         let mut next = || {
@@ -307,38 +290,10 @@ impl GpuStep {
         let (points, normals, reach) = (next()?, next()?, next()?);
         let (cluster_start, cluster_base, cluster_ids) = (next()?, next()?, next()?);
         let (balls, spheres, bvh_items, wide_nodes) = (next()?, next()?, next()?, next()?);
-        let masks = derived(gpu, "neighbour masks", mask_bytes);
-        step_passes.encode(
-            &gpu.device,
-            &ExpandInputs {
-                points: &points,
-                normals: &normals,
-                reach: &reach,
-                cluster_start: &cluster_start,
-                cluster_ids: &cluster_ids,
-                masks: &masks,
-                cluster_base: &cluster_base,
-            },
-            ExpandSettings {
-                point_count: info.point_count,
-                cluster_size: info.cluster_size,
-                mask_words: info.mask_words,
-                has_normals: u32::from(info.has_normals),
-                cluster_id_count: info.cluster_id_count,
-                ..ExpandSettings::zeroed()
-            },
-            split,
-            match passes {
-                Some(passes) => passes,
-                None => encoder,
-            },
-            timestamps,
-        )?;
         let buffers = StepBuffers {
             points,
             normals,
             reach,
-            masks,
             cluster_start,
             cluster_base,
             cluster_ids,
@@ -353,6 +308,7 @@ impl GpuStep {
         stats.record_seconds = start.elapsed().as_secs_f64();
         stats.total_seconds = stats.host_seconds + stats.record_seconds;
         Ok(GpuStep {
+            id: next_id(),
             buffers,
             info,
             split,
@@ -402,12 +358,17 @@ impl GpuStep {
                 gpu.queue.write_buffer(&buffer, 0, &f.bytes);
                 buffer
             }
-            None => derived(gpu, "no field", EMPTY_BINDING),
+            None => no_field(gpu),
         };
         self.buffers.field = buffer;
         self.field = field.map(|f| (f.name.clone(), f.min, f.max));
         self.bind_group = step_group(gpu, &self.buffers, self.binding_limit);
         Ok(())
+    }
+
+    /// Unique among this process's steps.
+    pub fn id(&self) -> u64 {
+        self.id
     }
 
     /// The trace and shade passes' group 0 for this step.

@@ -42,7 +42,12 @@ pub struct StepInfo {
 }
 
 impl StepInfo {
-    /// Bytes of the neighbour masks the per-step pass derives.
+    /// Bytes of the leaf spheres the tracer derives before a frame of the step.
+    pub fn leaf_bytes(&self) -> u64 {
+        (u64::from(self.item_count) * 16).max(EMPTY_BINDING)
+    }
+
+    /// Bytes of the neighbour masks the tracer derives before a refined frame of the step.
     pub fn mask_bytes(&self) -> u64 {
         (self.mask_rows * u64::from(self.cluster_size) * 4).max(EMPTY_BINDING)
     }
@@ -213,7 +218,7 @@ impl<'a> HostStep<'a> {
             .field
             .as_ref()
             .map_or(EMPTY_BINDING, |f| field_buffer_size(&f.bytes));
-        arrays + field + self.info.mask_bytes()
+        arrays + field
     }
 
     fn prepare(file: HeldFile<'a>, field: Option<&str>) -> Result<HostStep<'a>> {

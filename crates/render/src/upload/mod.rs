@@ -9,8 +9,8 @@
 //! in) on rayon's threads: raw sections copied from the map, compressed ones decoded run by
 //! run into a cache-sized buffer and copied on while hot (staging memory may be
 //! write-combined, and a decoder reads its own output), so a section never makes a round trip
-//! through main memory. It records the copies and the per-step passes (`expand.rs`) into the
-//! caller's encoder without waiting. A step owns its bind group (group 0); the colour
+//! through main memory. It records the copies into the caller's encoder without waiting; no
+//! pass runs per upload (the neighbour masks are the tracer's, `masks.rs`). A step owns its bind group (group 0); the colour
 //! field has its own buffer, so switching fields uploads only the field.
 
 mod checks;
@@ -57,7 +57,7 @@ const WIDE_NODE_BYTES: u64 = 128;
 /// wgpu refuses zero-sized bindings, and a binding must hold one element of its array:
 /// absent or empty sections (a step without particles) bind this many zero bytes, the
 /// largest element any binding holds (the wide node).
-const EMPTY_BINDING: u64 = WIDE_NODE_BYTES;
+pub(crate) const EMPTY_BINDING: u64 = WIDE_NODE_BYTES;
 
 fn field_buffer_size(bytes: &[u8]) -> u64 {
     (bytes.len() as u64).max(EMPTY_BINDING).next_multiple_of(4)
