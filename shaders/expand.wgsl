@@ -1,10 +1,6 @@
-// The passes that derive the tracer's arrays of the step it draws (derived.rs).
+// The neighbour-mask pass, run by the tracer before a step's first refined frame (masks.rs).
 //
-// `leaves`, before the step's first frame: each BVH item slot's sphere (a ball's centre and
-// radius of trust, or a droplet), so the trace walk reads a leaf's spheres beside its items
-// instead of through them.
-//
-// `expand`, before its first refined frame: the neighbour masks: which of a point's cluster
+// `expand`: the neighbour masks: which of a point's cluster
 // candidates are its neighbours (clusters.rs: expand_one, the rule docs/algorithm.md gives):
 // within the point's reach, and not a point whose normal opposes the centre's (both valid).
 // Bit b of word w is candidate slot 32 w + b; a cluster writes only the words its own
@@ -19,10 +15,9 @@ struct ExpandSettings {
     has_normals: u32,
     // Entries of cluster_ids.
     cluster_id_count: u32,
-    // Threads per row of the leaf pass's 2D dispatch.
-    row_threads: u32,
-    sphere_count: u32,
-    item_count: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // The arrays (shaders.rs: EXPAND_ARRAYS) are read and written through accessors that
@@ -126,24 +121,4 @@ fn expand(
         }
         workgroupBarrier();
     }
-}
-
-// A slot whose item is neither a ball nor a droplet gets radius −1, which the walk skips.
-@compute @workgroup_size(64, 1, 1)
-fn leaves(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let cfg = expand_settings;
-    let k = gid.y * cfg.row_threads + gid.x;
-    if k >= cfg.item_count {
-        return;
-    }
-    let item = bvh_items_at(k);
-    var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
-    if item < cfg.point_count {
-        let p = points_at(item);
-        sphere = vec4<f32>(p.position, p.radius);
-    } else if item - cfg.point_count < cfg.sphere_count {
-        let d = spheres_at(item - cfg.point_count);
-        sphere = vec4<f32>(d.centre, d.radius);
-    }
-    leaf_spheres_set(k, sphere);
 }

@@ -89,14 +89,21 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
     let n = settings.point_count;
     let end = min(first + count, settings.item_count);
     for (var k = first; k < end; k++) {
-        // The slot's sphere (expand.wgsl: leaves) is read beside the slot; most of a leaf's
-        // spheres are missed, and the item is read only for those crossed.
-        let sphere = leaf_spheres_at(k);
+        // An item is a ball (its point's centre and radius of trust) or a droplet sphere;
+        // anything else is skipped.
+        let item = bvh_items_at(k);
+        var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
+        if item < n {
+            let p = points_at(item);
+            sphere = vec4<f32>(p.position, p.radius);
+        } else if item - n < settings.sphere_count {
+            let d = spheres_at(item - n);
+            sphere = vec4<f32>(d.centre, d.radius);
+        }
         let iv = ray_ball(ray, sphere.xyz, sphere.w);
         if !iv.ok || sphere.w < 0.0 {
             continue;
         }
-        let item = bvh_items_at(k);
         if item >= n {
             // From inside a droplet the ray sees its far wall.
             let t = select(iv.t_out, iv.t_in, iv.t_in >= 0.0);

@@ -48,8 +48,7 @@ pub struct GpuSettings {
 #[allow(clippy::excessive_precision)]
 pub const DEFAULT_KEY_LIGHT: [f32; 3] = [0.40561610, -0.30421208, 0.86193422];
 
-/// `struct ExpandSettings` in expand.wgsl: the uniforms of the passes that derive the
-/// tracer's arrays of a step (leaf spheres, neighbour masks).
+/// `struct ExpandSettings` in expand.wgsl: the uniforms of the neighbour-mask pass.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct ExpandSettings {
@@ -59,11 +58,9 @@ pub struct ExpandSettings {
     pub has_normals: u32,
     /// Entries of cluster_ids.
     pub cluster_id_count: u32,
-    /// Threads per row of the leaf pass's 2D dispatch (a 1D one would exceed the workgroup
-    /// count limit).
-    pub row_threads: u32,
-    pub sphere_count: u32,
-    pub item_count: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// `struct Wide` in step.wgsl: a node of the 4-wide tree the trace walk descends, made by

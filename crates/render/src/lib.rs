@@ -1,6 +1,6 @@
 //! The GPU half of slosh: a cache step streamed into wgpu storage buffers, the MLS ray tracer
-//! (`shaders/trace.wgsl` over `shaders/mls.wgsl`, with the leaf spheres and neighbour masks of
-//! the step it draws derived by `shaders/expand.wgsl`), the shade pass (`shaders/shade.wgsl`) or the water pass with secondary
+//! (`shaders/trace.wgsl` over `shaders/mls.wgsl`, with the neighbour masks of the step it
+//! refines derived by `shaders/expand.wgsl`), the shade pass (`shaders/shade.wgsl`) or the water pass with secondary
 //! rays (`shaders/water.wgsl`) as compute shaders, and frames read back for files or timed
 //! with GPU timestamps. The WGSL is a port of `slosh_mls`; the tests hold it to the CPU f64
 //! oracle.
@@ -9,9 +9,9 @@ mod bindings;
 pub mod colormap;
 mod context;
 pub mod cpu_shade;
-mod derived;
 mod error;
 pub mod layout;
+mod masks;
 mod output;
 pub mod shaders;
 mod staging;

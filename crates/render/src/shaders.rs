@@ -15,8 +15,8 @@ pub const STEP_WGSL: &str = include_str!("../../../shaders/step.wgsl");
 /// The shared MLS maths alone.
 pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
 
-/// The passes that derive the tracer's arrays of the step it draws (derived.rs): `leaves`
-/// before its first frame, `expand` (neighbour masks) before its first refined frame.
+/// The neighbour-mask pass, entry point `expand`, run by the tracer before a step's first
+/// refined frame (masks.rs).
 pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
 
 /// The trace pass and the water pass, which traces secondary rays: mls.wgsl + trace.wgsl +
@@ -47,7 +47,7 @@ pub const TEXTURE_BINDING: u32 = 101;
 pub const TRACE_STACK_SIZES: [u32; 3] = [32, 64, 96];
 
 /// Bindings per storage array: an array may span this many of the adapter's largest
-/// bindings (3 × 128 MiB on lavapipe: the balls of 12M points). The 14 arrays then take 42
+/// bindings (3 × 128 MiB on lavapipe: the balls of 12M points). The 13 arrays then take 39
 /// storage bindings per stage, within lavapipe's 48.
 pub const RANGES: u32 = 3;
 
@@ -116,18 +116,9 @@ pub const STEP_ARRAYS: [RangedArray; 10] = [
     step_array::CLUSTER_BASE,
 ];
 
-/// What the tracer derives from the step it draws, as the trace and shade passes bind it
-/// (group 2; derived.rs): each BVH item slot's sphere, and the neighbour masks (refined
-/// frames only).
-pub mod derived_array {
-    use super::{RangedArray, array};
-
-    pub const LEAF_SPHERES: RangedArray = array("leaf_spheres", "vec4<f32>", 16, 2, 0, false);
-    pub const NEIGHBOUR_MASKS: RangedArray = array("neighbour_masks", "u32", 4, 2, 1, false);
-}
-
-pub const DERIVED_ARRAYS: [RangedArray; 2] =
-    [derived_array::LEAF_SPHERES, derived_array::NEIGHBOUR_MASKS];
+/// The neighbour masks as the trace and shade passes bind them (group 2): held by the
+/// tracer for the step it last refined, not by the step (masks.rs).
+pub const MASK_ARRAYS: [RangedArray; 1] = [array("neighbour_masks", "u32", 4, 2, 0, false)];
 
 /// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.
 pub const FRAME_ARRAYS: [RangedArray; 2] = [
@@ -138,8 +129,8 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
 /// The present pass's array (present.wgsl, group 0): the shaded image.
 pub const PRESENT_ARRAYS: [RangedArray; 1] = [array("image", "u32", 4, 0, 0, false)];
 
-/// The derived arrays' passes' arrays (expand.wgsl, group 0).
-pub const EXPAND_ARRAYS: [RangedArray; 10] = [
+/// The neighbour-mask pass's arrays (expand.wgsl, group 0).
+pub const EXPAND_ARRAYS: [RangedArray; 7] = [
     array("points", "Point", 16, 0, 0, false),
     array("normals", "u32", 4, 0, 1, false),
     array("reach", "f32", 4, 0, 2, false),
@@ -147,9 +138,6 @@ pub const EXPAND_ARRAYS: [RangedArray; 10] = [
     array("cluster_ids", "u32", 4, 0, 4, false),
     array("neighbour_masks", "u32", 4, 0, 5, true),
     array("cluster_base", "u32", 4, 0, 6, false),
-    array("bvh_items", "u32", 4, 0, 7, false),
-    array("spheres", "Sphere", 16, 0, 8, false),
-    array("leaf_spheres", "vec4<f32>", 16, 0, 9, true),
 ];
 
 /// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:
@@ -277,7 +265,7 @@ pub fn mls_wgsl(limit: u64, split: bool) -> String {
     frame_module(MLS_WGSL, limit, split)
 }
 
-/// The derived arrays' module (entry points `leaves` and `expand`).
+/// The neighbour-mask pass's module.
 pub fn expand_wgsl(limit: u64, split: bool) -> String {
     format!(
         "{}{STEP_WGSL}{}{EXPAND_WGSL}",
@@ -298,7 +286,7 @@ fn frame_module(source: &str, limit: u64, split: bool) -> String {
     let arrays: Vec<RangedArray> = STEP_ARRAYS
         .iter()
         .chain(&FRAME_ARRAYS)
-        .chain(&DERIVED_ARRAYS)
+        .chain(&MASK_ARRAYS)
         .copied()
         .collect();
     format!(

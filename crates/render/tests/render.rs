@@ -352,9 +352,9 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             mask_words,
             has_normals,
             cluster_id_count,
-            row_threads,
-            sphere_count,
-            item_count
+            pad0,
+            pad1,
+            pad2
         ]
     );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);

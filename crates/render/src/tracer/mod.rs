@@ -22,8 +22,8 @@
 //! group 1, and an `Rgba8Unorm` texture that `shaders/present.wgsl` fills, for egui-wgpu's
 //! `register_native_texture`); [`Tracer::record`] records trace, shade (or water) and present
 //! into the caller's encoder; [`Tracer::run`] and [`Tracer::render`] submit, wait and read
-//! back. The tracer holds what it derives from the step it drew last (`derived.rs`, group 2):
-//! its leaf spheres and, once a frame refined, its neighbour masks.
+//! back. The tracer holds the neighbour masks of the step it last refined (`masks.rs`,
+//! group 2); a frame of one iteration binds an empty group there.
 
 use std::sync::OnceLock;
 
@@ -31,9 +31,9 @@ use slosh_mls::Camera;
 
 use crate::bindings::{bind_entries, capacity, layout_entries, needs_split};
 use crate::context::Gpu;
-use crate::derived::{DerivedArrays, derived_buffer};
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings, status};
+use crate::masks::{NeighbourMasks, mask_buffer};
 use crate::shaders::{
     FRAME_ARRAYS, PRESENT_ARRAYS, TEXTURE_BINDING, TRACE_STACK_SIZES, present_wgsl, shade_wgsl,
     trace_wgsl,
@@ -98,7 +98,7 @@ pub struct Tracer {
     present_layout: wgpu::BindGroupLayout,
     present_pipeline_layout: wgpu::PipelineLayout,
     frame_layout: wgpu::BindGroupLayout,
-    derived: DerivedArrays,
+    masks: NeighbourMasks,
     /// The binding limit the modules and bind groups are made for (`Gpu::max_binding` when
     /// the tracer was built).
     limit: u64,
@@ -205,14 +205,10 @@ impl Tracer {
             label: Some("frame"),
             entries: &layout_entries(&FRAME_ARRAYS, true),
         });
-        let derived = DerivedArrays::new(gpu, gpu.max_binding());
+        let masks = NeighbourMasks::new(gpu, gpu.max_binding());
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("slosh"),
-            bind_group_layouts: &[
-                Some(step_layout),
-                Some(&frame_layout),
-                Some(&derived.layout),
-            ],
+            bind_group_layouts: &[Some(step_layout), Some(&frame_layout), Some(&masks.layout)],
             immediate_size: 0,
         });
         let mut present_entries = layout_entries(&PRESENT_ARRAYS, false);
@@ -247,7 +243,7 @@ impl Tracer {
             present_layout,
             present_pipeline_layout,
             frame_layout,
-            derived,
+            masks,
             limit: gpu.max_binding(),
         };
         // The shade pass is built now: a device that cannot take the layout fails here.
@@ -484,7 +480,7 @@ impl Tracer {
         &self,
         step: &GpuStep,
         targets: &FrameTargets,
-        derived: &wgpu::BindGroup,
+        masks: &wgpu::BindGroup,
         passes: [&wgpu::ComputePipeline; 3],
         encoder: &mut wgpu::CommandEncoder,
     ) {
@@ -507,7 +503,7 @@ impl Tracer {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, step.bind_group(), &[]);
             pass.set_bind_group(1, &targets.frame_group, &[]);
-            pass.set_bind_group(2, derived, &[]);
+            pass.set_bind_group(2, masks, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         {
@@ -527,8 +523,8 @@ impl Tracer {
 
     /// Records one frame of `step` into `encoder` (trace, shade, and the image into the
     /// targets' texture) without submitting or waiting: the way an app embeds the tracer.
-    /// A frame of a step other than the last one drawn first records the step's leaf pass,
-    /// and a refined frame whose step has no masks yet its mask pass.
+    /// A refined frame of a step other than the last one refined first records the step's
+    /// neighbour-mask pass.
     /// The frame's uniforms go through `queue.write_buffer`, so they are in place for the
     /// next submission; one frame per targets per submission.
     pub fn record(
@@ -558,22 +554,16 @@ impl Tracer {
             self.shade_pipeline(gpu, split)?
         };
         let present = self.present_pipeline(gpu, targets.split)?;
-        let derived = self
-            .derived
+        let masks = self
+            .masks
             .group_for(gpu, step, params.iterations > 1, encoder)?;
-        self.encode(step, targets, &derived, [trace, shade, present], encoder);
+        self.encode(step, targets, &masks, [trace, shade, present], encoder);
         Ok(())
     }
 
-    /// Bytes the tracer holds of what it derived from the step it drew last: its leaf
-    /// spheres and, once a frame refined, its neighbour masks.
-    pub fn derived_bytes(&self) -> u64 {
-        self.derived.held_bytes()
-    }
-
-    /// Bytes of those that are neighbour masks of the step drawn (0 until a frame refined).
+    /// Bytes of the neighbour masks the tracer holds (one step's, once a frame refined).
     pub fn mask_bytes(&self) -> u64 {
-        self.derived.mask_bytes()
+        self.masks.held_bytes()
     }
 
     /// `step`'s neighbour masks in a new buffer, their pass recorded into `encoder` and
@@ -587,9 +577,8 @@ impl Tracer {
         timestamps: Option<&wgpu::QuerySet>,
     ) -> Result<wgpu::Buffer> {
         self.check_limit(step)?;
-        let masks = derived_buffer(gpu, "neighbour masks", step.info.mask_bytes());
-        self.derived
-            .record_masks(gpu, step, &masks, encoder, timestamps)?;
+        let masks = mask_buffer(gpu, step.info.mask_bytes());
+        self.masks.record(gpu, step, &masks, encoder, timestamps)?;
         Ok(masks)
     }
 

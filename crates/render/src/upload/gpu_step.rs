@@ -12,7 +12,7 @@ use super::{EMPTY_BINDING, field_buffer_size, invalid};
 use crate::bindings::{bind_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
-use crate::shaders::{EXPAND_ARRAYS, RangedArray, STEP_ARRAYS, derived_array, step_array};
+use crate::shaders::{EXPAND_ARRAYS, MASK_ARRAYS, RangedArray, STEP_ARRAYS, step_array};
 use crate::staging::StagingPool;
 
 /// The storage buffers of one step.
@@ -233,7 +233,7 @@ impl GpuStep {
         let start = Instant::now();
         let file = host.file();
         let info = host.info.clone();
-        // Every array, sections, the wide tree and what the tracer derives from them, within
+        // Every array, sections, the wide tree and the masks a refined frame derives, within
         // RANGES bindings: one split decides how every pass of the step's frames reads.
         let mut split = false;
         let gpu_arrays = host.gpu_arrays();
@@ -250,20 +250,7 @@ impl GpuStep {
             )?;
         }
         let mask_bytes = info.mask_bytes();
-        for (what, array, bytes) in [
-            (
-                "neighbour masks",
-                &derived_array::NEIGHBOUR_MASKS,
-                mask_bytes,
-            ),
-            (
-                "leaf spheres",
-                &derived_array::LEAF_SPHERES,
-                info.leaf_bytes(),
-            ),
-        ] {
-            split |= needs_ranges(gpu, file, what, array, bytes)?;
-        }
+        split |= needs_ranges(gpu, file, "neighbour masks", &MASK_ARRAYS[0], mask_bytes)?;
         let mut stats = UploadStats {
             stored_bytes: host.stored_bytes,
             host_seconds: host.host_seconds,

@@ -42,11 +42,6 @@ pub struct StepInfo {
 }
 
 impl StepInfo {
-    /// Bytes of the leaf spheres the tracer derives before a frame of the step.
-    pub fn leaf_bytes(&self) -> u64 {
-        (u64::from(self.item_count) * 16).max(EMPTY_BINDING)
-    }
-
     /// Bytes of the neighbour masks the tracer derives before a refined frame of the step.
     pub fn mask_bytes(&self) -> u64 {
         (self.mask_rows * u64::from(self.cluster_size) * 4).max(EMPTY_BINDING)

@@ -1,0 +1,239 @@
+//! The neighbour masks of `shaders/expand.wgsl`: a bit per cluster candidate saying whether
+//! it is in the point's neighbour list, so the refinement loops visit the list itself instead
+//! of filtering every candidate each time.
+//!
+//! Only refinement reads them, and they are the largest thing a step would hold (about a
+//! third of its bytes), so no step holds them: the tracer keeps one set, for the step it
+//! last refined, and derives it again, in the same submission as the frame, when a refined
+//! frame asks for another step. One-iteration frames (scrubbing) never run the pass.
+
+use std::sync::{Mutex, OnceLock};
+
+use bytemuck::Zeroable;
+
+use crate::bindings::{bind_entries, layout_entries};
+use crate::context::Gpu;
+use crate::error::{Error, Result};
+use crate::layout::ExpandSettings;
+use crate::shaders::{EXPAND_ARRAYS, MASK_ARRAYS, expand_wgsl};
+use crate::upload::{EMPTY_BINDING, GpuStep};
+
+/// The masks the tracer holds: whose, and the trace passes' group over them.
+#[derive(Debug)]
+struct HeldMasks {
+    step: u64,
+    buffer: wgpu::Buffer,
+    group: wgpu::BindGroup,
+}
+
+/// The mask pass's pipelines (per split, on first use), the trace passes' group-2 layout,
+/// and the one set of masks held.
+#[derive(Debug)]
+pub(crate) struct NeighbourMasks {
+    /// The storage binding limit the pass is compiled for (the tracer's).
+    limit: u64,
+    expand_layout: wgpu::BindGroupLayout,
+    expand_pipeline_layout: wgpu::PipelineLayout,
+    pipelines: [OnceLock<wgpu::ComputePipeline>; 2],
+    /// Group 2 of the trace and shade passes.
+    pub(crate) layout: wgpu::BindGroupLayout,
+    /// Group 2 over an empty buffer, for frames that do not refine.
+    none: wgpu::BindGroup,
+    held: Mutex<Option<HeldMasks>>,
+}
+
+/// A storage buffer of `size` bytes the mask pass writes (readable back for tests).
+pub(crate) fn mask_buffer(gpu: &Gpu, size: u64) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("neighbour masks"),
+        size: size.max(EMPTY_BINDING),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+impl NeighbourMasks {
+    pub(crate) fn new(gpu: &Gpu, limit: u64) -> NeighbourMasks {
+        let device = &gpu.device;
+        let expand_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("expand"),
+            entries: &layout_entries(&EXPAND_ARRAYS, true),
+        });
+        let expand_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("expand"),
+                bind_group_layouts: &[Some(&expand_layout)],
+                immediate_size: 0,
+            });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("masks"),
+            entries: &layout_entries(&MASK_ARRAYS, false),
+        });
+        let none = Self::group(gpu, &layout, &mask_buffer(gpu, EMPTY_BINDING), limit);
+        NeighbourMasks {
+            limit,
+            expand_layout,
+            expand_pipeline_layout,
+            pipelines: Default::default(),
+            layout,
+            none,
+            held: Mutex::new(None),
+        }
+    }
+
+    fn group(
+        gpu: &Gpu,
+        layout: &wgpu::BindGroupLayout,
+        buffer: &wgpu::Buffer,
+        limit: u64,
+    ) -> wgpu::BindGroup {
+        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("masks"),
+            layout,
+            entries: &bind_entries(&MASK_ARRAYS, &[buffer], None, limit),
+        })
+    }
+
+    fn pipeline(&self, gpu: &Gpu, split: bool) -> Result<&wgpu::ComputePipeline> {
+        let slot = &self.pipelines[usize::from(split)];
+        if let Some(pipeline) = slot.get() {
+            return Ok(pipeline);
+        }
+        let device = &gpu.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("expand"),
+            source: wgpu::ShaderSource::Wgsl(expand_wgsl(self.limit, split).into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("expand"),
+            layout: Some(&self.expand_pipeline_layout),
+            module: &module,
+            entry_point: Some("expand"),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Validation(e.to_string()));
+        }
+        Ok(slot.get_or_init(|| pipeline))
+    }
+
+    /// The trace passes' group 2 for a frame of `step`: the empty one where the frame does
+    /// not refine, else the held masks, derived first (recorded into `encoder`) where they
+    /// are another step's.
+    pub(crate) fn group_for(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        refines: bool,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<wgpu::BindGroup> {
+        if !refines {
+            return Ok(self.none.clone());
+        }
+        let mut held = self
+            .held
+            .lock()
+            .map_err(|_| Error::Validation("the neighbour masks' lock was poisoned".into()))?;
+        if let Some(h) = held.as_ref().filter(|h| h.step == step.id()) {
+            return Ok(h.group.clone());
+        }
+        let needed = step.info.mask_bytes();
+        // The buffer is reused while it is large enough: the pass writes every word the
+        // step's clusters read.
+        let buffer = match held.take() {
+            Some(h) if h.buffer.size() >= needed => h.buffer,
+            _ => mask_buffer(gpu, needed),
+        };
+        self.record(gpu, step, &buffer, encoder, None)?;
+        let group = Self::group(gpu, &self.layout, &buffer, self.limit);
+        *held = Some(HeldMasks {
+            step: step.id(),
+            buffer,
+            group: group.clone(),
+        });
+        Ok(group)
+    }
+
+    /// Bytes of the masks held now (0 before the first refined frame).
+    pub(crate) fn held_bytes(&self) -> u64 {
+        self.held
+            .lock()
+            .map_or(0, |h| h.as_ref().map_or(0, |h| h.buffer.size()))
+    }
+
+    /// Records the pass that fills `masks` for `step` (rows of words, `mask_row`), timed
+    /// into `timestamps` (2 queries) where given.
+    pub(crate) fn record(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        masks: &wgpu::Buffer,
+        encoder: &mut wgpu::CommandEncoder,
+        timestamps: Option<&wgpu::QuerySet>,
+    ) -> Result<()> {
+        let device = &gpu.device;
+        let info = &step.info;
+        let settings = ExpandSettings {
+            point_count: info.point_count,
+            cluster_size: info.cluster_size,
+            mask_words: info.mask_words,
+            has_normals: u32::from(info.has_normals),
+            cluster_id_count: info.cluster_id_count,
+            ..ExpandSettings::zeroed()
+        };
+        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("expand settings"),
+            size: size_of::<ExpandSettings>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM,
+            mapped_at_creation: true,
+        });
+        uniform
+            .slice(..)
+            .get_mapped_range_mut()
+            .map_err(|e| Error::Readback(e.to_string()))?
+            .copy_from_slice(bytemuck::bytes_of(&settings));
+        uniform.unmap();
+        let b = &step.buffers;
+        let buffers = [
+            &b.points,
+            &b.normals,
+            &b.reach,
+            &b.cluster_start,
+            &b.cluster_ids,
+            masks,
+            &b.cluster_base,
+        ];
+        let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), self.limit);
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("expand"),
+            layout: &self.expand_layout,
+            entries: &entries,
+        });
+        let pipeline = self.pipeline(gpu, step.split)?;
+        let max_groups = device.limits().max_compute_workgroups_per_dimension;
+        // One workgroup per cluster.
+        let clusters = info.point_count.div_ceil(info.cluster_size.max(1));
+        let groups = if info.mask_words == 0 { 0 } else { clusters };
+        let timestamp_writes = timestamps.map(|set| wgpu::ComputePassTimestampWrites {
+            query_set: set,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        });
+        // A timed pass runs even with nothing to do, so that its stamps are written.
+        if groups == 0 && timestamp_writes.is_none() {
+            return Ok(());
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("neighbour masks"),
+            timestamp_writes,
+        });
+        if groups > 0 {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(groups.min(max_groups), groups.div_ceil(max_groups), 1);
+        }
+        Ok(())
+    }
+}
