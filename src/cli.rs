@@ -506,9 +506,15 @@ pub struct RenderArgs {
     pub iterations: u32,
     #[arg(long, value_enum, default_value_t = ModeArg::Shade)]
     pub mode: ModeArg,
-    /// PNG to write.
+    /// PNG to write, or a movie: NAME.mp4 (H.264), one frame per step of --steps.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// A movie's frame rate (default: the series' own times, in real time).
+    #[arg(long, conflicts_with = "slowdown")]
+    pub fps: Option<f64>,
+    /// A movie timed by the series' times, this many times slower than simulated.
+    #[arg(long)]
+    pub slowdown: Option<f64>,
     /// Hit buffer to write: float32 H×W×8 .npy (position xyz, normal xyz, t, status; 0 = miss).
     #[arg(long)]
     pub aov: Option<PathBuf>,

@@ -157,6 +157,7 @@ fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
         iterations: 3,
         mode: slosh_render::ShadeMode::Shade,
         out: Some(frames.join("{:05}.png")),
+        movie: None,
         aov: None,
         cpu,
         degree: None,

@@ -1,5 +1,5 @@
-//! `slosh render`: frames (PNG) and hit buffers (.npy) from a cache, one step or a range of
-//! steps. The GPU path uploads each step into wgpu buffers and runs the WGSL trace and shade
+//! `slosh render`: frames (PNG, or an MP4 movie of a range) and hit buffers (.npy) from a
+//! cache, one step or a range of steps. The GPU path uploads each step into wgpu buffers and runs the WGSL trace and shade
 //! passes; `--cpu` runs the CPU reference tracer on the mapped cache through its baked BVH.
 
 use slosh_fileio::say;
@@ -127,25 +127,34 @@ pub fn run(config: &RenderConfig) -> Result<()> {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
     }
+    let mut movie = match (config.movie, &config.out) {
+        (Some(timing), Some(out)) => Some(start_movie(config, timing, out)?),
+        _ => None,
+    };
     let targets = |step: usize| {
         (
-            config.out.as_ref().map(|p| expand_pattern(p, step)),
+            config
+                .out
+                .as_ref()
+                .filter(|_| config.movie.is_none())
+                .map(|p| expand_pattern(p, step)),
             config.aov.as_ref().map(|p| expand_pattern(p, step)),
         )
     };
     if config.cpu {
-        for &step in &config.steps {
+        for (i, &step) in config.steps.iter().enumerate() {
             let (out, aov) = targets(step);
+            let movie = movie.as_mut().map(|(m, seconds)| (m, seconds[i]));
             render_cpu(
                 config,
                 manifest.as_ref(),
                 &camera,
                 step,
-                out.as_deref(),
+                (out.as_deref(), movie),
                 aov.as_deref(),
             )?;
         }
-        return Ok(());
+        return finish_movie(movie);
     }
     let gpu = slosh_render::Gpu::new(config.adapter.as_deref())?;
     let tracer = Tracer::new(&gpu)?;
@@ -156,7 +165,7 @@ pub fn run(config: &RenderConfig) -> Result<()> {
             gpu.describe()
         );
     }
-    for &step in &config.steps {
+    for (i, &step) in config.steps.iter().enumerate() {
         let path = step_path(&config.path, step);
         let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
         check_belongs(manifest.as_ref(), &config.path, step, &path, &file)?;
@@ -186,6 +195,10 @@ pub fn run(config: &RenderConfig) -> Result<()> {
         if let Some(out) = &out {
             slosh_render::write_frame_png(out, &frame)?;
         }
+        if let Some((movie, seconds)) = movie.as_mut() {
+            let rgba: Vec<u8> = frame.rgba.iter().flat_map(|p| p.to_le_bytes()).collect();
+            movie.push_rgba(&rgba, seconds[i])?;
+        }
         if let Some(aov) = &aov {
             slosh_render::write_npy(
                 aov,
@@ -209,6 +222,47 @@ pub fn run(config: &RenderConfig) -> Result<()> {
             gpu.info.name
         );
     }
+    finish_movie(movie)
+}
+
+/// The movie `--out` names, with each step's frame duration (from `--fps`, or the steps'
+/// times read from their headers).
+fn start_movie(
+    config: &RenderConfig,
+    timing: slosh_movie::Timing,
+    out: &Path,
+) -> Result<(slosh_movie::MovieWriter, Vec<f64>)> {
+    let mut times = Vec::with_capacity(config.steps.len());
+    if matches!(timing, slosh_movie::Timing::SeriesTimes { .. }) {
+        for &step in &config.steps {
+            let file = CacheFile::open(&step_path(&config.path, step))
+                .with_context(|| format!("opening step {step}"))?;
+            times.push(file.header().source.time);
+        }
+    } else {
+        times.resize(config.steps.len(), 0.0);
+    }
+    let seconds = slosh_movie::frame_seconds(timing, &times)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    let fps = seconds.len() as f64 / seconds.iter().sum::<f64>();
+    let writer = slosh_movie::MovieWriter::new(out, config.width, config.height, fps)?;
+    Ok((writer, seconds))
+}
+
+fn finish_movie(movie: Option<(slosh_movie::MovieWriter, Vec<f64>)>) -> Result<()> {
+    if let Some((movie, _)) = movie {
+        let path = movie.path().to_path_buf();
+        let s = movie.finish()?;
+        say!(
+            "wrote {}: {} frames, {}x{}, {:.3} s, {:.1} MB (H.264 in MP4)",
+            path.display(),
+            s.frames,
+            s.width,
+            s.height,
+            s.seconds,
+            s.bytes as f64 / 1e6
+        );
+    }
     Ok(())
 }
 
@@ -217,7 +271,7 @@ fn render_cpu(
     manifest: Option<&slosh_cache::Manifest>,
     camera: &Camera,
     step_index: usize,
-    out: Option<&Path>,
+    (out, movie): (Option<&Path>, Option<(&mut slosh_movie::MovieWriter, f64)>),
     aov: Option<&Path>,
 ) -> Result<()> {
     let (width, height) = (camera.width, camera.height);
@@ -241,7 +295,7 @@ fn render_cpu(
     let hits = step.render(camera, &params);
     let seconds = start.elapsed().as_secs_f64();
     let hit_count = hits.iter().filter(|h| h.is_some()).count();
-    if let Some(out) = out {
+    if out.is_some() || movie.is_some() {
         let mut rgb = Vec::with_capacity(hits.len() * 3);
         for (i, hit) in hits.iter().enumerate() {
             let (x, y) = (i as u32 % width, i as u32 / width);
@@ -251,7 +305,12 @@ fn render_cpu(
             };
             rgb.extend(colour.map(cpu_shade::srgb));
         }
-        slosh_render::write_rgb_png(out, width, height, &rgb)?;
+        if let Some(out) = out {
+            slosh_render::write_rgb_png(out, width, height, &rgb)?;
+        }
+        if let Some((movie, seconds)) = movie {
+            movie.push_rgb(&rgb, seconds)?;
+        }
     }
     if let Some(aov) = aov {
         slosh_render::write_npy(aov, height, width, 8, &cpu_shade::cpu_hit_buffer(&hits))?;

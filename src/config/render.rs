@@ -64,6 +64,8 @@ pub struct RenderConfig {
     pub iterations: u32,
     pub mode: ShadeMode,
     pub out: Option<PathBuf>,
+    /// `--out` is an MP4, timed so.
+    pub movie: Option<slosh_movie::Timing>,
     pub aov: Option<PathBuf>,
     pub cpu: bool,
     pub degree: Option<u8>,
@@ -143,8 +145,25 @@ impl RenderConfig {
             }
             None => (vec![args.step], false),
         };
+        let movie = args
+            .out
+            .as_ref()
+            .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mp4")))
+            .map(|_| match args.fps {
+                Some(fps) => slosh_movie::Timing::Fps(fps),
+                None => slosh_movie::Timing::SeriesTimes {
+                    slowdown: args.slowdown.unwrap_or(1.0),
+                },
+            });
+        if movie.is_none() && (args.fps.is_some() || args.slowdown.is_some()) {
+            bail!("--fps and --slowdown time a movie: give --out NAME.mp4");
+        }
+        if let Some(timing) = movie {
+            slosh_movie::frame_seconds(timing, &[0.0, 1.0]).map_err(|e| anyhow!("{e}"))?;
+        }
         if sequence {
-            for (flag, path) in [("--out", &args.out), ("--aov", &args.aov)] {
+            let patterned = [("--out", &args.out), ("--aov", &args.aov)];
+            for (flag, path) in patterned.into_iter().skip(usize::from(movie.is_some())) {
                 if let Some(p) = path
                     && !p.to_string_lossy().contains('{')
                 {
@@ -173,6 +192,7 @@ impl RenderConfig {
             iterations: args.iterations,
             mode: args.mode.into(),
             out: args.out.clone(),
+            movie,
             aov: args.aov.clone(),
             cpu: args.cpu,
             degree: args.degree,

@@ -9,6 +9,7 @@ mod util;
 mod bake;
 mod bench;
 mod hard_inputs;
+mod movie;
 mod read;
 mod refusals;
 mod series_integrity;

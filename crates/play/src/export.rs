@@ -1,5 +1,5 @@
-//! Frames of a range of steps written as PNGs by a job on a thread of its own, with a tracer
-//! of its own, so that the window stays live while it runs: the player's export. The trace
+//! Frames of a range of steps written as PNGs, or as one MP4 movie, by a job on a thread of
+//! its own, with a tracer of its own, so that the window stays live while it runs: the player's export. The trace
 //! of one step file ([`trace_file`]) is shared with `slosh render`.
 
 use std::path::{Path, PathBuf};
@@ -34,6 +34,15 @@ pub struct ExportRequest {
     pub field: Option<String>,
     /// Frames go here as `NNNNN.png`, by bake index; created as needed.
     pub dir: PathBuf,
+    /// Instead of PNGs: one H.264 movie at this path, frame i shown for `seconds[i]`.
+    pub movie: Option<MovieRequest>,
+}
+
+/// Where an export's movie goes and how long each of its frames is shown.
+#[derive(Debug, Clone)]
+pub struct MovieRequest {
+    pub path: PathBuf,
+    pub seconds: Vec<f64>,
 }
 
 /// Where frame `index` of an export into `dir` goes.
@@ -72,7 +81,17 @@ impl ExportJob {
             return Err("no readable step".into());
         }
         let (tx, rx) = channel();
-        let (total, dir) = (request.steps.len(), request.dir.clone());
+        let total = request.steps.len();
+        let dir = match &request.movie {
+            Some(m) if m.seconds.len() != total => {
+                return Err(format!(
+                    "{} frame durations for {total} steps",
+                    m.seconds.len()
+                ));
+            }
+            Some(m) => m.path.clone(),
+            None => request.dir.clone(),
+        };
         std::thread::spawn(move || {
             let tracer = match Tracer::new(&gpu) {
                 Ok(t) => t,
@@ -81,11 +100,29 @@ impl ExportJob {
                     return;
                 }
             };
-            if let Err(e) = std::fs::create_dir_all(&request.dir) {
-                let _ = tx.send(Err(format!("{}: {e}", request.dir.display())));
+            let folder = match &request.movie {
+                Some(m) => m.path.parent().map(Path::to_path_buf).unwrap_or_default(),
+                None => request.dir.clone(),
+            };
+            if let Err(e) = std::fs::create_dir_all(&folder) {
+                let _ = tx.send(Err(format!("{}: {e}", folder.display())));
                 return;
             }
-            for (index, path) in &request.steps {
+            let mut movie = match &request.movie {
+                Some(m) => {
+                    let fps = m.seconds.len() as f64 / m.seconds.iter().sum::<f64>();
+                    let (w, h) = (request.camera.width, request.camera.height);
+                    match slosh_movie::MovieWriter::new(&m.path, w, h, fps) {
+                        Ok(writer) => Some((writer, &m.seconds)),
+                        Err(e) => {
+                            let _ = tx.send(Err(e.to_string()));
+                            return;
+                        }
+                    }
+                }
+                None => None,
+            };
+            for (k, (index, path)) in request.steps.iter().enumerate() {
                 let out = frame_path(&request.dir, *index);
                 let written = CacheFile::open(path)
                     .map_err(slosh_render::Error::from)
@@ -100,9 +137,31 @@ impl ExportJob {
                             &request.params,
                         )
                     })
-                    .and_then(|(_, frame)| slosh_render::write_frame_png(&out, &frame));
+                    .map_err(|e| e.to_string())
+                    .and_then(|(_, frame)| match movie.as_mut() {
+                        Some((writer, seconds)) => {
+                            let rgba: Vec<u8> =
+                                frame.rgba.iter().flat_map(|p| p.to_le_bytes()).collect();
+                            writer
+                                .push_rgba(&rgba, seconds[k])
+                                .map_err(|e| e.to_string())
+                        }
+                        None => {
+                            slosh_render::write_frame_png(&out, &frame).map_err(|e| e.to_string())
+                        }
+                    });
+                // A movie's last frame counts once the file is written.
+                let written = match (written, k + 1 == total, movie.take()) {
+                    (Ok(()), true, Some((writer, _))) => {
+                        writer.finish().map(|_| ()).map_err(|e| e.to_string())
+                    }
+                    (written, _, held) => {
+                        movie = held;
+                        written
+                    }
+                };
                 let failed = written.is_err();
-                let sent = tx.send(written.map(|()| out).map_err(|e| e.to_string()));
+                let sent = tx.send(written.map(|()| out));
                 if sent.is_err() || failed {
                     return;
                 }

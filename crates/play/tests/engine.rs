@@ -292,6 +292,7 @@ fn an_export_job_writes_each_step_as_a_direct_render() {
         params,
         field: None,
         dir: out.path().join("frames"),
+        movie: None,
     };
     let mut job = ExportJob::spawn(gpu.clone(), request.clone()).unwrap();
     let ended = finish(&mut job);
@@ -314,6 +315,31 @@ fn an_export_job_writes_each_step_as_a_direct_render() {
             "step {i} differs"
         );
     }
+    // The same range as one MP4: a sample per step, each shown for its duration.
+    let path = out.path().join("movie").join("range.mp4");
+    let seconds = vec![0.1, 0.2, 0.3];
+    let movie = ExportRequest {
+        movie: Some(slosh_play::export::MovieRequest {
+            path: path.clone(),
+            seconds: seconds.clone(),
+        }),
+        ..request.clone()
+    };
+    let mut job = ExportJob::spawn(gpu.clone(), movie).unwrap();
+    assert_eq!(
+        finish(&mut job),
+        ExportState::Finished {
+            frames: 3,
+            dir: path.clone()
+        }
+    );
+    let bytes = std::fs::read(&path).unwrap();
+    let reader =
+        mp4::Mp4Reader::read_header(std::io::Cursor::new(&bytes), bytes.len() as u64).unwrap();
+    let track = reader.tracks().values().next().unwrap();
+    assert_eq!(track.sample_count(), 3);
+    let lasts = track.duration().as_secs_f64();
+    assert!((lasts - 0.6).abs() < 1e-3, "the movie lasts {lasts} s");
     let none = ExportRequest {
         steps: Vec::new(),
         ..request.clone()

@@ -149,6 +149,19 @@ pub fn gpu_or_skip<T, E: std::fmt::Display>(found: Result<T, E>) -> Option<T> {
     }
 }
 
+/// Peak signal-to-noise ratio of two 8-bit images of equal length, in dB (peak 255): how
+/// decoded video frames are compared with the frames encoded.
+pub fn psnr_db(a: &[u8], b: &[u8]) -> f64 {
+    assert_eq!(a.len(), b.len(), "images of different sizes");
+    let mse = a
+        .iter()
+        .zip(b)
+        .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
+        .sum::<f64>()
+        / a.len().max(1) as f64;
+    10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

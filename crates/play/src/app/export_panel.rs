@@ -1,5 +1,6 @@
 //! The Output section's export: a range of steps (by bake index) that follows a growing
-//! series, the frame size and iterations, and the running [`ExportJob`].
+//! series, the frame size and iterations, PNG frames or an MP4 movie (timed by a rate or by
+//! the series' times), and the running [`ExportJob`].
 
 use std::path::Path;
 use std::sync::Arc;
@@ -9,7 +10,7 @@ use slosh_mls::Camera;
 use slosh_render::{Gpu, TraceParams};
 
 use crate::engine::Engine;
-use crate::export::{ExportJob, ExportRequest, ExportState};
+use crate::export::{ExportJob, ExportRequest, ExportState, MovieRequest};
 
 /// The export's settings and its job while one runs.
 #[derive(Debug)]
@@ -22,6 +23,11 @@ pub struct ExportPanel {
     seen_last: usize,
     pub size: (u32, u32),
     pub iterations: u32,
+    /// One MP4 instead of a PNG per step.
+    pub movie: bool,
+    /// The movie's frame rate; 0: the series' times, slowed down by `slowdown`.
+    pub fps: f64,
+    pub slowdown: f64,
     job: Option<ExportJob>,
 }
 
@@ -61,6 +67,9 @@ impl ExportPanel {
             seen_last: last,
             size: (1920, 1080),
             iterations: 3,
+            movie: false,
+            fps: 0.0,
+            slowdown: 1.0,
             job: None,
         }
     }
@@ -101,13 +110,44 @@ impl ExportPanel {
                     .suffix(" it"),
             );
         });
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut self.movie, "MP4");
+            if self.movie {
+                ui.add(
+                    egui::DragValue::new(&mut self.fps)
+                        .range(0.0..=240.0)
+                        .suffix(" fps")
+                        .custom_formatter(|v, _| {
+                            if v == 0.0 {
+                                "series times".into()
+                            } else {
+                                format!("{v}")
+                            }
+                        }),
+                );
+                if self.fps == 0.0 {
+                    ui.add(
+                        egui::DragValue::new(&mut self.slowdown)
+                            .range(0.01..=1e6)
+                            .prefix("×")
+                            .suffix(" slower"),
+                    );
+                }
+            }
+        });
         match &self.job {
             Some(job) => {
                 let (done, total) = job.progress();
                 ui.label(format!("exporting {done}/{total}…"));
                 false
             }
-            None => ui.button("export frames").clicked(),
+            None => ui
+                .button(if self.movie {
+                    "export movie"
+                } else {
+                    "export frames"
+                })
+                .clicked(),
         }
     }
 
@@ -123,13 +163,32 @@ impl ExportPanel {
         output: &Path,
     ) -> Option<String> {
         let (first, last) = (self.first.min(self.last), self.first.max(self.last));
-        let steps = engine
+        let chosen: Vec<_> = engine
             .series()
             .steps()
             .iter()
             .filter(|s| (first..=last).contains(&s.index) && s.problem.is_none())
-            .map(|s| (s.index, s.path.clone()))
             .collect();
+        let movie = if self.movie {
+            let timing = if self.fps > 0.0 {
+                slosh_movie::Timing::Fps(self.fps)
+            } else {
+                slosh_movie::Timing::SeriesTimes {
+                    slowdown: self.slowdown,
+                }
+            };
+            let times: Vec<f64> = chosen.iter().map(|s| s.time).collect();
+            match slosh_movie::frame_seconds(timing, &times) {
+                Ok(seconds) => Some(MovieRequest {
+                    path: output.join(format!("movie-{first:05}-{last:05}.mp4")),
+                    seconds,
+                }),
+                Err(why) => return Some(format!("export: {why}")),
+            }
+        } else {
+            None
+        };
+        let steps = chosen.iter().map(|s| (s.index, s.path.clone())).collect();
         params.iterations = self.iterations;
         let request = ExportRequest {
             steps,
@@ -137,6 +196,7 @@ impl ExportPanel {
             params,
             field: engine.field().map(str::to_string),
             dir: output.join("frames"),
+            movie,
         };
         match ExportJob::spawn(gpu, request) {
             Ok(job) => {
