@@ -57,7 +57,8 @@ struct Settings {
     // Entries of the 4-wide tree and of bvh_items.
     wide_count: u32,
     item_count: u32,
-    pad0: u32,
+    // The field's colour map (colormap.rs: Colormap).
+    colormap: u32,
     pad1: u32,
     // Unit direction towards the key light (the shade and water passes).
     key_light: vec3<f32>,

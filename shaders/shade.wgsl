@@ -7,7 +7,7 @@
 // shaders.rs (`shared_constants_wgsl`).
 
 // Viridis (perceptually uniform), a degree-6 fit of the matplotlib table; t in [0, 1]:
-// fn viridis(t: f32) -> vec3<f32>: generated from crates/render's colormap.rs (one source
+// fn colormap(which: u32, t: f32) -> vec3<f32>: generated from crates/render's colormap.rs (one source
 // for the shader and legends) and prepended to this file by shaders.rs.
 
 // The field at a hit: the MLS-weighted mean over the hit ball's neighbours (θ with the ball's
@@ -81,7 +81,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             if settings.has_field != 0u && hit.item < settings.point_count {
                 let span = settings.field_max - settings.field_min;
                 let v = field_value_at(hit);
-                base = viridis(select(0.5, (v - settings.field_min) / span, span > 0.0));
+                base = colormap(settings.colormap, select(0.5, (v - settings.field_min) / span, span > 0.0));
             }
             colour = blinn_phong(hit.normal, dir, base);
         }

@@ -55,6 +55,9 @@ pub struct PlayArgs {
     /// as `slosh render` does).
     #[arg(long, default_value = "series")]
     pub field_range: String,
+    /// The field's colour map (also in the Colour panel).
+    #[arg(long, value_enum, default_value_t = ColormapArg::Viridis)]
+    pub colormap: ColormapArg,
     /// Traced pixels per screen pixel, per axis (0.25-2; lower for large screens).
     #[arg(long, default_value_t = 1.0)]
     pub render_scale: f32,
@@ -473,6 +476,26 @@ impl From<ModeArg> for slosh_render::ShadeMode {
     }
 }
 
+/// A field's colour map (`--colormap`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ColormapArg {
+    /// Sequential, perceptually uniform.
+    Viridis,
+    /// Diverging blue–grey–red (Moreland), for signed fields such as pressure around zero.
+    Coolwarm,
+    Grey,
+}
+
+impl From<ColormapArg> for slosh_render::Colormap {
+    fn from(map: ColormapArg) -> Self {
+        match map {
+            ColormapArg::Viridis => Self::Viridis,
+            ColormapArg::Coolwarm => Self::CoolWarm,
+            ColormapArg::Grey => Self::Grey,
+        }
+    }
+}
+
 /// `slosh render`'s vertical field of view unless `--fov` says otherwise, in degrees.
 pub const DEFAULT_FOV: f64 = 40.0;
 
@@ -533,6 +556,9 @@ pub struct RenderArgs {
     /// Colour the surface by this baked field (GPU only).
     #[arg(long)]
     pub field: Option<String>,
+    /// The field's colour map.
+    #[arg(long, value_enum, default_value_t = ColormapArg::Viridis)]
+    pub colormap: ColormapArg,
     /// GPU adapter whose name contains this (default: the best one wgpu finds).
     #[arg(long)]
     pub adapter: Option<String>,

@@ -105,6 +105,7 @@ pub fn demo(args: &DemoConfig) -> Result<()> {
             budget: None,
             field: Some("pressure".into()),
             field_range: "series".into(),
+            colormap: crate::cli::ColormapArg::Viridis,
             render_scale: 1.0,
             up: None,
             iterations: 3,
@@ -164,6 +165,7 @@ fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
         h_scale: None,
         covariance: false,
         field: (!cpu).then(|| "pressure".to_string()),
+        colormap: slosh_render::Colormap::Viridis,
         adapter: None,
     })?;
     say!(

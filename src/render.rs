@@ -178,6 +178,7 @@ pub fn run(config: &RenderConfig) -> Result<()> {
             epsilon: 1e-4,
             mode: config.mode,
             field_range: None,
+            colormap: config.colormap,
             key_light: slosh_render::DEFAULT_KEY_LIGHT,
         };
         let start = std::time::Instant::now();

@@ -61,5 +61,6 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
             "step" => true,
             other => bail!("--field-range {other}: expected series or step"),
         },
+        colormap: args.colormap.into(),
     })
 }

@@ -72,6 +72,7 @@ pub struct RenderConfig {
     pub h_scale: Option<f64>,
     pub covariance: bool,
     pub field: Option<String>,
+    pub colormap: slosh_render::Colormap,
     pub adapter: Option<String>,
 }
 
@@ -199,6 +200,7 @@ impl RenderConfig {
             h_scale: args.h_scale,
             covariance: args.covariance,
             field: args.field.clone(),
+            colormap: args.colormap.into(),
             adapter: args.adapter.clone(),
         })
     }

@@ -36,7 +36,8 @@ pub struct GpuSettings {
     /// Entries of the 4-wide tree and of bvh_items.
     pub wide_count: u32,
     pub item_count: u32,
-    pub pad0: u32,
+    /// The field's colour map (`Colormap as u32`).
+    pub colormap: u32,
     pub pad1: u32,
     /// Unit direction towards the key light.
     pub key_light: [f32; 3],

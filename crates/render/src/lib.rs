@@ -9,6 +9,7 @@ mod bindings;
 pub mod colormap;
 mod context;
 pub mod cpu_shade;
+mod diverging;
 mod error;
 pub mod layout;
 mod masks;
@@ -19,6 +20,7 @@ mod tracer;
 mod upload;
 pub mod water;
 
+pub use colormap::Colormap;
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, status};

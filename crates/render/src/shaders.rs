@@ -251,10 +251,10 @@ pub fn trace_wgsl(entries: u32, limit: u64, split: bool) -> String {
     frame_module(&source, limit, split)
 }
 
-/// The shade module (with the colour map generated from `colormap.rs`).
+/// The shade module (with the colour maps generated from `colormap.rs`).
 pub fn shade_wgsl(limit: u64, split: bool) -> String {
     frame_module(
-        &format!("{}{SHADE_WGSL}", crate::colormap::viridis_wgsl()),
+        &format!("{}{SHADE_WGSL}", crate::colormap::colormap_wgsl()),
         limit,
         split,
     )

@@ -333,7 +333,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 mask_words,
                 wide_count,
                 item_count,
-                pad0,
+                colormap,
                 pad1,
                 key_light,
                 pad2

@@ -25,6 +25,8 @@ pub struct PlayOptions {
     /// Map each step's own field range to the colour map, instead of the range seen over
     /// the series.
     pub step_range: bool,
+    /// The field's colour map to start with.
+    pub colormap: slosh_render::Colormap,
 }
 
 /// Why the player could not start.

@@ -78,6 +78,7 @@ impl Player {
             } else {
                 RangeMode::Series
             },
+            colormap: options.colormap,
             series_range: None,
         };
         Player {

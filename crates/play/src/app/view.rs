@@ -2,7 +2,7 @@
 //! colour field with its range, and the panel that edits them.
 
 use eframe::egui;
-use slosh_render::{ShadeMode, TraceParams, colormap};
+use slosh_render::{Colormap, ShadeMode, TraceParams};
 
 use crate::engine::Engine;
 
@@ -29,6 +29,7 @@ pub struct ViewSettings {
     pub light: (f32, f32),
     pub field: Option<String>,
     pub range_mode: RangeMode,
+    pub colormap: Colormap,
     /// The widest field range of the steps shown since the field was chosen.
     pub series_range: Option<(f32, f32)>,
 }
@@ -85,6 +86,7 @@ impl ViewSettings {
             epsilon: 1e-4,
             mode: self.mode,
             field_range,
+            colormap: self.colormap,
             key_light: self.key_light(),
         }
     }
@@ -153,6 +155,13 @@ impl ViewSettings {
             self.series_range = None;
         }
         if self.field.is_some() {
+            egui::ComboBox::from_label("colour map")
+                .selected_text(self.colormap.name())
+                .show_ui(ui, |ui| {
+                    for m in Colormap::ALL {
+                        ui.selectable_value(&mut self.colormap, m, m.name());
+                    }
+                });
             ui.horizontal(|ui| {
                 let mut mode = self.range_mode;
                 ui.selectable_value(&mut mode, RangeMode::Series, "series");
@@ -187,7 +196,7 @@ impl ViewSettings {
         for k in 0..steps {
             let t = k as f32 / (steps - 1) as f32;
             // The shade pass encodes the map's values to sRGB; so does egui's `Rgba`.
-            let [r, g, b] = colormap::viridis(t);
+            let [r, g, b] = self.colormap.at(t);
             let colour: egui::Color32 = egui::Rgba::from_rgb(r, g, b).into();
             let x0 = rect.left() + rect.width() * k as f32 / steps as f32;
             let x1 = rect.left() + rect.width() * (k + 1) as f32 / steps as f32;

@@ -3,6 +3,7 @@
 
 use slosh_mls::Camera;
 
+use crate::colormap::Colormap;
 use crate::layout::{DEFAULT_KEY_LIGHT, GpuSettings};
 use crate::upload::GpuStep;
 
@@ -40,6 +41,7 @@ pub struct TraceParams {
     pub mode: ShadeMode,
     /// The field values mapped to the ends of the colour map; `None`: the step's own range.
     pub field_range: Option<(f32, f32)>,
+    pub colormap: Colormap,
     /// Direction towards the key light (normalised here); `DEFAULT_KEY_LIGHT` by default.
     pub key_light: [f32; 3],
 }
@@ -56,6 +58,7 @@ impl Default for TraceParams {
             epsilon: 1e-4,
             mode: ShadeMode::Shade,
             field_range: None,
+            colormap: Colormap::Viridis,
             key_light: DEFAULT_KEY_LIGHT,
         }
     }
@@ -109,7 +112,7 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         mask_words: info.mask_words,
         wide_count: info.wide_count,
         item_count: info.item_count,
-        pad0: 0,
+        colormap: params.colormap as u32,
         pad1: 0,
         key_light: unit_or_default(params.key_light),
         pad2: 0.0,
