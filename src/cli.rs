@@ -559,6 +559,9 @@ pub struct RenderArgs {
     /// The field's colour map.
     #[arg(long, value_enum, default_value_t = ColormapArg::Viridis)]
     pub colormap: ColormapArg,
+    /// Draw the step's time and, with --field, the colour legend into the frames.
+    #[arg(long)]
+    pub labels: bool,
     /// GPU adapter whose name contains this (default: the best one wgpu finds).
     #[arg(long)]
     pub adapter: Option<String>,

@@ -7,67 +7,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use slosh_cache::{
-    BallState, Bvh, CacheFile, GpuBall, GpuBvhNode, GpuPoint, Header, Manifest, SectionEntry,
-    SeriesKey, names, parse_step_file_name,
+    CacheFile, GpuBall, GpuPoint, Header, Manifest, SectionEntry, SeriesKey, names,
+    parse_step_file_name,
 };
 
 use crate::config::inspect::InspectConfig;
 use slosh_fileio::stdout::print;
-
-#[derive(Debug, Serialize)]
-struct Summary {
-    min: f64,
-    mean: f64,
-    max: f64,
-}
-
-impl Summary {
-    fn of(values: impl Iterator<Item = f64>) -> Summary {
-        let (mut min, mut max, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize);
-        for v in values {
-            min = min.min(v);
-            max = max.max(v);
-            sum += v;
-            n += 1;
-        }
-        if n == 0 {
-            return Summary {
-                min: 0.0,
-                mean: 0.0,
-                max: 0.0,
-            };
-        }
-        Summary {
-            min,
-            mean: sum / n as f64,
-            max,
-        }
-    }
-}
-
-/// Statistics computed from the sections (not stored in the header).
-#[derive(Debug, Serialize)]
-struct Statistics {
-    /// Neighbours per point.
-    neighbours: Summary,
-    /// Points with 0–15, 16–31, … neighbours (last bucket: 128 and more).
-    neighbour_histogram: Vec<u64>,
-    /// Radii of trust in world units.
-    radii: Summary,
-    /// Balls whose stored polynomial has degree 0, 1, 2, 3 (fitted balls only).
-    degrees: [u64; 4],
-    fit_full: u64,
-    fit_degraded: u64,
-    fit_none: u64,
-    droplets: u64,
-    droplet_points: u64,
-    bvh_nodes: u64,
-    bvh_leaves: u64,
-    bvh_depth: u64,
-    /// Clusters, and those storing 32-bit candidate indices (the others store 16-bit offsets).
-    clusters: u64,
-    wide_clusters: u64,
-}
 
 #[derive(Debug, Serialize)]
 struct Verification {
@@ -81,56 +26,8 @@ struct FileReport {
     version: [u16; 2],
     bytes: u64,
     header: Header,
-    statistics: Statistics,
+    statistics: slosh_cache::Statistics,
     verify: Option<Verification>,
-}
-
-fn statistics(file: &CacheFile) -> Result<Statistics> {
-    let h = file.header();
-    let (start, _) = file.neighbour_lists()?;
-    let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
-    let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
-    let nodes: Vec<GpuBvhNode> = file.decode(names::BVH_NODES)?;
-    let base: Vec<u32> = file.decode(names::CLUSTER_BASE)?;
-    let wide = slosh_cache::candidates::WIDE_CLUSTER;
-    let counts: Vec<u32> = start
-        .windows(2)
-        .map(|w| w[1].saturating_sub(w[0]))
-        .collect();
-    let mut histogram = vec![0u64; 9];
-    for &c in &counts {
-        histogram[(c as usize / 16).min(8)] += 1;
-    }
-    let mut degrees = [0u64; 4];
-    for b in &balls {
-        if matches!(b.kind(), BallState::Full | BallState::Degraded) {
-            degrees[usize::from(b.degree())] += 1;
-        }
-    }
-    let bvh = Bvh {
-        nodes,
-        items: Vec::new(),
-    };
-    Ok(Statistics {
-        neighbours: Summary::of(counts.iter().map(|&c| f64::from(c))),
-        neighbour_histogram: histogram,
-        radii: Summary::of(
-            points
-                .iter()
-                .map(|p| f64::from(p.radius) * h.transform.scale),
-        ),
-        degrees,
-        fit_full: h.stats.fit_full,
-        fit_degraded: h.stats.fit_degraded,
-        fit_none: h.stats.fit_none,
-        droplets: h.stats.droplets,
-        droplet_points: h.stats.droplet_points,
-        bvh_leaves: bvh.nodes.iter().filter(|n| n.count > 0).count() as u64,
-        bvh_nodes: bvh.nodes.len() as u64,
-        bvh_depth: bvh.depth().unwrap_or(0) as u64,
-        clusters: base.len() as u64,
-        wide_clusters: base.iter().filter(|&&b| b & wide != 0).count() as u64,
-    })
 }
 
 fn verification(file: &CacheFile) -> Verification {
@@ -329,7 +226,7 @@ fn inspect_file(path: &Path, args: &InspectConfig) -> Result<bool> {
     let verify = args.verify.then(|| verification(&file));
     let ok = verify.as_ref().is_none_or(|v| v.ok);
     // Statistics decode sections; a file that failed verification may not decode.
-    let statistics = match statistics(&file) {
+    let statistics = match slosh_cache::Statistics::of(&file) {
         Ok(s) => s,
         Err(e) if !ok => {
             let msg = verify.and_then(|v| v.error).unwrap_or_default();
@@ -343,7 +240,7 @@ fn inspect_file(path: &Path, args: &InspectConfig) -> Result<bool> {
             }
             bail!("verification failed: {msg} ({e})");
         }
-        Err(e) => return Err(e),
+        Err(e) => return Err(e.into()),
     };
     let report = FileReport {
         file: path.to_path_buf(),

@@ -166,6 +166,7 @@ fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
         covariance: false,
         field: (!cpu).then(|| "pressure".to_string()),
         colormap: slosh_render::Colormap::Viridis,
+        labels: false,
         adapter: None,
     })?;
     say!(

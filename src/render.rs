@@ -8,6 +8,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use slosh_cache::{CacheFile, LoadedStep, step_file_name};
 use slosh_mls::{Camera, NormalsMode, Params};
+use slosh_play::export::{check_belongs, step_pattern};
+use slosh_play::overlay::Overlay;
 use slosh_render::{TraceParams, Tracer, cpu_shade};
 
 use crate::config::render::RenderConfig;
@@ -18,49 +20,6 @@ fn step_path(path: &Path, step: usize) -> PathBuf {
     } else {
         path.to_path_buf()
     }
-}
-
-/// `{}` or `{:0N}` in `pattern` replaced by `step` (zero-padded to N digits).
-fn expand_pattern(pattern: &Path, step: usize) -> PathBuf {
-    let text = pattern.to_string_lossy();
-    let Some(open) = text.find('{') else {
-        return pattern.to_path_buf();
-    };
-    let Some(close) = text[open..].find('}').map(|c| open + c) else {
-        return pattern.to_path_buf();
-    };
-    let width: usize = text[open + 1..close]
-        .trim_start_matches(':')
-        .parse()
-        .unwrap_or(0);
-    PathBuf::from(format!(
-        "{}{step:0width$}{}",
-        &text[..open],
-        &text[close + 1..]
-    ))
-}
-
-/// A step rendered from a cache directory must belong to its series (`manifest`, read once
-/// per run where the directory has one).
-fn check_belongs(
-    manifest: Option<&slosh_cache::Manifest>,
-    dir: &Path,
-    step: usize,
-    path: &Path,
-    file: &CacheFile,
-) -> Result<()> {
-    if let Some(manifest) = manifest {
-        let problems = manifest.step_problems(step, file);
-        if !problems.is_empty() {
-            bail!(
-                "{}: not step {step} of the series in {}: {}",
-                path.display(),
-                dir.display(),
-                problems.join("; ")
-            );
-        }
-    }
-    Ok(())
 }
 
 /// The framing camera of the step, up from `--up`, else from the data (the header's `up`),
@@ -121,14 +80,25 @@ pub fn run(config: &RenderConfig) -> Result<()> {
     };
     // Output folders (e.g. frames/ of a sequence) are created as needed.
     for pattern in [&config.out, &config.aov].into_iter().flatten() {
-        if let Some(dir) = expand_pattern(pattern, 0).parent()
+        if let Some(dir) = step_pattern(pattern, 0).parent()
             && !dir.as_os_str().is_empty()
         {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
     }
     let mut movie = match (config.movie, &config.out) {
-        (Some(timing), Some(out)) => Some(start_movie(config, timing, out)?),
+        (Some(timing), Some(out)) => {
+            let files: Vec<PathBuf> = config
+                .steps
+                .iter()
+                .map(|&s| step_path(&config.path, s))
+                .collect();
+            let size = (config.width, config.height);
+            Some(
+                slosh_play::export::open_movie(out, timing, &files, size)
+                    .map_err(anyhow::Error::msg)?,
+            )
+        }
         _ => None,
     };
     let targets = |step: usize| {
@@ -137,8 +107,8 @@ pub fn run(config: &RenderConfig) -> Result<()> {
                 .out
                 .as_ref()
                 .filter(|_| config.movie.is_none())
-                .map(|p| expand_pattern(p, step)),
-            config.aov.as_ref().map(|p| expand_pattern(p, step)),
+                .map(|p| step_pattern(p, step)),
+            config.aov.as_ref().map(|p| step_pattern(p, step)),
         )
     };
     if config.cpu {
@@ -168,7 +138,8 @@ pub fn run(config: &RenderConfig) -> Result<()> {
     for (i, &step) in config.steps.iter().enumerate() {
         let path = step_path(&config.path, step);
         let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
-        check_belongs(manifest.as_ref(), &config.path, step, &path, &file)?;
+        check_belongs(manifest.as_ref(), &config.path, step, &path, &file)
+            .map_err(anyhow::Error::msg)?;
         let h = file.header();
         let params = TraceParams {
             iterations: config.iterations,
@@ -193,12 +164,15 @@ pub fn run(config: &RenderConfig) -> Result<()> {
         // The frame's time, the upload's (timed on its own) left out.
         let seconds = start.elapsed().as_secs_f64() - gpu_step.upload.total_seconds;
         let (out, aov) = targets(step);
+        let overlay = config
+            .labels
+            .then(|| Overlay::for_step(h.source.time, step, &gpu_step, &params));
+        let rgb = slosh_play::overlay::frame_rgb(&frame, overlay.as_ref());
         if let Some(out) = &out {
-            slosh_render::write_frame_png(out, &frame)?;
+            slosh_render::write_rgb_png(out, frame.width, frame.height, &rgb)?;
         }
         if let Some((movie, seconds)) = movie.as_mut() {
-            let rgba: Vec<u8> = frame.rgba.iter().flat_map(|p| p.to_le_bytes()).collect();
-            movie.push_rgba(&rgba, seconds[i])?;
+            movie.push_rgb(&rgb, seconds[i])?;
         }
         if let Some(aov) = &aov {
             slosh_render::write_npy(
@@ -226,42 +200,11 @@ pub fn run(config: &RenderConfig) -> Result<()> {
     finish_movie(movie)
 }
 
-/// The movie `--out` names, with each step's frame duration (from `--fps`, or the steps'
-/// times read from their headers).
-fn start_movie(
-    config: &RenderConfig,
-    timing: slosh_movie::Timing,
-    out: &Path,
-) -> Result<(slosh_movie::MovieWriter, Vec<f64>)> {
-    let mut times = Vec::with_capacity(config.steps.len());
-    if matches!(timing, slosh_movie::Timing::SeriesTimes { .. }) {
-        for &step in &config.steps {
-            let file = CacheFile::open(&step_path(&config.path, step))
-                .with_context(|| format!("opening step {step}"))?;
-            times.push(file.header().source.time);
-        }
-    } else {
-        times.resize(config.steps.len(), 0.0);
-    }
-    let seconds = slosh_movie::frame_seconds(timing, &times)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    let fps = seconds.len() as f64 / seconds.iter().sum::<f64>();
-    let writer = slosh_movie::MovieWriter::new(out, config.width, config.height, fps)?;
-    Ok((writer, seconds))
-}
-
 fn finish_movie(movie: Option<(slosh_movie::MovieWriter, Vec<f64>)>) -> Result<()> {
     if let Some((movie, _)) = movie {
-        let path = movie.path().to_path_buf();
-        let s = movie.finish()?;
         say!(
-            "wrote {}: {} frames, {}x{}, {:.3} s, {:.1} MB (H.264 in MP4)",
-            path.display(),
-            s.frames,
-            s.width,
-            s.height,
-            s.seconds,
-            s.bytes as f64 / 1e6
+            "{}",
+            slosh_play::export::finish_movie(movie).map_err(anyhow::Error::msg)?
         );
     }
     Ok(())
@@ -278,7 +221,7 @@ fn render_cpu(
     let (width, height) = (camera.width, camera.height);
     let path = step_path(&config.path, step_index);
     let file = CacheFile::open(&path).with_context(|| format!("opening step {step_index}"))?;
-    check_belongs(manifest, &config.path, step_index, &path, &file)?;
+    check_belongs(manifest, &config.path, step_index, &path, &file).map_err(anyhow::Error::msg)?;
     let step = LoadedStep::load(&file)?;
     let h = file.header();
     let params = Params {
@@ -297,14 +240,11 @@ fn render_cpu(
     let seconds = start.elapsed().as_secs_f64();
     let hit_count = hits.iter().filter(|h| h.is_some()).count();
     if out.is_some() || movie.is_some() {
-        let mut rgb = Vec::with_capacity(hits.len() * 3);
-        for (i, hit) in hits.iter().enumerate() {
-            let (x, y) = (i as u32 % width, i as u32 / width);
-            let colour = match hit {
-                Some(hit) => cpu_shade::shade(hit, camera.ray(x, y).1, config.mode),
-                None => cpu_shade::background(y, height),
-            };
-            rgb.extend(colour.map(cpu_shade::srgb));
+        let mut rgb = cpu_shade::cpu_frame_rgb(&hits, camera, config.mode);
+        if config.labels {
+            let time = Some((h.source.time, step_index));
+            let overlay = Overlay { time, legend: None };
+            slosh_play::overlay::draw(&mut rgb, width, height, &overlay);
         }
         if let Some(out) = out {
             slosh_render::write_rgb_png(out, width, height, &rgb)?;

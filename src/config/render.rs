@@ -73,6 +73,8 @@ pub struct RenderConfig {
     pub covariance: bool,
     pub field: Option<String>,
     pub colormap: slosh_render::Colormap,
+    /// The time label and legend drawn into each frame.
+    pub labels: bool,
     pub adapter: Option<String>,
 }
 
@@ -201,6 +203,7 @@ impl RenderConfig {
             covariance: args.covariance,
             field: args.field.clone(),
             colormap: args.colormap.into(),
+            labels: args.labels,
             adapter: args.adapter.clone(),
         })
     }

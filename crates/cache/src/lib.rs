@@ -15,6 +15,7 @@ mod manifest;
 pub mod names;
 pub mod octahedral;
 mod reader;
+mod statistics;
 mod step;
 mod verify;
 mod writer;
@@ -36,6 +37,7 @@ pub use manifest::{
     step_file_name,
 };
 pub use reader::CacheFile;
+pub use statistics::{Statistics, Summary};
 pub use step::LoadedStep;
 pub use verify::VerifyReport;
 pub use writer::{Compression, SectionInput, encode_step, write_step};

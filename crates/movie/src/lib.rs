@@ -158,16 +158,6 @@ impl MovieWriter {
         Ok(())
     }
 
-    /// [`push_rgb`](Self::push_rgb) of RGBA8 bytes (alpha dropped), as the tracer's frames
-    /// come.
-    pub fn push_rgba(&mut self, rgba: &[u8], seconds: f64) -> Result<()> {
-        let rgb: Vec<u8> = rgba
-            .chunks_exact(4)
-            .flat_map(|p| [p[0], p[1], p[2]])
-            .collect();
-        self.push_rgb(&rgb, seconds)
-    }
-
     /// Lays out the MP4 and writes it atomically (the file appears whole or not at all).
     pub fn finish(self) -> Result<MovieStats> {
         let fail = |problem: String| Error::Frames {

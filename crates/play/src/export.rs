@@ -10,6 +10,8 @@ use slosh_cache::CacheFile;
 use slosh_mls::Camera;
 use slosh_render::{Frame, Gpu, GpuStep, TraceParams, Tracer};
 
+use crate::overlay::{Overlay, frame_rgb};
+
 /// One step file on the GPU and traced: uploaded (with `field`, if named), rendered and read
 /// back, waiting for the device.
 pub fn trace_file(
@@ -25,6 +27,89 @@ pub fn trace_file(
     Ok((step, frame))
 }
 
+/// `{}` or `{:0N}` in `pattern` replaced by `step` (zero-padded to N digits).
+pub fn step_pattern(pattern: &Path, step: usize) -> PathBuf {
+    let text = pattern.to_string_lossy();
+    let Some(open) = text.find('{') else {
+        return pattern.to_path_buf();
+    };
+    let Some(close) = text[open..].find('}').map(|c| open + c) else {
+        return pattern.to_path_buf();
+    };
+    let width: usize = text[open + 1..close]
+        .trim_start_matches(':')
+        .parse()
+        .unwrap_or(0);
+    PathBuf::from(format!(
+        "{}{step:0width$}{}",
+        &text[..open],
+        &text[close + 1..]
+    ))
+}
+
+/// A step rendered from a cache directory must belong to its series (`manifest`, read once
+/// per run where the directory has one).
+pub fn check_belongs(
+    manifest: Option<&slosh_cache::Manifest>,
+    dir: &Path,
+    step: usize,
+    path: &Path,
+    file: &CacheFile,
+) -> Result<(), String> {
+    if let Some(manifest) = manifest {
+        let problems = manifest.step_problems(step, file);
+        if !problems.is_empty() {
+            return Err(format!(
+                "{}: not step {step} of the series in {}: {}",
+                path.display(),
+                dir.display(),
+                problems.join("; ")
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A `width` × `height` movie at `out` of the step files `steps`, with each frame's seconds
+/// under `timing` (the steps' times read from their headers where it asks for them).
+pub fn open_movie(
+    out: &Path,
+    timing: slosh_movie::Timing,
+    steps: &[PathBuf],
+    (width, height): (u32, u32),
+) -> Result<(slosh_movie::MovieWriter, Vec<f64>), String> {
+    let mut times = vec![0.0; steps.len()];
+    if matches!(timing, slosh_movie::Timing::SeriesTimes { .. }) {
+        for (t, path) in times.iter_mut().zip(steps) {
+            *t = CacheFile::open(path)
+                .map_err(|e| e.to_string())?
+                .header()
+                .source
+                .time;
+        }
+    }
+    let seconds = slosh_movie::frame_seconds(timing, &times)
+        .map_err(|e| format!("{}: {e}", out.display()))?;
+    let fps = seconds.len() as f64 / seconds.iter().sum::<f64>();
+    let writer =
+        slosh_movie::MovieWriter::new(out, width, height, fps).map_err(|e| e.to_string())?;
+    Ok((writer, seconds))
+}
+
+/// Writes the movie: what it holds, as a line for the terminal.
+pub fn finish_movie(movie: slosh_movie::MovieWriter) -> Result<String, String> {
+    let path = movie.path().display().to_string();
+    let s = movie.finish().map_err(|e| e.to_string())?;
+    Ok(format!(
+        "wrote {path}: {} frames, {}x{}, {:.3} s, {:.1} MB (H.264 in MP4)",
+        s.frames,
+        s.width,
+        s.height,
+        s.seconds,
+        s.bytes as f64 / 1e6
+    ))
+}
+
 /// What to export: steps by bake index and file, one camera and trace settings for all.
 #[derive(Debug, Clone)]
 pub struct ExportRequest {
@@ -36,6 +121,8 @@ pub struct ExportRequest {
     pub dir: PathBuf,
     /// Instead of PNGs: one H.264 movie at this path, frame i shown for `seconds[i]`.
     pub movie: Option<MovieRequest>,
+    /// Each frame carries its time label and, with a field, the colour legend.
+    pub labels: bool,
 }
 
 /// Where an export's movie goes and how long each of its frames is shown.
@@ -128,6 +215,7 @@ impl ExportJob {
                     .map_err(slosh_render::Error::from)
                     .and_then(|file| {
                         let field = request.field.as_deref();
+                        let time = file.header().source.time;
                         trace_file(
                             &gpu,
                             &tracer,
@@ -136,18 +224,22 @@ impl ExportJob {
                             &request.camera,
                             &request.params,
                         )
+                        .map(|traced| (time, traced))
                     })
                     .map_err(|e| e.to_string())
-                    .and_then(|(_, frame)| match movie.as_mut() {
-                        Some((writer, seconds)) => {
-                            let rgba: Vec<u8> =
-                                frame.rgba.iter().flat_map(|p| p.to_le_bytes()).collect();
-                            writer
-                                .push_rgba(&rgba, seconds[k])
-                                .map_err(|e| e.to_string())
-                        }
-                        None => {
-                            slosh_render::write_frame_png(&out, &frame).map_err(|e| e.to_string())
+                    .and_then(|(time, (step, frame))| {
+                        let overlay = request
+                            .labels
+                            .then(|| Overlay::for_step(time, *index, &step, &request.params));
+                        let rgb = frame_rgb(&frame, overlay.as_ref());
+                        match movie.as_mut() {
+                            Some((writer, seconds)) => {
+                                writer.push_rgb(&rgb, seconds[k]).map_err(|e| e.to_string())
+                            }
+                            None => {
+                                slosh_render::write_rgb_png(&out, frame.width, frame.height, &rgb)
+                                    .map_err(|e| e.to_string())
+                            }
                         }
                     });
                 // A movie's last frame counts once the file is written.

@@ -8,6 +8,7 @@ pub mod app;
 mod engine;
 mod error;
 pub mod export;
+pub mod overlay;
 pub mod pool;
 pub mod prefetch;
 pub mod refine;

@@ -293,6 +293,7 @@ fn an_export_job_writes_each_step_as_a_direct_render() {
         field: None,
         dir: out.path().join("frames"),
         movie: None,
+        labels: false,
     };
     let mut job = ExportJob::spawn(gpu.clone(), request.clone()).unwrap();
     let ended = finish(&mut job);
@@ -315,6 +316,35 @@ fn an_export_job_writes_each_step_as_a_direct_render() {
             "step {i} differs"
         );
     }
+    // With labels, the time is drawn over the frame's top half; the rest of it is the
+    // direct render's.
+    let labelled = ExportRequest {
+        dir: out.path().join("labelled"),
+        labels: true,
+        ..request.clone()
+    };
+    let mut job = ExportJob::spawn(gpu.clone(), labelled.clone()).unwrap();
+    assert!(matches!(
+        finish(&mut job),
+        ExportState::Finished { frames: 3, .. }
+    ));
+    let rows = |path: &Path| {
+        let decoder =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size()];
+        reader.next_frame(&mut buf).unwrap();
+        buf
+    };
+    let plain = rows(&frame_path(&request.dir, 1));
+    let marked = rows(&frame_path(&labelled.dir, 1));
+    // The label is about 10 pixels tall at this size (its smallest), from row 6.
+    let top = 48 / 2 * 64 * 3;
+    assert!(plain[..top] != marked[..top], "no label in the top half");
+    assert!(
+        plain[top..] == marked[top..],
+        "the label spilled below the top half"
+    );
     // The same range as one MP4: a sample per step, each shown for its duration.
     let path = out.path().join("movie").join("range.mp4");
     let seconds = vec![0.1, 0.2, 0.3];

@@ -2,7 +2,7 @@
 //! background, and the hit buffer both write to `.npy`, with the status codes of
 //! `layout::status` (one source for both tracers).
 
-use slosh_mls::{HitStatus, TraceHit};
+use slosh_mls::{Camera, HitStatus, TraceHit};
 
 use crate::layout::{GpuHit, status};
 use crate::tracer::ShadeMode;
@@ -82,6 +82,22 @@ pub fn shade(hit: &TraceHit, dir: [f64; 3], mode: ShadeMode) -> [f64; 3] {
 
 /// The CPU's hits as the `.npy` layout: 8 floats per pixel (position, normal, t, status),
 /// zeros for a miss.
+/// The CPU tracer's frame as sRGB bytes: each hit shaded as `shade.wgsl` shades it, the
+/// background elsewhere.
+pub fn cpu_frame_rgb(hits: &[Option<TraceHit>], camera: &Camera, mode: ShadeMode) -> Vec<u8> {
+    let (width, height) = (camera.width, camera.height);
+    let mut rgb = Vec::with_capacity(hits.len() * 3);
+    for (i, hit) in hits.iter().enumerate() {
+        let (x, y) = (i as u32 % width, i as u32 / width);
+        let colour = match hit {
+            Some(hit) => shade(hit, camera.ray(x, y).1, mode),
+            None => background(y, height),
+        };
+        rgb.extend(colour.map(srgb));
+    }
+    rgb
+}
+
 pub fn cpu_hit_buffer(hits: &[Option<TraceHit>]) -> Vec<f32> {
     let mut out = vec![0f32; hits.len() * 8];
     for (px, hit) in out.chunks_exact_mut(8).zip(hits) {

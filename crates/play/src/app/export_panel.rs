@@ -28,6 +28,8 @@ pub struct ExportPanel {
     /// The movie's frame rate; 0: the series' times, slowed down by `slowdown`.
     pub fps: f64,
     pub slowdown: f64,
+    /// Frames carry the time label and the colour legend.
+    pub labels: bool,
     job: Option<ExportJob>,
 }
 
@@ -70,6 +72,7 @@ impl ExportPanel {
             movie: false,
             fps: 0.0,
             slowdown: 1.0,
+            labels: true,
             job: None,
         }
     }
@@ -111,6 +114,7 @@ impl ExportPanel {
             );
         });
         ui.horizontal(|ui| {
+            ui.checkbox(&mut self.labels, "labels");
             ui.checkbox(&mut self.movie, "MP4");
             if self.movie {
                 ui.add(
@@ -197,6 +201,7 @@ impl ExportPanel {
             field: engine.field().map(str::to_string),
             dir: output.join("frames"),
             movie,
+            labels: self.labels,
         };
         match ExportJob::spawn(gpu, request) {
             Ok(job) => {
