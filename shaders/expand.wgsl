@@ -15,8 +15,9 @@ struct ExpandSettings {
     has_normals: u32,
     // Entries of cluster_ids.
     cluster_id_count: u32,
-    pad0: u32,
-    pad1: u32,
+    // The clusters this dispatch derives: first_cluster..end_cluster.
+    first_cluster: u32,
+    end_cluster: u32,
     pad2: u32,
 }
 
@@ -44,8 +45,8 @@ fn expand(
 ) {
     let cfg = expand_settings;
     let size = max(cfg.cluster_size, 1u);
-    let c = wid.y * groups.x + wid.x;
-    if cfg.mask_words == 0u || c >= (cfg.point_count + size - 1u) / size {
+    let c = cfg.first_cluster + wid.y * groups.x + wid.x;
+    if cfg.mask_words == 0u || c >= min(cfg.end_cluster, (cfg.point_count + size - 1u) / size) {
         return;
     }
     if lid == 0u {

@@ -59,10 +59,12 @@ struct Settings {
     item_count: u32,
     // The field's colour map (colormap.rs: Colormap).
     colormap: u32,
-    pad1: u32,
+    // The rows this dispatch covers: every row_stride-th from first_row (layout.rs:
+    // GpuSettings::first_row).
+    first_row: u32,
     // Unit direction towards the key light (the shade and water passes).
     key_light: vec3<f32>,
-    pad2: f32,
+    row_stride: u32,
 }
 
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's
@@ -817,6 +819,16 @@ struct Ray {
 
 // The camera ray through the centre of pixel (x, y), y down (Camera::ray); shared by the
 // passes.
+// The pixel an invocation of a frame pass covers: a dispatch covers every row_stride-th row
+// from first_row (the whole frame when 0 and 1).
+fn frame_pixel(gid: vec3<u32>) -> vec2<u32> {
+    return vec2<u32>(gid.x, settings.first_row + gid.y * settings.row_stride);
+}
+
+fn in_frame(p: vec2<u32>) -> bool {
+    return p.x < settings.width && p.y < settings.height;
+}
+
 fn camera_ray(x: u32, y: u32) -> Ray {
     let sx = (f32(x) + 0.5) / f32(settings.width) * 2.0 - 1.0;
     let sy = 1.0 - (f32(y) + 0.5) / f32(settings.height) * 2.0;

@@ -52,16 +52,17 @@ fn status_colour(hit: Hit) -> vec3<f32> {
 
 @compute @workgroup_size(8, 8, 1)
 fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= settings.width || gid.y >= settings.height {
+    let p = frame_pixel(gid);
+    if !in_frame(p) {
         return;
     }
-    let index = gid.y * settings.width + gid.x;
+    let index = p.y * settings.width + p.x;
     if read_status(index) == STATUS_MISS {
-        image_set(index, pack(background(gid.y)));
+        image_set(index, pack(background(p.y)));
         return;
     }
     let hit = read_hit(index);
-    let dir = camera_ray(gid.x, gid.y).dir;
+    let dir = camera_ray(p.x, p.y).dir;
     var colour: vec3<f32>;
     switch settings.mode {
         case 1u: {

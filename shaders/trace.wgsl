@@ -234,8 +234,8 @@ fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
     return out;
 }
 
-// Writes pixel `gid`'s hit; no NaN reaches the buffer: a non-finite hit is a miss.
-fn store(gid: vec3<u32>, ray: Ray, item: u32, out: Outcome) {
+// Writes pixel `p`'s hit; no NaN reaches the buffer: a non-finite hit is a miss.
+fn store(p: vec2<u32>, ray: Ray, item: u32, out: Outcome) {
     var hit: Hit;
     hit.position = ray.origin + ray.dir * out.t;
     hit.t = out.t;
@@ -248,7 +248,7 @@ fn store(gid: vec3<u32>, ray: Ray, item: u32, out: Outcome) {
     if hit.status != STATUS_MISS && !(finite(hit.t) && finite3(hit.position) && finite3(hit.normal)) {
         hit.status = STATUS_MISS;
     }
-    let pixel = gid.y * settings.width + gid.x;
+    let pixel = p.y * settings.width + p.x;
     if hit.status == STATUS_MISS {
         write_miss(pixel);
         return;
@@ -265,26 +265,28 @@ fn missed() -> Outcome {
 // One iteration: the nearest initial hit, with no refinement code to weigh the kernel down.
 @compute @workgroup_size(8, 8, 1)
 fn trace_initial(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= settings.width || gid.y >= settings.height {
+    let p = frame_pixel(gid);
+    if !in_frame(p) {
         return;
     }
-    let ray = camera_ray(gid.x, gid.y);
+    let ray = camera_ray(p.x, p.y);
     let c = next_candidate(ray, -FAR, 0u);
     if !c.found {
-        store(gid, ray, 0u, missed());
+        store(p, ray, 0u, missed());
         return;
     }
-    store(gid, ray, c.item, initial_outcome(ray, c));
+    store(p, ray, c.item, initial_outcome(ray, c));
 }
 
 // More iterations: candidates in the order of their initial hits; the first whose refinement
 // stays inside its ball is the hit (Adamson & Alexa 2003; tracer.rs: trace_in).
 @compute @workgroup_size(8, 8, 1)
 fn trace_refined(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= settings.width || gid.y >= settings.height {
+    let p = frame_pixel(gid);
+    if !in_frame(p) {
         return;
     }
-    let ray = camera_ray(gid.x, gid.y);
+    let ray = camera_ray(p.x, p.y);
     var after_t = -FAR;
     var after_item = 0u;
     for (var attempt = 0u; attempt < MAX_CANDIDATES; attempt++) {
@@ -294,16 +296,16 @@ fn trace_refined(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         let start = initial_outcome(ray, c);
         if c.droplet {
-            store(gid, ray, c.item, start);
+            store(p, ray, c.item, start);
             return;
         }
         let out = refine(ray, c.item, balls_at(c.item).h, start, c.t_lo, c.t_out);
         if out.status != STATUS_MISS && finite(out.t) {
-            store(gid, ray, c.item, out);
+            store(p, ray, c.item, out);
             return;
         }
         after_t = c.t;
         after_item = c.item;
     }
-    store(gid, ray, 0u, missed());
+    store(p, ray, 0u, missed());
 }

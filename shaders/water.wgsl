@@ -134,11 +134,12 @@ fn water_colour(p: vec3<f32>, n_in: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec
 
 @compute @workgroup_size(8, 8, 1)
 fn water(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= settings.width || gid.y >= settings.height {
+    let p = frame_pixel(gid);
+    if !in_frame(p) {
         return;
     }
-    let index = gid.y * settings.width + gid.x;
-    let dir = camera_ray(gid.x, gid.y).dir;
+    let index = p.y * settings.width + p.x;
+    let dir = camera_ray(p.x, p.y).dir;
     let st = stage();
     if read_status(index) == STATUS_MISS {
         image_set(index, pack(environment(settings.eye, dir, st)));

@@ -67,6 +67,11 @@ pub struct PlayArgs {
     /// Iterations refined to when the view is still.
     #[arg(long, default_value_t = 3)]
     pub iterations: u32,
+    /// Milliseconds a frame may take on the GPU: while the view moves it is drawn smaller,
+    /// and a still view refines in bands of rows, so the window answers on a slow GPU
+    /// (0: every frame whole at full size).
+    #[arg(long, default_value_t = 33.0)]
+    pub frame_budget_ms: f64,
     /// Window size in points, WxH.
     #[arg(long, default_value = "1280x800")]
     pub window: String,

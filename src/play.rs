@@ -109,6 +109,7 @@ pub fn demo(args: &DemoConfig) -> Result<()> {
             render_scale: 1.0,
             up: None,
             iterations: 3,
+            frame_budget_ms: 33.0,
             window: "1280x800".into(),
             output: root.clone(),
             loaders: None,

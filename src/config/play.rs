@@ -37,6 +37,13 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
     if !(0.25..=2.0).contains(&args.render_scale) {
         bail!("--render-scale {}: expected 0.25 to 2", args.render_scale);
     }
+    let frame_budget_ms = match args.frame_budget_ms {
+        0.0 => None,
+        ms if ms.is_finite() && ms > 0.0 => Some(ms),
+        ms => bail!(
+            "--frame-budget-ms {ms}: expected a positive number of milliseconds, or 0 for none"
+        ),
+    };
     let mut engine = EngineOptions {
         budget,
         field: args.field.clone(),
@@ -53,6 +60,7 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
         render_scale: args.render_scale,
         up: args.up.as_deref().map(up_axis).transpose()?,
         iterations: args.iterations.clamp(1, 8),
+        frame_budget_ms,
         window: window(&args.window)?,
         output: args.output.clone(),
         log_frames: args.log_frames,

@@ -60,6 +60,7 @@ fn request(iterations: u32) -> FrameRequest {
             ..TraceParams::default()
         },
         camera_moving: false,
+        frame_budget_ms: None,
     }
 }
 

@@ -38,10 +38,13 @@ pub struct GpuSettings {
     pub item_count: u32,
     /// The field's colour map (`Colormap as u32`).
     pub colormap: u32,
-    pub pad1: u32,
+    /// The rows this dispatch covers: every `row_stride`-th from `first_row`. A slow adapter
+    /// traces a frame as several such sets, one per submission (`Tracer::record_rows`), so
+    /// it never holds the UI for a whole frame.
+    pub first_row: u32,
     /// Unit direction towards the key light.
     pub key_light: [f32; 3],
-    pub pad2: f32,
+    pub row_stride: u32,
 }
 
 /// The key light's direction by default, normalize(0.4, −0.3, 0.85): from the front left,
@@ -59,8 +62,10 @@ pub struct ExpandSettings {
     pub has_normals: u32,
     /// Entries of cluster_ids.
     pub cluster_id_count: u32,
-    pub pad0: u32,
-    pub pad1: u32,
+    /// The clusters this dispatch derives: `first_cluster..end_cluster` (a step's masks may
+    /// be derived in parts, one per submission, on a slow adapter).
+    pub first_cluster: u32,
+    pub end_cluster: u32,
     pub pad2: u32,
 }
 

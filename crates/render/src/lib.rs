@@ -13,6 +13,7 @@ mod diverging;
 mod error;
 pub mod layout;
 mod masks;
+pub use masks::MaskProgress;
 mod output;
 pub mod shaders;
 mod staging;
@@ -27,7 +28,7 @@ pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, status}
 pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use staging::StagingPool;
 pub use tracer::{
-    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ShadeMode, TraceParams, Tracer,
+    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, RowSet, ShadeMode, TraceParams, Tracer,
     read_buffer, settings,
 };
 pub use upload::{

@@ -18,12 +18,34 @@ use crate::layout::ExpandSettings;
 use crate::shaders::{EXPAND_ARRAYS, MASK_ARRAYS, expand_wgsl};
 use crate::upload::{EMPTY_BINDING, GpuStep};
 
-/// The masks the tracer holds: whose, and the trace passes' group over them.
+/// The masks the tracer holds: whose, how many of its clusters are derived, and the trace
+/// passes' group over them.
 #[derive(Debug)]
 struct HeldMasks {
     step: u64,
+    derived: u32,
     buffer: wgpu::Buffer,
     group: wgpu::BindGroup,
+}
+
+/// How far the derivation of a step's neighbour masks has got, in clusters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MaskProgress {
+    pub derived: u32,
+    pub total: u32,
+}
+
+impl MaskProgress {
+    pub fn finished(&self) -> bool {
+        self.derived >= self.total
+    }
+}
+
+/// The clusters of `step`, one mask-pass workgroup each.
+pub(crate) fn cluster_count(step: &GpuStep) -> u32 {
+    step.info
+        .point_count
+        .div_ceil(step.info.cluster_size.max(1))
 }
 
 /// The mask pass's pipelines (per split, on first use), the trace passes' group-2 layout,
@@ -120,8 +142,8 @@ impl NeighbourMasks {
     }
 
     /// The trace passes' group 2 for a frame of `step`: the empty one where the frame does
-    /// not refine, else the held masks, derived first (recorded into `encoder`) where they
-    /// are another step's.
+    /// not refine, else the held masks, derived first (recorded into `encoder`) as far as
+    /// they are not yet.
     pub(crate) fn group_for(
         &self,
         gpu: &Gpu,
@@ -132,28 +154,72 @@ impl NeighbourMasks {
         if !refines {
             return Ok(self.none.clone());
         }
-        let mut held = self
-            .held
-            .lock()
-            .map_err(|_| Error::Validation("the neighbour masks' lock was poisoned".into()))?;
-        if let Some(h) = held.as_ref().filter(|h| h.step == step.id()) {
-            return Ok(h.group.clone());
+        self.derive(gpu, step, u32::MAX, encoder)?;
+        let held = self.lock()?;
+        held.as_ref()
+            .map(|h| h.group.clone())
+            .ok_or_else(|| Error::Validation("the neighbour masks were not derived".into()))
+    }
+
+    /// Derives up to `clusters` more clusters of `step`'s masks (recorded into `encoder`),
+    /// starting them where the held masks are another step's.
+    pub(crate) fn derive(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        clusters: u32,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<MaskProgress> {
+        let total = cluster_count(step);
+        let mut held = self.lock()?;
+        let current = held.as_ref().is_some_and(|h| h.step == step.id());
+        if !current {
+            let needed = step.info.mask_bytes();
+            // The buffer is reused while it is large enough: the pass writes every word the
+            // step's clusters read.
+            let buffer = match held.take() {
+                Some(h) if h.buffer.size() >= needed => h.buffer,
+                _ => mask_buffer(gpu, needed),
+            };
+            let group = Self::group(gpu, &self.layout, &buffer, self.limit);
+            *held = Some(HeldMasks {
+                step: step.id(),
+                derived: 0,
+                buffer,
+                group,
+            });
         }
-        let needed = step.info.mask_bytes();
-        // The buffer is reused while it is large enough: the pass writes every word the
-        // step's clusters read.
-        let buffer = match held.take() {
-            Some(h) if h.buffer.size() >= needed => h.buffer,
-            _ => mask_buffer(gpu, needed),
-        };
-        self.record(gpu, step, &buffer, encoder, None)?;
-        let group = Self::group(gpu, &self.layout, &buffer, self.limit);
-        *held = Some(HeldMasks {
-            step: step.id(),
-            buffer,
-            group: group.clone(),
+        let h = held
+            .as_mut()
+            .ok_or_else(|| Error::Validation("the neighbour masks were not made".into()))?;
+        if h.derived < total {
+            let end = h.derived.saturating_add(clusters.max(1)).min(total);
+            self.record(gpu, step, &h.buffer, h.derived..end, encoder, None)?;
+            h.derived = end;
+        }
+        Ok(MaskProgress {
+            derived: h.derived,
+            total,
+        })
+    }
+
+    /// How far `step`'s masks are derived (none where the held ones are another's).
+    pub(crate) fn progress(&self, step: &GpuStep) -> MaskProgress {
+        let derived = self.held.lock().map_or(0, |h| {
+            h.as_ref()
+                .filter(|h| h.step == step.id())
+                .map_or(0, |h| h.derived)
         });
-        Ok(group)
+        MaskProgress {
+            derived,
+            total: cluster_count(step),
+        }
+    }
+
+    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Option<HeldMasks>>> {
+        self.held
+            .lock()
+            .map_err(|_| Error::Validation("the neighbour masks' lock was poisoned".into()))
     }
 
     /// Bytes of the masks held now (0 before the first refined frame).
@@ -163,13 +229,14 @@ impl NeighbourMasks {
             .map_or(0, |h| h.as_ref().map_or(0, |h| h.buffer.size()))
     }
 
-    /// Records the pass that fills `masks` for `step` (rows of words, `mask_row`), timed
-    /// into `timestamps` (2 queries) where given.
+    /// Records the pass that fills `masks` for `step`'s clusters `clusters` (rows of words,
+    /// `mask_row`), timed into `timestamps` (2 queries) where given.
     pub(crate) fn record(
         &self,
         gpu: &Gpu,
         step: &GpuStep,
         masks: &wgpu::Buffer,
+        clusters: std::ops::Range<u32>,
         encoder: &mut wgpu::CommandEncoder,
         timestamps: Option<&wgpu::QuerySet>,
     ) -> Result<()> {
@@ -181,6 +248,8 @@ impl NeighbourMasks {
             mask_words: info.mask_words,
             has_normals: u32::from(info.has_normals),
             cluster_id_count: info.cluster_id_count,
+            first_cluster: clusters.start,
+            end_cluster: clusters.end,
             ..ExpandSettings::zeroed()
         };
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
@@ -214,8 +283,11 @@ impl NeighbourMasks {
         let pipeline = self.pipeline(gpu, step.split)?;
         let max_groups = device.limits().max_compute_workgroups_per_dimension;
         // One workgroup per cluster.
-        let clusters = info.point_count.div_ceil(info.cluster_size.max(1));
-        let groups = if info.mask_words == 0 { 0 } else { clusters };
+        let groups = if info.mask_words == 0 {
+            0
+        } else {
+            clusters.len() as u32
+        };
         let timestamp_writes = timestamps.map(|set| wgpu::ComputePassTimestampWrites {
             query_set: set,
             beginning_of_pass_write_index: Some(0),

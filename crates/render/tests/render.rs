@@ -49,7 +49,7 @@ use slosh_bake::{BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step};
 use slosh_cache::{CacheFile, encode_step};
 use slosh_fileio::FileBytes;
 use slosh_mls::{Camera, HitStatus, NormalsMode, Params, Surface, TraceHit};
-use slosh_render::{Frame, Gpu, GpuHit, GpuStep, ShadeMode, TraceParams, Tracer, status};
+use slosh_render::{Frame, Gpu, GpuHit, GpuStep, RowSet, ShadeMode, TraceParams, Tracer, status};
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
 
 struct Device {
@@ -334,9 +334,9 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 wide_count,
                 item_count,
                 colormap,
-                pad1,
+                first_row,
                 key_light,
-                pad2
+                row_stride
             ]
         );
     }
@@ -352,8 +352,8 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             mask_words,
             has_normals,
             cluster_id_count,
-            pad0,
-            pad1,
+            first_cluster,
+            end_cluster,
             pad2
         ]
     );
@@ -742,6 +742,91 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
             read_texture(&dev.gpu, targets.texture()) == frame.rgba,
             "{mode:?}: the texture differs from the image"
         );
+        // Set of rows by set, one set a submission (every 4th row from 1, every 2nd from 0,
+        // every 4th from 3): the same pixels, and the texture shows none of them before the
+        // last set.
+        let banded = dev.tracer.targets(&dev.gpu, 64, 48).unwrap();
+        let sets = [
+            RowSet {
+                first: 1,
+                stride: 4,
+            },
+            RowSet {
+                first: 0,
+                stride: 2,
+            },
+            RowSet {
+                first: 3,
+                stride: 4,
+            },
+        ];
+        for (i, rows) in sets.into_iter().enumerate() {
+            let before = read_texture(&dev.gpu, banded.texture());
+            let mut encoder = dev
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+            let last = i == sets.len() - 1;
+            dev.tracer
+                .record_rows(
+                    &dev.gpu,
+                    &step,
+                    &banded,
+                    &camera,
+                    &trace,
+                    rows,
+                    last,
+                    &mut encoder,
+                )
+                .unwrap();
+            dev.gpu.queue.submit([encoder.finish()]);
+            if !last {
+                assert!(read_texture(&dev.gpu, banded.texture()) == before);
+            }
+        }
+        let bands = dev.tracer.read_frame(&dev.gpu, &banded).unwrap();
+        assert!(
+            reference.hits == bands.hits,
+            "{mode:?}: hits by row sets differ"
+        );
+        assert!(
+            reference.rgba == bands.rgba,
+            "{mode:?}: pixels by row sets differ"
+        );
+        assert!(read_texture(&dev.gpu, banded.texture()) == frame.rgba);
+        let mut encoder = dev
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        for empty in [
+            RowSet {
+                first: 48,
+                stride: 1,
+            },
+            RowSet {
+                first: 0,
+                stride: 0,
+            },
+        ] {
+            let refused = dev
+                .tracer
+                .record_rows(
+                    &dev.gpu,
+                    &step,
+                    &banded,
+                    &camera,
+                    &trace,
+                    empty,
+                    true,
+                    &mut encoder,
+                )
+                .unwrap_err()
+                .to_string();
+            assert!(
+                refused.contains("hold none of a frame 48 rows high"),
+                "{refused}"
+            );
+        }
     }
     // Switching the field uploads the field alone and draws what a step uploaded with that
     // field draws.
@@ -996,6 +1081,43 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
                 held >= step.info.mask_bytes() && held <= largest,
                 "{held} bytes held"
             );
+        }
+    }
+    // Derived in parts, one submission each (a slow adapter's way), then a refined frame:
+    // the same pixels; the frame derives what is still missing itself.
+    for parts_before_frame in [usize::MAX, 2] {
+        for (k, (camera, step)) in steps.iter().enumerate() {
+            let total = shared.mask_progress(step).total;
+            assert!(total > 3, "{total} clusters");
+            let part = total.div_ceil(3);
+            let mut parts = 0;
+            loop {
+                if parts == parts_before_frame {
+                    break;
+                }
+                let mut encoder = dev
+                    .gpu
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+                let progress = shared
+                    .derive_masks(&dev.gpu, step, part, &mut encoder)
+                    .unwrap();
+                dev.gpu.queue.submit([encoder.finish()]);
+                parts += 1;
+                assert_eq!(progress, shared.mask_progress(step));
+                assert_eq!(progress.derived, (part * parts as u32).min(total));
+                if progress.finished() {
+                    break;
+                }
+            }
+            let frame = shared
+                .render(&dev.gpu, step, camera, &refined(step))
+                .unwrap();
+            assert!(
+                frame.hits == alone[k].hits && frame.rgba == alone[k].rgba,
+                "step {k}: masks derived in {parts} parts draw other pixels"
+            );
+            assert!(shared.mask_progress(step).finished());
         }
     }
 }

@@ -240,6 +240,7 @@ fn measure(
             camera,
             params: TraceParams::default(),
             camera_moving: true,
+            frame_budget_ms: None,
         };
         let options = EngineOptions {
             loaders: args.loaders.unwrap_or_else(slosh_play::default_loaders),
@@ -374,6 +375,7 @@ fn measure(
         camera,
         params,
         camera_moving: false,
+        frame_budget_ms: None,
     };
     let streaming_budget = step_gpu_bytes * args.pool_steps.max(3);
     let options = |budget| EngineOptions {

@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use crate::engine::{Engine, FrameReport};
+use crate::refine::Draw;
 
 /// Timings of the UI's frames, as the status bar shows them.
 #[derive(Debug, Clone)]
@@ -61,6 +62,30 @@ impl FrameStats {
         let progress = last.progress.map_or(String::new(), |p| {
             format!(" · refined {}/{}", p.done, p.target)
         });
+        // What is on screen, where the frame budget lowered it or a refinement is in bands.
+        let percent = |part: u32, whole: u32| u64::from(part) * 100 / u64::from(whole.max(1));
+        let quality = match (last.masks, last.quality, &last.draw) {
+            (Some(m), _, _) => format!(" · neighbour masks {}%", percent(m.derived, m.total)),
+            (
+                _,
+                _,
+                Some(Draw::Rows {
+                    iterations,
+                    done,
+                    height,
+                    ..
+                }),
+            ) => format!(
+                " · refining {iterations} it: {}% of rows",
+                percent(*done, *height)
+            ),
+            (_, Some(q), _) if q.scale < 1.0 => format!(
+                " · showing {:.0}% size, {} it",
+                q.scale * 100.0,
+                q.iterations
+            ),
+            _ => String::new(),
+        };
         let index = |p: usize| engine.bake_index(p).unwrap_or(p);
         let shown = match (last.shown, last.stand_in) {
             (Some(s), true) => format!(" · showing step {} for {}", index(s), index(last.wanted)),
@@ -68,7 +93,7 @@ impl FrameStats {
             (None, _) => " · nothing resident yet".into(),
         };
         format!(
-            "frame {:.1} ms · trace {} · upload {:.1} ms · {} / {} steps resident · {:.2} / {:.2} GiB{progress}{shown} · {} frames",
+            "frame {:.1} ms · trace {} · upload {:.1} ms · {} / {} steps resident · {:.2} / {:.2} GiB{progress}{quality}{shown} · {} frames",
             self.frame_ms,
             self.trace_ms.map_or("–".into(), |t| format!("{t:.2} ms")),
             self.upload_ms,

@@ -18,6 +18,7 @@ use super::options::PlayOptions;
 use super::timeline_panel;
 use super::view::{RangeMode, ViewSettings, axis_vector, default_light};
 use crate::engine::{Engine, FrameReport, FrameRequest};
+use crate::refine::Draw;
 use slosh_mls::dominant_axis;
 
 /// Framed before the series has a step with particles.
@@ -70,6 +71,7 @@ impl Player {
             mode: slosh_render::ShadeMode::Shade,
             iterations: options.iterations.max(1),
             render_scale: options.render_scale.clamp(0.25, 2.0),
+            frame_budget_ms: options.frame_budget_ms,
             up_axis,
             light: default_light(),
             field: engine.field().map(str::to_string),
@@ -190,6 +192,7 @@ impl Player {
             camera: self.camera.camera(width, height),
             params: self.view.params(&self.engine),
             camera_moving: moving,
+            frame_budget_ms: self.view.frame_budget_ms,
         };
         let mut encoder = self
             .gpu
@@ -200,14 +203,13 @@ impl Player {
         match self.engine.frame(&request, &mut encoder) {
             Ok(report) => {
                 self.gpu.queue.submit([encoder.finish()]);
-                let trace_ms = match (report.drawn, self.engine.targets()) {
-                    (Some(_), Some(targets)) => self
-                        .engine
-                        .tracer()
-                        .pass_times(&self.gpu, targets)
-                        .ok()
-                        .map(|times| times.map(|t| t.trace_ms)),
-                    _ => None,
+                // Waits for the frame: what it cost paces the next ones.
+                let trace_ms = match self.engine.finish_frame() {
+                    Ok(ms) => ms.map(Some),
+                    Err(e) => {
+                        self.message = Some(e.to_string());
+                        None
+                    }
                 };
                 self.stats.record(&report, trace_ms);
                 if let Some((_, why)) = report.failures.last() {
@@ -400,6 +402,7 @@ impl Player {
 
 impl eframe::App for Player {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let pass_start = Instant::now();
         let ctx = ui.ctx().clone();
         self.keys(&ctx);
         if let Some(message) = self.export.poll() {
@@ -430,21 +433,6 @@ impl eframe::App for Player {
             .default_size(260.0)
             .show(ui, |ui| self.controls(ui));
         egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
-        self.stats.passes += 1;
-        if self.log_frames {
-            say!(
-                "pass {}: wanted {} shown {:?}{}{} export {}..={}",
-                self.stats.passes,
-                self.last.wanted,
-                self.last.shown,
-                if self.last.stand_in { " stand-in" } else { "" },
-                self.last
-                    .drawn
-                    .map_or(String::new(), |n| format!(" drew {n}")),
-                self.export.first,
-                self.export.last
-            );
-        }
         // The title names the step on screen (a stand-in's own number while another loads),
         // by its bake index, as `slosh render --step` does.
         let title = match self.last.shown {
@@ -479,6 +467,39 @@ impl eframe::App for Player {
             || self.last.progress.is_some_and(|p| !p.finished())
             || self.screenshot_pending
             || self.export.running();
+        self.stats.passes += 1;
+        if self.log_frames {
+            // The pass's interval since the last one (what delays an input event while the
+            // player is busy) and the time spent in this pass's own work.
+            let band = match &self.last.draw {
+                Some(Draw::Rows {
+                    rows, done, height, ..
+                }) => format!(" rows {}+{}k ({done} of {height})", rows.first, rows.stride),
+                None if self.last.masks.is_some() => self.last.masks.map_or(String::new(), |m| {
+                    format!(" masks {}/{}", m.derived, m.total)
+                }),
+                Some(Draw::Preview) => self
+                    .last
+                    .quality
+                    .map_or(String::new(), |q| format!(" preview {}", q.scale)),
+                _ => String::new(),
+            };
+            say!(
+                "pass {}: wanted {} shown {:?}{}{}{band} ms {:.1}/{:.1} {} export {}..={}",
+                self.stats.passes,
+                self.last.wanted,
+                self.last.shown,
+                if self.last.stand_in { " stand-in" } else { "" },
+                self.last
+                    .drawn
+                    .map_or(String::new(), |n| format!(" drew {n}")),
+                self.stats.frame_ms,
+                pass_start.elapsed().as_secs_f64() * 1e3,
+                if busy { "busy" } else { "idle" },
+                self.export.first,
+                self.export.last
+            );
+        }
         if busy {
             ctx.request_repaint();
         } else {

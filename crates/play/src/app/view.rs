@@ -24,6 +24,8 @@ pub struct ViewSettings {
     pub iterations: u32,
     /// Viewport pixels traced per physical pixel, per axis.
     pub render_scale: f32,
+    /// Milliseconds a frame may take on the GPU; `None`: every frame whole at full size.
+    pub frame_budget_ms: Option<f64>,
     pub up_axis: usize,
     /// The key light's azimuth and elevation about the up axis, in degrees.
     pub light: (f32, f32),
@@ -123,6 +125,14 @@ impl ViewSettings {
         });
         ui.add(egui::Slider::new(&mut self.iterations, 1..=8).text("iterations when still"));
         ui.add(egui::Slider::new(&mut self.render_scale, 0.25..=2.0).text("render scale"));
+        let mut paced = self.frame_budget_ms.is_some();
+        let mut ms = self.frame_budget_ms.unwrap_or(33.0);
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut paced, "frame budget")
+                .on_hover_text("while the view moves, draw it smaller; refine a still view in bands, so the window stays responsive on a slow GPU");
+            ui.add_enabled(paced, egui::Slider::new(&mut ms, 8.0..=200.0).suffix(" ms"));
+        });
+        self.frame_budget_ms = paced.then_some(ms);
         let before = self.up_axis;
         ui.horizontal(|ui| {
             ui.label("up");

@@ -8,7 +8,9 @@ use std::path::Path;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use slosh_mls::Camera;
-use slosh_render::{FrameTargets, Gpu, GpuStep, HostField, StagingPool, TraceParams, Tracer};
+use slosh_render::{
+    FrameTargets, Gpu, GpuStep, HostField, MaskProgress, RowSet, StagingPool, TraceParams, Tracer,
+};
 
 mod gpu_source;
 mod wait;
@@ -17,9 +19,10 @@ pub use gpu_source::{GpuSource, Prepared};
 pub use wait::Pace;
 
 use crate::error::{Error, Result};
+use crate::frame_budget::FrameBudget;
 use crate::pool::{Admission, StepPool};
 use crate::prefetch::Prefetcher;
-use crate::refine::{Progress, Refinement, ViewKey};
+use crate::refine::{Draw, Pacing, Progress, Refinement, ViewKey};
 use crate::series::Series;
 use crate::timeline::{Direction, Looping, Timeline};
 
@@ -83,6 +86,32 @@ pub struct FrameRequest {
     pub params: TraceParams,
     /// Whether the camera is being moved (refinement restarts at one iteration).
     pub camera_moving: bool,
+    /// Milliseconds a frame may take on the GPU: a moving view is drawn smaller and a refined
+    /// frame in bands of rows, one per call, as the frames measured so far say fits
+    /// ([`Engine::finish_frame`] measures them). `None`: every frame whole at full size.
+    pub frame_budget_ms: Option<f64>,
+}
+
+/// What a frame recorded, to be measured once it ran.
+#[derive(Debug, Clone, Copy)]
+enum Recorded {
+    /// A frame or a set of its rows: its iterations and pixels, and whether it went into
+    /// the preview targets.
+    Trace {
+        iterations: u32,
+        pixels: u64,
+        preview: bool,
+    },
+    /// A part of a step's neighbour masks, in clusters.
+    Masks { clusters: u32 },
+}
+
+/// The quality of the picture on screen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Quality {
+    /// Its size per axis against the full size.
+    pub scale: f32,
+    pub iterations: u32,
 }
 
 /// What a frame did.
@@ -96,6 +125,12 @@ pub struct FrameReport {
     pub stand_in: bool,
     /// Iterations drawn this frame; `None` when the targets already hold this view.
     pub drawn: Option<u32>,
+    /// What was drawn this frame: a whole frame, a preview or a band of rows.
+    pub draw: Option<Draw>,
+    /// The quality of the picture on screen after this frame.
+    pub quality: Option<Quality>,
+    /// Neighbour masks derived this frame ahead of a refined one, under a frame budget.
+    pub masks: Option<MaskProgress>,
     pub progress: Option<Progress>,
     /// Steps made resident this frame, by position.
     pub uploaded: Vec<usize>,
@@ -117,7 +152,17 @@ pub struct Engine {
     pool: StepPool<GpuStep>,
     prefetch: Prefetcher<Prepared>,
     targets: Option<FrameTargets>,
+    /// The smaller targets a moving view is drawn into under a frame budget.
+    preview_targets: Option<FrameTargets>,
+    /// The picture on screen is the preview's (else the full targets').
+    showing_preview: bool,
+    quality: Option<Quality>,
     refinement: Refinement,
+    /// The frame budget and what frames have cost, once a request asked for one.
+    frame_budget: Option<FrameBudget>,
+    /// What the last frame recorded, and when it handed the encoder back, for
+    /// [`Engine::finish_frame`].
+    unmeasured: Option<(Recorded, std::time::Instant)>,
     options: EngineOptions,
     /// Failed steps by bake index, with why.
     failed: BTreeMap<usize, String>,
@@ -171,7 +216,12 @@ impl Engine {
             pool: StepPool::new(budget),
             prefetch,
             targets: None,
+            preview_targets: None,
+            showing_preview: false,
+            quality: None,
             refinement: Refinement::default(),
+            frame_budget: None,
+            unmeasured: None,
             field: options.field.clone(),
             options,
             failed: BTreeMap::new(),
@@ -321,9 +371,52 @@ impl Engine {
         self.field.as_deref()
     }
 
-    /// The frame targets of the last frame (its texture holds the picture).
+    /// The frame targets whose texture holds the picture on screen: the full-size ones, or a
+    /// moving view's preview under a frame budget.
     pub fn targets(&self) -> Option<&FrameTargets> {
-        self.targets.as_ref()
+        if self.showing_preview {
+            self.preview_targets.as_ref()
+        } else {
+            self.targets.as_ref()
+        }
+    }
+
+    /// The frame budget's state, once a request asked for one.
+    pub fn frame_budget(&self) -> Option<&FrameBudget> {
+        self.frame_budget.as_ref()
+    }
+
+    /// Waits for the frame last recorded and submitted, and takes its GPU time (timestamp
+    /// queries where the adapter has them, else from its recording to the end of the wait) into
+    /// the frame budget. Returns that time in ms where a frame was recorded.
+    pub fn finish_frame(&mut self) -> Result<Option<f64>> {
+        let Some((recorded, start)) = self.unmeasured.take() else {
+            return Ok(None);
+        };
+        let targets = match recorded {
+            Recorded::Trace { preview: true, .. } => self.preview_targets.as_ref(),
+            Recorded::Trace { preview: false, .. } => self.targets.as_ref(),
+            // The mask pass has no timestamps: its time is from the end of the recording to
+            // the end of the wait (a software adapter may run the work inside the submit).
+            Recorded::Masks { .. } => None,
+        };
+        let stamped = match targets {
+            Some(t) => self.tracer.pass_times(&self.gpu, t)?,
+            None => None,
+        };
+        self.gpu.wait()?;
+        let ms = stamped.map_or(start.elapsed().as_secs_f64() * 1e3, |t| {
+            t.trace_ms + t.shade_ms
+        });
+        if let Some(budget) = &mut self.frame_budget {
+            match recorded {
+                Recorded::Trace {
+                    iterations, pixels, ..
+                } => budget.record(iterations, pixels, ms),
+                Recorded::Masks { clusters } => budget.record_masks(clusters, ms),
+            }
+        }
+        Ok(Some(ms))
     }
 
     /// The step drawn last, if any (series position, and the step itself).
@@ -608,26 +701,123 @@ impl Engine {
         // step asked for starts over at one iteration when it arrives (another key).
         let moving = request.camera_moving || time_moved || scrubbed || self.timeline.is_playing();
         let target = request.params.iterations.max(1);
-        report.drawn = self.refinement.next(key, moving, target);
+        match request.frame_budget_ms {
+            Some(ms) if self.frame_budget.as_ref().map(FrameBudget::budget_ms) != Some(ms) => {
+                self.frame_budget = Some(FrameBudget::new(ms));
+            }
+            Some(_) => {}
+            None => self.frame_budget = None,
+        }
+        let preview_scale = self
+            .frame_budget
+            .as_mut()
+            .map_or(1.0, |b| b.preview_scale(width, height));
+        let pacing = self.frame_budget.as_ref().map(|budget| Pacing {
+            budget,
+            preview: preview_scale < 1.0,
+        });
+        let step = self.pool.get(shown_index).ok_or_else(|| Error::Series {
+            path: self.series.dir().to_path_buf(),
+            problem: "the shown step left the pool".into(),
+        })?;
+        // Under a budget, the neighbour masks a refined frame needs are derived first, a
+        // part per frame, instead of all at once inside it.
+        if let Some(p) = pacing {
+            let mut probe = self.refinement.clone();
+            let refines = probe
+                .next(key.clone(), moving, target, pacing)
+                .is_some_and(|d| d.iterations() > 1);
+            if refines && !self.tracer.mask_progress(step).finished() {
+                let clusters = p.budget.mask_clusters();
+                let progress = self
+                    .tracer
+                    .derive_masks(&self.gpu, step, clusters, encoder)?;
+                self.unmeasured = Some((Recorded::Masks { clusters }, std::time::Instant::now()));
+                report.masks = Some(progress);
+                report.progress = Some(self.refinement.progress(target));
+                report.quality = self.quality;
+                return Ok(report);
+            }
+        }
+        let draw = self.refinement.next(key, moving, target, pacing);
+        report.drawn = draw.as_ref().map(Draw::iterations);
         report.progress = Some(self.refinement.progress(target));
-        if let Some(iterations) = report.drawn {
+        if let Some(draw) = &draw {
             let params = TraceParams {
-                iterations,
+                iterations: draw.iterations(),
                 ..request.params
             };
-            let step = self.pool.get(shown_index).ok_or_else(|| Error::Series {
-                path: self.series.dir().to_path_buf(),
-                problem: "the shown step left the pool".into(),
-            })?;
-            let targets = self.targets.as_ref().ok_or_else(|| Error::Series {
+            let missing = || Error::Series {
                 path: self.series.dir().to_path_buf(),
                 problem: "no frame targets".into(),
-            })?;
-            self.tracer
-                .record(&self.gpu, step, targets, &request.camera, &params, encoder)?;
-        } else {
-            self.pool.get(shown_index);
+            };
+            match draw {
+                Draw::Preview => {
+                    let size = (
+                        ((width as f32 * preview_scale).round() as u32).max(1),
+                        ((height as f32 * preview_scale).round() as u32).max(1),
+                    );
+                    if self.preview_targets.as_ref().map(FrameTargets::size) != Some(size) {
+                        self.preview_targets =
+                            Some(self.tracer.targets(&self.gpu, size.0, size.1)?);
+                    }
+                    let targets = self.preview_targets.as_ref().ok_or_else(missing)?;
+                    self.tracer.record(
+                        &self.gpu,
+                        step,
+                        targets,
+                        &request.camera,
+                        &params,
+                        encoder,
+                    )?;
+                    let recorded = Recorded::Trace {
+                        iterations: 1,
+                        pixels: u64::from(size.0) * u64::from(size.1),
+                        preview: true,
+                    };
+                    self.unmeasured = Some((recorded, std::time::Instant::now()));
+                    self.showing_preview = true;
+                    self.quality = Some(Quality {
+                        scale: preview_scale,
+                        iterations: 1,
+                    });
+                }
+                Draw::Whole { iterations } | Draw::Rows { iterations, .. } => {
+                    let rows = match draw {
+                        Draw::Rows { rows, .. } => *rows,
+                        _ => RowSet::WHOLE,
+                    };
+                    let completes = draw.completes_frame();
+                    let targets = self.targets.as_ref().ok_or_else(missing)?;
+                    self.tracer.record_rows(
+                        &self.gpu,
+                        step,
+                        targets,
+                        &request.camera,
+                        &params,
+                        rows,
+                        completes,
+                        encoder,
+                    )?;
+                    let pixels = u64::from(width) * u64::from(rows.count(height));
+                    let recorded = Recorded::Trace {
+                        iterations: *iterations,
+                        pixels,
+                        preview: false,
+                    };
+                    self.unmeasured = Some((recorded, std::time::Instant::now()));
+                    if completes {
+                        self.showing_preview = false;
+                        self.quality = Some(Quality {
+                            scale: 1.0,
+                            iterations: *iterations,
+                        });
+                    }
+                }
+            }
         }
+        report.draw = draw;
+        report.quality = self.quality;
         Ok(report)
     }
 

@@ -30,6 +30,7 @@ impl Engine {
             });
         let report = self.frame(request, &mut encoder)?;
         gpu.queue.submit([encoder.finish()]);
+        self.finish_frame()?;
         gpu.wait()?;
         Ok(report)
     }

@@ -32,8 +32,8 @@ use slosh_mls::Camera;
 use crate::bindings::{bind_entries, capacity, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
-use crate::layout::{GpuHit, GpuSettings, status};
-use crate::masks::{NeighbourMasks, mask_buffer};
+use crate::layout::{GpuHit, GpuSettings};
+use crate::masks::{MaskProgress, NeighbourMasks, mask_buffer};
 use crate::shaders::{
     FRAME_ARRAYS, PRESENT_ARRAYS, TEXTURE_BINDING, TRACE_STACK_SIZES, present_wgsl, shade_wgsl,
     trace_wgsl,
@@ -43,14 +43,13 @@ use crate::shaders::{
 pub const FRAME_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 use crate::upload::GpuStep;
 
-use bytemuck::Zeroable;
-
 mod params;
 mod readback;
+mod rows;
 
 pub use params::{ShadeMode, TraceParams, settings};
-use readback::read;
 pub use readback::read_buffer;
+pub use rows::RowSet;
 
 /// A rendered frame read back from the GPU.
 #[derive(Debug, Clone)]
@@ -476,15 +475,21 @@ impl Tracer {
 
     /// Records the trace, shade and present passes (trace and shade timed where the targets
     /// have timestamp queries).
+    #[allow(clippy::too_many_arguments)]
     fn encode(
         &self,
         step: &GpuStep,
         targets: &FrameTargets,
         masks: &wgpu::BindGroup,
         passes: [&wgpu::ComputePipeline; 3],
+        rows: RowSet,
+        present_frame: bool,
         encoder: &mut wgpu::CommandEncoder,
     ) {
-        let groups = (targets.width.div_ceil(8), targets.height.div_ceil(8));
+        let groups = (
+            targets.width.div_ceil(8),
+            rows.count(targets.height).div_ceil(8),
+        );
         let [trace, shade, present] = passes;
         for (i, pipeline) in [trace, shade].into_iter().enumerate() {
             let timestamp_writes =
@@ -506,14 +511,16 @@ impl Tracer {
             pass.set_bind_group(2, masks, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
-        {
+        // The texture takes the image once its last rows are in, so it never shows a frame
+        // half drawn.
+        if present_frame {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("present"),
                 timestamp_writes: None,
             });
             pass.set_pipeline(present);
             pass.set_bind_group(0, &targets.present_group, &[]);
-            pass.dispatch_workgroups(groups.0, groups.1, 1);
+            pass.dispatch_workgroups(groups.0, targets.height.div_ceil(8), 1);
         }
         if let Some((set, resolve, readback)) = &targets.queries {
             encoder.resolve_query_set(set, 0..4, resolve, 0);
@@ -536,15 +543,50 @@ impl Tracer {
         params: &TraceParams,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<()> {
+        self.record_rows(
+            gpu,
+            step,
+            targets,
+            camera,
+            params,
+            RowSet::WHOLE,
+            true,
+            encoder,
+        )
+    }
+
+    /// [`Tracer::record`] for a set of the frame's rows: the trace and shade passes cover
+    /// only `rows`, and the texture takes the image where `present_frame` (the set that
+    /// completes the frame). A frame recorded set by set, one set per submission with the
+    /// same camera and parameters, holds the pixels of one recorded whole: every pass is per
+    /// pixel.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_rows(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        targets: &FrameTargets,
+        camera: &Camera,
+        params: &TraceParams,
+        rows: RowSet,
+        present_frame: bool,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<()> {
         self.check_limit(step)?;
+        if rows.count(targets.height) == 0 {
+            return Err(Error::Validation(format!(
+                "rows {rows:?} hold none of a frame {} rows high (a stride of at least 1 and a first row inside the frame)",
+                targets.height
+            )));
+        }
         let mut camera = *camera;
         camera.width = targets.width;
         camera.height = targets.height;
-        gpu.queue.write_buffer(
-            &targets.settings,
-            0,
-            bytemuck::bytes_of(&settings(step, &camera, params)),
-        );
+        let mut uniforms = settings(step, &camera, params);
+        uniforms.first_row = rows.first;
+        uniforms.row_stride = rows.stride;
+        gpu.queue
+            .write_buffer(&targets.settings, 0, bytemuck::bytes_of(&uniforms));
         let split = step.split || targets.split;
         let variant = self.variant(gpu, step, split)?;
         let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
@@ -557,7 +599,15 @@ impl Tracer {
         let masks = self
             .masks
             .group_for(gpu, step, params.iterations > 1, encoder)?;
-        self.encode(step, targets, &masks, [trace, shade, present], encoder);
+        self.encode(
+            step,
+            targets,
+            &masks,
+            [trace, shade, present],
+            rows,
+            present_frame,
+            encoder,
+        );
         Ok(())
     }
 
@@ -578,8 +628,32 @@ impl Tracer {
     ) -> Result<wgpu::Buffer> {
         self.check_limit(step)?;
         let masks = mask_buffer(gpu, step.info.mask_bytes());
-        self.masks.record(gpu, step, &masks, encoder, timestamps)?;
+        let clusters = 0..step
+            .info
+            .point_count
+            .div_ceil(step.info.cluster_size.max(1));
+        self.masks
+            .record(gpu, step, &masks, clusters, encoder, timestamps)?;
         Ok(masks)
+    }
+
+    /// Derives up to `clusters` more clusters of the neighbour masks of `step` into
+    /// `encoder`, ahead of its first refined frame: a slow adapter spreads the pass over
+    /// several submissions, where a refined frame would derive all that is missing at once.
+    pub fn derive_masks(
+        &self,
+        gpu: &Gpu,
+        step: &GpuStep,
+        clusters: u32,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<MaskProgress> {
+        self.check_limit(step)?;
+        self.masks.derive(gpu, step, clusters, encoder)
+    }
+
+    /// How far the neighbour masks of `step` are derived.
+    pub fn mask_progress(&self, step: &GpuStep) -> MaskProgress {
+        self.masks.progress(step)
     }
 
     fn check_limit(&self, step: &GpuStep) -> Result<()> {
@@ -591,21 +665,6 @@ impl Tracer {
             )));
         }
         Ok(())
-    }
-
-    /// The pass times of the last frame submitted into `targets`, once the GPU has finished
-    /// it (waits); `None` where the adapter has no timestamp queries.
-    pub fn pass_times(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Option<PassTimes>> {
-        let Some((_, _, readback)) = &targets.queries else {
-            return Ok(None);
-        };
-        let stamps: Vec<u64> = read(gpu, readback)?;
-        let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
-        let ms = |a: usize, b: usize| stamps[b].saturating_sub(stamps[a]) as f64 * period;
-        Ok(Some(PassTimes {
-            trace_ms: ms(0, 1),
-            shade_ms: ms(2, 3),
-        }))
     }
 
     /// Traces and shades one frame on the GPU and waits for it; the pass times when the
@@ -646,40 +705,5 @@ impl Tracer {
         let targets = self.targets(gpu, camera.width, camera.height)?;
         self.run(gpu, step, &targets, camera, params)?;
         self.read_frame(gpu, &targets)
-    }
-
-    /// Reads the hits and pixels of the last frame submitted into `targets` (waits).
-    pub fn read_frame(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Frame> {
-        let copy = |source: &wgpu::Buffer| -> Result<wgpu::Buffer> {
-            let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("readback"),
-                size: source.size(),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let mut encoder = gpu
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("readback"),
-                });
-            encoder.copy_buffer_to_buffer(source, 0, &staging, 0, source.size());
-            gpu.queue.submit([encoder.finish()]);
-            Ok(staging)
-        };
-        let mut hits: Vec<GpuHit> = read(gpu, &copy(&targets.hits)?)?;
-        // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
-        for hit in hits.iter_mut().filter(|h| h.status == status::MISS) {
-            *hit = GpuHit {
-                item: u32::MAX,
-                ..GpuHit::zeroed()
-            };
-        }
-        let rgba = read(gpu, &copy(&targets.image)?)?;
-        Ok(Frame {
-            width: targets.width,
-            height: targets.height,
-            hits,
-            rgba,
-        })
     }
 }

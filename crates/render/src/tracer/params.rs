@@ -113,9 +113,9 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         wide_count: info.wide_count,
         item_count: info.item_count,
         colormap: params.colormap as u32,
-        pad1: 0,
+        first_row: 0,
         key_light: unit_or_default(params.key_light),
-        pad2: 0.0,
+        row_stride: 1,
     }
 }
 

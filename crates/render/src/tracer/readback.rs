@@ -1,7 +1,12 @@
-//! GPU buffers read back to the host.
+//! GPU buffers read back to the host, and what a frame's targets hold: its pass times, its
+//! hits and pixels.
 
+use bytemuck::Zeroable;
+
+use super::{Frame, FrameTargets, PassTimes, Tracer};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
+use crate::layout::{GpuHit, status};
 
 /// Maps a `MAP_READ` buffer, waits, and copies its contents out as `T`s.
 pub fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
@@ -27,4 +32,56 @@ pub(super) fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result
     };
     buffer.unmap();
     Ok(out)
+}
+
+impl Tracer {
+    /// The pass times of the last frame submitted into `targets`, once the GPU has finished
+    /// it (waits); `None` where the adapter has no timestamp queries.
+    pub fn pass_times(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Option<PassTimes>> {
+        let Some((_, _, readback)) = &targets.queries else {
+            return Ok(None);
+        };
+        let stamps: Vec<u64> = read(gpu, readback)?;
+        let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
+        let ms = |a: usize, b: usize| stamps[b].saturating_sub(stamps[a]) as f64 * period;
+        Ok(Some(PassTimes {
+            trace_ms: ms(0, 1),
+            shade_ms: ms(2, 3),
+        }))
+    }
+
+    /// Reads the hits and pixels of the last frame submitted into `targets` (waits).
+    pub fn read_frame(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Frame> {
+        let copy = |source: &wgpu::Buffer| -> Result<wgpu::Buffer> {
+            let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback"),
+                size: source.size(),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("readback"),
+                });
+            encoder.copy_buffer_to_buffer(source, 0, &staging, 0, source.size());
+            gpu.queue.submit([encoder.finish()]);
+            Ok(staging)
+        };
+        let mut hits: Vec<GpuHit> = read(gpu, &copy(&targets.hits)?)?;
+        // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
+        for hit in hits.iter_mut().filter(|h| h.status == status::MISS) {
+            *hit = GpuHit {
+                item: u32::MAX,
+                ..GpuHit::zeroed()
+            };
+        }
+        let rgba = read(gpu, &copy(&targets.image)?)?;
+        Ok(Frame {
+            width: targets.width,
+            height: targets.height,
+            hits,
+            rgba,
+        })
+    }
 }
