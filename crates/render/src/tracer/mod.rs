@@ -33,7 +33,7 @@ use crate::bindings::{bind_entries, capacity, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings};
-use crate::masks::{MaskProgress, NeighbourMasks, mask_buffer};
+use crate::masks::{MaskProgress, NeighbourMasks, cluster_count, mask_buffer};
 use crate::shaders::{
     FRAME_ARRAYS, PRESENT_ARRAYS, TEXTURE_BINDING, TRACE_STACK_SIZES, present_wgsl, shade_wgsl,
     trace_wgsl,
@@ -628,10 +628,7 @@ impl Tracer {
     ) -> Result<wgpu::Buffer> {
         self.check_limit(step)?;
         let masks = mask_buffer(gpu, step.info.mask_bytes());
-        let clusters = 0..step
-            .info
-            .point_count
-            .div_ceil(step.info.cluster_size.max(1));
+        let clusters = 0..cluster_count(step);
         self.masks
             .record(gpu, step, &masks, clusters, encoder, timestamps)?;
         Ok(masks)
