@@ -947,5 +947,58 @@ fn a_slow_gpu_answers_within_100_ms_and_still_refines_to_the_render() {
     assert!(*worst <= 100.0, "a pass took {worst:.1} ms: {line}");
 
     // At rest, refined: the app's screenshot is `slosh render` of the view, pixel for pixel.
-    screenshot_against_render(&player, &display, dir.path(), &cache, 1, &[]);
+    let shot = screenshot_against_render(&player, &display, dir.path(), &cache, 1, &[]);
+
+    // A click on the surface reads it back (issue 28, item 5): a point on the true sphere of
+    // step 1, within two spacings of the input particle it names.
+    let centre = (
+        shot.viewport.0 + shot.width / 2,
+        shot.viewport.1 + shot.height / 2,
+    );
+    display.xdotool(&[
+        "mousemove",
+        "--window",
+        &player.window,
+        &centre.0.to_string(),
+        &centre.1.to_string(),
+    ]);
+    display.xdotool(&["click", "1"]).unwrap();
+    wait_for("the probe", Duration::from_secs(60), || {
+        player.log().contains("probe step 1 ")
+    });
+    let log = player.log();
+    let line = log
+        .lines()
+        .find(|l| l.starts_with("probe step 1 "))
+        .unwrap();
+    eprintln!("{line}");
+    let word_after = |key: &str| {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let i = words.iter().position(|w| *w == key).unwrap();
+        words[i + 1].to_string()
+    };
+    let position: Vec<f64> = word_after("position")
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(case.join("truth.json")).unwrap()).unwrap();
+    let surface = &truth["steps"][1]["surface"];
+    let radius = surface["radius"].as_f64().unwrap();
+    let from_centre = (0..3)
+        .map(|a| (position[a] - surface["center"][a].as_f64().unwrap()).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let spacing = truth["spacing"].as_f64().unwrap();
+    assert!(
+        (from_centre - radius).abs() < 0.1 * spacing,
+        "the probe is {from_centre} from the centre of a sphere of radius {radius}"
+    );
+    let input: usize = word_after("input").parse().unwrap();
+    assert!(input < 300_000);
+    let distance: f64 = word_after("at").parse().unwrap();
+    assert!(
+        distance < 2.0 * spacing,
+        "{distance} from the nearest particle"
+    );
 }

@@ -14,6 +14,7 @@ mod layout;
 mod manifest;
 pub mod names;
 pub mod octahedral;
+mod probe;
 mod reader;
 mod statistics;
 mod step;
@@ -36,6 +37,7 @@ pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,
     step_file_name,
 };
+pub use probe::{ProbeReading, SurfaceProbe};
 pub use reader::CacheFile;
 pub use statistics::{Statistics, Summary};
 pub use step::LoadedStep;

@@ -52,15 +52,15 @@ impl MlsSettings {
 
 /// What neighbour lists are recovered from: stored points (with radii), positions and data
 /// normals as vectors, reaches.
-struct Geometry {
-    points: Vec<GpuPoint>,
-    positions: Vec<V3<f32>>,
-    normals: Option<Vec<V3<f32>>>,
-    reach: Vec<f32>,
+pub(crate) struct Geometry {
+    pub(crate) points: Vec<GpuPoint>,
+    pub(crate) positions: Vec<V3<f32>>,
+    pub(crate) normals: Option<Vec<V3<f32>>>,
+    pub(crate) reach: Vec<f32>,
 }
 
 impl CacheFile {
-    fn geometry(&self) -> Result<Geometry> {
+    pub(crate) fn geometry(&self) -> Result<Geometry> {
         let points: Vec<GpuPoint> = self.decode(names::POINTS)?;
         let normals: Option<Vec<u32>> = self
             .section(names::NORMALS)

@@ -18,6 +18,10 @@ const STEP_UP_SHARE: f64 = 0.6;
 const UNMEASURED_ITERATION_FACTOR: f64 = 3.0;
 /// Iteration counts measured apart; higher counts share the last.
 const MEASURED_COUNTS: usize = 9;
+/// The least share of the budget left to the GPU however costly the rest of a frame.
+pub const MIN_GPU_SHARE: f64 = 1.0 / 3.0;
+/// A frame interval past this many budgets is a rest between frames.
+const REST_FACTOR: f64 = 8.0;
 /// Clusters of the first neighbour-mask part (a 300k-point step has about 9000).
 pub const FIRST_MASK_CLUSTERS: u32 = 256;
 /// The most rows of a row set before any frame was measured.
@@ -35,6 +39,9 @@ pub struct FrameBudget {
     preview: usize,
     /// Running estimate of milliseconds per cluster of the neighbour-mask pass.
     per_cluster_ms: Option<f64>,
+    /// Running estimate of what a frame costs besides its GPU work (the UI's own drawing,
+    /// presenting): the budget left for the GPU is what remains.
+    overhead_ms: f64,
 }
 
 impl FrameBudget {
@@ -46,11 +53,31 @@ impl FrameBudget {
             per_pixel_ms: [None; MEASURED_COUNTS],
             preview: PREVIEW_SCALES.len() - 4,
             per_cluster_ms: None,
+            overhead_ms: 0.0,
         }
     }
 
     pub fn budget_ms(&self) -> f64 {
         self.budget_ms
+    }
+
+    /// Milliseconds of GPU work a frame may hold: the budget less the frame's other costs,
+    /// but never below [`MIN_GPU_SHARE`] of it.
+    pub fn gpu_ms(&self) -> f64 {
+        (self.budget_ms - self.overhead_ms).max(MIN_GPU_SHARE * self.budget_ms)
+    }
+
+    /// Takes in a frame that took `frame_ms` from the one before, `gpu_ms` of it the GPU
+    /// work measured. Intervals far past the budget are a rest, not a frame, and are left out.
+    pub fn record_frame(&mut self, frame_ms: f64, gpu_ms: f64) {
+        if !(frame_ms.is_finite() && gpu_ms.is_finite())
+            || frame_ms <= 0.0
+            || frame_ms > REST_FACTOR * self.budget_ms
+        {
+            return;
+        }
+        let sample = (frame_ms - gpu_ms).max(0.0);
+        self.overhead_ms += SMOOTHING * (sample - self.overhead_ms);
     }
 
     fn slot(iterations: u32) -> usize {
@@ -83,7 +110,7 @@ impl FrameBudget {
     /// was measured.
     pub fn mask_clusters(&self) -> u32 {
         self.per_cluster_ms.map_or(FIRST_MASK_CLUSTERS, |ms| {
-            (self.budget_ms / ms.max(1e-9)).clamp(1.0, f64::from(u32::MAX)) as u32
+            (self.gpu_ms() / ms.max(1e-9)).clamp(1.0, f64::from(u32::MAX)) as u32
         })
     }
 
@@ -119,10 +146,10 @@ impl FrameBudget {
             .unwrap_or(0);
         // Coarser while the current one is over budget, finer while the next fits well.
         let mut at = self.preview.min(smallest);
-        while at < smallest && cost(PREVIEW_SCALES[at]) > self.budget_ms {
+        while at < smallest && cost(PREVIEW_SCALES[at]) > self.gpu_ms() {
             at += 1;
         }
-        while at > 0 && cost(PREVIEW_SCALES[at - 1]) <= STEP_UP_SHARE * self.budget_ms {
+        while at > 0 && cost(PREVIEW_SCALES[at - 1]) <= STEP_UP_SHARE * self.gpu_ms() {
             at -= 1;
         }
         self.preview = at;
@@ -134,7 +161,7 @@ impl FrameBudget {
     pub fn fits(&self, iterations: u32, width: u32, rows: u32) -> bool {
         match self.per_pixel_ms(iterations) {
             Some(per_pixel) => {
-                per_pixel * f64::from(width.max(1)) * f64::from(rows) <= self.budget_ms
+                per_pixel * f64::from(width.max(1)) * f64::from(rows) <= self.gpu_ms()
             }
             None => rows <= FIRST_SET_ROWS,
         }
@@ -182,6 +209,28 @@ mod tests {
         b.record(3, 100, f64::NAN);
         b.record(3, 100, -1.0);
         assert_eq!(b.per_pixel_ms(3), Some(1e-3));
+    }
+
+    #[test]
+    fn the_rest_of_a_frame_leaves_the_gpu_less() {
+        let mut b = FrameBudget::new(33.0);
+        assert_eq!(b.gpu_ms(), 33.0);
+        b.record(1, 1000, 1.0);
+        assert!(b.fits(1, 100, 330) && !b.fits(1, 100, 331));
+        // Frames of 40 ms of which 10 on the GPU: 30 ms of UI; 3 ms left, but never below a
+        // third of the budget.
+        for _ in 0..30 {
+            b.record_frame(40.0, 10.0);
+        }
+        assert!((b.gpu_ms() - 11.0).abs() < 1e-9, "{}", b.gpu_ms());
+        assert!(b.fits(1, 100, 110) && !b.fits(1, 100, 111));
+        // A rest of a second is no frame; cheaper frames give the GPU its share back.
+        b.record_frame(1000.0, 0.0);
+        assert!((b.gpu_ms() - 11.0).abs() < 1e-9);
+        for _ in 0..60 {
+            b.record_frame(20.0, 15.0);
+        }
+        assert!((b.gpu_ms() - 28.0).abs() < 1e-6, "{}", b.gpu_ms());
     }
 
     #[test]

@@ -17,7 +17,7 @@ pub mod series;
 pub mod timeline;
 
 pub use engine::{
-    Engine, EngineOptions, FrameReport, FrameRequest, GpuSource, Pace, Prepared, Quality,
+    Engine, EngineOptions, FrameReport, FrameRequest, GpuSource, Pace, Prepared, Probe, Quality,
     default_budget, default_loaders,
 };
 pub use error::{Error, Result};

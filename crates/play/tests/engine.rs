@@ -11,8 +11,8 @@ use slosh_bake::{BakeParams, NormalSource, SurfaceSelect, bake_step};
 use slosh_cache::{Manifest, step_file_name, write_step};
 use slosh_mls::Camera;
 use slosh_play::export::{ExportJob, ExportRequest, ExportState, frame_path, trace_file};
-use slosh_play::{Engine, EngineOptions, FrameReport, FrameRequest, Pace};
-use slosh_render::{Gpu, GpuStep, HostStep, TraceParams, Tracer};
+use slosh_play::{Draw, Engine, EngineOptions, FrameReport, FrameRequest, Pace, Quality};
+use slosh_render::{Frame, Gpu, GpuStep, HostStep, TraceParams, Tracer};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 fn gpu() -> Option<Arc<Gpu>> {
@@ -101,6 +101,28 @@ fn step_bytes(dir: &Path, gpu: &Gpu, index: usize) -> u64 {
     let step = GpuStep::create(gpu, &host, &mut encoder).unwrap();
     assert_eq!(step.gpu_bytes(), host.gpu_bytes(), "predicted bytes differ");
     step.gpu_bytes()
+}
+
+/// The engine's picture on screen is a direct render of step `index` at the request's
+/// iterations, hit for hit and pixel for pixel; that render.
+fn assert_shows_the_direct_render(
+    engine: &Engine,
+    gpu: &Gpu,
+    dir: &Path,
+    index: usize,
+    request: &FrameRequest,
+) -> Frame {
+    let targets = engine.targets().unwrap();
+    let shown = engine.tracer().read_frame(gpu, targets).unwrap();
+    let file = slosh_cache::CacheFile::open(&dir.join(step_file_name(index))).unwrap();
+    let step = GpuStep::upload(gpu, &file, None).unwrap();
+    let direct = engine
+        .tracer()
+        .render(gpu, &step, &request.camera, &request.params)
+        .unwrap();
+    assert!(shown.hits == direct.hits, "hits differ");
+    assert!(shown.rgba == direct.rgba, "pixels differ");
+    direct
 }
 
 #[test]
@@ -193,25 +215,85 @@ fn finished_refinement_equals_a_direct_render() {
     let drawn: Vec<Option<u32>> = (0..4).map(|_| frame(&mut engine, &request).drawn).collect();
     assert_eq!(drawn, vec![Some(2), Some(3), None, None]);
     assert!(frame(&mut engine, &request).progress.unwrap().finished());
-    let targets = engine.targets().unwrap();
-    let refined = engine.tracer().read_frame(&gpu, targets).unwrap();
-    let file = slosh_cache::CacheFile::open(&dir.path().join(step_file_name(1))).unwrap();
-    let step = GpuStep::upload(&gpu, &file, None).unwrap();
-    let mut params = request.params;
-    params.iterations = 3;
-    let direct = engine
-        .tracer()
-        .render(&gpu, &step, &request.camera, &params)
-        .unwrap();
+    let direct = assert_shows_the_direct_render(&engine, &gpu, dir.path(), 1, &request);
     let lit = direct.hits.iter().filter(|h| h.status != 0).count();
     assert!(lit > 200, "{lit} hit pixels");
-    assert!(refined.hits == direct.hits, "hits differ");
-    assert!(refined.rgba == direct.rgba, "pixels differ");
     // Moving the camera starts over at one iteration.
     let mut moving = request.clone();
     moving.camera_moving = true;
     moving.camera.eye[0] += 0.1;
     assert_eq!(frame(&mut engine, &moving).drawn, Some(1));
+}
+
+/// Under a frame budget far below a frame's cost, a still view is drawn as a preview, then
+/// its masks in parts and its levels as sets of rows, one per frame: the finished picture is
+/// the direct render's, and a probe of its pixels reads the surface back.
+#[test]
+fn a_frame_budget_refines_in_parts_to_the_direct_render_and_probes_it() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    bake_series(dir.path(), 0..2, true);
+    let mut engine = Engine::open(gpu.clone(), dir.path(), EngineOptions::default()).unwrap();
+    let mut request = request(3);
+    request.frame_budget_ms = Some(0.001);
+    show(&mut engine, &request, 1);
+    let mut reports = Vec::new();
+    while !reports
+        .last()
+        .is_some_and(|r: &FrameReport| r.progress.is_some_and(|p| p.finished()))
+    {
+        assert!(reports.len() < 5000, "no end to the refinement");
+        reports.push(frame(&mut engine, &request));
+    }
+    let sets = reports
+        .iter()
+        .filter(|r| matches!(r.draw, Some(Draw::Rows { .. })))
+        .count();
+    let parts = reports.iter().filter(|r| r.masks.is_some()).count();
+    eprintln!(
+        "{} frames: {parts} mask parts, {sets} row sets",
+        reports.len()
+    );
+    assert!(
+        sets > 3 && parts >= 1,
+        "{sets} row sets, {parts} mask parts"
+    );
+    assert_eq!(
+        reports.last().unwrap().quality,
+        Some(Quality {
+            scale: 1.0,
+            iterations: 3
+        })
+    );
+    let direct = assert_shows_the_direct_render(&engine, &gpu, dir.path(), 1, &request);
+    // Moving: a preview, smaller than the frame.
+    let mut moving = request.clone();
+    moving.camera_moving = true;
+    let report = frame(&mut engine, &moving);
+    assert_eq!(report.draw, Some(Draw::Preview));
+    assert!(report.quality.unwrap().scale < 1.0);
+    // Probes of the refined picture: a miss in the corner; the centre on the surface, within
+    // two spacings of its nearest particle, which names its input index.
+    for _ in 0..2000 {
+        if frame(&mut engine, &request).progress.unwrap().finished() {
+            break;
+        }
+    }
+    assert!(engine.probe(0, 0, 1.0).unwrap().is_none());
+    let probe = engine.probe(32, 24, 1.0).unwrap().unwrap();
+    let file = slosh_cache::CacheFile::open(&dir.path().join(step_file_name(1))).unwrap();
+    let header = file.header();
+    let spacing = header.spacing * header.transform.scale;
+    assert_eq!(probe.step, 1);
+    assert!(
+        probe.reading.nearest_distance < 2.0 * spacing,
+        "{probe:?}, spacing {spacing}"
+    );
+    let input = probe.reading.nearest_input.unwrap() as usize;
+    assert!(input < header.stats.input_points as usize);
+    let hit = &direct.hits[24 * 64 + 32];
+    let world = header.transform.to_world(hit.position.map(f64::from));
+    assert_eq!(probe.reading.world, world);
 }
 
 #[test]

@@ -17,7 +17,7 @@ use super::frame_stats::FrameStats;
 use super::options::PlayOptions;
 use super::timeline_panel;
 use super::view::{RangeMode, ViewSettings, axis_vector, default_light};
-use crate::engine::{Engine, FrameReport, FrameRequest};
+use crate::engine::{Engine, FrameReport, FrameRequest, Probe};
 use crate::refine::Draw;
 use slosh_mls::dominant_axis;
 
@@ -50,6 +50,9 @@ pub(super) struct Player {
     /// The window title last set (set again only when it changes: setting it asks for
     /// another pass).
     title: String,
+    /// What the surface holds under the pointer, and the pixel and frame count it was read
+    /// at.
+    probe: Option<(Probe, (u32, u32), u64)>,
 }
 
 impl Player {
@@ -103,6 +106,7 @@ impl Player {
             viewport_px: egui::Rect::NOTHING,
             log_frames: options.log_frames,
             title: String::new(),
+            probe: None,
         }
     }
 
@@ -232,9 +236,74 @@ impl Player {
         }
         self.view.track_field_range(&self.engine);
         self.show_texture(ui, rect);
+        self.probe_pointer(ui, &response, rect, moving);
         if self.screenshot_pending && self.last.progress.is_some_and(|p| p.finished()) {
             self.screenshot_pending = false;
             self.screenshot();
+        }
+    }
+
+    /// Reads the surface under the pointer back where it rests on a refined picture, or
+    /// where it clicks, and labels it there.
+    fn probe_pointer(
+        &mut self,
+        ui: &egui::Ui,
+        response: &egui::Response,
+        rect: egui::Rect,
+        moving: bool,
+    ) {
+        let (Some(pos), Some(size)) = (
+            response.hover_pos(),
+            self.engine.targets().map(|t| t.size()),
+        ) else {
+            self.probe = None;
+            return;
+        };
+        let clicked = response.clicked();
+        let at_rest = !moving && self.last.progress.is_some_and(|p| p.finished());
+        if !clicked && !at_rest {
+            self.probe = None;
+            return;
+        }
+        let u = ((pos.x - rect.min.x) / rect.width().max(1.0)).clamp(0.0, 1.0);
+        let v = ((pos.y - rect.min.y) / rect.height().max(1.0)).clamp(0.0, 1.0);
+        let pixel = (
+            ((u * size.0 as f32) as u32).min(size.0 - 1),
+            ((v * size.1 as f32) as u32).min(size.1 - 1),
+        );
+        let current = self
+            .probe
+            .as_ref()
+            .is_some_and(|(_, at, frames)| *at == pixel && *frames == self.stats.frames);
+        if clicked || !current {
+            let h_factor = self.view.params(&self.engine).h_factor;
+            match self.engine.probe(pixel.0, pixel.1, h_factor) {
+                Ok(Some(probe)) => {
+                    if clicked {
+                        let line = probe_line(&probe, pixel);
+                        if self.log_frames {
+                            say!("{line}");
+                        }
+                        self.message = Some(line);
+                    }
+                    self.probe = Some((probe, pixel, self.stats.frames));
+                }
+                Ok(None) => self.probe = None,
+                Err(e) => {
+                    self.probe = None;
+                    self.message = Some(format!("reading the surface back failed: {e}"));
+                }
+            }
+        }
+        if let Some((probe, _, _)) = &self.probe {
+            let text = probe_label(probe);
+            let font = egui::FontId::monospace(12.0);
+            let painter = ui.painter();
+            let galley = painter.layout_no_wrap(text, font, egui::Color32::WHITE);
+            let at = pos + egui::vec2(16.0, 16.0);
+            let frame = egui::Rect::from_min_size(at, galley.size()).expand(4.0);
+            painter.rect_filled(frame, 3.0, egui::Color32::from_black_alpha(190));
+            painter.galley(at, galley, egui::Color32::WHITE);
         }
     }
 
@@ -506,4 +575,42 @@ impl eframe::App for Player {
             ctx.request_repaint_after(std::time::Duration::from_millis(1000));
         }
     }
+}
+
+/// The label beside the pointer: position, the field's value, the nearest particle.
+fn probe_label(probe: &Probe) -> String {
+    let r = &probe.reading;
+    let [x, y, z] = r.world;
+    let mut text = format!("x {x:.5}  y {y:.5}  z {z:.5}");
+    if let (Some(name), Some(value)) = (&probe.field, r.field) {
+        text += &format!("\n{name} {value:.5e}");
+    }
+    text += &match r.nearest_input {
+        Some(input) => format!("\nparticle {input} at {:.3e}", r.nearest_distance),
+        None => format!(
+            "\nparticle {} of the cache at {:.3e} (its input index needs a re-bake)",
+            r.nearest, r.nearest_distance
+        ),
+    };
+    if probe.status == slosh_render::status::DROPLET {
+        text += "\n(a droplet)";
+    }
+    text
+}
+
+/// The probe said in one line (the message line and the frame log).
+fn probe_line(probe: &Probe, pixel: (u32, u32)) -> String {
+    let r = &probe.reading;
+    let [x, y, z] = r.world;
+    let field = match (&probe.field, r.field) {
+        (Some(name), Some(value)) => format!(" {name} {value:e}"),
+        _ => String::new(),
+    };
+    let input = r
+        .nearest_input
+        .map_or("unknown".to_string(), |i| i.to_string());
+    format!(
+        "probe step {} pixel {},{}: position {x},{y},{z}{field} nearest input {input} cache {} at {:e} status {}",
+        probe.step, pixel.0, pixel.1, r.nearest, r.nearest_distance, probe.status
+    )
 }

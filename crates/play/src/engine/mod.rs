@@ -13,9 +13,11 @@ use slosh_render::{
 };
 
 mod gpu_source;
+mod probe;
 mod wait;
 
 pub use gpu_source::{GpuSource, Prepared};
+pub use probe::Probe;
 pub use wait::Pace;
 
 use crate::error::{Error, Result};
@@ -189,6 +191,10 @@ pub struct Engine {
     shown: Option<usize>,
     /// Mean bytes of a resident step, for how many fit.
     step_bytes: u64,
+    /// The shown step's surface, once a pixel of it was probed.
+    probed: Option<probe::HeldProbe>,
+    /// The GPU time [`Engine::finish_frame`] measured of the last frame.
+    last_gpu_ms: Option<f64>,
 }
 
 impl Engine {
@@ -236,6 +242,8 @@ impl Engine {
             urgent: None,
             shown: None,
             step_bytes: 0,
+            probed: None,
+            last_gpu_ms: None,
         };
         engine.adopt_series();
         Ok(engine)
@@ -408,6 +416,7 @@ impl Engine {
         let ms = stamped.map_or(start.elapsed().as_secs_f64() * 1e3, |t| {
             t.trace_ms + t.shade_ms
         });
+        self.last_gpu_ms = Some(ms);
         if let Some(budget) = &mut self.frame_budget {
             match recorded {
                 Recorded::Trace {
@@ -707,6 +716,11 @@ impl Engine {
             }
             Some(_) => {}
             None => self.frame_budget = None,
+        }
+        // The interval since the last frame, against the GPU time that frame measured: what
+        // the rest of a frame costs.
+        if let (Some(budget), Some(gpu_ms)) = (&mut self.frame_budget, self.last_gpu_ms.take()) {
+            budget.record_frame(request.seconds * 1e3, gpu_ms);
         }
         let preview_scale = self
             .frame_budget

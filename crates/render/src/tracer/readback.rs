@@ -84,4 +84,36 @@ impl Tracer {
             rgba,
         })
     }
+
+    /// The hit at pixel (`x`, `y`) of the last frame recorded into `targets` (waits; one
+    /// pixel's bytes cross): `None` for a miss or a pixel outside the frame.
+    pub fn read_hit(
+        &self,
+        gpu: &Gpu,
+        targets: &FrameTargets,
+        x: u32,
+        y: u32,
+    ) -> Result<Option<GpuHit>> {
+        if x >= targets.width || y >= targets.height {
+            return Ok(None);
+        }
+        let size = size_of::<GpuHit>() as u64;
+        let offset = (u64::from(y) * u64::from(targets.width) + u64::from(x)) * size;
+        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hit readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("hit readback"),
+            });
+        encoder.copy_buffer_to_buffer(&targets.hits, offset, &staging, 0, size);
+        gpu.queue.submit([encoder.finish()]);
+        let hit: Vec<GpuHit> = read(gpu, &staging)?;
+        // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
+        Ok(hit.first().copied().filter(|h| h.status != status::MISS))
+    }
 }

@@ -1,0 +1,150 @@
+//! Reading the surface back where a ray hit it: the world position, the particle nearest to
+//! it (its index in the step's input, where the cache stores it) and a field's value there,
+//! weighted as the shade pass weights it. What a click on the player's picture asks.
+
+use slosh_mls::{MIN_WEIGHT, V3, expand_one, weight};
+
+use crate::error::{Error, Result};
+use crate::format::Transform;
+use crate::layout::GpuBall;
+use crate::names;
+use crate::reader::CacheFile;
+
+/// One step's points, neighbour lists and input indices, held for probing.
+#[derive(Debug)]
+pub struct SurfaceProbe {
+    transform: Transform,
+    positions: Vec<V3<f32>>,
+    normals: Option<Vec<V3<f32>>>,
+    reach: Vec<f32>,
+    /// Each ball's smoothing length.
+    h: Vec<f32>,
+    cluster_size: usize,
+    cluster_start: Vec<u32>,
+    candidates: Vec<u32>,
+    /// Input indices (format 4.1 and later).
+    source_index: Option<Vec<u32>>,
+}
+
+/// What the surface holds at a probed point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProbeReading {
+    /// The point in world coordinates.
+    pub world: [f64; 3],
+    /// The stored particle nearest to it (in the cache's order), and its distance in world
+    /// units.
+    pub nearest: usize,
+    pub nearest_distance: f64,
+    /// That particle's index among the step's input particles; `None` for caches baked
+    /// before format 4.1.
+    pub nearest_input: Option<u32>,
+    /// The field's value there: the weighted mean over the hit ball's neighbours (`θ` with
+    /// the ball's `h`), as the shade pass colours it; the ball's own value where no weight
+    /// reaches, the nearest particle's where the hit is a droplet.
+    pub field: Option<f32>,
+}
+
+impl SurfaceProbe {
+    /// Decodes what probing `file` needs.
+    pub fn open(file: &CacheFile) -> Result<SurfaceProbe> {
+        let geometry = file.geometry()?;
+        let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+        let cluster_start: Vec<u32> = file.decode(names::CLUSTER_START)?;
+        let candidates = file.cluster_candidates(&cluster_start)?;
+        let source_index: Option<Vec<u32>> = file
+            .section(names::SOURCE_INDEX)
+            .map(|_| file.decode(names::SOURCE_INDEX))
+            .transpose()?;
+        let n = geometry.positions.len();
+        if balls.len() != n || source_index.as_ref().is_some_and(|s| s.len() != n) {
+            return Err(Error::Invalid {
+                path: file.path().to_path_buf(),
+                problem: format!(
+                    "{n} points, {} balls, {:?} input indices",
+                    balls.len(),
+                    source_index.as_ref().map(Vec::len)
+                ),
+            });
+        }
+        Ok(SurfaceProbe {
+            transform: file.header().transform,
+            positions: geometry.positions,
+            normals: geometry.normals,
+            reach: geometry.reach,
+            h: balls.iter().map(|b| b.h).collect(),
+            cluster_size: file.header().neighbour_cluster.max(1) as usize,
+            cluster_start,
+            candidates,
+            source_index,
+        })
+    }
+
+    pub fn point_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// The world coordinates of a point in the cache's local ones.
+    pub fn to_world(&self, local: [f32; 3]) -> [f64; 3] {
+        self.transform.to_world(local.map(f64::from))
+    }
+
+    /// Reads the surface at `local` (the cache's local coordinates, as the hit buffer holds
+    /// them), hit on ball `ball` (`None` for a droplet), with the smoothing lengths scaled by
+    /// `h_factor`, and `field` one value per stored point where a field is shown. `None`
+    /// for a step without points.
+    pub fn read(
+        &self,
+        local: [f32; 3],
+        ball: Option<usize>,
+        h_factor: f32,
+        field: Option<&[f32]>,
+    ) -> Option<ProbeReading> {
+        let x = V3::new(local[0], local[1], local[2]);
+        let (nearest, d2) = self
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (i, (*p - x).length_squared()))
+            .min_by(|a, b| a.1.total_cmp(&b.1))?;
+        let field = field.filter(|f| f.len() == self.positions.len()).map(|f| {
+            match ball.filter(|&i| i < self.positions.len()) {
+                Some(i) => self.weighted_mean(i, x, h_factor, f).unwrap_or(f[i]),
+                None => f[nearest],
+            }
+        });
+        Some(ProbeReading {
+            world: self.to_world(local),
+            nearest,
+            nearest_distance: f64::from(d2).sqrt() * self.transform.scale,
+            nearest_input: self.source_index.as_ref().map(|s| s[nearest]),
+            field,
+        })
+    }
+
+    /// The θ-weighted mean of `field` at `x` over ball `i`'s neighbours (its list recovered
+    /// from its cluster's candidates, as the tracer's masks select them).
+    fn weighted_mean(&self, i: usize, x: V3<f32>, h_factor: f32, field: &[f32]) -> Option<f32> {
+        let cluster = i / self.cluster_size;
+        let range = self.cluster_start.get(cluster).copied()? as usize
+            ..self.cluster_start.get(cluster + 1).copied()? as usize;
+        let mut list = Vec::new();
+        expand_one(
+            i,
+            &self.positions,
+            self.normals.as_deref(),
+            &self.reach,
+            self.candidates.get(range)?,
+            &mut list,
+        );
+        let h = self.h[i] * h_factor;
+        let h2 = h * h;
+        let (mut sum, mut wsum) = (0.0f32, 0.0f32);
+        for &j in &list {
+            let w = weight((self.positions[j as usize] - x).length_squared(), h2);
+            sum += w * field[j as usize];
+            wsum += w;
+        }
+        // Below the fits' least summed weight the shade pass takes the ball's own value.
+        (wsum > MIN_WEIGHT as f32).then(|| sum / wsum)
+    }
+}
