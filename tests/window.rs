@@ -972,11 +972,13 @@ fn a_slow_gpu_answers_within_100_ms_and_still_refines_to_the_render() {
         .find(|l| l.starts_with("probe step 1 "))
         .unwrap();
     eprintln!("{line}");
-    let word_after = |key: &str| {
+    // The `k`-th word after `key`.
+    let word_after_by = |key: &str, k: usize| {
         let words: Vec<&str> = line.split_whitespace().collect();
         let i = words.iter().position(|w| *w == key).unwrap();
-        words[i + 1].to_string()
+        words[i + k].to_string()
     };
+    let word_after = |key: &str| word_after_by(key, 1);
     let position: Vec<f64> = word_after("position")
         .split(',')
         .map(|v| v.parse().unwrap())
@@ -994,11 +996,25 @@ fn a_slow_gpu_answers_within_100_ms_and_still_refines_to_the_render() {
         (from_centre - radius).abs() < 0.1 * spacing,
         "the probe is {from_centre} from the centre of a sphere of radius {radius}"
     );
-    let input: usize = word_after("input").parse().unwrap();
-    assert!(input < 300_000);
     let distance: f64 = word_after("at").parse().unwrap();
     assert!(
         distance < 2.0 * spacing,
         "{distance} from the nearest particle"
+    );
+    // The particle named by its index in the EnSight case, at its position there: as near.
+    let input: usize = word_after("input").parse().unwrap();
+    assert!(input < 300_000);
+    let at: Vec<f64> = word_after_by("input", 2)
+        .trim_matches(|c| c == '(' || c == ')')
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let apart = (0..3)
+        .map(|a| (at[a] - position[a]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        (apart - distance).abs() < 1e-4 * spacing,
+        "input particle {input} is {apart} from the probe, the stored one {distance}"
     );
 }

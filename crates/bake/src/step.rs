@@ -452,16 +452,10 @@ pub fn bake_step_parts(
             (crate::bvh::build(&items), start.elapsed().as_secs_f64())
         }
     };
-    // After the spheres, before the fields: the order every cache has had; the input
-    // indices (4.1) last.
+    // After the spheres, before the fields: the order every cache has had.
     sections.extend(bvh_sections(&bvh));
     sections.extend(fields);
-    sections.push(SectionInput::new(
-        names::SOURCE_INDEX,
-        Element::U32,
-        &source_index,
-        Encoding::Shuffle4Zstd,
-    ));
+
     let mut stats = StepStats {
         input_points: n_in as u64,
         dropped_non_finite: dropped_non_finite as u64,

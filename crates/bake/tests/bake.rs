@@ -220,24 +220,6 @@ fn selection_drops_non_finite_and_interior_and_keeps_fields_aligned() {
         let world = h.transform.to_world(p.position.map(f64::from));
         assert!((world[0] - f64::from(*x)).abs() < 1e-5, "{world:?} vs {x}");
     }
-    // Each stored point names its input particle (format 4.1): the one at its position,
-    // never a dropped one, none twice.
-    let source: Vec<u32> = file.decode(names::SOURCE_INDEX).unwrap();
-    assert_eq!(source.len(), points.len());
-    let mut seen = vec![false; n];
-    for (p, &s) in points.iter().zip(&source) {
-        let s = s as usize;
-        assert!(
-            s != 5 && s != 9 && !s.is_multiple_of(4),
-            "dropped particle {s} stored"
-        );
-        assert!(!std::mem::replace(&mut seen[s], true), "{s} stored twice");
-        let world = h.transform.to_world(p.position.map(f64::from));
-        let d = (0..3)
-            .map(|a| (world[a] - input.positions[s][a]).abs())
-            .fold(0.0, f64::max);
-        assert!(d < 1e-5, "point of input {s} is {d} away from it");
-    }
     file.verify().unwrap();
 }
 
@@ -257,21 +239,20 @@ fn probes_read_the_nearest_input_particle_and_the_field_as_shaded() {
     let spacing = h.spacing * h.transform.scale;
     let probe = slosh_cache::SurfaceProbe::open(&file).unwrap();
     let points: Vec<slosh_cache::GpuPoint> = file.decode(names::POINTS).unwrap();
-    let source: Vec<u32> = file.decode(names::SOURCE_INDEX).unwrap();
     let c: Vec<f32> = file.decode("field.c").unwrap();
     let x: Vec<f32> = file.decode("field.x").unwrap();
     assert_eq!(probe.point_count(), points.len());
     let mut worst_x = 0.0f64;
     for i in (0..points.len()).step_by(37) {
         let at = points[i].position;
-        // At a stored point: that point, its input particle, a constant field exactly.
+        // At a stored point: that point, a constant field exactly.
         let r = probe.read(at, Some(i), 1.0, Some(&c)).unwrap();
         assert_eq!((r.nearest, r.nearest_distance), (i, 0.0));
-        assert_eq!(r.nearest_input, Some(source[i]));
+        assert_eq!(r.nearest_world, r.world);
         assert!((r.field.unwrap() - 2.5).abs() < 1e-5, "{r:?}");
-        // A third of a spacing off: the nearest input particle by brute force in f64, and
-        // the field x within a spacing of the point's own x (the weighted mean of a linear
-        // field over a neighbourhood around it).
+        // A third of a spacing off: the nearest particle is the nearest input particle by
+        // brute force in f64 (every particle is stored), and the field x is within a spacing
+        // of the point's own x (the weighted mean of a linear field around it).
         let off = [at[0] + (h.spacing / 3.0) as f32, at[1], at[2]];
         let r = probe.read(off, Some(i), 1.0, Some(&x)).unwrap();
         let world = r.world;
@@ -285,7 +266,13 @@ fn probes_read_the_nearest_input_particle_and_the_field_as_shaded() {
                 d(a).total_cmp(&d(b))
             })
             .unwrap();
-        assert_eq!(r.nearest_input, Some(brute as u32), "at {world:?}");
+        let d = (0..3)
+            .map(|a| (input.positions[brute][a] - r.nearest_world[a]).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            d < 1e-5,
+            "the nearest stored point is {d} from input particle {brute}"
+        );
         let error = (f64::from(r.field.unwrap()) - world[0]).abs();
         worst_x = worst_x.max(error);
         assert!(error < spacing, "x read as {:?} at {world:?}", r.field);

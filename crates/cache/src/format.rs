@@ -11,7 +11,7 @@ pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files of another major version (older ones with the command that re-bakes
 /// them); minor versions only add.
 pub const MAJOR: u16 = 4;
-pub const MINOR: u16 = 1;
+pub const MINOR: u16 = 0;
 /// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
 /// element size.

@@ -11,8 +11,5 @@ pub const CLUSTER_BASE: &str = "cluster_base";
 pub const SPHERES: &str = "spheres";
 pub const BVH_NODES: &str = "bvh_nodes";
 pub const BVH_ITEMS: &str = "bvh_items";
-/// Each stored point's index among the step's input particles, as the EnSight file numbers
-/// them from 0 (format 4.1; host only: what a probe of the surface reports).
-pub const SOURCE_INDEX: &str = "source_index";
 /// Per-point field sections are named `field.<variable>`.
 pub const FIELD_PREFIX: &str = "field.";

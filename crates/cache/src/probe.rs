@@ -1,6 +1,6 @@
-//! Reading the surface back where a ray hit it: the world position, the particle nearest to
-//! it (its index in the step's input, where the cache stores it) and a field's value there,
-//! weighted as the shade pass weights it. What a click on the player's picture asks.
+//! Reading the surface back where a ray hit it: the world position, the stored particle
+//! nearest to it and a field's value there, weighted as the shade pass weights it. What a
+//! click on the player's picture asks.
 
 use slosh_mls::{MIN_WEIGHT, V3, expand_one, weight};
 
@@ -22,8 +22,6 @@ pub struct SurfaceProbe {
     cluster_size: usize,
     cluster_start: Vec<u32>,
     candidates: Vec<u32>,
-    /// Input indices (format 4.1 and later).
-    source_index: Option<Vec<u32>>,
 }
 
 /// What the surface holds at a probed point.
@@ -31,13 +29,11 @@ pub struct SurfaceProbe {
 pub struct ProbeReading {
     /// The point in world coordinates.
     pub world: [f64; 3],
-    /// The stored particle nearest to it (in the cache's order), and its distance in world
-    /// units.
+    /// The stored particle nearest to it (in the cache's order), where it is in world
+    /// coordinates, and how far.
     pub nearest: usize,
+    pub nearest_world: [f64; 3],
     pub nearest_distance: f64,
-    /// That particle's index among the step's input particles; `None` for caches baked
-    /// before format 4.1.
-    pub nearest_input: Option<u32>,
     /// The field's value there: the weighted mean over the hit ball's neighbours (`θ` with
     /// the ball's `h`), as the shade pass colours it; the ball's own value where no weight
     /// reaches, the nearest particle's where the hit is a droplet.
@@ -51,19 +47,11 @@ impl SurfaceProbe {
         let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
         let cluster_start: Vec<u32> = file.decode(names::CLUSTER_START)?;
         let candidates = file.cluster_candidates(&cluster_start)?;
-        let source_index: Option<Vec<u32>> = file
-            .section(names::SOURCE_INDEX)
-            .map(|_| file.decode(names::SOURCE_INDEX))
-            .transpose()?;
         let n = geometry.positions.len();
-        if balls.len() != n || source_index.as_ref().is_some_and(|s| s.len() != n) {
+        if balls.len() != n {
             return Err(Error::Invalid {
                 path: file.path().to_path_buf(),
-                problem: format!(
-                    "{n} points, {} balls, {:?} input indices",
-                    balls.len(),
-                    source_index.as_ref().map(Vec::len)
-                ),
+                problem: format!("{n} points, {} balls", balls.len()),
             });
         }
         Ok(SurfaceProbe {
@@ -75,7 +63,6 @@ impl SurfaceProbe {
             cluster_size: file.header().neighbour_cluster.max(1) as usize,
             cluster_start,
             candidates,
-            source_index,
         })
     }
 
@@ -115,8 +102,11 @@ impl SurfaceProbe {
         Some(ProbeReading {
             world: self.to_world(local),
             nearest,
+            nearest_world: {
+                let p = self.positions[nearest];
+                self.to_world([p.x, p.y, p.z])
+            },
             nearest_distance: f64::from(d2).sqrt() * self.transform.scale,
-            nearest_input: self.source_index.as_ref().map(|s| s[nearest]),
             field,
         })
     }

@@ -10,7 +10,7 @@ use crate::names;
 use crate::reader::CacheFile;
 
 /// Sections that `check_invariants` decodes.
-const STRUCTURAL: [&str; 9] = [
+const STRUCTURAL: [&str; 8] = [
     names::POINTS,
     names::BALLS,
     names::SPHERES,
@@ -19,7 +19,6 @@ const STRUCTURAL: [&str; 9] = [
     names::CLUSTER_NEIGHBOURS,
     names::BVH_NODES,
     names::BVH_ITEMS,
-    names::SOURCE_INDEX,
 ];
 
 /// What a successful verification covered.
@@ -202,35 +201,6 @@ impl CacheFile {
         if let Some(d) = seen[n..].iter().position(|s| !s) {
             return Err(format!("droplet sphere {d} is missing from the BVH"));
         }
-        if self.section(names::SOURCE_INDEX).is_some() {
-            let source: Vec<u32> = self.decode(names::SOURCE_INDEX).map_err(decode_err)?;
-            check_source_index(&source, n, header.stats.input_points)?;
-        }
         Ok(())
     }
-}
-
-/// The input indices of `n` stored points: one each, distinct, each below `inputs`.
-fn check_source_index(source: &[u32], n: usize, inputs: u64) -> Result<(), String> {
-    if source.len() != n {
-        return Err(format!("{} input indices for {n} points", source.len()));
-    }
-    let mut seen = vec![
-        false;
-        usize::try_from(inputs)
-            .unwrap_or(usize::MAX)
-            .min(u32::MAX as usize + 1)
-    ];
-    for (i, &s) in source.iter().enumerate() {
-        match seen.get_mut(s as usize) {
-            None => {
-                return Err(format!(
-                    "point {i}'s input index {s} is past the step's {inputs} input particles"
-                ));
-            }
-            Some(true) => return Err(format!("input index {s} is stored twice (point {i})")),
-            Some(slot) => *slot = true,
-        }
-    }
-    Ok(())
 }

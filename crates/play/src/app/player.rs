@@ -585,10 +585,10 @@ fn probe_label(probe: &Probe) -> String {
     if let (Some(name), Some(value)) = (&probe.field, r.field) {
         text += &format!("\n{name} {value:.5e}");
     }
-    text += &match r.nearest_input {
-        Some(input) => format!("\nparticle {input} at {:.3e}", r.nearest_distance),
-        None => format!(
-            "\nparticle {} of the cache at {:.3e} (its input index needs a re-bake)",
+    text += &match &probe.input {
+        Ok((input, _)) => format!("\nparticle {input} at {:.3e}", r.nearest_distance),
+        Err(why) => format!(
+            "\nparticle {} of the cache at {:.3e}\n(its index in the case: {why})",
             r.nearest, r.nearest_distance
         ),
     };
@@ -606,11 +606,12 @@ fn probe_line(probe: &Probe, pixel: (u32, u32)) -> String {
         (Some(name), Some(value)) => format!(" {name} {value:e}"),
         _ => String::new(),
     };
-    let input = r
-        .nearest_input
-        .map_or("unknown".to_string(), |i| i.to_string());
+    let input = match &probe.input {
+        Ok((i, [a, b, c])) => format!("{i} ({a},{b},{c})"),
+        Err(why) => format!("unknown ({why})"),
+    };
     format!(
-        "probe step {} pixel {},{}: position {x},{y},{z}{field} nearest input {input} cache {} at {:e} status {}",
+        "probe step {} pixel {},{}: position {x},{y},{z}{field} nearest cache {} at {:e} input {input} status {}",
         probe.step, pixel.0, pixel.1, r.nearest, r.nearest_distance, probe.status
     )
 }
