@@ -67,6 +67,9 @@ pub struct PlayArgs {
     /// Iterations refined to when the view is still.
     #[arg(long, default_value_t = 3)]
     pub iterations: u32,
+    /// How the surface is shown at the start (the View section switches it).
+    #[arg(long, value_enum, default_value_t = ModeArg::Shade)]
+    pub mode: ModeArg,
     /// Milliseconds a frame may take on the GPU: while the view moves it is drawn smaller,
     /// and a still view refines in bands of rows, so the window answers on a slow GPU
     /// (0: every frame whole at full size).
@@ -304,7 +307,7 @@ pub enum ByteOrderArg {
 
 #[derive(Debug, Args)]
 pub struct GenArgs {
-    /// sphere, torus, ellipsoid, tank, droplets, sheet, plane, or from-file.
+    /// sphere, torus, ellipsoid, tank, droplets, wave, sheet, plane, or from-file.
     pub scene: String,
     /// The PLY or OBJ file, for `from-file`.
     pub input: Option<PathBuf>,

@@ -29,10 +29,16 @@ fn path(p: &Path) -> Result<&str> {
         .with_context(|| format!("{}: the demo needs a UTF-8 path", p.display()))
 }
 
-/// Whether `cache` holds a complete demo of `steps` steps.
+/// Whether `cache` holds a complete demo of `steps` steps, baked by this version from the
+/// wave scene (an earlier demo's series is made again).
 fn demo_ready(cache: &Path, steps: usize) -> bool {
-    slosh_cache::Manifest::read(cache)
-        .is_ok_and(|m| m.steps.len() == steps && m.missing().is_empty())
+    slosh_cache::Manifest::read(cache).is_ok_and(|m| {
+        m.steps.len() == steps
+            && m.missing().is_empty()
+            && m.source.ends_with("wave.case")
+            && m.bake.get("revision").and_then(|r| r.as_u64())
+                == Some(u64::from(slosh_bake::BAKE_REVISION))
+    })
 }
 
 pub fn demo(args: &DemoConfig) -> Result<()> {
@@ -67,7 +73,7 @@ pub fn demo(args: &DemoConfig) -> Result<()> {
         say!("demo series: {} (already baked)", cache.display());
     } else {
         say!(
-            "generating the demo series: a sloshing tank with droplets, {} steps of {} particles, in {}",
+            "generating the demo series: a tank sloshing hard, its crests throwing droplets, {} steps of {} particles, in {}",
             args.steps,
             args.points,
             root.display()
@@ -75,7 +81,7 @@ pub fn demo(args: &DemoConfig) -> Result<()> {
         let (steps, points) = (args.steps.to_string(), args.points.to_string());
         slosh(&[
             "gen",
-            "droplets",
+            "wave",
             "--points",
             &points,
             "--steps",
@@ -86,13 +92,17 @@ pub fn demo(args: &DemoConfig) -> Result<()> {
             path(&case_dir)?,
         ])?;
         say!("baking it (resumes if interrupted)");
+        // The whole body of water, as a solver's particles make it: its surface found from
+        // all of them (free surface, walls and floor), so it shows as a closed volume.
         slosh(&[
             "bake",
-            path(&case_dir.join("droplets.case"))?,
+            path(&case_dir.join("wave.case"))?,
             "--out",
             path(&cache)?,
             "--fields",
             "pressure",
+            "--surface",
+            "estimate",
         ])?;
     }
     drop(lock);
@@ -109,6 +119,7 @@ pub fn demo(args: &DemoConfig) -> Result<()> {
             render_scale: 1.0,
             up: None,
             iterations: 3,
+            mode: crate::cli::ModeArg::Water,
             frame_budget_ms: 33.0,
             window: "1280x800".into(),
             output: root.clone(),
@@ -157,7 +168,12 @@ fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
             fov: crate::cli::DEFAULT_FOV,
         },
         iterations: 3,
-        mode: slosh_render::ShadeMode::Shade,
+        // Water where secondary rays can run; the CPU tracer shades.
+        mode: if cpu {
+            slosh_render::ShadeMode::Shade
+        } else {
+            slosh_render::ShadeMode::Water
+        },
         out: Some(frames.join("{:05}.png")),
         movie: None,
         aov: None,

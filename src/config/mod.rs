@@ -69,8 +69,11 @@ impl GenConfig {
             let mut spec = SceneSpec::new(kind, a.points, a.seed);
             spec.dt = a.dt;
             if let Some(d) = a.droplets {
-                if !matches!(kind, SceneKind::Tank | SceneKind::Droplets) {
-                    bail!("--droplets applies to the tank and droplets scenes");
+                if !matches!(
+                    kind,
+                    SceneKind::Tank | SceneKind::Droplets | SceneKind::Wave
+                ) {
+                    bail!("--droplets applies to the tank, droplets and wave scenes");
                 }
                 spec.droplets = d;
             }

@@ -60,6 +60,7 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
         render_scale: args.render_scale,
         up: args.up.as_deref().map(up_axis).transpose()?,
         iterations: args.iterations.clamp(1, 8),
+        mode: args.mode.into(),
         frame_budget_ms,
         window: window(&args.window)?,
         output: args.output.clone(),

@@ -41,7 +41,7 @@ pub struct BakeParams {
 }
 
 /// Bumped whenever the bake's output for the same input and parameters changes.
-pub const BAKE_REVISION: u32 = 5;
+pub const BAKE_REVISION: u32 = 6;
 
 impl BakeParams {
     /// Parameters with the MLS defaults and the normals mode matching `normals`.

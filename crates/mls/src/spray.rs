@@ -19,8 +19,10 @@ pub struct Sphere<T> {
 
 /// The spheres that draw spray, and (point, sphere) for each point of it. Spray is a
 /// component (points linked where one is in the other's list within its h, the `links` the
-/// lists stage found) that cannot support a surface: fewer points than
-/// `below`, or no wider than its smoothing length (every fit in it would span it whole). A
+/// lists stage found) that cannot support a surface: fewer points than `below`, or no wider
+/// than its smoothing length (every fit in it would span it whole), or no wider than that
+/// across its second principal axis (a thread: a string of droplets, a jet thinner than a
+/// fit, which every fit would span across and draw as an open shell). A
 /// compact component of 4 points or more becomes one blob: its centroid, radius the members'
 /// RMS distance to it plus half the dense spacing (a particle's radius). Otherwise (fewer
 /// points, or a scattered component whose members stand out of that blob by more than a
@@ -141,10 +143,16 @@ pub(crate) fn droplets<T: Real>(
                 .iter()
                 .map(|&i| distance(points[i], c))
                 .fold(0.0, f64::max);
-            // A surface: enough points, wider than h, and sampled about as densely as the
-            // fluid (spray spread thin is not a sheet to stretch across its gaps).
+            // A surface: enough points, wider than h, in two directions at least, and
+            // sampled about as densely as the fluid (spray spread thin is not a sheet to
+            // stretch across its gaps).
             let mean_gap = m.iter().map(|&i| nearest[i]).sum::<f64>() / m.len() as f64;
-            if m.len() >= below && far > ball_h(m[0]) && mean_gap <= SPRAY_GAP * spacing {
+            let h = ball_h(m[0]);
+            if m.len() >= below
+                && far > h
+                && second_half_width(points, m, c) > h
+                && mean_gap <= SPRAY_GAP * spacing
+            {
                 return Spray::Surface;
             }
             let rms = (m
@@ -192,4 +200,27 @@ pub(crate) fn droplets<T: Real>(
         }
     }
     (spheres, marks)
+}
+
+/// The half-width of `members` (centroid `c`) along the second of their principal axes:
+/// √3 σ₂, σ₂² the middle eigenvalue of their covariance. A sphere's radius for points on a
+/// sphere (σ² = R²/3 along every axis); a thread's thickness for points along a line; a
+/// sheet's half-width in its plane.
+fn second_half_width(points: &[[f64; 3]], members: &[usize], c: [f64; 3]) -> f64 {
+    let mut cov = [[0.0f64; 3]; 3];
+    for &i in members {
+        let d = [
+            points[i][0] - c[0],
+            points[i][1] - c[1],
+            points[i][2] - c[2],
+        ];
+        for (a, row) in cov.iter_mut().enumerate() {
+            for (b, v) in row.iter_mut().enumerate() {
+                *v += d[a] * d[b] / members.len() as f64;
+            }
+        }
+    }
+    let (mut values, _) = crate::support::jacobi_eigen(cov);
+    values.sort_by(f64::total_cmp);
+    (3.0 * values[1].max(0.0)).sqrt()
 }

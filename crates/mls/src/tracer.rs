@@ -69,6 +69,9 @@ pub struct CameraBasis {
     pub up: [f64; 3],
 }
 
+/// How much room a framed box leaves around it: it fills 1 / this of the frame.
+const FRAMING_MARGIN: f64 = 1.1;
+
 impl Camera {
     /// A camera looking at the centre of `bounds` from the front-left and above, framing
     /// them, with `up` (a unit axis, e.g. `[0, 0, 1]`) up: the view direction is fixed in the
@@ -103,11 +106,47 @@ impl Camera {
         dir[(axis + 2) % 3] = -0.8;
         dir[axis] = 0.4 * sign;
         let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
-        let distance = 1.1 * radius / (fov_y.to_radians() * 0.5).sin();
+        let view = dir.map(|v| v / len);
         let mut unit = [0.0; 3];
         unit[axis] = sign;
+        // Near enough that the bounds' eight corners fill the frame, with a tenth to spare, in
+        // its tighter direction (the frame's aspect from width and height): a long, low
+        // tank fills a wide window instead of floating inside the sphere around it.
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let forward = view.map(|v| -v);
+        let right = cross(forward, unit);
+        let right_len = dot(right, right).sqrt();
+        let right = right.map(|v| v / right_len);
+        let screen_up = cross(right, forward);
+        let aspect = if width > 0 && height > 0 {
+            f64::from(width) / f64::from(height)
+        } else {
+            1.0
+        };
+        let tan_v = (fov_y.to_radians() * 0.5).tan();
+        let tan_h = tan_v * aspect;
+        let fitted = (0..8)
+            .map(|k| {
+                let corner: [f64; 3] = std::array::from_fn(|a| bounds[(k >> a) & 1][a]);
+                let q: [f64; 3] = std::array::from_fn(|a| corner[a] - centre[a]);
+                let (x, y) = (dot(q, right).abs(), dot(q, screen_up).abs());
+                dot(q, view) + FRAMING_MARGIN * (x / tan_h).max(y / tan_v)
+            })
+            .fold(0.0f64, f64::max);
+        let distance = if extent > 0.0 && extent.is_finite() && fitted.is_finite() && fitted > 0.0 {
+            fitted
+        } else {
+            FRAMING_MARGIN * radius / (fov_y.to_radians() * 0.5).sin()
+        };
         Camera {
-            eye: std::array::from_fn(|a| centre[a] + dir[a] / len * distance),
+            eye: std::array::from_fn(|a| centre[a] + view[a] * distance),
             target: centre,
             up: unit,
             fov_y,

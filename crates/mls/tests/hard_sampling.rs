@@ -98,15 +98,12 @@ fn collinear_coplanar_and_isolated_points_degrade_and_report() {
         let n = surface.len();
         // The extras are the last 12 + 25 + 1 points.
         let fits = &surface.ball_fits[n - 38..];
-        let degraded = fits
-            .iter()
-            .filter(|f| matches!(f, BallFit::Fitted(FitStatus::Degraded { .. })))
-            .count();
         eprintln!("degree {degree}: extras' fits {fits:?}");
-        // The segment's far end has no other points within reach of the weight.
+        // The segment is a thread, no wider than h across: spray, drawn as spheres.
         assert!(
-            degraded >= 6,
-            "the collinear segment cannot support degree {degree}: {degraded} degraded"
+            fits[..12].iter().all(|f| matches!(f, BallFit::Droplet(_))),
+            "the collinear segment is a thread: {:?}",
+            &fits[..12]
         );
         // The isolated point is a droplet: drawn as a sphere, not fitted.
         assert!(matches!(fits[37], BallFit::Droplet(_)), "{:?}", fits[37]);
@@ -128,6 +125,16 @@ fn collinear_coplanar_and_isolated_points_degrade_and_report() {
             ),
             "{:?}",
             undetected.ball_fits[n - 1]
+        );
+        // Fitted, the segment degrades: its far end has no other points within reach of the
+        // weight.
+        let degraded = undetected.ball_fits[n - 38..n - 26]
+            .iter()
+            .filter(|f| matches!(f, BallFit::Fitted(FitStatus::Degraded { .. })))
+            .count();
+        assert!(
+            degraded >= 6,
+            "the collinear segment cannot support degree {degree}: {degraded} degraded"
         );
         assert!(
             surface
@@ -201,7 +208,10 @@ fn sparse_droplets_give_finite_answers() {
             d.radius / spacing,
             h.status,
         );
-        close += usize::from(late <= 1.0 && to_particle <= 1.0);
+        // A blob stands for a compact cluster (two droplets touching, say): its surface, the
+        // particles' RMS distance from their centroid plus a particle's radius, may pass a
+        // little over a spacing from every one of them.
+        close += usize::from(late <= 1.0 && to_particle <= 1.25);
     }
     eprintln!(
         "{close} of {in_flight} droplets in flight drawn on their particles, no later than the truth"

@@ -309,3 +309,43 @@ fn thin_sheet_is_thinner_than_the_spacing() {
     assert_eq!(up * 2, p.len());
     assert!(sc.sheet_gap() < sc.spacing());
 }
+
+/// The demo's wave (issue 28, item 3): over the demo's 200 steps of 0.02 s, the highest point
+/// of the free surface moves by at least a tenth of the tank's 2 m width, and droplets fly.
+#[test]
+fn the_wave_sloshes_hard_and_throws_droplets() {
+    let mut spec = SceneSpec::new(SceneKind::Wave, 20_000, 1);
+    spec.dt = 0.02;
+    let sc = Scene::new(spec).unwrap();
+    // The highest point of the free surface (the first part where droplets fly too).
+    let crest = |step: usize| {
+        let truth = sc.truth(sc.time(step));
+        let field = match &truth {
+            Truth::Union { parts } => &parts[0],
+            other => other,
+        };
+        let Truth::HeightField { waves, time, .. } = field else {
+            panic!("{field:?}")
+        };
+        grid_max(waves, *time)
+    };
+    fn grid_max(waves: &[Wave], t: f64) -> f64 {
+        (0..=80)
+            .flat_map(|i| (0..=40).map(move |j| (i as f64 * 2.0 / 80.0, j as f64 / 40.0)))
+            .map(|(x, y)| height(waves, t, x, y))
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+    let heights: Vec<f64> = (0..200).map(crest).collect();
+    let lo = heights.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = heights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    eprintln!("crest from {lo:.3} m to {hi:.3} m above the still level");
+    assert!(hi - lo >= 0.1 * 2.0, "the crest moves by {:.3} m", hi - lo);
+    let flying = (0..200)
+        .filter(|&s| {
+            sc.droplets()
+                .iter()
+                .any(|d| sc.droplet_center(d, sc.time(s)).is_some())
+        })
+        .count();
+    assert!(flying >= 150, "droplets fly in {flying} of 200 steps");
+}

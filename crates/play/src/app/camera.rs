@@ -52,8 +52,14 @@ pub struct OrbitCamera {
 
 impl OrbitCamera {
     /// The framing camera of `bounds` with `up` up (`slosh render`'s camera for z up).
-    pub fn framing(bounds: &[[f64; 3]; 2], fov_y: f64, up: [f64; 3]) -> OrbitCamera {
-        let c = Camera::framing(bounds, fov_y, 1, 1, up);
+    /// The framing `slosh render` takes of `bounds` for a viewport of `size` pixels.
+    pub fn framing(
+        bounds: &[[f64; 3]; 2],
+        fov_y: f64,
+        up: [f64; 3],
+        size: (u32, u32),
+    ) -> OrbitCamera {
+        let c = Camera::framing(bounds, fov_y, size.0, size.1, up);
         OrbitCamera {
             eye: c.eye,
             target: c.target,
@@ -125,13 +131,13 @@ mod tests {
 
     #[test]
     fn the_initial_view_is_the_render_framing() {
-        let c = OrbitCamera::framing(&BOUNDS, 40.0, [0.0, 0.0, 1.0]).camera(64, 48);
+        let c = OrbitCamera::framing(&BOUNDS, 40.0, [0.0, 0.0, 1.0], (64, 48)).camera(64, 48);
         assert_eq!(c, Camera::framing(&BOUNDS, 40.0, 64, 48, [0.0, 0.0, 1.0]));
     }
 
     #[test]
     fn orbiting_keeps_distance_and_target_and_stays_off_the_pole() {
-        let mut c = OrbitCamera::framing(&BOUNDS, 40.0, [0.0, 1.0, 0.0]);
+        let mut c = OrbitCamera::framing(&BOUNDS, 40.0, [0.0, 1.0, 0.0], (64, 48));
         let (d, t) = (c.distance(), c.target);
         c.orbit(120.0, -35.0);
         assert!((c.distance() - d).abs() < 1e-9 * d);
@@ -150,7 +156,7 @@ mod tests {
 
     #[test]
     fn pan_moves_eye_and_target_together_and_zoom_scales_distance() {
-        let mut c = OrbitCamera::framing(&BOUNDS, 40.0, [0.0, 0.0, 1.0]);
+        let mut c = OrbitCamera::framing(&BOUNDS, 40.0, [0.0, 0.0, 1.0], (64, 48));
         let (d, offset) = (c.distance(), sub(c.eye, c.target));
         c.pan(30.0, -12.0, 480.0);
         assert!(

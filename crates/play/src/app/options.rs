@@ -16,6 +16,8 @@ pub struct PlayOptions {
     pub up: Option<[f64; 3]>,
     /// Iterations refined to once the view is still.
     pub iterations: u32,
+    /// How the surface is shown at the start.
+    pub mode: slosh_render::ShadeMode,
     /// Milliseconds a frame may take on the GPU (`FrameRequest::frame_budget_ms`).
     pub frame_budget_ms: Option<f64>,
     /// Window inner size in logical points.

@@ -21,6 +21,11 @@ use crate::engine::{Engine, FrameReport, FrameRequest, Probe};
 use crate::refine::Draw;
 use slosh_mls::dominant_axis;
 
+/// The controls panel's width and the height of the timeline and status bars, in points:
+/// what the viewport leaves of the window.
+const CONTROLS_WIDTH: f32 = 260.0;
+const BARS_HEIGHT: f32 = 80.0;
+
 /// Framed before the series has a step with particles.
 const NO_BOUNDS: [[f64; 3]; 2] = [[-1.0; 3], [1.0; 3]];
 
@@ -69,9 +74,14 @@ impl Player {
             .unwrap_or([0.0, 0.0, 1.0]);
         let up_axis = dominant_axis(up);
         let bounds = engine.series().bounds().unwrap_or(NO_BOUNDS);
-        let camera = OrbitCamera::framing(&bounds, 40.0, axis_vector(up_axis));
+        // The viewport: the window less the controls and the timeline and status bars.
+        let viewport = (
+            (options.window.0 - CONTROLS_WIDTH).max(1.0) as u32,
+            (options.window.1 - BARS_HEIGHT).max(1.0) as u32,
+        );
+        let camera = OrbitCamera::framing(&bounds, 40.0, axis_vector(up_axis), viewport);
         let view = ViewSettings {
-            mode: slosh_render::ShadeMode::Shade,
+            mode: options.mode,
             iterations: options.iterations.max(1),
             render_scale: options.render_scale.clamp(0.25, 2.0),
             frame_budget_ms: options.frame_budget_ms,
@@ -112,7 +122,13 @@ impl Player {
 
     /// Frames the data again about the chosen up axis.
     fn reframe(&mut self) {
-        self.home = OrbitCamera::framing(&self.bounds, 40.0, axis_vector(self.view.up_axis));
+        let r = self.viewport_px;
+        let size = if r.is_positive() {
+            (r.width() as u32, r.height() as u32)
+        } else {
+            (1, 1)
+        };
+        self.home = OrbitCamera::framing(&self.bounds, 40.0, axis_vector(self.view.up_axis), size);
         self.camera = self.home;
     }
 
@@ -499,7 +515,7 @@ impl eframe::App for Player {
             timeline_panel::show(ui, &mut self.engine);
         });
         egui::Panel::right("controls")
-            .default_size(260.0)
+            .default_size(CONTROLS_WIDTH)
             .show(ui, |ui| self.controls(ui));
         egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui));
         // The title names the step on screen (a stand-in's own number while another loads),

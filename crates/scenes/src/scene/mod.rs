@@ -25,7 +25,7 @@ enum Family {
     Flat,
 }
 
-use tank::{tank_spacing, tank_waves};
+use tank::{slosh_waves, tank_spacing, tank_waves};
 
 /// Gravity used by the tank and the droplets (m/s²).
 pub const GRAVITY: f64 = 9.81;
@@ -42,6 +42,9 @@ pub enum SceneKind {
     Tank,
     /// The tank plus ballistic droplets leaving its crests.
     Droplets,
+    /// The tank sloshing hard: one large standing wave whose crests throw droplets (the
+    /// demo's scene).
+    Wave,
     /// Two parallel squares closer than the smoothing length, normals opposing.
     Sheet,
     /// One flat square: every neighbourhood exactly coplanar.
@@ -49,12 +52,13 @@ pub enum SceneKind {
 }
 
 impl SceneKind {
-    pub const ALL: [SceneKind; 7] = [
+    pub const ALL: [SceneKind; 8] = [
         SceneKind::Sphere,
         SceneKind::Torus,
         SceneKind::Ellipsoid,
         SceneKind::Tank,
         SceneKind::Droplets,
+        SceneKind::Wave,
         SceneKind::Sheet,
         SceneKind::Plane,
     ];
@@ -63,7 +67,7 @@ impl SceneKind {
     fn family(self) -> Family {
         match self {
             SceneKind::Sphere | SceneKind::Torus | SceneKind::Ellipsoid => Family::Body,
-            SceneKind::Tank | SceneKind::Droplets => Family::Tank,
+            SceneKind::Tank | SceneKind::Droplets | SceneKind::Wave => Family::Tank,
             SceneKind::Sheet | SceneKind::Plane => Family::Flat,
         }
     }
@@ -75,6 +79,7 @@ impl SceneKind {
             SceneKind::Ellipsoid => "ellipsoid",
             SceneKind::Tank => "tank",
             SceneKind::Droplets => "droplets",
+            SceneKind::Wave => "wave",
             SceneKind::Sheet => "sheet",
             SceneKind::Plane => "plane",
         }
@@ -128,7 +133,7 @@ pub struct SceneSpec {
     pub seed: u64,
     /// Time between steps (s).
     pub dt: f64,
-    /// Droplets (the droplets scene defaults to 40).
+    /// Droplets (the droplets scene defaults to 40, the wave scene to 80).
     pub droplets: usize,
     pub hard: HardCases,
 }
@@ -140,7 +145,11 @@ impl SceneSpec {
             points,
             seed,
             dt: 0.05,
-            droplets: if kind == SceneKind::Droplets { 40 } else { 0 },
+            droplets: match kind {
+                SceneKind::Droplets => 40,
+                SceneKind::Wave => 80,
+                _ => 0,
+            },
             hard: HardCases::default(),
         }
     }
@@ -288,10 +297,10 @@ impl Scene {
             Family::Tank => tank_spacing(spec.points),
             Family::Flat => flat::spacing(spec.kind, n),
         };
-        let waves = if matches!(spec.kind, SceneKind::Tank | SceneKind::Droplets) {
-            tank_waves()
-        } else {
-            Vec::new()
+        let waves = match spec.kind {
+            SceneKind::Tank | SceneKind::Droplets => tank_waves(),
+            SceneKind::Wave => slosh_waves(),
+            _ => Vec::new(),
         };
         let mut scene = Scene {
             spec,
@@ -299,7 +308,7 @@ impl Scene {
             waves,
             droplets: Vec::new(),
         };
-        if matches!(scene.spec.kind, SceneKind::Tank | SceneKind::Droplets) {
+        if scene.spec.kind.family() == Family::Tank {
             // The area/volume estimate ignores lattice rounding and the wavy top: calibrate on
             // the real count so that `points` is what the user gets (to about 1 %).
             let target = scene.spec.points as f64;

@@ -1,4 +1,4 @@
-//! The tank family (tank, droplets): a sloshing free surface in a box with walls and an
+//! The tank family (tank, droplets, wave): a sloshing free surface in a box with walls and an
 //! interior, standing waves, and ballistic droplets leaving the crests.
 
 use std::f64::consts::PI;
@@ -7,7 +7,7 @@ use glam::DVec3;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use super::{Droplet, GRAVITY, Particles, Scene};
+use super::{Droplet, GRAVITY, Particles, Scene, SceneKind};
 use crate::sampling::{fibonacci_sphere, grid};
 use crate::truth::{Truth, Wave, height, height_gradient};
 
@@ -106,13 +106,39 @@ impl Scene {
         }
     }
 
+    /// Whether droplets leave the wave's surface where they are (the wave scene) or start
+    /// above the highest crest any wave makes (tank, droplets).
+    fn droplets_from_the_surface(&self) -> bool {
+        self.spec.kind == SceneKind::Wave
+    }
+
+    /// The height a droplet of `radius` at (x, y) flies above at `time` (it is drawn only
+    /// above it): the highest the surface reaches under it.
+    fn droplet_floor(&self, time: f64, x: f64, y: f64, radius: f64) -> f64 {
+        if self.droplets_from_the_surface() {
+            let under = [(0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)];
+            under
+                .iter()
+                .map(|(dx, dy)| height(&self.waves, time, x + dx * radius, y + dy * radius))
+                .fold(f64::NEG_INFINITY, f64::max)
+                + TANK.depth
+        } else {
+            TANK.depth + self.waves.iter().map(|w| w.amplitude.abs()).sum::<f64>()
+        }
+    }
+
     pub(super) fn make_droplets(&self) -> Vec<Droplet> {
         let mut rng = self.rng(0, 3);
-        let amp: f64 = self.waves.iter().map(|w| w.amplitude.abs()).sum();
         let [lx, ly] = TANK.size;
+        // The wave scene throws droplets over the first 4 s (the demo's 200 steps of 0.02 s).
+        let launches = if self.droplets_from_the_surface() {
+            -0.2..4.0
+        } else {
+            -0.5..2.0
+        };
         (0..self.spec.droplets)
             .map(|_| {
-                let launch_time = rng.random_range(-0.5..2.0);
+                let launch_time = rng.random_range(launches.clone());
                 // Leave from the highest of a few candidate points: a crest.
                 let (x, y) = (0..8)
                     .map(|_| {
@@ -132,9 +158,10 @@ impl Scene {
                     .unwrap_or((0.5 * lx, 0.5 * ly));
                 let particles = rng.random_range(1..=20usize);
                 let radius = self.spacing * (particles as f64 / (4.0 * PI)).sqrt().max(0.5);
+                let floor = self.droplet_floor(launch_time, x, y, radius);
                 Droplet {
                     launch_time,
-                    launch: DVec3::new(x, y, TANK.depth + amp + 2.0 * self.spacing + radius),
+                    launch: DVec3::new(x, y, floor + 2.0 * self.spacing + radius),
                     velocity: DVec3::new(
                         rng.random_range(-0.4..0.4),
                         rng.random_range(-0.2..0.2),
@@ -154,9 +181,8 @@ impl Scene {
             return None;
         }
         let c = d.launch + d.velocity * tau + DVec3::new(0.0, 0.0, -0.5 * GRAVITY * tau * tau);
-        let amp: f64 = self.waves.iter().map(|w| w.amplitude.abs()).sum();
         let [lx, ly] = TANK.size;
-        let above = c.z - d.radius > TANK.depth + amp + self.spacing;
+        let above = c.z - d.radius > self.droplet_floor(time, c.x, c.y, d.radius) + self.spacing;
         let inside = (0.0..=lx).contains(&c.x) && (0.0..=ly).contains(&c.y);
         (above && inside).then_some(c)
     }
@@ -166,7 +192,8 @@ impl Scene {
             return;
         };
         if d.particles == 1 {
-            out.push(c, DVec3::Z, TANK.depth, true);
+            // On its sphere, as every surface particle lies on the truth: at the top.
+            out.push(c + DVec3::Z * d.radius, DVec3::Z, TANK.depth, true);
             return;
         }
         for n in fibonacci_sphere(d.particles) {
@@ -177,26 +204,43 @@ impl Scene {
 
 /// Three standing modes of a 2 × 1 × 0.5 m tank with slip walls (dispersion ω² = g k tanh(k d)).
 pub(super) fn tank_waves() -> Vec<Wave> {
-    let [lx, ly] = TANK.size;
-    [
+    standing_waves(&[
         (1.0, 0.0, 0.06, 0.0),
         (2.0, 1.0, 0.015, 1.0),
         (0.0, 1.0, 0.02, 2.0),
-    ]
-    .into_iter()
-    .map(|(mx, my, amplitude, phase)| {
-        let kx = mx * PI / lx;
-        let ky = my * PI / ly;
-        let k = f64::hypot(kx, ky);
-        Wave {
-            amplitude,
-            kx,
-            ky,
-            omega: (GRAVITY * k * (k * TANK.depth).tanh()).sqrt(),
-            phase,
-        }
-    })
-    .collect()
+    ])
+}
+
+/// Standing modes (mx, my, amplitude, phase) of the tank with slip walls.
+fn standing_waves(modes: &[(f64, f64, f64, f64)]) -> Vec<Wave> {
+    let [lx, ly] = TANK.size;
+    modes
+        .iter()
+        .map(|&(mx, my, amplitude, phase)| {
+            let kx = mx * PI / lx;
+            let ky = my * PI / ly;
+            let k = f64::hypot(kx, ky);
+            Wave {
+                amplitude,
+                kx,
+                ky,
+                omega: (GRAVITY * k * (k * TANK.depth).tanh()).sqrt(),
+                phase,
+            }
+        })
+        .collect()
+}
+
+/// The wave scene's modes: the tank's first mode sloshing hard (the crest at each end wall
+/// rises 0.22 m above the still level and falls as far below it, once every 2 s; the highest
+/// point of the surface moves by more than a tenth of the tank's 2 m width), with two smaller
+/// cross modes for a surface that is not a plain sheet (linear waves, as the tank's).
+pub(super) fn slosh_waves() -> Vec<Wave> {
+    standing_waves(&[
+        (1.0, 0.0, 0.22, 0.0),
+        (2.0, 1.0, 0.02, 1.0),
+        (1.0, 1.0, 0.025, 2.0),
+    ])
 }
 
 /// Spacing s at which surface + walls (area / s²) and interior (volume / s³) make `n` points.
