@@ -165,4 +165,56 @@ fn demo_headless_renders_frames_and_reuses_its_series() {
     assert!(out.contains("frames: "), "{out}");
     let (ok, out, err) = slosh(&["inspect", root.join("cache").to_str().unwrap(), "--verify"]);
     assert!(ok, "{out}{err}");
+    demo_fills_the_view(&root.join("cache"), dir.path());
+}
+
+/// The player's first frame of the demo (issue 28, item 3): the camera it frames the series
+/// with for the viewport of its default 1280×800 window (1020×720 beside the controls), the
+/// step traced: the water spans at least half the viewport's width.
+fn demo_fills_the_view(cache: &std::path::Path, dir: &std::path::Path) {
+    let manifest: Value =
+        serde_json::from_str(&std::fs::read_to_string(cache.join("manifest.json")).unwrap())
+            .unwrap();
+    let corner = |k: usize| -> [f64; 3] {
+        std::array::from_fn(|a| manifest["bounds"][k][a].as_f64().unwrap())
+    };
+    let (w, h) = (1020u32, 720u32);
+    let camera = slosh_mls::Camera::framing(&[corner(0), corner(1)], 40.0, w, h, [0.0, 0.0, 1.0]);
+    let v = |p: [f64; 3]| format!("{},{},{}", p[0], p[1], p[2]);
+    let npy = dir.join("first.npy");
+    let (ok, out, err) = slosh(&[
+        "render",
+        cache.to_str().unwrap(),
+        "--step",
+        "0",
+        "--size",
+        &format!("{w}x{h}"),
+        "--eye",
+        &v(camera.eye),
+        "--target",
+        &v(camera.target),
+        "--up",
+        "0,0,1",
+        "--fov",
+        "40",
+        "--out",
+        dir.join("first.png").to_str().unwrap(),
+        "--aov",
+        npy.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}{err}");
+    let bytes = std::fs::read(&npy).unwrap();
+    let values: &[f32] = bytemuck::cast_slice(&bytes[128..]);
+    let hit_columns: Vec<usize> = (0..w as usize)
+        .filter(|&x| (0..h as usize).any(|y| values[(y * w as usize + x) * 8 + 7] != 0.0))
+        .collect();
+    let span = hit_columns.last().unwrap() - hit_columns.first().unwrap() + 1;
+    eprintln!(
+        "the demo's first frame: water across {span} of {w} columns ({:.0} %)",
+        100.0 * span as f64 / f64::from(w)
+    );
+    assert!(
+        2 * span >= w as usize,
+        "the water spans {span} of {w} columns"
+    );
 }
