@@ -179,7 +179,7 @@ fn demo_fills_the_view(cache: &std::path::Path, dir: &std::path::Path) {
         std::array::from_fn(|a| manifest["bounds"][k][a].as_f64().unwrap())
     };
     let (w, h) = (1020u32, 720u32);
-    let camera = slosh_mls::Camera::framing(&[corner(0), corner(1)], 40.0, w, h, [0.0, 0.0, 1.0]);
+    let camera = slosh_mls::Camera::filling(&[corner(0), corner(1)], 40.0, w, h, [0.0, 0.0, 1.0]);
     let v = |p: [f64; 3]| format!("{},{},{}", p[0], p[1], p[2]);
     let npy = dir.join("first.npy");
     let (ok, out, err) = slosh(&[

@@ -69,7 +69,7 @@ pub struct CameraBasis {
     pub up: [f64; 3],
 }
 
-/// How much room a framed box leaves around it: it fills 1 / this of the frame.
+/// How much room a framing leaves around what it frames: it fills 1 / this of the frame.
 const FRAMING_MARGIN: f64 = 1.1;
 
 impl Camera {
@@ -106,12 +106,36 @@ impl Camera {
         dir[(axis + 2) % 3] = -0.8;
         dir[axis] = 0.4 * sign;
         let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
-        let view = dir.map(|v| v / len);
+        let distance = FRAMING_MARGIN * radius / (fov_y.to_radians() * 0.5).sin();
         let mut unit = [0.0; 3];
         unit[axis] = sign;
-        // Near enough that the bounds' eight corners fill the frame, with a tenth to spare, in
-        // its tighter direction (the frame's aspect from width and height): a long, low
-        // tank fills a wide window instead of floating inside the sphere around it.
+        Camera {
+            eye: std::array::from_fn(|a| centre[a] + dir[a] / len * distance),
+            target: centre,
+            up: unit,
+            fov_y,
+            width,
+            height,
+        }
+    }
+
+    /// [`Camera::framing`]'s view, brought near enough that the eight corners of `bounds`
+    /// fill the frame of `width` × `height` with a tenth to spare in its tighter direction,
+    /// instead of the sphere around them: a long, low tank fills a wide window. What the
+    /// player opens with.
+    pub fn filling(
+        bounds: &[[f64; 3]; 2],
+        fov_y: f64,
+        width: u32,
+        height: u32,
+        up: [f64; 3],
+    ) -> Camera {
+        let framed = Camera::framing(bounds, fov_y, width, height, up);
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let unit = |v: [f64; 3]| {
+            let l = dot(v, v).sqrt();
+            v.map(|x| x / l)
+        };
         let cross = |a: [f64; 3], b: [f64; 3]| {
             [
                 a[1] * b[2] - a[2] * b[1],
@@ -119,12 +143,10 @@ impl Camera {
                 a[0] * b[1] - a[1] * b[0],
             ]
         };
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        let forward = view.map(|v| -v);
-        let right = cross(forward, unit);
-        let right_len = dot(right, right).sqrt();
-        let right = right.map(|v| v / right_len);
-        let screen_up = cross(right, forward);
+        let centre = framed.target;
+        let view = unit(std::array::from_fn(|a| framed.eye[a] - centre[a]));
+        let right = unit(cross(view.map(|v| -v), framed.up));
+        let screen_up = cross(right, view.map(|v| -v));
         let aspect = if width > 0 && height > 0 {
             f64::from(width) / f64::from(height)
         } else {
@@ -132,7 +154,8 @@ impl Camera {
         };
         let tan_v = (fov_y.to_radians() * 0.5).tan();
         let tan_h = tan_v * aspect;
-        let fitted = (0..8)
+        // The distance at which every corner is inside the frame, shrunk by the margin.
+        let distance = (0..8)
             .map(|k| {
                 let corner: [f64; 3] = std::array::from_fn(|a| bounds[(k >> a) & 1][a]);
                 let q: [f64; 3] = std::array::from_fn(|a| corner[a] - centre[a]);
@@ -140,18 +163,13 @@ impl Camera {
                 dot(q, view) + FRAMING_MARGIN * (x / tan_h).max(y / tan_v)
             })
             .fold(0.0f64, f64::max);
-        let distance = if extent > 0.0 && extent.is_finite() && fitted.is_finite() && fitted > 0.0 {
-            fitted
-        } else {
-            FRAMING_MARGIN * radius / (fov_y.to_radians() * 0.5).sin()
-        };
+        if !(distance.is_finite() && distance > 0.0) {
+            // Bounds of no extent: the framing's own distance.
+            return framed;
+        }
         Camera {
             eye: std::array::from_fn(|a| centre[a] + view[a] * distance),
-            target: centre,
-            up: unit,
-            fov_y,
-            width,
-            height,
+            ..framed
         }
     }
 

@@ -152,3 +152,53 @@ fn f32_matches_the_f64_oracle() {
         assert!(differ * 200 <= compared, "{kind:?}: {differ} of {compared}");
     }
 }
+
+/// `Camera::filling` looks from the framing's direction, at the distance where the bounds'
+/// corners fill the frame's tighter direction with a tenth to spare: every corner in front of
+/// the eye and inside the frame, the farthest out at 1 / 1.1 of its half-width or height.
+#[test]
+fn filling_puts_the_bounds_corners_just_inside_the_frame() {
+    let bounds = [[0.0, 0.0, 0.0], [2.0, 1.0, 0.8]];
+    for (w, h, up) in [
+        (1020, 720, [0.0, 0.0, 1.0]),
+        (400, 800, [0.0, 0.0, 1.0]),
+        (640, 480, [0.0, 1.0, 0.0]),
+    ] {
+        let framed = Camera::framing(&bounds, 40.0, w, h, up);
+        let filled = Camera::filling(&bounds, 40.0, w, h, up);
+        assert_eq!((filled.target, filled.up), (framed.target, framed.up));
+        let dir = |c: &Camera| {
+            let d: [f64; 3] = std::array::from_fn(|a| c.eye[a] - c.target[a]);
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            (d.map(|v| v / l), l)
+        };
+        let ((a, near), (b, far)) = (dir(&filled), dir(&framed));
+        assert!(
+            (0..3).all(|k| (a[k] - b[k]).abs() < 1e-12),
+            "{a:?} vs {b:?}"
+        );
+        // A long, low box in a landscape frame: nearer than the sphere around it allows (in a
+        // portrait one the sphere's framing overflows the sides, and filling stands back).
+        if w > h {
+            assert!(near < far, "{near} not nearer than {far}");
+        }
+        // Each corner's place on the image plane, in units of the half-width and height.
+        let basis = filled.basis();
+        let dot = |u: [f64; 3], v: [f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+        let mut widest = 0.0f64;
+        for k in 0..8 {
+            let corner: [f64; 3] = std::array::from_fn(|ax| bounds[(k >> ax) & 1][ax]);
+            let q: [f64; 3] = std::array::from_fn(|ax| corner[ax] - filled.eye[ax]);
+            let z = dot(q, basis.forward);
+            assert!(z > 0.0, "corner {corner:?} behind the eye");
+            let norm = |v: [f64; 3]| dot(v, v);
+            let sx = dot(q, basis.right) / norm(basis.right) / z;
+            let sy = dot(q, basis.up) / norm(basis.up) / z;
+            widest = widest.max(sx.abs()).max(sy.abs());
+        }
+        assert!(
+            (widest - 1.0 / 1.1).abs() < 1e-9,
+            "{w}×{h}: the farthest corner at {widest} of the frame"
+        );
+    }
+}

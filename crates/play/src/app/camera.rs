@@ -52,14 +52,15 @@ pub struct OrbitCamera {
 
 impl OrbitCamera {
     /// The framing camera of `bounds` with `up` up (`slosh render`'s camera for z up).
-    /// The framing `slosh render` takes of `bounds` for a viewport of `size` pixels.
+    /// `bounds` filling a viewport of `size` pixels ([`Camera::filling`]: `slosh render`'s
+    /// view, as near as the box allows).
     pub fn framing(
         bounds: &[[f64; 3]; 2],
         fov_y: f64,
         up: [f64; 3],
         size: (u32, u32),
     ) -> OrbitCamera {
-        let c = Camera::framing(bounds, fov_y, size.0, size.1, up);
+        let c = Camera::filling(bounds, fov_y, size.0, size.1, up);
         OrbitCamera {
             eye: c.eye,
             target: c.target,
@@ -130,9 +131,9 @@ mod tests {
     const BOUNDS: [[f64; 3]; 2] = [[-1.0, -2.0, 0.0], [1.0, 2.0, 1.0]];
 
     #[test]
-    fn the_initial_view_is_the_render_framing() {
+    fn the_initial_view_fills_the_viewport_from_the_render_framings_direction() {
         let c = OrbitCamera::framing(&BOUNDS, 40.0, [0.0, 0.0, 1.0], (64, 48)).camera(64, 48);
-        assert_eq!(c, Camera::framing(&BOUNDS, 40.0, 64, 48, [0.0, 0.0, 1.0]));
+        assert_eq!(c, Camera::filling(&BOUNDS, 40.0, 64, 48, [0.0, 0.0, 1.0]));
     }
 
     #[test]
