@@ -389,11 +389,6 @@ impl Engine {
         }
     }
 
-    /// The frame budget's state, once a request asked for one.
-    pub fn frame_budget(&self) -> Option<&FrameBudget> {
-        self.frame_budget.as_ref()
-    }
-
     /// Waits for the frame last recorded and submitted, and takes its GPU time (timestamp
     /// queries where the adapter has them, else from its recording to the end of the wait) into
     /// the frame budget. Returns that time in ms where a frame was recorded.

@@ -4,7 +4,7 @@
 
 use slosh_cache::{CacheFile, ProbeReading, Source, SurfaceProbe};
 use slosh_ensight::{Case, PointSource, StepRequest};
-use slosh_render::{HostField, status};
+use slosh_render::{GpuStep, HostField, status};
 
 use super::Engine;
 use crate::error::{Error, Result};
@@ -28,7 +28,9 @@ pub struct Probe {
 /// The shown step's surface, held for probing, with the field it was read with.
 #[derive(Debug)]
 pub(super) struct HeldProbe {
-    index: usize,
+    /// The resident step it was read for (`GpuStep::id`: a step file that changed and was
+    /// loaded again is another) and the field revision.
+    step_id: u64,
     revision: u64,
     surface: SurfaceProbe,
     field: Option<Vec<f32>>,
@@ -81,11 +83,14 @@ impl HeldProbe {
 }
 
 impl Engine {
-    /// What the picture on screen shows at pixel (`x`, `y`) of [`Engine::targets`]: `None`
-    /// for a miss, before any frame, or while the shown step is a preview's (its pixels are
-    /// another size). The step's surface is decoded on the first probe of each step.
+    /// What the picture on screen shows at pixel (`x`, `y`) of [`Engine::targets`] (a
+    /// preview's pixels while one is shown): `None` for a miss or before any frame. The
+    /// step's surface is decoded on the first probe of each step loaded.
     pub fn probe(&mut self, x: u32, y: u32, h_factor: f32) -> Result<Option<Probe>> {
         let (Some(index), Some(targets)) = (self.shown, self.targets()) else {
+            return Ok(None);
+        };
+        let Some(step_id) = self.pool.peek(index).map(GpuStep::id) else {
             return Ok(None);
         };
         let Some(hit) = self.tracer.read_hit(&self.gpu, targets, x, y)? else {
@@ -94,7 +99,7 @@ impl Engine {
         let stale = self
             .probed
             .as_ref()
-            .is_none_or(|p| p.index != index || p.revision != self.revision);
+            .is_none_or(|p| p.step_id != step_id || p.revision != self.revision);
         if stale {
             let path = self.source.path(index).ok_or_else(|| Error::Series {
                 path: self.series.dir().to_path_buf(),
@@ -113,7 +118,7 @@ impl Engine {
             };
             let header = file.header();
             self.probed = Some(HeldProbe {
-                index,
+                step_id,
                 revision: self.revision,
                 surface: SurfaceProbe::open(&file)?,
                 field,

@@ -34,6 +34,24 @@ pub(super) fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result
     Ok(out)
 }
 
+/// `size` bytes of `source` from `offset` copied into a new `MAP_READ` buffer (submitted).
+fn staged(gpu: &Gpu, source: &wgpu::Buffer, offset: u64, size: u64) -> wgpu::Buffer {
+    let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("readback"),
+        });
+    encoder.copy_buffer_to_buffer(source, offset, &staging, 0, size);
+    gpu.queue.submit([encoder.finish()]);
+    staging
+}
+
 impl Tracer {
     /// The pass times of the last frame submitted into `targets`, once the GPU has finished
     /// it (waits); `None` where the adapter has no timestamp queries.
@@ -52,23 +70,8 @@ impl Tracer {
 
     /// Reads the hits and pixels of the last frame submitted into `targets` (waits).
     pub fn read_frame(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Frame> {
-        let copy = |source: &wgpu::Buffer| -> Result<wgpu::Buffer> {
-            let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("readback"),
-                size: source.size(),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let mut encoder = gpu
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("readback"),
-                });
-            encoder.copy_buffer_to_buffer(source, 0, &staging, 0, source.size());
-            gpu.queue.submit([encoder.finish()]);
-            Ok(staging)
-        };
-        let mut hits: Vec<GpuHit> = read(gpu, &copy(&targets.hits)?)?;
+        let whole = |b: &wgpu::Buffer| staged(gpu, b, 0, b.size());
+        let mut hits: Vec<GpuHit> = read(gpu, &whole(&targets.hits))?;
         // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
         for hit in hits.iter_mut().filter(|h| h.status == status::MISS) {
             *hit = GpuHit {
@@ -76,7 +79,7 @@ impl Tracer {
                 ..GpuHit::zeroed()
             };
         }
-        let rgba = read(gpu, &copy(&targets.image)?)?;
+        let rgba = read(gpu, &whole(&targets.image))?;
         Ok(Frame {
             width: targets.width,
             height: targets.height,
@@ -99,20 +102,7 @@ impl Tracer {
         }
         let size = size_of::<GpuHit>() as u64;
         let offset = (u64::from(y) * u64::from(targets.width) + u64::from(x)) * size;
-        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hit readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("hit readback"),
-            });
-        encoder.copy_buffer_to_buffer(&targets.hits, offset, &staging, 0, size);
-        gpu.queue.submit([encoder.finish()]);
-        let hit: Vec<GpuHit> = read(gpu, &staging)?;
+        let hit: Vec<GpuHit> = read(gpu, &staged(gpu, &targets.hits, offset, size))?;
         // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
         Ok(hit.first().copied().filter(|h| h.status != status::MISS))
     }
