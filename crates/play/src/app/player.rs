@@ -556,14 +556,15 @@ impl eframe::App for Player {
         if self.log_frames {
             // The pass's interval since the last one (what delays an input event while the
             // player is busy) and the time spent in this pass's own work.
-            let band = match &self.last.draw {
-                Some(Draw::Rows {
-                    rows, done, height, ..
-                }) => format!(" rows {}+{}k ({done} of {height})", rows.first, rows.stride),
-                None if self.last.masks.is_some() => self.last.masks.map_or(String::new(), |m| {
-                    format!(" masks {}/{}", m.derived, m.total)
-                }),
-                Some(Draw::Preview) => self
+            let band = match (&self.last.draw, self.last.masks) {
+                (
+                    Some(Draw::Rows {
+                        rows, done, height, ..
+                    }),
+                    _,
+                ) => format!(" rows {}+{}k ({done} of {height})", rows.first, rows.stride),
+                (None, Some(m)) => format!(" masks {}/{}", m.derived, m.total),
+                (Some(Draw::Preview), _) => self
                     .last
                     .quality
                     .map_or(String::new(), |q| format!(" preview {}", q.scale)),
