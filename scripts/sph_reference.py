@@ -2,16 +2,24 @@
 """Real SPH data and the field's reference surface for `slosh bench accuracy --sph DIR`.
 
 Runs SPlisHSPlasH (pysplishsplash) on its dam break at one particle radius, takes the
-particles at one time, and reconstructs them with splashsurf (pysplashsurf 0.14.1:
+particles at each time asked for, and reconstructs them with splashsurf (pysplashsurf 0.14.1:
 smoothing length 2r, cubes 0.5r, iso 0.6, given in particle radii; its docstring says
 absolute lengths, its output says otherwise, so the edge length is checked). Writes, under
-OUT/NAME:
+OUT/NAME-tTIME for each TIME:
 
   particles.ply   the particles (binary little-endian x y z, float32)
   splashsurf.ply  splashsurf's triangle mesh (binary little-endian, float32 vertices)
   meta.json       particle radius, time, splashsurf settings and seconds, particle count
 
-usage: sph_reference.py OUT NAME RADIUS [TIME]
+usage: sph_reference.py OUT NAME RADIUS [TIME ...]   (default: 1)
+
+The dam breaks the accuracy report shows (`docs/accuracy.md`) are
+
+  sph_reference.py OUT coarse 0.025  0.3 0.4 0.5 0.6 0.8 1.0
+  sph_reference.py OUT fine   0.0175 0.3 0.4 0.5 0.6 0.8 1.0
+
+where the column collapses (0.3–0.5 s: it meets the far wall and rises along it) and when its
+splash falls back (0.6–1 s).
   (pysplishsplash needs LD_PRELOAD=/lib/x86_64-linux-gnu/libGLdispatch.so.0 on Debian 12)
 """
 import json
@@ -90,15 +98,21 @@ def write_ply(path, vertices, triangles=None):
 
 def main():
     out, name, radius = sys.argv[1], sys.argv[2], float(sys.argv[3])
-    at = float(sys.argv[4]) if len(sys.argv) > 4 else 1.0
+    times = [float(t) for t in sys.argv[4:]] or [1.0]
+    with tempfile.TemporaryDirectory() as work:
+        # One run to the last time; each time is a frame of its 25 fps export.
+        simulate(scene_file(radius, work), os.path.join(work, "sim"), max(times))
+        for at in times:
+            frame = int(round(at * 25))
+            vtk = os.path.join(work, "sim", "vtk", f"ParticleData_Fluid_{frame}.vtk")
+            reconstruct(read_vtk_points(vtk), os.path.join(out, f"{name}-t{at:g}"), radius, at)
+
+
+def reconstruct(points, target, radius, at):
+    """splashsurf's mesh of `points`, written with them and the meta data under `target`."""
     import pysplashsurf
 
-    target = os.path.join(out, name)
     os.makedirs(target, exist_ok=True)
-    with tempfile.TemporaryDirectory() as work:
-        simulate(scene_file(radius, work), os.path.join(work, "sim"), at)
-        frame = int(round(at * 25))
-        points = read_vtk_points(os.path.join(work, "sim", "vtk", f"ParticleData_Fluid_{frame}.vtk"))
     # pysplashsurf 0.14.1's docstring calls these absolute lengths, but it scales smoothing
     # length and cube size by the particle radius (splashsurf's CLI convention): absolute
     # values give a mesh of a few thousandths of the radius per cube. So they are given as

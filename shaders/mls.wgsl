@@ -65,6 +65,9 @@ struct Settings {
     // Unit direction towards the key light (the shade and water passes).
     key_light: vec3<f32>,
     row_stride: u32,
+    // How far outside the MLS surface the drawn surface lies along its normal, in local
+    // units (docs/algorithm.md: the offset).
+    surface_offset: f32,
 }
 
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's
@@ -862,14 +865,16 @@ struct PolyHit {
     y: f32,
 }
 
-fn intersect_poly(ray: Ray, r: vec3<f32>, frame: Frame, p: Poly, h: f32, t_lo: f32, t_hi: f32) -> PolyHit {
+// Where the ray meets `p` (set at `r` in `frame`) raised by `offset` along the frame's normal,
+// first in [t_lo, t_hi] (intersect.rs: intersect_poly).
+fn intersect_poly(ray: Ray, r: vec3<f32>, frame: Frame, p: Poly, h: f32, offset: f32, t_lo: f32, t_hi: f32) -> PolyHit {
     let rel = ray.origin - r;
     let t0 = min(max(-dot(rel, ray.dir), t_lo), t_hi);
     let inv_h = 1.0 / h;
     let q0 = to_local(frame, rel + ray.dir * t0) * inv_h;
     let dl = to_local(frame, ray.dir);
     var c = along_line(p, q0.x, q0.y, dl.x, dl.y);
-    c[0] = c[0] - q0.z;
+    c[0] = c[0] + offset * inv_h - q0.z;
     c[1] = c[1] - dl.z;
     let root = first_root_in(c, (t_lo - t0) * inv_h, (t_hi - t0) * inv_h);
     if !root.ok {
@@ -918,7 +923,7 @@ fn refine(ray: Ray, centre: u32, bh: f32, start: Outcome, t_lo: f32, t_out: f32)
             break;
         }
         out.degraded = out.degraded || f.degraded;
-        let next = intersect_poly(ray, r, frame, f.poly, h, t_lo, t_out);
+        let next = intersect_poly(ray, r, frame, f.poly, h, settings.surface_offset, t_lo, t_out);
         if !next.ok {
             // Left the trust region: no hit from this ball.
             out.status = STATUS_MISS;

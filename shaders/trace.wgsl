@@ -126,7 +126,7 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
         if (ball.state & 3u) >= 2u {
             continue;
         }
-        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball), ball.h, t_lo, iv.t_out);
+        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball), ball.h, settings.surface_offset, t_lo, iv.t_out);
         if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
             && key_before(hit.t, item, (*best).t, (*best).item) {
             (*best).found = true;

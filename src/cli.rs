@@ -413,6 +413,12 @@ pub struct BakeArgs {
     /// the coefficient count of the degree, 6 or 10; 0 turns detection off).
     #[arg(long)]
     pub droplet_below: Option<usize>,
+    /// Draw the surface this many particle radii (half the median particle spacing) outside
+    /// the MLS surface through the particles: for particles that fill the fluid's volume
+    /// (SPH), whose free surface lies outside the outer centres. Default: 0.75 with
+    /// --surface estimate, else 0 (particles on the surface, as FPM's).
+    #[arg(long)]
+    pub surface_offset: Option<f64>,
     /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable
     /// `surface` if the case has one, else all).
     #[arg(long)]

@@ -94,7 +94,7 @@ fn human_file(r: &FileReport) -> String {
         h.transform.origin[0], h.transform.origin[1], h.transform.origin[2], h.transform.scale
     ));
     line(format!(
-        "mls        degree {}, k {}, h-scale {} (h = {:.4e} world), support {}h, cap {}, normals {}, {} h, droplets below {} points",
+        "mls        degree {}, k {}, h-scale {} (h = {:.4e} world), support {}h, cap {}, normals {}, {} h, droplets below {} points, surface offset {} particle radii ({:.4e} world)",
         m.degree,
         m.k,
         m.h_scale,
@@ -103,7 +103,9 @@ fn human_file(r: &FileReport) -> String {
         m.neighbour_cap,
         m.normals,
         if m.per_point_h { "per-point" } else { "global" },
-        m.droplet_below
+        m.droplet_below,
+        m.offset,
+        h.surface_offset * h.transform.scale
     ));
     line(format!("params     hash {}", h.params_hash));
     line(format!(

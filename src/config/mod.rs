@@ -353,6 +353,14 @@ impl BakeConfig {
         params.mls.h_scale = a.h_scale;
         params.mls.neighbour_cap = a.neighbour_cap;
         params.mls.per_point_h = a.per_point_h;
+        if let Some(offset) = a.surface_offset {
+            if !(offset.is_finite() && (0.0..=2.0).contains(&offset)) {
+                bail!(
+                    "--surface-offset {offset}: expected 0 to 2 particle radii (a ball reaches at most 4)"
+                );
+            }
+            params.mls.offset = offset;
+        }
         params.mls.droplet_below = a
             .droplet_below
             .unwrap_or(slosh_mls::coefficient_count(a.degree));

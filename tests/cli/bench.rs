@@ -36,11 +36,11 @@ fn accuracy_harness_reports_goals() {
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
 }
 
-/// Real SPH data (the fixture: SPlisHSPlasH's dam break, 6859 particles at t = 1 s, and
-/// splashsurf's ray depths through the same camera): the issue's goals (holes ≤ 1 %, p90
-/// |Δt| ≤ 1.5 spacings), and near what slosh measured when the fixture was made (false
-/// surface 1.95 %, p90 1.27, hits far from particles 1.25 %): a change that opens holes,
-/// stretches sheets or moves the surface fails here.
+/// Real SPH data (the fixture: SPlisHSPlasH's dam break, 6859 particles, as the column
+/// collapses at t = 0.4 s, as its splash falls at 0.6 s, and at 1 s; splashsurf's ray depths
+/// through the same camera). Measured when the fixture was made: far 0 % at each, p90 |Δt|
+/// 1.31, 0.97, 0.96, holes 1.92, 2.35, 0.65 %, false 0.54, 0.94, 0.29 %: a change that opens
+/// holes, stretches sheets or fins, or moves the surface fails here.
 #[test]
 fn sph_dam_break_stays_close_to_splashsurf() {
     let dir = tempfile::tempdir().unwrap();
@@ -61,22 +61,33 @@ fn sph_dam_break_stays_close_to_splashsurf() {
     ]);
     assert!(ok, "{err}");
     let m: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    let case = &m[0];
-    let get = |k: &str| {
-        case[k]
-            .as_f64()
-            .unwrap_or_else(|| panic!("{k} missing: {m}"))
-    };
-    assert!(get("reference_hits") > 3000.0, "{m}");
-    assert!(get("holes_pct") <= 1.0, "{m}");
-    assert!(get("false_pct") <= 2.5, "{m}");
-    assert!(get("dt_p90") <= 1.4, "{m}");
-    assert!(get("far_pct") <= 1.75, "{m}");
-    assert!(
-        std::fs::read(dir.path().join("sph-coarse.png"))
-            .unwrap()
-            .starts_with(b"\x89PNG")
-    );
+    let cases = m.as_array().unwrap();
+    let names: Vec<&str> = cases.iter().map(|c| c["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["coarse-t0.4", "coarse-t0.6", "coarse-t1"], "{m}");
+    for case in cases {
+        let name = case["name"].as_str().unwrap();
+        let get = |k: &str| {
+            case[k]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{name}: {k} missing: {m}"))
+        };
+        assert!(get("reference_hits") > 3000.0, "{name}: {m}");
+        // Issue 28's goals at every step: no surface more than two spacings from every
+        // particle (0.5 % of the hits at most), p90 |Δt| ≤ 1.5 spacing.
+        assert!(get("far_pct") <= 0.5, "{name}: {m}");
+        assert!(get("dt_p90") <= 1.5, "{name}: {m}");
+        // Issue 15's, set at t = 1 s: holes ≤ 1 %, false surface ≤ 5 %. While the column
+        // collapses, splashsurf's blobs around spray are wider than slosh's particle-radius
+        // spheres: holes measured up to 2.35 % there.
+        let holes = if get("time") >= 1.0 { 1.0 } else { 2.5 };
+        assert!(get("holes_pct") <= holes, "{name}: {m}");
+        assert!(get("false_pct") <= 2.5, "{name}: {m}");
+        assert!(
+            std::fs::read(dir.path().join(format!("sph-{name}.png")))
+                .unwrap()
+                .starts_with(b"\x89PNG")
+        );
+    }
 }
 
 /// `slosh bench scrub --quick`: the engine streams a small baked series on the adapter there

@@ -41,7 +41,12 @@ pub struct BakeParams {
 }
 
 /// Bumped whenever the bake's output for the same input and parameters changes.
-pub const BAKE_REVISION: u32 = 6;
+pub const BAKE_REVISION: u32 = 7;
+
+/// The surface's default offset, in particle radii, where the surface is estimated from
+/// particles that fill the fluid's volume (SPH): ¾ of a radius outside the outer centres,
+/// the offset nearest splashsurf's iso-surface on SPlisHSPlasH dam breaks (`docs/accuracy.md`).
+pub const VOLUME_PARTICLE_OFFSET: f64 = 0.75;
 
 impl BakeParams {
     /// Parameters with the MLS defaults and the normals mode matching `normals`.
@@ -50,6 +55,11 @@ impl BakeParams {
             normals: match normals {
                 NormalSource::Variable(_) | NormalSource::Estimate => NormalsMode::Mean,
                 NormalSource::Pca => NormalsMode::Covariance,
+            },
+            // Particles that fill the volume stand for fluid out to about their radius.
+            offset: match surface {
+                SurfaceSelect::Estimate => VOLUME_PARTICLE_OFFSET,
+                SurfaceSelect::All | SurfaceSelect::Variable(_) => 0.0,
             },
             ..SurfaceParams::default()
         };

@@ -492,6 +492,7 @@ pub fn bake_step_parts(
         bounds: [lo, hi],
         smoothing_length: surface.h,
         spacing: surface.spacing,
+        surface_offset: surface.offset,
         stats,
         up,
         ..step_header(input, params)
@@ -516,6 +517,7 @@ fn step_header(input: &StepInput, params: &BakeParams) -> Header {
         bounds: [[0.0; 3]; 2],
         smoothing_length: 0.0,
         spacing: 0.0,
+        surface_offset: 0.0,
         neighbour_cluster: NEIGHBOUR_CLUSTER,
         mls: MlsSettings::from_params(&params.mls),
         bake: params.record(),

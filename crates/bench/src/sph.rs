@@ -224,7 +224,8 @@ fn shade(normal: Option<[f64; 3]>, light: [f64; 3]) -> [u8; 3] {
 }
 
 /// Compares one case directory; with `image`, writes slosh | reference | difference there
-/// (difference: holes red, false surface blue, shared hits grey by |Δt|).
+/// (difference: holes red, false surface blue, shared hits grey by |Δt|, slosh's hits far
+/// from every particle yellow).
 pub fn compare_case(dir: &Path, image: Option<&Path>) -> Result<SphResult> {
     let meta_path = dir.join("meta.json");
     let meta: serde_json::Value = serde_json::from_slice(
@@ -278,6 +279,7 @@ pub fn compare_case(dir: &Path, image: Option<&Path>) -> Result<SphResult> {
     let (mut compared, mut ref_hits, mut our_hits, mut holes, mut false_hits, mut far) =
         (0, 0, 0, 0, 0, 0);
     let mut dt = Vec::new();
+    let mut far_from_particles = vec![false; ours.len()];
     for i in 0..ours.len() {
         if silhouette[i] {
             continue;
@@ -290,7 +292,8 @@ pub fn compare_case(dir: &Path, image: Option<&Path>) -> Result<SphResult> {
                 .query(&h.position)
                 .nearest_one::<SquaredEuclidean<f64>>()
                 .execute();
-            far += usize::from(nearest.distance.sqrt() > 4.0 * radius);
+            far_from_particles[i] = nearest.distance.sqrt() > 4.0 * radius;
+            far += usize::from(far_from_particles[i]);
         }
         match (reference[i], ours[i]) {
             (Some(_), None) => holes += 1,
@@ -310,6 +313,7 @@ pub fn compare_case(dir: &Path, image: Option<&Path>) -> Result<SphResult> {
                     let px = match panel {
                         0 => shade(ours[i].map(|h| h.normal), light),
                         1 => shade(reference[i].map(|r| r.1), light),
+                        _ if far_from_particles[i] => [240, 200, 30],
                         _ => match (reference[i], ours[i]) {
                             (Some(_), None) => [220, 40, 40],
                             (None, Some(_)) => [40, 90, 230],

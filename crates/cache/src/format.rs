@@ -230,6 +230,10 @@ pub struct MlsSettings {
     pub normals: String,
     pub per_point_h: bool,
     pub droplet_below: usize,
+    /// The drawn surface's offset outside the MLS surface, in particle radii (absent before
+    /// bake revision 7: none).
+    #[serde(default)]
+    pub offset: f64,
 }
 
 /// Where the step came from.
@@ -314,6 +318,10 @@ pub struct Header {
     /// Global smoothing length and mean nearest-neighbour spacing, in local units.
     pub smoothing_length: f64,
     pub spacing: f64,
+    /// How far outside the MLS surface the drawn surface lies along its normal, in local
+    /// units (`mls.offset` particle radii; absent before bake revision 7: none).
+    #[serde(default)]
+    pub surface_offset: f64,
     /// Points per neighbour cluster: `cluster_neighbours` holds one candidate list per run of
     /// this many consecutive points.
     pub neighbour_cluster: u32,

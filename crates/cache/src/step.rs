@@ -29,6 +29,7 @@ impl MlsSettings {
             .to_string(),
             per_point_h: p.per_point_h,
             droplet_below: p.droplet_below,
+            offset: p.offset,
         }
     }
 
@@ -46,6 +47,7 @@ impl MlsSettings {
             },
             per_point_h: self.per_point_h,
             droplet_below: self.droplet_below,
+            offset: self.offset,
         })
     }
 }
@@ -186,6 +188,7 @@ impl LoadedStep {
             radii: points.iter().map(|p| p.radius).collect(),
             h: header.smoothing_length as f32,
             spacing: header.spacing as f32,
+            offset: header.surface_offset as f32,
             neighbours: Neighbours::from_csr(neighbour_start, neighbours).ok_or_else(|| {
                 invalid("the expanded neighbour lists are not a CSR index".into())
             })?,

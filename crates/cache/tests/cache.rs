@@ -24,6 +24,7 @@ fn header() -> Header {
         bounds: [[0.0; 3], [1.0; 3]],
         smoothing_length: 0.1,
         spacing: 0.05,
+        surface_offset: 0.0,
         neighbour_cluster: 32,
         mls: MlsSettings::from_params(&slosh_mls::SurfaceParams::default()),
         bake: serde_json::json!({"test": true}),

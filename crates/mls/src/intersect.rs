@@ -138,14 +138,17 @@ pub fn ray_ball<T: Real>(ray: &Ray<T>, centre: V3<T>, radius: T) -> Option<(T, T
     Some((tc - half, tc + half))
 }
 
-/// Where the ray meets `poly` (set at reference point `r` in `frame`) for t in [t_lo, t_hi]:
-/// the first such t and the local (scaled) coordinates there.
+/// Where the ray meets `poly` (set at reference point `r` in `frame`) raised by `offset`
+/// along the frame's normal, for t in [t_lo, t_hi]: the first such t and the local (scaled)
+/// coordinates there.
+#[allow(clippy::too_many_arguments)]
 fn intersect_poly<T: Real>(
     ray: &Ray<T>,
     r: V3<T>,
     frame: &LocalFrame<T>,
     poly: &Poly<T>,
     h: T,
+    offset: T,
     t_lo: T,
     t_hi: T,
 ) -> Option<(T, T, T)> {
@@ -156,7 +159,7 @@ fn intersect_poly<T: Real>(
     let q0 = frame.to_local(rel + ray.dir * t0) * inv_h;
     let dl = frame.to_local(ray.dir);
     let mut c = poly.along_line(q0.x, q0.y, dl.x, dl.y);
-    c[0] = c[0] - q0.z;
+    c[0] = c[0] + offset * inv_h - q0.z;
     c[1] = c[1] - dl.z;
     let s = first_root_in(c, (t_lo - t0) * inv_h, (t_hi - t0) * inv_h)?;
     Some((t0 + s * h, q0.x + s * dl.x, q0.y + s * dl.y))
@@ -235,17 +238,30 @@ pub struct InitialHit<T> {
     pub normal: V3<T>,
 }
 
-/// Iteration 1: the ball's initial polynomial against the ray inside the ball, or why not
-/// (`MissedBall`, `NoInitialRoot`).
-pub fn initial_hit<T: Real>(ray: &Ray<T>, ball: &Ball<T>) -> Result<InitialHit<T>, HitStatus> {
+/// Iteration 1: the ball's initial polynomial, raised by the surface's `offset`, against the
+/// ray inside the ball, or why not (`MissedBall`, `NoInitialRoot`).
+pub fn initial_hit<T: Real>(
+    ray: &Ray<T>,
+    ball: &Ball<T>,
+    offset: T,
+) -> Result<InitialHit<T>, HitStatus> {
     let (t_in, t_out) = ray_ball(ray, ball.centre, ball.radius).ok_or(HitStatus::MissedBall)?;
     let t_lo = t_in.max(T::zero());
     if t_lo > t_out {
         return Err(HitStatus::MissedBall);
     }
     let frame = LocalFrame::from_normal(ball.normal);
-    let (t, x, y) = intersect_poly(ray, ball.centre, &frame, &ball.poly, ball.h, t_lo, t_out)
-        .ok_or(HitStatus::NoInitialRoot)?;
+    let (t, x, y) = intersect_poly(
+        ray,
+        ball.centre,
+        &frame,
+        &ball.poly,
+        ball.h,
+        offset,
+        t_lo,
+        t_out,
+    )
+    .ok_or(HitStatus::NoInitialRoot)?;
     Ok(InitialHit {
         t,
         t_lo,
@@ -254,25 +270,28 @@ pub fn initial_hit<T: Real>(ray: &Ray<T>, ball: &Ball<T>) -> Result<InitialHit<T
     })
 }
 
-/// Intersects the ray with the MLS surface inside `ball`, refining with the ball centre's
-/// `neighbours` (and their `normals`, if any).
+/// Intersects the ray with the MLS surface raised by `offset` inside `ball`, refining with
+/// the ball centre's `neighbours` (and their `normals`, if any).
 pub fn intersect_ball<T: Real>(
     ray: &Ray<T>,
     ball: &Ball<T>,
+    offset: T,
     neighbours: &[V3<T>],
     normals: Option<&[V3<T>]>,
     params: &Params<T>,
 ) -> BallHit<T> {
-    match initial_hit(ray, ball) {
-        Ok(initial) => refine(ray, ball, &initial, neighbours, normals, params),
+    match initial_hit(ray, ball, offset) {
+        Ok(initial) => refine(ray, ball, offset, &initial, neighbours, normals, params),
         Err(status) => BallHit::miss(status),
     }
 }
 
-/// Iterations 2 and on from a ball's initial hit, with the ball centre's `neighbours`.
+/// Iterations 2 and on from a ball's initial hit, with the ball centre's `neighbours`: each
+/// fit at the latest hit, raised by `offset`.
 pub fn refine<T: Real>(
     ray: &Ray<T>,
     ball: &Ball<T>,
+    offset: T,
     initial: &InitialHit<T>,
     neighbours: &[V3<T>],
     normals: Option<&[V3<T>]>,
@@ -301,7 +320,8 @@ pub fn refine<T: Real>(
             break;
         }
         degraded |= matches!(f.status, FitStatus::Degraded { .. });
-        let Some((t_next, x, y)) = intersect_poly(ray, r, &frame, &f.poly, h, t_lo, t_out) else {
+        let Some((t_next, x, y)) = intersect_poly(ray, r, &frame, &f.poly, h, offset, t_lo, t_out)
+        else {
             return BallHit {
                 iterations: iterations + 1,
                 degree: f.poly.degree,

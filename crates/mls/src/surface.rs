@@ -40,6 +40,11 @@ pub struct SurfaceParams {
     /// wider than h, are spray, drawn as spheres instead of MLS patches; 0 turns spray
     /// detection off.
     pub droplet_below: usize,
+    /// The surface drawn this far outside the MLS surface along its normal, in particle
+    /// radii (half the dense spacing s₅₀): where particles fill the fluid's volume (SPH),
+    /// its free surface lies outside the outer particles' centres; 0 where the particles lie
+    /// on it (FPM's free-surface particles).
+    pub offset: f64,
 }
 
 impl Default for SurfaceParams {
@@ -53,6 +58,7 @@ impl Default for SurfaceParams {
             normals: NormalsMode::Mean,
             per_point_h: false,
             droplet_below: 6,
+            offset: 0.0,
         }
     }
 }
@@ -107,6 +113,9 @@ pub struct SurfaceParts<T> {
     pub h: T,
     /// Mean distance to the nearest other point.
     pub spacing: T,
+    /// How far outside the MLS surface the drawn surface lies, along its normal
+    /// (`SurfaceParams::offset` particle radii).
+    pub offset: T,
     /// Every point's neighbour list: point i's is `neighbours.of(i)`.
     pub neighbours: Neighbours,
     /// How far each point's neighbour list reaches: ρ_i + support·h_i, or the distance of the
@@ -261,10 +270,13 @@ impl<T: Real> SurfaceParts<T> {
         // (large radii) cannot inflate while they are fewer than half.
         let h = params.h_scale * quantile(&radii, H_QUANTILE);
         let dense_spacing = quantile(&nearest, H_QUANTILE);
-        // A ball is trusted no farther than its data reach: beyond 2h a fit has no weight.
+        // A ball is trusted no farther than its data reach: beyond 2h a fit has no weight;
+        // and no farther than two dense spacings, since every hit lies in its ball: a sparse
+        // point's fit would otherwise stretch a fin out to 2h (3 spacings) from any particle.
         if !params.per_point_h {
+            let trust = (2.0 * h).min(MAX_BALL_SPACINGS * dense_spacing);
             for r in &mut radii {
-                *r = r.min(2.0 * h);
+                *r = r.min(trust);
             }
         }
         let ball_h = |i: usize| {
@@ -398,6 +410,7 @@ impl<T: Real> SurfaceParts<T> {
             radii: radii.par_iter().map(|&r| T::c(r)).collect(),
             h: h_t,
             spacing: T::c(spacing),
+            offset: T::c(params.offset * 0.5 * dense_spacing),
             neighbours,
             reach: reach.par_iter().map(|&r| T::c(r)).collect(),
             capped,
@@ -429,6 +442,7 @@ impl<T: Real> SurfaceParts<T> {
             radii: Vec::new(),
             h: T::c(0.0),
             spacing: T::c(0.0),
+            offset: T::c(0.0),
             neighbours: Neighbours::from_csr(vec![0], Vec::new())
                 .unwrap_or_else(|| unreachable!("one offset of 0 over no ids is a CSR index")),
             reach: Vec::new(),
@@ -546,6 +560,10 @@ fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
 /// particle size: the median. A lower one (0.25 was tried) resists more spray but makes cubic
 /// fits on noisy data ill-conditioned in f32 (`docs/accuracy.md`, f32 against f64).
 const H_QUANTILE: f64 = 0.5;
+
+/// The largest ball radius with a global h, in dense spacings (median nearest-neighbour
+/// distances): no hit lies farther than this from its ball's particle.
+pub const MAX_BALL_SPACINGS: f64 = 2.0;
 
 /// The `q` quantile of `values`: the ⌊q·n⌋-th smallest, counting from 0 (for the median of
 /// an even count, the upper of the two middle values); 0 for none. The bake's rule for h

@@ -266,7 +266,7 @@ impl<T: Real> Surface<T> {
                 &mut nn,
             );
             let normals = self.normals.as_ref().map(|_| nn.as_slice());
-            let out = refine(&ray, ball, &initial, &np, normals, params);
+            let out = refine(&ray, ball, self.offset, &initial, &np, normals, params);
             if out.status.is_hit() && out.t.is_finite() {
                 return Some(hit(
                     out.t,
@@ -342,7 +342,7 @@ impl<T: Real> Surface<T> {
                 {
                     continue;
                 }
-                let Ok(initial) = initial_hit(ray, ball) else {
+                let Ok(initial) = initial_hit(ray, ball, self.offset) else {
                     continue;
                 };
                 let t = initial.t;

@@ -222,3 +222,61 @@ fn sparse_droplets_give_finite_answers() {
         "{close} of {in_flight} droplets drawn on their particles, no later than the truth"
     );
 }
+
+/// A dense square of points with a sparse fringe (twice the spacing, still joined to it):
+/// a fringe point's ball would reach ρ = 2√2 spacings, and draw the plane that far past the
+/// last points. No ball may reach past two dense spacings, so no hit lies farther than that
+/// from every point.
+#[test]
+fn no_surface_lies_farther_than_two_spacings_from_every_point() {
+    let mut points = Vec::new();
+    for i in 0..30 {
+        for j in 0..30 {
+            points.push([f64::from(i), f64::from(j), 0.0]);
+        }
+    }
+    for i in 0..6 {
+        for j in 0..6 {
+            points.push([31.0 + 2.0 * f64::from(i), 2.0 * f64::from(j), 0.0]);
+        }
+    }
+    let normals = vec![[0.0, 0.0, 1.0]; points.len()];
+    let surface =
+        Surface::<f64>::build(&points, Some(&normals), &SurfaceParams::default()).unwrap();
+    // The dense spacing is 1 (the median nearest-neighbour distance).
+    let largest = surface.radii.iter().copied().fold(0.0, f64::max);
+    assert!(largest <= 2.0 + 1e-9, "a ball of radius {largest} spacings");
+    let centre = [21.0, 15.0, 0.0];
+    let camera = Camera {
+        eye: [centre[0], centre[1] - 10.0, 60.0],
+        target: centre,
+        up: [0.0, 1.0, 0.0],
+        fov_y: 50.0,
+        width: 160,
+        height: 160,
+    };
+    let hits: Vec<TraceHit> = surface
+        .render(&camera, &Params::new())
+        .into_iter()
+        .flatten()
+        .collect();
+    let farthest = hits
+        .iter()
+        .map(|h| {
+            let p = h.position;
+            points
+                .iter()
+                .map(|q| (0..3).map(|a| (p[a] - q[a]).powi(2)).sum::<f64>().sqrt())
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    eprintln!(
+        "{} hits, the farthest {farthest:.3} spacings from every point",
+        hits.len()
+    );
+    assert!(hits.len() > 5000, "{} hits", hits.len());
+    assert!(
+        farthest <= 2.0 + 1e-6,
+        "a hit {farthest} spacings from every point"
+    );
+}

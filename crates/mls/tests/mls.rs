@@ -295,12 +295,19 @@ fn fibonacci_sphere(n: usize) -> Vec<V> {
 }
 
 /// Rays into a sampled unit sphere: the converged hit lies on the sphere to a small fraction
-/// of the spacing, f32 agrees with f64, and more iterations do not hurt.
+/// of the spacing, f32 agrees with f64, and more iterations do not hurt; with the surface
+/// offset by δ, on the sphere of radius 1 + δ just as closely.
 #[test]
 fn sphere_hits_converge_onto_the_surface() {
     let n = 3000;
-    let pts = fibonacci_sphere(n);
     let spacing = (4.0 * std::f64::consts::PI / n as f64).sqrt();
+    for offset in [0.0, 0.4 * spacing] {
+        sphere_hits_converge_onto_the_sphere_offset_by(n, spacing, offset);
+    }
+}
+
+fn sphere_hits_converge_onto_the_sphere_offset_by(n: usize, spacing: f64, offset: f64) {
+    let pts = fibonacci_sphere(n);
     let radius_of_trust = 1.6 * spacing;
     let h = 1.5 * radius_of_trust;
     let mut worst: f64 = 0.0;
@@ -336,10 +343,10 @@ fn sphere_hits_converge_onto_the_surface() {
             normal,
             poly: f.poly,
         };
-        let out = intersect_ball(&ray, &ball, &neighbours, Some(&normals), &params);
+        let out = intersect_ball(&ray, &ball, offset, &neighbours, Some(&normals), &params);
         assert!(out.status.is_hit(), "ray {k}: {:?}", out.status);
         assert!(out.t.is_finite() && out.normal.is_finite());
-        let err = (out.position.length() - 1.0).abs() / spacing;
+        let err = (out.position.length() - (1.0 + offset)).abs() / spacing;
         worst = worst.max(err);
         assert!(
             out.normal.dot(out.position.normalized().unwrap()) > 0.999,
@@ -366,6 +373,7 @@ fn sphere_hits_converge_onto_the_surface() {
                 dir: c32(dir),
             },
             &ball32,
+            offset as f32,
             &n32,
             Some(&n32),
             &p32,
@@ -374,7 +382,7 @@ fn sphere_hits_converge_onto_the_surface() {
         worst32 = worst32.max((f64::from(out32.t) - out.t).abs() / spacing);
     }
     eprintln!(
-        "sphere: worst distance {worst:.2e} spacings, f32 vs f64 worst |Δt| {worst32:.2e} spacings"
+        "sphere, offset {offset:.3}: worst distance {worst:.2e} spacings, f32 vs f64 worst |Δt| {worst32:.2e} spacings"
     );
     // Modelling error of a converged quadratic MLS on a clean sphere, in spacings.
     assert!(

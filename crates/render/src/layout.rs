@@ -45,6 +45,11 @@ pub struct GpuSettings {
     /// Unit direction towards the key light.
     pub key_light: [f32; 3],
     pub row_stride: u32,
+    /// How far outside the MLS surface the drawn surface lies along its normal, in local
+    /// units (the step's `surface_offset`).
+    pub surface_offset: f32,
+    /// WGSL rounds the struct's size up to 16 bytes.
+    pub pad: [u32; 3],
 }
 
 /// The key light's direction by default, normalize(0.4, −0.3, 0.85): from the front left,

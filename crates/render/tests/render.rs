@@ -74,6 +74,8 @@ fn device() -> Option<&'static Device> {
 struct Case {
     name: &'static str,
     spec: SceneSpec,
+    /// The surface's offset in particle radii (`SurfaceParams::offset`).
+    offset: f64,
 }
 
 fn cases() -> Vec<Case> {
@@ -92,26 +94,37 @@ fn cases() -> Vec<Case> {
         Case {
             name: "sphere",
             spec: SceneSpec::new(SceneKind::Sphere, 3000, 7),
+            offset: 0.0,
         },
         Case {
             name: "torus",
             spec: SceneSpec::new(SceneKind::Torus, 4000, 7),
+            offset: 0.0,
         },
         Case {
             name: "tank",
             spec: SceneSpec::new(SceneKind::Tank, 6000, 7),
+            offset: 0.0,
         },
         Case {
             name: "droplets",
             spec: SceneSpec::new(SceneKind::Droplets, 4000, 7),
+            offset: 0.0,
         },
         Case {
             name: "hard: noisy sphere, flipped and bad normals, duplicates, offset 1e5",
             spec: noisy,
+            offset: 0.0,
         },
         Case {
             name: "hard: thin sheet, opposing normals",
             spec: SceneSpec::new(SceneKind::Sheet, 3000, 7),
+            offset: 0.0,
+        },
+        Case {
+            name: "tank, surface drawn ¾ of a particle radius outside",
+            spec: SceneSpec::new(SceneKind::Tank, 6000, 7),
+            offset: 0.75,
         },
     ]
 }
@@ -121,9 +134,10 @@ fn input_of(spec: &SceneSpec) -> StepInput {
     slosh_testkit::scene_step(&scene, 1, spec.kind.name())
 }
 
-fn bake(input: &StepInput, degree: u8) -> (CacheFile, BakeParams) {
+fn bake(input: &StepInput, degree: u8, offset: f64) -> (CacheFile, BakeParams) {
     let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     params.mls.degree = degree;
+    params.mls.offset = offset;
     let file = slosh_testkit::bake_in_memory(input, &params, Path::new("memory.slc")).unwrap();
     (file, params)
 }
@@ -194,7 +208,7 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
         let input = input_of(&case.spec);
         let camera = slosh_testkit::framing_camera(&input.positions, SIZE);
         for degree in [2u8, 3] {
-            let (file, params) = bake(&input, degree);
+            let (file, params) = bake(&input, degree, case.offset);
             let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
             let oracle =
                 Surface::<f64>::build(&input.positions, input.normals.as_deref(), &params.mls)
@@ -336,7 +350,8 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 colormap,
                 first_row,
                 key_light,
-                row_stride
+                row_stride,
+                surface_offset
             ]
         );
     }
@@ -393,7 +408,7 @@ fn shaded_frame_matches_the_golden_image() {
     let Some(dev) = device() else { return };
     let input = input_of(&SceneSpec::new(SceneKind::Torus, 4000, 7));
     let camera = slosh_testkit::framing_camera(&input.positions, 96);
-    let (file, _) = bake(&input, 2);
+    let (file, _) = bake(&input, 2, 0.0);
     let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let mut params = TraceParams::for_step(&step, 3);
     params.mode = ShadeMode::Shade;
@@ -454,7 +469,7 @@ fn water_floor_shows_the_checkerboard_and_the_shadow_of_a_sphere() {
         panic!("the sphere scene's truth is a sphere")
     };
     let input = input_of(&spec);
-    let (file, _) = bake(&input, 2);
+    let (file, _) = bake(&input, 2, 0.0);
     let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let loaded = slosh_cache::LoadedStep::load(&file).unwrap();
     // The stage from its one source (slosh_render::water, which water.wgsl is generated
@@ -600,7 +615,7 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
     capped.limit_bindings(slosh_render::MIN_BINDING_LIMIT);
     let capped_tracer = Tracer::new(&capped).unwrap();
     let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 5));
-    let (file, _) = bake(&input, 2);
+    let (file, _) = bake(&input, 2, 0.0);
     let whole = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let split = GpuStep::upload(&capped, &file, None).unwrap();
     assert!(!whole.split, "the unsplit device split the step");
@@ -635,7 +650,7 @@ fn arrays_over_the_binding_limit_are_bound_in_ranges() {
     }
     // 5000 points: 320 KB of balls (and more neighbour ids), past 3 ranges of 64 KiB.
     let big = input_of(&SceneSpec::new(SceneKind::Sphere, 5000, 5));
-    let (file, _) = bake(&big, 2);
+    let (file, _) = bake(&big, 2, 0.0);
     let message = GpuStep::upload(&capped, &file, None)
         .unwrap_err()
         .to_string();
@@ -891,10 +906,11 @@ fn neighbour_masks_equal_the_cpu_lists() {
     let wide = Case {
         name: "wide clusters: a 70k-point sphere",
         spec: SceneSpec::new(SceneKind::Sphere, 70_000, 7),
+        offset: 0.0,
     };
     for case in cases().into_iter().chain([wide]) {
         let input = input_of(&case.spec);
-        let (file, _) = bake(&input, 2);
+        let (file, _) = bake(&input, 2, 0.0);
         let base: Vec<u32> = file.decode(names::CLUSTER_BASE).unwrap();
         let wide_clusters = base
             .iter()
@@ -982,7 +998,7 @@ fn neighbour_masks_equal_the_cpu_lists() {
 fn the_key_light_comes_from_where_it_is_set() {
     let Some(dev) = device() else { return };
     let input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 7));
-    let (file, _) = bake(&input, 2);
+    let (file, _) = bake(&input, 2, 0.0);
     let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
     let (lo, hi) = slosh_mls::bounds(&input.positions);
     let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
@@ -1033,7 +1049,7 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
         .into_iter()
         .map(|(kind, n, seed)| {
             let input = input_of(&SceneSpec::new(kind, n, seed));
-            let (file, _) = bake(&input, 2);
+            let (file, _) = bake(&input, 2, 0.0);
             let camera = slosh_testkit::framing_camera(&input.positions, 64);
             (camera, GpuStep::upload(&dev.gpu, &file, None).unwrap())
         })

@@ -116,6 +116,8 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         first_row: 0,
         key_light: unit_or_default(params.key_light),
         row_stride: 1,
+        surface_offset: info.surface_offset,
+        pad: [0; 3],
     }
 }
 

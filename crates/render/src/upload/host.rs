@@ -39,6 +39,8 @@ pub struct StepInfo {
     pub bounds: [[f64; 3]; 2],
     /// Mean nearest-neighbour spacing in world units.
     pub spacing: f64,
+    /// How far outside the MLS surface the drawn surface lies, in local units.
+    pub surface_offset: f32,
 }
 
 impl StepInfo {
@@ -281,6 +283,7 @@ impl<'a> HostStep<'a> {
             transform: header.transform,
             bounds: header.bounds,
             spacing: header.spacing * header.transform.scale,
+            surface_offset: header.surface_offset as f32,
         };
         let candidate_words = count(names::CLUSTER_NEIGHBOURS);
         let stored_bytes = entries.iter().flatten().map(|e| e.stored).sum::<u64>()
