@@ -45,7 +45,7 @@ pub const BAKE_REVISION: u32 = 7;
 
 /// The surface's default offset, in particle radii, where the surface is estimated from
 /// particles that fill the fluid's volume (SPH): ¾ of a radius outside the outer centres,
-/// the offset nearest splashsurf's iso-surface on SPlisHSPlasH dam breaks (`docs/accuracy.md`).
+/// the offset nearest splashsurf's iso-surface on SPlisHSPlasH dam breaks (`docs/results-sph.md`).
 pub const VOLUME_PARTICLE_OFFSET: f64 = 0.75;
 
 impl BakeParams {
