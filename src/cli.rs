@@ -40,8 +40,15 @@ pub enum Command {
 
 #[derive(Debug, Args)]
 pub struct PlayArgs {
-    /// A cache directory written by `slosh bake`.
-    pub dir: PathBuf,
+    /// A cache directory written by `slosh bake`, or an EnSight .case file: its steps are
+    /// baked as the player needs them, into --cache.
+    pub input: PathBuf,
+    /// Where a .case file's steps are baked (kept: the next run starts with them). Default:
+    /// NAME.slosh beside NAME.case.
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
+    #[command(flatten, next_help_heading = "Baking a .case file (as `slosh bake`)")]
+    pub bake: BakeSettings,
     /// GPU adapter whose name contains this.
     #[arg(long)]
     pub adapter: Option<String>,
@@ -376,24 +383,9 @@ pub struct InfoArgs {
     pub byte_order: Option<ByteOrderArg>,
 }
 
-#[derive(Debug, Args)]
-pub struct BakeArgs {
-    /// The .case file, a .ply/.obj point cloud, or with --manifest-only the cache directory.
-    pub input: PathBuf,
-    /// Output directory for step-NNNNN.slc files and manifest.json.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Steps to bake: A..B (B excluded), A..=B (B included) or N, e.g. 0..50.
-    #[arg(long)]
-    pub steps: Option<String>,
-    /// Steps baked at once (each is also parallel inside). Default: half the cores,
-    /// within three quarters of the memory available, for the first step's size.
-    #[arg(long)]
-    pub jobs: Option<usize>,
-    /// Bake only shard I of N (0-based), e.g. 2/8 for task 2 of a job array, or `slurm`: this
-    /// task's shard of a SLURM job array (docs/slurm.md).
-    #[arg(long)]
-    pub shard: Option<String>,
+/// How a step is baked: `slosh bake`'s settings, and `slosh play`'s for a raw case.
+#[derive(Debug, Clone, Args)]
+pub struct BakeSettings {
     /// Polynomial degree of the fits.
     #[arg(long, default_value_t = 2)]
     pub degree: u8,
@@ -439,6 +431,40 @@ pub struct BakeArgs {
     /// Force the byte order of binary EnSight files instead of detecting it.
     #[arg(long, value_enum)]
     pub byte_order: Option<ByteOrderArg>,
+}
+
+impl Default for BakeSettings {
+    /// The flags' own defaults.
+    fn default() -> BakeSettings {
+        #[derive(Parser)]
+        struct Only {
+            #[command(flatten)]
+            settings: BakeSettings,
+        }
+        Only::parse_from(["slosh"]).settings
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct BakeArgs {
+    /// The .case file, a .ply/.obj point cloud, or with --manifest-only the cache directory.
+    pub input: PathBuf,
+    /// Output directory for step-NNNNN.slc files and manifest.json.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Steps to bake: A..B (B excluded), A..=B (B included) or N, e.g. 0..50.
+    #[arg(long)]
+    pub steps: Option<String>,
+    /// Steps baked at once (each is also parallel inside). Default: half the cores,
+    /// within three quarters of the memory available, for the first step's size.
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Bake only shard I of N (0-based), e.g. 2/8 for task 2 of a job array, or `slurm`: this
+    /// task's shard of a SLURM job array (docs/slurm.md).
+    #[arg(long)]
+    pub shard: Option<String>,
+    #[command(flatten)]
+    pub settings: BakeSettings,
     /// Rebuild manifest.json from the step files in the directory, bake nothing.
     #[arg(long)]
     pub manifest_only: bool,

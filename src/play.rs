@@ -110,7 +110,9 @@ pub fn demo(args: &DemoConfig) -> Result<()> {
         || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|d| !d.is_empty());
     if display && !args.headless {
         let play_args = PlayArgs {
-            dir: cache.clone(),
+            input: cache.clone(),
+            cache: None,
+            bake: crate::cli::BakeSettings::default(),
             adapter: None,
             budget: None,
             field: Some("pressure".into()),

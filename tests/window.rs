@@ -136,9 +136,10 @@ fn crop(image: &(u32, u32, Vec<u8>), x: u32, y: u32, w: u32, h: u32) -> Vec<u8> 
 }
 
 /// A baked series of `steps` steps of the sloshing tank with droplets, coloured by pressure.
-fn series(dir: &Path, steps: usize) -> PathBuf {
+/// The droplets scene, 8000 particles, `steps` steps 0.02 s apart, written as a case under
+/// `dir/case`; the case file.
+fn droplets_case(dir: &Path, steps: usize) -> PathBuf {
     let case = dir.join("case");
-    let cache = dir.join("cache");
     slosh(&[
         "gen",
         "droplets",
@@ -151,9 +152,16 @@ fn series(dir: &Path, steps: usize) -> PathBuf {
         "--out",
         case.to_str().unwrap(),
     ]);
+    case.join("droplets.case")
+}
+
+/// [`droplets_case`] baked with its pressure into `dir/cache`.
+fn series(dir: &Path, steps: usize) -> PathBuf {
+    let case = droplets_case(dir, steps);
+    let cache = dir.join("cache");
     slosh(&[
         "bake",
-        case.join("droplets.case").to_str().unwrap(),
+        case.to_str().unwrap(),
         "--out",
         cache.to_str().unwrap(),
         "--fields",
@@ -1017,4 +1025,58 @@ fn a_slow_gpu_answers_within_100_ms_and_still_refines_to_the_render() {
         (apart - distance).abs() < 1e-4 * spacing,
         "input particle {input} is {apart} from the probe, the stored one {distance}"
     );
+}
+
+/// `slosh play CASE.case`: the raw case opens at once with every step on the timeline, steps
+/// are baked as the player needs them into NAME.slosh beside the case, and `slosh bake` of
+/// the case with the same settings afterwards keeps every one of them.
+#[test]
+fn a_raw_case_plays_at_once_and_is_baked_beside_it() {
+    if !tools() {
+        return;
+    }
+    let _turn = turn();
+    let dir = tempfile::tempdir().unwrap();
+    let case = droplets_case(dir.path(), 3);
+    let cache = case.with_file_name("droplets.slosh");
+    let step_file = |i: usize| cache.join(format!("step-{i:05}.slc"));
+    let display = Display::start();
+    let player = Player::start(
+        &display,
+        &case,
+        dir.path(),
+        &["--fields", "pressure", "--field", "pressure"],
+    );
+    player.wait_title(&display, "step 0/2");
+    player.key(&display, "End");
+    player.wait_title(&display, "step 2/2");
+    wait_for(
+        "every step baked beside the case",
+        Duration::from_secs(120),
+        || (0..3).all(|i| step_file(i).exists()),
+    );
+    let log = player.log();
+    assert!(!log.lines().any(|l| l.contains("failed step")), "{log}");
+    drop(player);
+    let stamps: Vec<_> = (0..3)
+        .map(|i| std::fs::metadata(step_file(i)).unwrap().modified().unwrap())
+        .collect();
+    // `slosh bake` of the same case and settings into the player's directory.
+    slosh(&[
+        "bake",
+        case.to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+        "--fields",
+        "pressure",
+        "--quiet",
+    ]);
+    let after: Vec<_> = (0..3)
+        .map(|i| std::fs::metadata(step_file(i)).unwrap().modified().unwrap())
+        .collect();
+    assert_eq!(
+        stamps, after,
+        "slosh bake baked again what the player had baked"
+    );
+    slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
 }

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod demo;
 pub mod inspect;
+pub mod on_demand;
 pub mod play;
 pub mod render;
 
@@ -224,22 +225,25 @@ impl BakeConfig {
             .out
             .clone()
             .context("--out DIR is required (where the .slc files go)")?;
-        if !(1..=3).contains(&a.degree) {
-            bail!("--degree {}: expected 1, 2 or 3", a.degree);
+        if !(1..=3).contains(&a.settings.degree) {
+            bail!("--degree {}: expected 1, 2 or 3", a.settings.degree);
         }
-        if a.k == 0 {
+        if a.settings.k == 0 {
             bail!("--k must be at least 1");
         }
-        if !(a.h_scale.is_finite() && a.h_scale > 0.0) {
-            bail!("--h-scale {}: expected a positive number", a.h_scale);
-        }
-        if a.neighbour_cap < 3 {
+        if !(a.settings.h_scale.is_finite() && a.settings.h_scale > 0.0) {
             bail!(
-                "--neighbour-cap {}: at least 3 neighbours are needed for a plane",
-                a.neighbour_cap
+                "--h-scale {}: expected a positive number",
+                a.settings.h_scale
             );
         }
-        let compression = match a.compress.as_str() {
+        if a.settings.neighbour_cap < 3 {
+            bail!(
+                "--neighbour-cap {}: at least 3 neighbours are needed for a plane",
+                a.settings.neighbour_cap
+            );
+        }
+        let compression = match a.settings.compress.as_str() {
             "none" => slosh_cache::Compression::None,
             l => {
                 let level: i32 = l
@@ -261,7 +265,7 @@ impl BakeConfig {
             .map(str::to_ascii_lowercase);
         let point_cloud = matches!(ext.as_deref(), Some("ply" | "obj"));
         let (input, surface, normals) = if point_cloud {
-            let surface = match a.surface.as_deref() {
+            let surface = match a.settings.surface.as_deref() {
                 None | Some("all") => SurfaceSelect::All,
                 Some("estimate") => SurfaceSelect::Estimate,
                 Some(v) => {
@@ -269,7 +273,7 @@ impl BakeConfig {
                 }
             };
             let cloud = slosh_bake::read_point_cloud(&a.input)?;
-            let normals = match a.normals.as_deref() {
+            let normals = match a.settings.normals.as_deref() {
                 Some("pca") => NormalSource::Pca,
                 Some("estimate") => NormalSource::Estimate,
                 None if cloud.normals.is_some() => NormalSource::Variable("normals".into()),
@@ -282,7 +286,7 @@ impl BakeConfig {
             (BakeInput::PointCloud(cloud), surface, normals)
         } else {
             let mut case = slosh_ensight::Case::open(&a.input)?;
-            case.set_byte_order(a.byte_order.map(Into::into));
+            case.set_byte_order(a.settings.byte_order.map(Into::into));
             let has = |name: &str, ty: VarType| {
                 case.variables()
                     .iter()
@@ -302,7 +306,7 @@ impl BakeConfig {
                 }
                 Ok(())
             };
-            let surface = match a.surface.as_deref() {
+            let surface = match a.settings.surface.as_deref() {
                 None if has("surface", VarType::Scalar) => {
                     SurfaceSelect::Variable("surface".into())
                 }
@@ -313,7 +317,7 @@ impl BakeConfig {
                     SurfaceSelect::Variable(v.into())
                 }
             };
-            let normals = match a.normals.as_deref() {
+            let normals = match a.settings.normals.as_deref() {
                 None => ["normal", "normals"]
                     .into_iter()
                     .find(|n| has(n, VarType::Vector))
@@ -337,23 +341,23 @@ impl BakeConfig {
                     NormalSource::Variable(v.into())
                 }
             };
-            for f in &a.fields {
+            for f in &a.settings.fields {
                 if !case.variables().iter().any(|v| &v.name == f) {
                     bail!("{}: no variable '{f}' for --fields", a.input.display());
                 }
             }
             (BakeInput::Case(case), surface, normals)
         };
-        if point_cloud && !a.fields.is_empty() {
+        if point_cloud && !a.settings.fields.is_empty() {
             bail!("--fields: a point cloud has no variables");
         }
         let mut params = BakeParams::new(surface, normals);
-        params.mls.degree = a.degree;
-        params.mls.k = a.k;
-        params.mls.h_scale = a.h_scale;
-        params.mls.neighbour_cap = a.neighbour_cap;
-        params.mls.per_point_h = a.per_point_h;
-        if let Some(offset) = a.surface_offset {
+        params.mls.degree = a.settings.degree;
+        params.mls.k = a.settings.k;
+        params.mls.h_scale = a.settings.h_scale;
+        params.mls.neighbour_cap = a.settings.neighbour_cap;
+        params.mls.per_point_h = a.settings.per_point_h;
+        if let Some(offset) = a.settings.surface_offset {
             if !(offset.is_finite() && (0.0..=2.0).contains(&offset)) {
                 bail!(
                     "--surface-offset {offset}: expected 0 to 2 particle radii (a ball reaches at most 4)"
@@ -362,9 +366,10 @@ impl BakeConfig {
             params.mls.offset = offset;
         }
         params.mls.droplet_below = a
+            .settings
             .droplet_below
-            .unwrap_or(slosh_mls::coefficient_count(a.degree));
-        params.fields = a.fields.clone();
+            .unwrap_or(slosh_mls::coefficient_count(a.settings.degree));
+        params.fields = a.settings.fields.clone();
         params.compression = compression;
         // Each job holds a whole step in memory and is parallel inside: more jobs than a few
         // per core only cost memory and threads.

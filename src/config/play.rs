@@ -23,12 +23,23 @@ fn window(s: &str) -> Result<(f32, f32)> {
 
 /// The player's options from `slosh play`'s flags, every value checked.
 pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
-    if !args.dir.is_dir() {
+    let (dir, bake) = if args.input.is_dir() {
+        if args.cache.is_some() {
+            bail!(
+                "--cache: {} is a cache directory already (--cache is where a .case file's steps are baked)",
+                args.input.display()
+            );
+        }
+        (args.input.clone(), None)
+    } else if args.input.is_file() {
+        let bake = super::on_demand::open(&args.input, args.cache.as_deref(), &args.bake)?;
+        (bake.dir().to_path_buf(), Some(std::sync::Arc::new(bake)))
+    } else {
         bail!(
-            "{}: not a directory (give the --out directory of `slosh bake`)",
-            args.dir.display()
+            "{}: no such cache directory or .case file (give the --out directory of `slosh bake`, or the case)",
+            args.input.display()
         );
-    }
+    };
     let budget = match args.budget {
         Some(g) if g.is_finite() && g > 0.0 => Some((g * f64::from(1u32 << 30)) as u64),
         Some(g) => bail!("--budget {g}: expected a positive number of GiB"),
@@ -54,7 +65,8 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
         engine.loaders = n.clamp(1, 64);
     }
     Ok(PlayOptions {
-        dir: args.dir.clone(),
+        dir,
+        bake,
         adapter: args.adapter.clone(),
         engine,
         render_scale: args.render_scale,

@@ -169,7 +169,9 @@ pub fn is_current(path: &Path, key: &SeriesKey, index: usize, identity: Option<&
     })
 }
 
-fn bake_one(
+/// Bakes step `index` of `source` into `opts.out` unless a current cache of it is there:
+/// read, bake, encode, verify in memory, then write atomically.
+pub(crate) fn bake_one(
     source: &dyn StepSource,
     index: usize,
     opts: &BatchOptions,
@@ -313,6 +315,20 @@ fn remove_stale_temps(dir: &Path) {
     }
 }
 
+/// Holds `dir` for a bake of `key` that writes the `planned` steps: claimed, cleared of the
+/// temporary files of killed bakes, and checked to hold no other series' steps.
+pub(crate) fn prepare_dir(
+    dir: &Path,
+    planned: &[(usize, f64)],
+    key: &SeriesKey,
+) -> Result<crate::claim::Claim, slosh_cache::Error> {
+    std::fs::create_dir_all(dir).map_err(|e| slosh_fileio::IoError::new(dir, e))?;
+    let claim = crate::claim::claim(dir, key)?;
+    remove_stale_temps(dir);
+    refuse_mixing(dir, planned, key)?;
+    Ok(claim)
+}
+
 /// Bakes the planned steps of `source` into `opts.out`, then rebuilds the manifest.
 pub fn run_batch(
     source: &dyn StepSource,
@@ -320,13 +336,10 @@ pub fn run_batch(
     progress: &(dyn Fn(Event) + Sync),
 ) -> Result<BatchReport, slosh_cache::Error> {
     let start = Instant::now();
-    std::fs::create_dir_all(&opts.out).map_err(|e| slosh_fileio::IoError::new(&opts.out, e))?;
     let key = series_key(source, opts);
-    // Held to the end of the run, manifest included.
-    let _claim = crate::claim::claim(&opts.out, &key)?;
-    remove_stale_temps(&opts.out);
     let planned = plan(source, opts);
-    refuse_mixing(&opts.out, &planned, &key)?;
+    // Held to the end of the run, manifest included.
+    let _claim = prepare_dir(&opts.out, &planned, &key)?;
     progress(Event::Planned {
         steps: planned.len(),
     });

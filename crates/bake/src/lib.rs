@@ -6,6 +6,7 @@ mod bvh;
 mod claim;
 mod ensight_source;
 mod jobs;
+mod on_demand;
 mod params;
 mod point_cloud;
 mod select;
@@ -19,6 +20,7 @@ pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
 pub use ensight_source::{EnsightSource, canonical_label};
 pub use jobs::{available_memory, cores, default_jobs};
+pub use on_demand::OnDemand;
 pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
 pub use point_cloud::{PointCloud, PointCloudError, read_point_cloud};
 pub use select::{

@@ -1,6 +1,6 @@
 //! A cache directory as a series of steps: the manifest's steps, and the step files a bake
 //! is still adding (bake renames each finished file into place, so a file that is there is
-//! whole). Positions are stable for the life of the series: a step whose file disappears
+//! whole); or a raw case's planned steps, each baked into the directory when first loaded. Positions are stable for the life of the series: a step whose file disappears
 //! stays in place, marked, so that every later step keeps its place on the timeline; a step
 //! file that cannot be read is a step too, marked with why.
 
@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
-use slosh_cache::{CacheFile, Manifest, SeriesKey, names, parse_step_file_name};
+use slosh_cache::{CacheFile, Manifest, SeriesKey, names, parse_step_file_name, step_file_name};
 
 use crate::error::{Error, Result};
 
@@ -57,13 +57,15 @@ pub struct SeriesChange {
     /// Bake indices of known steps whose file changed, vanished or came back: whatever was
     /// loaded or concluded from them is stale.
     pub changed: Vec<usize>,
+    /// Planned steps whose file has appeared (baked since the last look).
+    pub baked: usize,
     /// The manifest appeared, changed or went away.
     pub manifest: bool,
 }
 
 impl SeriesChange {
     pub fn any(&self) -> bool {
-        self.added > 0 || !self.changed.is_empty() || self.manifest
+        self.added > 0 || !self.changed.is_empty() || self.manifest || self.baked > 0
     }
 }
 
@@ -74,8 +76,12 @@ pub struct Series {
     steps: Vec<SeriesStep>,
     manifest: Option<Manifest>,
     manifest_stamp: Option<FileStamp>,
-    /// What every step must share: the manifest's, else the first readable step's.
+    /// What every step must share: the manifest's, else the first readable step's; a
+    /// planned series' own.
     key: Option<SeriesKey>,
+    /// A raw case's steps (bake index, time), each baked on demand: every one is a position
+    /// from the start, baked or not, and the directory's manifest is not read.
+    plan: Option<BTreeMap<usize, f64>>,
 }
 
 impl Series {
@@ -88,9 +94,30 @@ impl Series {
             manifest: None,
             manifest_stamp: None,
             key: None,
+            plan: None,
         };
         series.refresh()?;
         Ok(series)
+    }
+
+    /// The planned `steps` (bake index, time) of the series `key`, cached in `dir` once
+    /// baked: a step without its file is a position still to bake, not a problem.
+    pub fn planned(dir: &Path, steps: &[(usize, f64)], key: SeriesKey) -> Result<Series> {
+        let mut series = Series {
+            dir: dir.to_path_buf(),
+            steps: Vec::new(),
+            manifest: None,
+            manifest_stamp: None,
+            key: Some(key),
+            plan: Some(steps.iter().copied().collect()),
+        };
+        series.refresh()?;
+        Ok(series)
+    }
+
+    /// Whether the series is a raw case's, baked on demand.
+    pub fn is_planned(&self) -> bool {
+        self.plan.is_some()
     }
 
     pub fn dir(&self) -> &Path {
@@ -183,9 +210,17 @@ impl Series {
             }
         }
         let mut change = SeriesChange::default();
+        if let Some(plan) = &self.plan {
+            // Only the planned steps, whatever else the directory holds.
+            files.retain(|index, _| plan.contains_key(index));
+        }
         let manifest_path = self.dir.join(slosh_cache::MANIFEST_NAME);
         let manifest_stamp = FileStamp::of(&manifest_path);
-        if manifest_stamp != self.manifest_stamp || (self.steps.is_empty() && !files.is_empty()) {
+        if self.plan.is_some() {
+            // The plan and its key say what the series is.
+        } else if manifest_stamp != self.manifest_stamp
+            || (self.steps.is_empty() && !files.is_empty())
+        {
             let manifest = Manifest::read(&self.dir).ok();
             change.manifest = manifest != self.manifest;
             self.manifest = manifest;
@@ -197,6 +232,17 @@ impl Series {
         for step in known.values_mut() {
             let stamp = files.get(&step.index).and_then(|p| FileStamp::of(p));
             if stamp == step.stamp {
+                continue;
+            }
+            if self.plan.is_some() {
+                // A planned step's file appearing is its bake; one removed is baked again
+                // when next loaded; one replaced is stale.
+                if step.stamp.is_none() {
+                    change.baked += 1;
+                } else {
+                    change.changed.push(step.index);
+                }
+                step.stamp = stamp;
                 continue;
             }
             change.changed.push(step.index);
@@ -226,7 +272,10 @@ impl Series {
                 continue;
             }
             let stamp = FileStamp::of(&path);
-            let (time, problem) = match listed.get(&index) {
+            // A planned step's time is the case's; its file is judged when loaded (and
+            // baked again where it is not of the series).
+            let planned = self.plan.as_ref().and_then(|p| p.get(&index));
+            let (time, problem) = match planned.or(listed.get(&index)) {
                 Some(&time) => (time, None),
                 None => match CacheFile::open(&path) {
                     Ok(file) => {
@@ -249,6 +298,19 @@ impl Series {
                     problem,
                 },
             );
+        }
+        // Planned steps not baked yet.
+        for (&index, &time) in self.plan.iter().flatten() {
+            known.entry(index).or_insert_with(|| {
+                change.added += 1;
+                SeriesStep {
+                    index,
+                    time,
+                    path: self.dir.join(step_file_name(index)),
+                    stamp: None,
+                    problem: None,
+                }
+            });
         }
         if let Some(m) = &self.manifest {
             self.key = Some(m.key());

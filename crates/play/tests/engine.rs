@@ -474,3 +474,168 @@ fn an_export_job_writes_each_step_as_a_direct_render() {
     assert!(frame_path(&out.path().join("bad"), 0).exists());
     assert!(!frame_path(&out.path().join("bad"), 7).exists());
 }
+
+/// Steps `0..count` of the moving 1500-point sphere written as an EnSight 6 binary case with
+/// its normals, under `dir`; the case's path.
+fn write_case(dir: &Path, count: usize) -> std::path::PathBuf {
+    use slosh_ensight::{CaseWriter, Placement, VarData, VarType, WriteFormat};
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 1500, 3)).unwrap();
+    let mut writer = CaseWriter::create(
+        dir,
+        "sphere",
+        WriteFormat::E6Binary,
+        Placement::PointPart,
+        &[("normal", VarType::Vector)],
+    )
+    .unwrap();
+    for step in 0..count {
+        let input = slosh_testkit::scene_step(&scene, step, "sphere");
+        let f32x3 =
+            |v: &[[f64; 3]]| -> Vec<[f32; 3]> { v.iter().map(|p| p.map(|c| c as f32)).collect() };
+        let normals = f32x3(input.normals.as_deref().unwrap());
+        writer
+            .write_step(
+                input.time,
+                &f32x3(&input.positions),
+                &[VarData::Vector("normal", &normals)],
+            )
+            .unwrap();
+    }
+    writer.case_path()
+}
+
+/// Shows `position` and refines it to the request's iterations.
+fn show_refined(engine: &mut Engine, request: &FrameRequest, position: usize) {
+    show(engine, request, position);
+    for _ in 0..100 {
+        if frame(engine, request)
+            .progress
+            .is_some_and(|p| p.finished())
+        {
+            return;
+        }
+    }
+    panic!("step {position} did not finish refining in 100 frames");
+}
+
+/// The case's steps, baked on demand into `cache` by `slosh bake`'s settings for it.
+fn on_demand(case: &Path, cache: &Path) -> slosh_bake::OnDemand {
+    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    let source = slosh_bake::EnsightSource::new(
+        slosh_ensight::Case::open(case).unwrap(),
+        case,
+        slosh_ensight::PointSource::Auto,
+        &params,
+    );
+    let opts = slosh_bake::BatchOptions {
+        out: cache.to_path_buf(),
+        steps: None,
+        jobs: 1,
+        threads: 1,
+        shard: slosh_bake::Shard::WHOLE,
+        params,
+    };
+    slosh_bake::OnDemand::open(Box::new(source), opts).unwrap()
+}
+
+/// A raw case plays with no bake first: every step is a position from the start, a step is
+/// baked into the cache directory by the loader that first needs it and shows what `slosh
+/// bake` of the same case renders, a step whose files are damaged is a failed step while the
+/// others play, and the next run finds the steps baked and bakes none again.
+#[test]
+fn a_raw_case_is_baked_as_it_plays_and_stays_baked() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let case = write_case(&dir.path().join("case"), 4);
+    // Step 2's geometry cut short.
+    let geometry = dir.path().join("case/sphere.geo00002");
+    let bytes = std::fs::read(&geometry).unwrap();
+    std::fs::write(&geometry, &bytes[..bytes.len() / 2]).unwrap();
+    let cache = dir.path().join("cache");
+    let mut engine = Engine::open_baking(
+        gpu.clone(),
+        Arc::new(on_demand(&case, &cache)),
+        EngineOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(
+        engine.timeline().len(),
+        4,
+        "every step is a position at once"
+    );
+    assert!(engine.baked().is_empty());
+    assert!(!cache.join(step_file_name(1)).exists());
+    let request = request(3);
+    show_refined(&mut engine, &request, 1);
+    let baked = cache.join(step_file_name(1));
+    slosh_cache::CacheFile::open(&baked)
+        .unwrap()
+        .verify()
+        .unwrap();
+    let shown = assert_shows_the_direct_render(&engine, &gpu, &cache, 1, &request);
+    // The same step baked by the batch driver (`slosh bake`) renders the same.
+    let batch = dir.path().join("batch");
+    let source = slosh_bake::EnsightSource::new(
+        slosh_ensight::Case::open(&case).unwrap(),
+        &case,
+        slosh_ensight::PointSource::Auto,
+        &BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into())),
+    );
+    let opts = slosh_bake::BatchOptions {
+        out: batch.clone(),
+        steps: Some((1, 1)),
+        jobs: 1,
+        threads: 1,
+        shard: slosh_bake::Shard::WHOLE,
+        params: BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into())),
+    };
+    let report = slosh_bake::run_batch(&source, &opts, &|_| {}).unwrap();
+    assert_eq!(report.baked, 1);
+    let file = slosh_cache::CacheFile::open(&batch.join(step_file_name(1))).unwrap();
+    let step = GpuStep::upload(&gpu, &file, None).unwrap();
+    let direct = engine
+        .tracer()
+        .render(&gpu, &step, &request.camera, &request.params)
+        .unwrap();
+    assert!(
+        shown.hits == direct.hits,
+        "the batch's bake renders otherwise"
+    );
+    // The damaged step fails; the one after it plays.
+    engine.timeline_mut().set_current(2);
+    let mut failed = None;
+    for _ in 0..5000 {
+        frame(&mut engine, &request);
+        if let Some(f) = engine.failures().into_iter().find(|(p, _)| *p == 2) {
+            failed = Some(f.1);
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let why = failed.expect("the step that cannot be read is reported");
+    assert!(
+        why.contains("did not bake") && why.contains("sphere.geo00002"),
+        "{why}"
+    );
+    assert!(!cache.join(step_file_name(2)).exists(), "no file for it");
+    show(&mut engine, &request, 3);
+    engine.refresh_series().unwrap();
+    assert!(engine.baked().contains(&1) && engine.baked().contains(&3));
+    assert!(!engine.baked().contains(&2));
+    drop(engine);
+    // The next run: step 1 is there, and is not baked again.
+    let stamp = std::fs::metadata(&baked).unwrap().modified().unwrap();
+    let mut engine = Engine::open_baking(
+        gpu.clone(),
+        Arc::new(on_demand(&case, &cache)),
+        EngineOptions::default(),
+    )
+    .unwrap();
+    assert!(engine.baked().contains(&1));
+    show_refined(&mut engine, &request, 1);
+    assert_eq!(
+        std::fs::metadata(&baked).unwrap().modified().unwrap(),
+        stamp
+    );
+    assert_shows_the_direct_render(&engine, &gpu, &cache, 1, &request);
+}

@@ -24,7 +24,10 @@ pub fn run(options: PlayOptions) -> Result<(), AppError> {
         queue: gpu.queue.clone(),
     };
     let gpu = Arc::new(gpu);
-    let engine = Engine::open(gpu.clone(), &options.dir, options.engine.clone())?;
+    let engine = match &options.bake {
+        Some(bake) => Engine::open_baking(gpu.clone(), bake.clone(), options.engine.clone())?,
+        None => Engine::open(gpu.clone(), &options.dir, options.engine.clone())?,
+    };
     // The window's surface is a texture: a window manager that honours the hint never makes
     // it larger than the device holds (the device asks for the adapter's largest).
     let max_side = gpu.device.limits().max_texture_dimension_2d as f32;

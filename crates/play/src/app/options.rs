@@ -7,7 +7,10 @@ use crate::engine::EngineOptions;
 /// How `slosh play` was asked to run.
 #[derive(Debug, Clone)]
 pub struct PlayOptions {
+    /// The cache directory played (a raw case's: where its steps are baked).
     pub dir: PathBuf,
+    /// A raw case, baked into `dir` as its steps are needed.
+    pub bake: Option<std::sync::Arc<slosh_bake::OnDemand>>,
     pub adapter: Option<String>,
     pub engine: EngineOptions,
     /// Viewport pixels traced per physical pixel, per axis (0.25–2).

@@ -1,5 +1,6 @@
 //! The timeline widget: transport buttons, loop and speed, and a scrub bar that shows which
-//! steps are resident on the GPU, which are being loaded and which failed. It holds no state:
+//! steps are resident on the GPU, which are being loaded and which failed, and of a raw
+//! case which are baked. It holds no state:
 //! everything it shows and changes lives in the engine's `Timeline`.
 
 use eframe::egui;
@@ -10,6 +11,7 @@ use crate::timeline::Looping;
 const RESIDENT: egui::Color32 = egui::Color32::from_rgb(70, 170, 90);
 const LOADING: egui::Color32 = egui::Color32::from_rgb(220, 170, 40);
 const FAILED: egui::Color32 = egui::Color32::from_rgb(220, 60, 50);
+const BAKED: egui::Color32 = egui::Color32::from_rgb(90, 120, 170);
 
 /// Draws the timeline for `engine`.
 pub fn show(ui: &mut egui::Ui, engine: &mut Engine) {
@@ -130,6 +132,11 @@ fn scrub_bar(ui: &mut egui::Ui, engine: &mut Engine) {
             colour,
         );
     };
+    if engine.series().is_planned() {
+        for i in engine.baked() {
+            band(&painter, i, 10.0, 16.0, BAKED);
+        }
+    }
     for i in engine.resident() {
         band(&painter, i, 16.0, 26.0, RESIDENT);
     }

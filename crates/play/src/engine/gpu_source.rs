@@ -34,6 +34,9 @@ pub struct GpuSource {
     pub(super) delay: Option<std::time::Duration>,
     pub(super) paths: Mutex<HashMap<usize, PathBuf>>,
     pub(super) field: Mutex<Option<String>>,
+    /// A raw case's bake: a step is baked into its file (unless a current one is there)
+    /// before it loads.
+    pub(super) bake: Option<Arc<slosh_bake::OnDemand>>,
 }
 
 impl GpuSource {
@@ -63,6 +66,14 @@ impl StepLoader for GpuSource {
             .ok_or_else(|| format!("step {index} is not in the series"))?;
         if let Some(delay) = self.delay {
             std::thread::sleep(delay);
+        }
+        if let Some(bake) = &self.bake {
+            if withdrawn() {
+                return Err("withdrawn".into());
+            }
+            if let slosh_bake::StepOutcome::Failed(why) = bake.bake(index) {
+                return Err(format!("step {index} did not bake: {why}"));
+            }
         }
         let field = self.field();
         let host = HostStep::open(&path, field.as_deref()).map_err(|e| e.to_string())?;

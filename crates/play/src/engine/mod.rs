@@ -201,7 +201,27 @@ impl Engine {
     /// An engine over the cache directory `dir`, on `gpu` (made here or from a device
     /// someone else created, [`Gpu::from_parts`]).
     pub fn open(gpu: Arc<Gpu>, dir: &Path, options: EngineOptions) -> Result<Engine> {
-        let series = Series::open(dir)?;
+        Engine::over(gpu, Series::open(dir)?, None, options)
+    }
+
+    /// An engine over a raw case's steps, each baked into `bake`'s directory by the loader
+    /// that first needs it (the next run finds it baked); a step that fails to bake is a
+    /// failed step like any other.
+    pub fn open_baking(
+        gpu: Arc<Gpu>,
+        bake: Arc<slosh_bake::OnDemand>,
+        options: EngineOptions,
+    ) -> Result<Engine> {
+        let series = Series::planned(bake.dir(), bake.steps(), bake.key().clone())?;
+        Engine::over(gpu, series, Some(bake), options)
+    }
+
+    fn over(
+        gpu: Arc<Gpu>,
+        series: Series,
+        bake: Option<Arc<slosh_bake::OnDemand>>,
+        options: EngineOptions,
+    ) -> Result<Engine> {
         let tracer = Tracer::new(&gpu)?;
         let budget = options.budget.unwrap_or_else(|| default_budget(&gpu));
         let source = Arc::new(GpuSource {
@@ -211,6 +231,7 @@ impl Engine {
             delay: options.load_delay,
             paths: Mutex::new(HashMap::new()),
             field: Mutex::new(options.field.clone()),
+            bake,
         });
         let prefetch = Prefetcher::new(source.clone(), options.loaders);
         let mut engine = Engine {
@@ -352,6 +373,15 @@ impl Engine {
             .collect();
         v.sort_unstable();
         v
+    }
+
+    /// Series positions whose step is baked, in a raw case's series (every one of a cache
+    /// directory's is); as of the last look at the directory.
+    pub fn baked(&self) -> Vec<usize> {
+        let steps = self.series.steps();
+        (0..steps.len())
+            .filter(|&p| !self.series.is_planned() || steps[p].stamp.is_some())
+            .collect()
     }
 
     /// Series positions being loaded or queued.

@@ -1,0 +1,80 @@
+//! Steps baked one at a time as a viewer asks for them: the batch driver's single-step bake
+//! (read, bake, verify, write atomically) over a held cache directory, so that a raw case
+//! plays at once and its steps stay baked for the next run.
+
+use std::path::{Path, PathBuf};
+
+use slosh_cache::{SeriesKey, step_file_name};
+
+use crate::batch::{
+    BatchOptions, StepOutcome, StepSource, bake_one, plan, prepare_dir, series_key,
+};
+use crate::claim::Claim;
+
+/// A cache directory held for one series, whose steps are baked on request.
+pub struct OnDemand {
+    source: Box<dyn StepSource + Send>,
+    opts: BatchOptions,
+    key: SeriesKey,
+    steps: Vec<(usize, f64)>,
+    _claim: Claim,
+}
+
+impl std::fmt::Debug for OnDemand {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OnDemand")
+            .field("source", &self.source.source_path())
+            .field("out", &self.opts.out)
+            .field("steps", &self.steps.len())
+            .finish()
+    }
+}
+
+impl OnDemand {
+    /// Holds `opts.out` for the series of `source` that `opts` selects (refused, before
+    /// anything is written, where another bake holds it or its step files are of another
+    /// series), to bake its steps when asked.
+    pub fn open(
+        source: Box<dyn StepSource + Send>,
+        opts: BatchOptions,
+    ) -> Result<OnDemand, slosh_cache::Error> {
+        let key = series_key(source.as_ref(), &opts);
+        let steps = plan(source.as_ref(), &opts);
+        let claim = prepare_dir(&opts.out, &steps, &key)?;
+        Ok(OnDemand {
+            source,
+            opts,
+            key,
+            steps,
+            _claim: claim,
+        })
+    }
+
+    /// (step index, time) of every step of the series, in order.
+    pub fn steps(&self) -> &[(usize, f64)] {
+        &self.steps
+    }
+
+    /// What every step file of the series records.
+    pub fn key(&self) -> &SeriesKey {
+        &self.key
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.opts.out
+    }
+
+    /// Where step `index` is (or will be) cached.
+    pub fn path(&self, index: usize) -> PathBuf {
+        self.opts.out.join(step_file_name(index))
+    }
+
+    /// Bakes step `index` into its file unless a current one is there (`Kept`); on the
+    /// calling thread's rayon pool. A step the verifier would reject is never written.
+    pub fn bake(&self, index: usize) -> StepOutcome {
+        if !self.steps.iter().any(|(i, _)| *i == index) {
+            return StepOutcome::Failed(format!("step {index} is not in the series"));
+        }
+        bake_one(self.source.as_ref(), index, &self.opts, &self.key)
+    }
+}

@@ -1,0 +1,51 @@
+//! A raw EnSight case for `slosh play`: `slosh bake`'s settings, validated the same way, over
+//! a cache directory its steps are baked into as they are needed.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use slosh_bake::{EnsightSource, OnDemand};
+use slosh_ensight::PointSource;
+
+use super::{BakeConfig, BakeInput};
+use crate::cli::{BakeArgs, BakeSettings};
+
+/// Where a case's steps are baked by default: NAME.slosh beside NAME.case.
+pub fn default_cache(case: &Path) -> PathBuf {
+    let stem = case
+        .file_stem()
+        .map_or_else(|| "case".into(), |s| s.to_string_lossy().into_owned());
+    case.with_file_name(format!("{stem}.slosh"))
+}
+
+/// The case at `case`, held for baking into `cache` (default [`default_cache`]) with
+/// `settings`; refused where the directory holds another series or another bake holds it.
+pub fn open(case: &Path, cache: Option<&Path>, settings: &BakeSettings) -> Result<OnDemand> {
+    let out = cache.map_or_else(|| default_cache(case), Path::to_path_buf);
+    let args = BakeArgs {
+        input: case.to_path_buf(),
+        out: Some(out.clone()),
+        steps: None,
+        jobs: None,
+        shard: None,
+        settings: settings.clone(),
+        manifest_only: false,
+        quiet: true,
+    };
+    let cfg = BakeConfig::from_args(&args)?;
+    let BakeInput::Case(case_data) = cfg.input else {
+        bail!(
+            "{}: a point cloud is one step: bake it with `slosh bake {} --out DIR` and play DIR",
+            case.display(),
+            case.display()
+        );
+    };
+    let source = EnsightSource::new(
+        case_data,
+        &cfg.input_path,
+        PointSource::Auto,
+        &cfg.options.params,
+    );
+    OnDemand::open(Box::new(source), cfg.options)
+        .with_context(|| format!("baking {} into {}", case.display(), out.display()))
+}
