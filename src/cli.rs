@@ -386,6 +386,15 @@ pub struct InfoArgs {
 /// How a step is baked: `slosh bake`'s settings, and `slosh play`'s for a raw case.
 #[derive(Debug, Clone, Args)]
 pub struct BakeSettings {
+    #[command(flatten)]
+    pub fit: FitSettings,
+    #[command(flatten)]
+    pub select: SelectSettings,
+}
+
+/// How the MLS surface is fitted to the particles.
+#[derive(Debug, Clone, Args)]
+pub struct FitSettings {
     /// Polynomial degree of the fits.
     #[arg(long, default_value_t = 2)]
     pub degree: u8,
@@ -411,6 +420,11 @@ pub struct BakeSettings {
     /// --surface estimate, else 0 (particles on the surface, as FPM's).
     #[arg(long)]
     pub surface_offset: Option<f64>,
+}
+
+/// Which particles and variables a bake reads, and how it stores them.
+#[derive(Debug, Clone, Args)]
+pub struct SelectSettings {
     /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable
     /// `surface` if the case has one, else all).
     #[arg(long)]
@@ -433,15 +447,21 @@ pub struct BakeSettings {
     pub byte_order: Option<ByteOrderArg>,
 }
 
+/// A flag group with every flag at its default, as a command line without them parses.
+fn flag_defaults<T: Args + clap::FromArgMatches>() -> T {
+    let command = T::augment_args(clap::Command::new("slosh"));
+    T::from_arg_matches(&command.get_matches_from(["slosh"])).unwrap_or_else(|e| e.exit())
+}
+
 impl Default for BakeSettings {
-    /// The flags' own defaults.
     fn default() -> BakeSettings {
-        #[derive(Parser)]
-        struct Only {
-            #[command(flatten)]
-            settings: BakeSettings,
-        }
-        Only::parse_from(["slosh"]).settings
+        flag_defaults()
+    }
+}
+
+impl Default for FitSettings {
+    fn default() -> FitSettings {
+        flag_defaults()
     }
 }
 
@@ -541,8 +561,14 @@ pub const DEFAULT_FOV: f64 = 40.0;
 
 #[derive(Debug, Args)]
 pub struct RenderArgs {
-    /// A cache directory or one step file.
+    /// A cache directory, one step file, or an EnSight .case file: the steps rendered are
+    /// baked first, into --cache (kept for the next run), with the default fit.
     pub path: PathBuf,
+    /// Where a .case file's steps are baked. Default: NAME.slosh beside NAME.case.
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
+    #[command(flatten, next_help_heading = "Baking a .case file (as `slosh bake`)")]
+    pub bake: SelectSettings,
     /// Step index (cache directories).
     #[arg(long, default_value_t = 0)]
     pub step: usize,

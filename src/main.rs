@@ -126,7 +126,18 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Bake(args) if args.manifest_only => bake::manifest_only(&args.input),
         Command::Bake(args) => bake::run(&config::BakeConfig::from_args(&args)?),
         Command::Inspect(args) => inspect::run(&config::inspect::InspectConfig::from_args(&args)?),
-        Command::Render(args) => render::run(&config::render::RenderConfig::from_args(&args)?),
+        Command::Render(args) => {
+            let mut config = config::render::RenderConfig::from_args(&args)?;
+            if args.path.is_file() && args.path.extension().is_some_and(|e| e == "case") {
+                config.path = render::bake_case(&args, &config.steps)?;
+            } else if args.cache.is_some() {
+                anyhow::bail!(
+                    "--cache: {} is not a .case file (--cache is where a case's steps are baked)",
+                    args.path.display()
+                );
+            }
+            render::run(&config)
+        }
         Command::Play(args) => play::play(&args),
         Command::Demo(args) => play::demo(&config::demo::DemoConfig::from_args(&args)?),
         Command::Info(args) => {

@@ -14,6 +14,45 @@ use slosh_render::{TraceParams, Tracer, cpu_shade};
 
 use crate::config::render::RenderConfig;
 
+/// Bakes the `steps` of the case `args.path` that its cache does not hold yet (`slosh bake`'s
+/// single-step bake, with the default fit and `args.bake`'s selection), going on past a step
+/// that fails and then naming every one that did; the cache directory.
+pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<PathBuf> {
+    let settings = crate::cli::BakeSettings {
+        fit: crate::cli::FitSettings::default(),
+        select: args.bake.clone(),
+    };
+    let bake = crate::config::on_demand::open(
+        &args.path,
+        args.cache.as_deref(),
+        &settings,
+        args.field.as_deref(),
+    )?;
+    let mut failed = Vec::new();
+    for &step in steps {
+        match bake.bake(step) {
+            slosh_bake::StepOutcome::Baked {
+                seconds, points, ..
+            } => {
+                say!("baked step {step} ({points} points, {seconds:.2} s)");
+            }
+            slosh_bake::StepOutcome::Kept => {}
+            slosh_bake::StepOutcome::Failed(why) => {
+                eprintln!("step {step} did not bake: {why}");
+                failed.push(step);
+            }
+        }
+    }
+    if !failed.is_empty() {
+        anyhow::bail!(
+            "{} of {} steps did not bake (steps {failed:?}); nothing was rendered",
+            failed.len(),
+            steps.len()
+        );
+    }
+    Ok(bake.dir().to_path_buf())
+}
+
 fn step_path(path: &Path, step: usize) -> PathBuf {
     if path.is_dir() {
         path.join(step_file_name(step))

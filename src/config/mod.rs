@@ -225,25 +225,25 @@ impl BakeConfig {
             .out
             .clone()
             .context("--out DIR is required (where the .slc files go)")?;
-        if !(1..=3).contains(&a.settings.degree) {
-            bail!("--degree {}: expected 1, 2 or 3", a.settings.degree);
+        if !(1..=3).contains(&a.settings.fit.degree) {
+            bail!("--degree {}: expected 1, 2 or 3", a.settings.fit.degree);
         }
-        if a.settings.k == 0 {
+        if a.settings.fit.k == 0 {
             bail!("--k must be at least 1");
         }
-        if !(a.settings.h_scale.is_finite() && a.settings.h_scale > 0.0) {
+        if !(a.settings.fit.h_scale.is_finite() && a.settings.fit.h_scale > 0.0) {
             bail!(
                 "--h-scale {}: expected a positive number",
-                a.settings.h_scale
+                a.settings.fit.h_scale
             );
         }
-        if a.settings.neighbour_cap < 3 {
+        if a.settings.fit.neighbour_cap < 3 {
             bail!(
                 "--neighbour-cap {}: at least 3 neighbours are needed for a plane",
-                a.settings.neighbour_cap
+                a.settings.fit.neighbour_cap
             );
         }
-        let compression = match a.settings.compress.as_str() {
+        let compression = match a.settings.select.compress.as_str() {
             "none" => slosh_cache::Compression::None,
             l => {
                 let level: i32 = l
@@ -265,7 +265,7 @@ impl BakeConfig {
             .map(str::to_ascii_lowercase);
         let point_cloud = matches!(ext.as_deref(), Some("ply" | "obj"));
         let (input, surface, normals) = if point_cloud {
-            let surface = match a.settings.surface.as_deref() {
+            let surface = match a.settings.select.surface.as_deref() {
                 None | Some("all") => SurfaceSelect::All,
                 Some("estimate") => SurfaceSelect::Estimate,
                 Some(v) => {
@@ -273,7 +273,7 @@ impl BakeConfig {
                 }
             };
             let cloud = slosh_bake::read_point_cloud(&a.input)?;
-            let normals = match a.settings.normals.as_deref() {
+            let normals = match a.settings.select.normals.as_deref() {
                 Some("pca") => NormalSource::Pca,
                 Some("estimate") => NormalSource::Estimate,
                 None if cloud.normals.is_some() => NormalSource::Variable("normals".into()),
@@ -286,7 +286,7 @@ impl BakeConfig {
             (BakeInput::PointCloud(cloud), surface, normals)
         } else {
             let mut case = slosh_ensight::Case::open(&a.input)?;
-            case.set_byte_order(a.settings.byte_order.map(Into::into));
+            case.set_byte_order(a.settings.select.byte_order.map(Into::into));
             let has = |name: &str, ty: VarType| {
                 case.variables()
                     .iter()
@@ -306,7 +306,7 @@ impl BakeConfig {
                 }
                 Ok(())
             };
-            let surface = match a.settings.surface.as_deref() {
+            let surface = match a.settings.select.surface.as_deref() {
                 None if has("surface", VarType::Scalar) => {
                     SurfaceSelect::Variable("surface".into())
                 }
@@ -317,7 +317,7 @@ impl BakeConfig {
                     SurfaceSelect::Variable(v.into())
                 }
             };
-            let normals = match a.settings.normals.as_deref() {
+            let normals = match a.settings.select.normals.as_deref() {
                 None => ["normal", "normals"]
                     .into_iter()
                     .find(|n| has(n, VarType::Vector))
@@ -341,23 +341,23 @@ impl BakeConfig {
                     NormalSource::Variable(v.into())
                 }
             };
-            for f in &a.settings.fields {
+            for f in &a.settings.select.fields {
                 if !case.variables().iter().any(|v| &v.name == f) {
                     bail!("{}: no variable '{f}' for --fields", a.input.display());
                 }
             }
             (BakeInput::Case(case), surface, normals)
         };
-        if point_cloud && !a.settings.fields.is_empty() {
+        if point_cloud && !a.settings.select.fields.is_empty() {
             bail!("--fields: a point cloud has no variables");
         }
         let mut params = BakeParams::new(surface, normals);
-        params.mls.degree = a.settings.degree;
-        params.mls.k = a.settings.k;
-        params.mls.h_scale = a.settings.h_scale;
-        params.mls.neighbour_cap = a.settings.neighbour_cap;
-        params.mls.per_point_h = a.settings.per_point_h;
-        if let Some(offset) = a.settings.surface_offset {
+        params.mls.degree = a.settings.fit.degree;
+        params.mls.k = a.settings.fit.k;
+        params.mls.h_scale = a.settings.fit.h_scale;
+        params.mls.neighbour_cap = a.settings.fit.neighbour_cap;
+        params.mls.per_point_h = a.settings.fit.per_point_h;
+        if let Some(offset) = a.settings.fit.surface_offset {
             if !(offset.is_finite() && (0.0..=2.0).contains(&offset)) {
                 bail!(
                     "--surface-offset {offset}: expected 0 to 2 particle radii (a ball reaches at most 4)"
@@ -367,9 +367,10 @@ impl BakeConfig {
         }
         params.mls.droplet_below = a
             .settings
+            .fit
             .droplet_below
-            .unwrap_or(slosh_mls::coefficient_count(a.settings.degree));
-        params.fields = a.settings.fields.clone();
+            .unwrap_or(slosh_mls::coefficient_count(a.settings.fit.degree));
+        params.fields = a.settings.select.fields.clone();
         params.compression = compression;
         // Each job holds a whole step in memory and is parallel inside: more jobs than a few
         // per core only cost memory and threads.

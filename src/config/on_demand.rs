@@ -19,16 +19,28 @@ pub fn default_cache(case: &Path) -> PathBuf {
 }
 
 /// The case at `case`, held for baking into `cache` (default [`default_cache`]) with
-/// `settings`; refused where the directory holds another series or another bake holds it.
-pub fn open(case: &Path, cache: Option<&Path>, settings: &BakeSettings) -> Result<OnDemand> {
+/// `settings` and the `shown` field (the one frames are coloured by is baked with them);
+/// refused where the directory holds another series or another bake holds it.
+pub fn open(
+    case: &Path,
+    cache: Option<&Path>,
+    settings: &BakeSettings,
+    shown: Option<&str>,
+) -> Result<OnDemand> {
     let out = cache.map_or_else(|| default_cache(case), Path::to_path_buf);
+    let mut settings = settings.clone();
+    if let Some(field) = shown
+        && !settings.select.fields.iter().any(|f| f == field)
+    {
+        settings.select.fields.push(field.to_string());
+    }
     let args = BakeArgs {
         input: case.to_path_buf(),
         out: Some(out.clone()),
         steps: None,
         jobs: None,
         shard: None,
-        settings: settings.clone(),
+        settings,
         manifest_only: false,
         quiet: true,
     };

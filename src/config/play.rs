@@ -32,7 +32,12 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
         }
         (args.input.clone(), None)
     } else if args.input.is_file() {
-        let bake = super::on_demand::open(&args.input, args.cache.as_deref(), &args.bake)?;
+        let bake = super::on_demand::open(
+            &args.input,
+            args.cache.as_deref(),
+            &args.bake,
+            args.field.as_deref(),
+        )?;
         (bake.dir().to_path_buf(), Some(std::sync::Arc::new(bake)))
     } else {
         bail!(

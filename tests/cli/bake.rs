@@ -564,3 +564,63 @@ fn slurm_job_arrays_bake_like_one_process_and_resume() {
     assert!(stdout.contains("every section identical to the single-process bake"));
     assert!(stdout.contains("== SLURM test passed"));
 }
+
+/// `slosh render CASE.case`: the steps asked for are baked first into NAME.slosh beside the
+/// case (with the field the frame shows), and the frame is byte for byte what `slosh bake`
+/// then `slosh render DIR` make; a step that cannot be read fails the command, naming it,
+/// after the others are baked.
+#[test]
+fn a_case_renders_after_its_steps_are_baked_beside_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("case");
+    generate(&case_dir, &["sphere", "--points", "3000", "--steps", "3"]);
+    let case = case_dir.join("sphere.case");
+    let cache = case_dir.join("sphere.slosh");
+    let render = |input: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            input.to_str().unwrap(),
+            "--size",
+            "160x120",
+            "--field",
+            "pressure",
+        ];
+        args.extend_from_slice(extra);
+        slosh(&args)
+    };
+    let direct = dir.path().join("direct.png");
+    let (ok, _, err) = render(&case, &["--step", "1", "--out", direct.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(cache.join("step-00001.slc").exists());
+    assert!(
+        !cache.join("step-00000.slc").exists(),
+        "only the step asked for"
+    );
+    let baked = dir.path().join("baked");
+    let (ok, _, err) = bake_case(&case, &baked, &["--fields", "pressure", "--quiet"]);
+    assert!(ok, "{err}");
+    let via = dir.path().join("via.png");
+    let (ok, _, err) = render(&baked, &["--step", "1", "--out", via.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(
+        std::fs::read(&direct).unwrap() == std::fs::read(&via).unwrap(),
+        "the case's frame differs from the baked series'"
+    );
+    let geometry = case_dir.join("sphere.geo00002");
+    let bytes = std::fs::read(&geometry).unwrap();
+    std::fs::write(&geometry, &bytes[..bytes.len() / 2]).unwrap();
+    let frames = dir.path().join("f{}.png");
+    let (ok, _, err) = render(
+        &case,
+        &["--steps", "0..=2", "--out", frames.to_str().unwrap()],
+    );
+    assert!(!ok, "a step that cannot be read fails the render");
+    assert!(
+        err.contains("step 2 did not bake") && err.contains("sphere.geo00002"),
+        "{err}"
+    );
+    assert!(
+        cache.join("step-00000.slc").exists(),
+        "the others are baked"
+    );
+}
