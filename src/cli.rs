@@ -181,6 +181,10 @@ pub struct ScrubBenchArgs {
     /// Series stored without compression (`bake --compress none`): a load is then a copy.
     #[arg(long)]
     pub raw: bool,
+    /// Also each size as a raw EnSight case played with no bake first: every step baked
+    /// as the player needs it (sequential playback and jumps to steps not baked yet).
+    #[arg(long)]
+    pub raw_case: bool,
 }
 
 #[derive(Debug, Args)]

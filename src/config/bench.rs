@@ -103,5 +103,6 @@ pub fn scrub(a: &ScrubBenchArgs) -> Result<scrub::Settings> {
         adapter: a.adapter.clone(),
         cold: a.cold,
         raw: a.raw,
+        raw_case: a.raw_case,
     })
 }

@@ -101,6 +101,7 @@ fn scrub_bench_streams_a_series_on_the_engine() {
         "bench",
         "scrub",
         "--quick",
+        "--raw-case",
         "--out",
         md.to_str().unwrap(),
         "--dir",
@@ -114,7 +115,7 @@ fn scrub_bench_streams_a_series_on_the_engine() {
     let report = std::fs::read_to_string(&md).unwrap();
     let rows: Vec<Vec<&str>> = report
         .lines()
-        .filter(|l| l.starts_with("| 2000 points"))
+        .filter(|l| l.starts_with("| 2000 points, 12 steps ("))
         .map(|l| l.split('|').map(str::trim).collect())
         .collect();
     // Throughput, the resident-jump goal, step costs, five codec levels.
@@ -143,6 +144,31 @@ fn scrub_bench_streams_a_series_on_the_engine() {
     let cache = series.join("sphere-2000-12");
     let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
     assert!(ok, "{out}{err}");
+    // The raw case, baked as played: measured figures, and every step baked and verified.
+    let raw: Vec<&str> = report
+        .lines()
+        .find(|l| l.starts_with("| 2000 points, 12 steps |"))
+        .unwrap_or_else(|| panic!("no raw-case row: {report}"))
+        .split('|')
+        .map(str::trim)
+        .collect();
+    for cell in [raw[3], raw[5], raw[7]] {
+        for part in cell.split('/') {
+            assert!(number(part) > 0.0, "{cell}: {report}");
+        }
+    }
+    // The jumps' run starts from an empty cache: what it baked is there, each file verified.
+    let baked = series.join("case-2000-12/cache");
+    let files: Vec<std::path::PathBuf> = std::fs::read_dir(&baked)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "slc"))
+        .collect();
+    assert!(files.len() >= 2, "{files:?}");
+    for file in files {
+        let (ok, out, err) = slosh(&["inspect", file.to_str().unwrap(), "--verify"]);
+        assert!(ok, "{out}{err}");
+    }
 }
 
 /// `slosh demo --headless`: generates and bakes the series once (a second run reuses it) and

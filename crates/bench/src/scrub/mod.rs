@@ -19,8 +19,10 @@ use slosh_scenes::{Scene, SceneKind, SceneSpec};
 
 use crate::stats::{median, spread};
 
+mod raw_case;
 mod report;
 
+pub use raw_case::RawCaseReport;
 pub use report::{CodecRow, Cold, ScrubReport, SeriesReport};
 
 /// What `slosh bench scrub` measures and where it writes.
@@ -54,6 +56,8 @@ pub struct Settings {
     pub cold: bool,
     /// Steps stored without compression (`--compress none`), so a load is a copy.
     pub raw: bool,
+    /// Also each size as a raw EnSight case, baked as the engine plays it.
+    pub raw_case: bool,
 }
 
 /// Percentiles of a sample, in the sample's unit.
@@ -619,7 +623,21 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
         .clone()
         .unwrap_or_else(|| std::env::temp_dir().join("slosh-scrub"));
     let mut reports = Vec::new();
+    let mut raw_cases = Vec::new();
     for points in counts {
+        if args.raw_case {
+            say!("raw EnSight case: {points} points, {steps} steps, baked as played");
+            let r = raw_case::measure(&gpu, &root, points, size, &jumps_args)?;
+            say!(
+                "  sequential {:.2} steps/s; jumps to unbaked steps p50 {:.0} / p99 {:.0} ms; one step: read {:.0} ms, read and bake {:.0} ms",
+                r.sequential_steps_per_s,
+                r.jumps.p50,
+                r.jumps.p99,
+                r.read_ms,
+                r.bake_ms
+            );
+            raw_cases.push(r);
+        }
         let distinct = args
             .distinct
             .unwrap_or(if points <= 200_000 { steps } else { 8 })
@@ -654,5 +672,6 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
         size,
         settings: args.clone(),
         series: reports,
+        raw_cases,
     })
 }
