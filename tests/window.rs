@@ -1028,8 +1028,9 @@ fn a_slow_gpu_answers_within_100_ms_and_still_refines_to_the_render() {
 }
 
 /// `slosh play CASE.case`: the raw case opens at once with every step on the timeline, steps
-/// are baked as the player needs them into NAME.slosh beside the case, and `slosh bake` of
-/// the case with the same settings afterwards keeps every one of them.
+/// are baked as the player needs them into NAME.slosh beside the case (with the manifest once
+/// every one is), and `slosh bake` of the case with the same settings afterwards keeps every
+/// one of them.
 #[test]
 fn a_raw_case_plays_at_once_and_is_baked_beside_it() {
     if !tools() {
@@ -1057,6 +1058,13 @@ fn a_raw_case_plays_at_once_and_is_baked_beside_it() {
     );
     let log = player.log();
     assert!(!log.lines().any(|l| l.contains("failed step")), "{log}");
+    // The bake that completed the series wrote its manifest: a whole, verified series.
+    wait_for(
+        "the manifest of the completed series",
+        Duration::from_secs(30),
+        || cache.join("manifest.json").exists(),
+    );
+    slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
     drop(player);
     let stamps: Vec<_> = (0..3)
         .map(|i| std::fs::metadata(step_file(i)).unwrap().modified().unwrap())

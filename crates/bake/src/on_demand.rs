@@ -70,11 +70,20 @@ impl OnDemand {
     }
 
     /// Bakes step `index` into its file unless a current one is there (`Kept`); on the
-    /// calling thread's rayon pool. A step the verifier would reject is never written.
+    /// calling thread's rayon pool. A step the verifier would reject is never written. The
+    /// bake that completes the series writes its manifest, as `slosh bake` does.
     pub fn bake(&self, index: usize) -> StepOutcome {
         if !self.steps.iter().any(|(i, _)| *i == index) {
             return StepOutcome::Failed(format!("step {index} is not in the series"));
         }
-        bake_one(self.source.as_ref(), index, &self.opts, &self.key)
+        let outcome = bake_one(self.source.as_ref(), index, &self.opts, &self.key);
+        if matches!(outcome, StepOutcome::Baked { .. })
+            && self.steps.iter().all(|(i, _)| self.path(*i).exists())
+        {
+            // A manifest that cannot be written leaves the steps as they are: every one is
+            // whole and checked on its own, and `slosh bake --manifest-only` writes it.
+            let _ = slosh_cache::Manifest::refresh(&self.opts.out);
+        }
+        outcome
     }
 }
