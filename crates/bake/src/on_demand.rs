@@ -71,12 +71,32 @@ impl OnDemand {
 
     /// Bakes step `index` into its file unless a current one is there (`Kept`); on the
     /// calling thread's rayon pool. A step the verifier would reject is never written. The
-    /// bake that completes the series writes its manifest, as `slosh bake` does.
+    /// bake that completes the series writes its manifest, as `slosh bake` does. Another
+    /// holder baking the same step (in this process or another) is waited for.
     pub fn bake(&self, index: usize) -> StepOutcome {
         if !self.steps.iter().any(|(i, _)| *i == index) {
             return StepOutcome::Failed(format!("step {index} is not in the series"));
         }
+        // Players and renders of one case share its directory (the claim lets bakes of one
+        // series in together) and may want one step at once: a lock per step makes the
+        // second wait, then find the first's file current, instead of baking it again and
+        // replacing a file another may already have read or listed in the manifest.
+        let lock_path = self
+            .opts
+            .out
+            .join(format!(".{}.lock", step_file_name(index)));
+        let lock = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&lock_path)
+            .and_then(|f| f.lock().map(|()| f));
+        let lock = match lock {
+            Ok(lock) => lock,
+            Err(e) => return StepOutcome::Failed(format!("{}: {e}", lock_path.display())),
+        };
         let outcome = bake_one(self.source.as_ref(), index, &self.opts, &self.key);
+        drop(lock);
         if matches!(outcome, StepOutcome::Baked { .. })
             && self.steps.iter().all(|(i, _)| self.path(*i).exists())
         {

@@ -659,3 +659,52 @@ fn every_isolated_cluster_of_the_demo_is_closed_from_26_directions() {
     }
     assert!(total > 3, "{total} isolated clusters");
 }
+
+/// Two holders of one raw case's directory (two players, or a player and a render) asking
+/// for one step at once: it is baked once, the other finds it current, and the file the
+/// first wrote stays in place.
+#[test]
+fn two_holders_of_a_case_bake_a_step_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 20000, 3)).unwrap();
+    let case =
+        slosh_testkit::write_surface_case(&dir.path().join("case"), "sphere", &scene, 2).unwrap();
+    let cache = dir.path().join("cache");
+    let holder = || {
+        let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+        let source = EnsightSource::new(
+            slosh_ensight::Case::open(&case).unwrap(),
+            &case,
+            slosh_ensight::PointSource::Auto,
+            &params,
+        );
+        let opts = BatchOptions {
+            out: cache.clone(),
+            steps: None,
+            jobs: 1,
+            threads: 1,
+            shard: Shard::WHOLE,
+            params,
+        };
+        OnDemand::open(Box::new(source), opts).unwrap()
+    };
+    let (a, b) = (holder(), holder());
+    let outcomes: Vec<StepOutcome> = std::thread::scope(|s| {
+        let x = s.spawn(|| a.bake(1));
+        let y = s.spawn(|| b.bake(1));
+        vec![x.join().unwrap(), y.join().unwrap()]
+    });
+    let baked = outcomes
+        .iter()
+        .filter(|o| matches!(o, StepOutcome::Baked { .. }))
+        .count();
+    let kept = outcomes
+        .iter()
+        .filter(|o| matches!(o, StepOutcome::Kept))
+        .count();
+    assert_eq!((baked, kept), (1, 1), "{outcomes:?}");
+    CacheFile::open(&cache.join(step_file_name(1)))
+        .unwrap()
+        .verify()
+        .unwrap();
+}

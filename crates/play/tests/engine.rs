@@ -478,30 +478,8 @@ fn an_export_job_writes_each_step_as_a_direct_render() {
 /// Steps `0..count` of the moving 1500-point sphere written as an EnSight 6 binary case with
 /// its normals, under `dir`; the case's path.
 fn write_case(dir: &Path, count: usize) -> std::path::PathBuf {
-    use slosh_ensight::{CaseWriter, Placement, VarData, VarType, WriteFormat};
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 1500, 3)).unwrap();
-    let mut writer = CaseWriter::create(
-        dir,
-        "sphere",
-        WriteFormat::E6Binary,
-        Placement::PointPart,
-        &[("normal", VarType::Vector)],
-    )
-    .unwrap();
-    for step in 0..count {
-        let input = slosh_testkit::scene_step(&scene, step, "sphere");
-        let f32x3 =
-            |v: &[[f64; 3]]| -> Vec<[f32; 3]> { v.iter().map(|p| p.map(|c| c as f32)).collect() };
-        let normals = f32x3(input.normals.as_deref().unwrap());
-        writer
-            .write_step(
-                input.time,
-                &f32x3(&input.positions),
-                &[VarData::Vector("normal", &normals)],
-            )
-            .unwrap();
-    }
-    writer.case_path()
+    slosh_testkit::write_surface_case(dir, "sphere", &scene, count).unwrap()
 }
 
 /// Shows `position` and refines it to the request's iterations.

@@ -1,9 +1,9 @@
 //! What the test suites and the bench harness share, defined once: a scene's step as bake
-//! input, a step baked into an in-memory cache file, the cameras that frame a point set, the
+//! input, a scene's surface written as an EnSight case, a step baked into an in-memory cache file, the cameras that frame a point set, the
 //! mask of silhouette pixels that comparisons leave out, and the rule for a test that cannot
 //! run here (skipped with a message, except under `CI=true`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 mod exact;
 
@@ -27,6 +27,37 @@ pub fn scene_step(scene: &Scene, step: usize, source: &str) -> StepInput {
         normals: Some(normals),
         ..StepInput::default()
     }
+}
+
+/// Steps `0..steps` of `scene`'s surface particles with their normals (a vector variable
+/// `normal`), as [`scene_step`] gives them, written as the EnSight 6 binary case `name` under
+/// `dir`; the case file.
+pub fn write_surface_case(
+    dir: &Path,
+    name: &str,
+    scene: &Scene,
+    steps: usize,
+) -> Result<PathBuf, slosh_ensight::Error> {
+    use slosh_ensight::{CaseWriter, Placement, VarData, VarType, WriteFormat};
+    let mut writer = CaseWriter::create(
+        dir,
+        name,
+        WriteFormat::E6Binary,
+        Placement::PointPart,
+        &[("normal", VarType::Vector)],
+    )?;
+    let f32x3 =
+        |v: &[[f64; 3]]| -> Vec<[f32; 3]> { v.iter().map(|p| p.map(|c| c as f32)).collect() };
+    for step in 0..steps {
+        let input = scene_step(scene, step, name);
+        let normals = f32x3(input.normals.as_deref().unwrap_or_default());
+        writer.write_step(
+            input.time,
+            &f32x3(&input.positions),
+            &[VarData::Vector("normal", &normals)],
+        )?;
+    }
+    Ok(writer.case_path())
 }
 
 /// Why an in-memory bake failed: the bake, encoding the cache, or reading it back.

@@ -11,7 +11,6 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
 use slosh_bake::{BatchOptions, EnsightSource, OnDemand, Shard, StepOutcome, StepSource};
-use slosh_ensight::{CaseWriter, Placement, VarData, VarType, WriteFormat};
 use slosh_play::{Engine, EngineOptions, FrameRequest, Pace};
 use slosh_render::{Gpu, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
@@ -48,24 +47,7 @@ fn ensure_case(dir: &Path, points: usize, steps: usize) -> Result<std::path::Pat
     }
     let _ = std::fs::remove_dir_all(dir);
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))?;
-    let mut writer = CaseWriter::create(
-        dir,
-        "sphere",
-        WriteFormat::E6Binary,
-        Placement::PointPart,
-        &[("normal", VarType::Vector)],
-    )?;
-    let f32x3 =
-        |v: &[[f64; 3]]| -> Vec<[f32; 3]> { v.iter().map(|p| p.map(|c| c as f32)).collect() };
-    for step in 0..steps {
-        let input = slosh_testkit::scene_step(&scene, step, "sphere");
-        let normals = f32x3(input.normals.as_deref().unwrap_or_default());
-        writer.write_step(
-            step as f64 * 0.01,
-            &f32x3(&input.positions),
-            &[VarData::Vector("normal", &normals)],
-        )?;
-    }
+    slosh_testkit::write_surface_case(dir, "sphere", &scene, steps)?;
     std::fs::write(dir.join("points"), points.to_string())
         .with_context(|| format!("writing {}", dir.display()))?;
     Ok(case)
