@@ -1,6 +1,7 @@
 // The neighbour-mask pass, run by the tracer before a step's first refined frame (masks.rs).
 //
-// `expand`: the neighbour masks: which of a point's cluster
+// `expand`: first each cluster's runs of candidates (slosh_cache::candidates) into one index
+// per slot of `candidates`, then the neighbour masks: which of a point's cluster
 // candidates are its neighbours (clusters.rs: expand_one, the rule docs/algorithm.md gives):
 // within the point's reach, and not a point whose normal opposes the centre's (both valid).
 // Bit b of word w is candidate slot 32 w + b; a cluster writes only the words its own
@@ -13,12 +14,13 @@ struct ExpandSettings {
     cluster_size: u32,
     mask_words: u32,
     has_normals: u32,
-    // Entries of cluster_ids.
-    cluster_id_count: u32,
+    // Words of cluster_ids (the runs).
+    run_words: u32,
     // The clusters this dispatch derives: first_cluster..end_cluster.
     first_cluster: u32,
     end_cluster: u32,
-    pad2: u32,
+    // Candidate slots of all clusters (the last cluster_start).
+    candidate_count: u32,
 }
 
 // The arrays (shaders.rs: EXPAND_ARRAYS) are read and written through accessors that
@@ -36,6 +38,61 @@ var<workgroup> tile_normals: array<vec4<f32>, MASK_TILE>;
 var<workgroup> cluster_first: u32;
 var<workgroup> cluster_count: u32;
 var<workgroup> cluster_base_word: u32;
+var<workgroup> cluster_end_word: u32;
+// A tile of runs' lengths, scanned into their first slots.
+var<workgroup> run_slots: array<u32, MASK_TILE>;
+
+// Writes cluster c's candidates, one per slot from `first`, from its runs: a tile of runs at
+// a time, each thread one run, placed by an exclusive scan of the tile's lengths. Slots no
+// run reaches keep NO_NEIGHBOUR, and a run never writes past the cluster's `count` slots,
+// whatever the file holds.
+fn expand_runs(c: u32, first: u32, count: u32, lid: u32) {
+    let cfg = expand_settings;
+    let size = max(cfg.cluster_size, 1u);
+    for (var k = lid; k < count; k += MASK_TILE) {
+        candidates_set(first + k, NO_NEIGHBOUR);
+    }
+    let base = workgroupUniformLoad(&cluster_base_word);
+    let wide = (base & WIDE_CLUSTER) != 0u;
+    let at = base & ~WIDE_CLUSTER;
+    let end = workgroupUniformLoad(&cluster_end_word);
+    let per_run = select(1u, 2u, wide);
+    let runs = select(0u, (end - at) / per_run, end > at);
+    var placed = 0u;
+    for (var tile = 0u; tile < runs; tile += MASK_TILE) {
+        let r = tile + lid;
+        var start = 0u;
+        var len = 0u;
+        if r < runs {
+            if wide {
+                start = cluster_ids_at(at + 2u * r);
+                len = cluster_ids_at(at + 2u * r + 1u);
+            } else {
+                let word = cluster_ids_at(at + r);
+                start = c * size + (word & 0xffffu) - NARROW_BIAS;
+                len = word >> 16u;
+            }
+        }
+        // Inclusive scan (Hillis–Steele), saturating so that a hostile length cannot wrap.
+        run_slots[lid] = min(len, count);
+        workgroupBarrier();
+        for (var d = 1u; d < MASK_TILE; d <<= 1u) {
+            var add = 0u;
+            if lid >= d {
+                add = run_slots[lid - d];
+            }
+            workgroupBarrier();
+            run_slots[lid] = min(run_slots[lid] + add, count);
+            workgroupBarrier();
+        }
+        let at_slot = min(placed + run_slots[lid] - min(len, count), count);
+        for (var m = 0u; m < len && at_slot + m < count; m++) {
+            candidates_set(first + at_slot + m, start + m);
+        }
+        placed = min(placed + workgroupUniformLoad(&run_slots[MASK_TILE - 1u]), count);
+    }
+    storageBarrier();
+}
 
 @compute @workgroup_size(256, 1, 1)
 fn expand(
@@ -51,15 +108,20 @@ fn expand(
     }
     if lid == 0u {
         let first = cluster_start_at(c);
-        let last = min(cluster_start_at(c + 1u), cfg.cluster_id_count);
+        let last = min(cluster_start_at(c + 1u), cfg.candidate_count);
         cluster_first = first;
         cluster_count = select(0u, last - first, last > first);
         cluster_base_word = cluster_base_at(c);
+        var end = cfg.run_words;
+        if c + 1u < (cfg.point_count + size - 1u) / size {
+            end = min(cluster_base_at(c + 1u) & ~WIDE_CLUSTER, cfg.run_words);
+        }
+        cluster_end_word = end;
     }
     let first = workgroupUniformLoad(&cluster_first);
-    let words_base = workgroupUniformLoad(&cluster_base_word);
     // Candidates past the largest cluster's words are never tested.
     let count = min(workgroupUniformLoad(&cluster_count), cfg.mask_words * 32u);
+    expand_runs(c, first, count, lid);
     let members = min(size, cfg.point_count - c * size);
     let block = mask_row(c, first) * size;
     let words = (count + 31u) / 32u;
@@ -68,7 +130,7 @@ fn expand(
         var position = vec4<f32>(0.0);
         var normal = vec4<f32>(0.0);
         if k < count {
-            let j = candidate(c * size, words_base, k);
+            let j = candidates_at(first + k);
             // w = 1 marks a candidate inside the point list.
             if j < cfg.point_count {
                 position = vec4<f32>(points_at(j).position, 1.0);

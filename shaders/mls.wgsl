@@ -160,9 +160,8 @@ fn normalized(v: vec3<f32>) -> Unit {
 // `mask_row * cluster_size + m * words` (step.wgsl). Visiting set bits in order visits the
 // list in index order, as the CPU does.
 struct Neighbourhood {
-    // The cluster's first point and its cluster_base entry (`candidate` in step.wgsl).
-    origin: u32,
-    base: u32,
+    // The cluster's first candidate slot in `candidates` (step.wgsl).
+    first: u32,
     // Index of the member's word 0.
     mask: u32,
     words: u32,
@@ -176,7 +175,7 @@ fn neighbourhood(centre: u32) -> Neighbourhood {
     let count = select(0u, last - first, last > first);
     // The largest cluster's words bound any other's.
     let words = min((count + 31u) / 32u, settings.mask_words);
-    return Neighbourhood(c * size, cluster_base_at(c), mask_row(c, first) * size + (centre % size) * words, words);
+    return Neighbourhood(first, mask_row(c, first) * size + (centre % size) * words, words);
 }
 
 // Where a walk over a neighbourhood stands: the current word and its unvisited bits.
@@ -184,8 +183,6 @@ struct Cursor {
     word: u32,
     bits: u32,
 }
-
-const NO_NEIGHBOUR: u32 = 0xffffffffu;
 
 fn first_neighbours(nb: Neighbourhood) -> Cursor {
     return Cursor(0u, select(0u, neighbour_masks_at(nb.mask), nb.words > 0u));
@@ -202,7 +199,7 @@ fn next_neighbour(nb: Neighbourhood, cursor: ptr<function, Cursor>) -> u32 {
     }
     let bits = (*cursor).bits;
     (*cursor).bits = bits & (bits - 1u);
-    return candidate(nb.origin, nb.base, (*cursor).word * 32u + firstTrailingBit(bits));
+    return candidates_at(nb.first + (*cursor).word * 32u + firstTrailingBit(bits));
 }
 
 // ---- Local frame (frame.rs) -----------------------------------------------------------------

@@ -31,18 +31,12 @@ fn normal_at(j: u32) -> vec3<f32> {
     return octahedral(normals_at(j));
 }
 
-// Candidate slot k of a cluster whose first point is `origin` and whose cluster_base entry is
-// `base` (slosh_cache::candidates): a wide cluster stores 32-bit indices, a narrow one 16-bit
-// offsets from its first point, biased by NARROW_BIAS, two to a word. WIDE_CLUSTER and
-// NARROW_BIAS are generated from slosh_cache::candidates by shaders.rs.
-fn candidate(origin: u32, base: u32, k: u32) -> u32 {
-    let at = base & ~WIDE_CLUSTER;
-    if (base & WIDE_CLUSTER) != 0u {
-        return cluster_ids_at(at + k);
-    }
-    let word = cluster_ids_at(at + (k >> 1u));
-    return origin + ((word >> ((k & 1u) << 4u)) & 0xffffu) - NARROW_BIAS;
-}
+// A cluster's candidates are stored as runs of consecutive indices (slosh_cache::candidates);
+// expand.wgsl expands those of the step being refined into the tracer's `candidates`, one
+// index per slot, cluster c's from slot cluster_start[c]. WIDE_CLUSTER and NARROW_BIAS are
+// generated from slosh_cache::candidates by shaders.rs. An empty slot, and the end of a walk
+// over a neighbourhood (mls.wgsl), is NO_NEIGHBOUR.
+const NO_NEIGHBOUR: u32 = 0xffffffffu;
 
 // The neighbour masks give each cluster a block of `cluster_size` rows' worth of words: a
 // member's words (its candidates over 32, rounded up) side by side, member after member.

@@ -119,7 +119,7 @@ fn human_file(r: &FileReport) -> String {
         h.sections.iter().map(f).sum::<u64>() as f64 / h.points.max(1) as f64
     };
     line(format!(
-        "           {:.1} bytes per point decoded, {:.1} stored; {} of {} clusters store 32-bit candidates, the rest 16-bit offsets",
+        "           {:.1} bytes per point decoded, {:.1} stored; {} of {} clusters store runs from 32-bit starts, the rest from 16-bit offsets",
         per_point(|s| s.raw),
         per_point(|s| s.stored),
         st.wide_clusters,

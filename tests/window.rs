@@ -834,6 +834,7 @@ fn the_export_range_follows_a_growing_series() {
 fn busy_intervals(log: &str, from: usize) -> Vec<(f64, String)> {
     let mut out = Vec::new();
     let mut previous_busy = false;
+    let mut previous = "";
     for line in log.lines().skip(from).filter(|l| l.starts_with("pass ")) {
         let words: Vec<&str> = line.split_whitespace().collect();
         let Some(at) = words.iter().position(|w| *w == "ms") else {
@@ -841,9 +842,11 @@ fn busy_intervals(log: &str, from: usize) -> Vec<(f64, String)> {
         };
         let interval: f64 = words[at + 1].split('/').next().unwrap().parse().unwrap();
         if previous_busy {
-            out.push((interval, line.to_string()));
+            // The pass before drew what delayed this one.
+            out.push((interval, format!("{line} after {previous}")));
         }
         previous_busy = words[at + 2] == "busy";
+        previous = line;
     }
     out
 }
@@ -942,6 +945,11 @@ fn a_slow_gpu_answers_within_100_ms_and_still_refines_to_the_render() {
     let mut ms: Vec<f64> = intervals.iter().map(|(t, _)| *t).collect();
     ms.sort_by(f64::total_cmp);
     let (worst, line) = intervals.iter().max_by(|a, b| a.0.total_cmp(&b.0)).unwrap();
+    let mut slowest: Vec<&(f64, String)> = intervals.iter().collect();
+    slowest.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for (ms, line) in slowest.iter().take(8) {
+        eprintln!("slow pass {ms:.1} ms: {line}");
+    }
     eprintln!(
         "{} busy passes: p50 {:.1} ms, p90 {:.1} ms, max {worst:.1} ms ({line})",
         ms.len(),

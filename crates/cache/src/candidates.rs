@@ -1,63 +1,103 @@
-//! Cluster candidate lists stored narrow (format 4): in Morton order a cluster's candidates
-//! lie near its own points, so most clusters store each candidate as a 16-bit offset from
-//! the cluster's first point, two to a word; a cluster with a candidate farther away stores
-//! full 32-bit indices. `cluster_base` gives each cluster's first word and, in its top bit,
-//! which of the two it is; `cluster_start` still counts candidates (the neighbour masks'
-//! slots). `candidate` in shaders/step.wgsl reads them the same way.
+//! Cluster candidate lists stored as runs (format 5): in Morton order a cluster's candidates
+//! come in runs of consecutive indices (about 36 runs of 10 for a cluster of 32 with 350
+//! candidates), so each cluster stores its runs, not its candidates. A narrow cluster, whose
+//! runs all begin near its first point, stores each run in one word: the start as a 16-bit
+//! offset from the cluster's first point (low half), the length in the high half. A wide
+//! cluster stores two words per run: the start as a 32-bit index, then the length.
+//! `cluster_base` gives each cluster's first word and, in its top bit, which of the two it
+//! is; a cluster's words end where the next one's begin. `cluster_start` still counts
+//! candidates (the neighbour masks' slots). expand.wgsl expands the runs of the step it
+//! refines into one candidate per slot, the same way.
 
-/// The top bit of a `cluster_base` entry: the cluster stores 32-bit indices.
+/// The top bit of a `cluster_base` entry: the cluster stores 32-bit run starts.
 pub const WIDE_CLUSTER: u32 = 1 << 31;
 
-/// A narrow candidate j of the cluster starting at point `first` is stored as
+/// A narrow run starting at candidate j, in a cluster whose first point is `first`, stores
 /// j + NARROW_BIAS − first, which must lie in 0..=u16::MAX.
 pub const NARROW_BIAS: u32 = 32768;
 
-/// The narrow offset of candidate `j` in a cluster whose first point is `first`, if it has
-/// one.
-fn narrow(j: u32, first: u32) -> Option<u16> {
-    u16::try_from((i64::from(j) + i64::from(NARROW_BIAS) - i64::from(first)).max(-1)).ok()
+/// The longest run one narrow word holds (a longer one is split).
+const NARROW_RUN: u32 = u16::MAX as u32;
+
+/// The narrow offset of a run starting at `j` in a cluster whose first point is `first`, if
+/// it has one.
+fn narrow(j: u32, first: u32) -> Option<u32> {
+    u16::try_from((i64::from(j) + i64::from(NARROW_BIAS) - i64::from(first)).max(-1))
+        .ok()
+        .map(u32::from)
 }
 
-/// The `cluster_base` entries and packed words of cluster lists (`start`, CSR over `ids`) of
-/// clusters of `size` points; `None` if the words would not be addressable by 31 bits.
+/// The runs of consecutive indices of a sorted `list`: (start, length).
+fn runs_of(list: &[u32]) -> Vec<(u32, u32)> {
+    let mut runs: Vec<(u32, u32)> = Vec::new();
+    for &j in list {
+        match runs.last_mut() {
+            Some((start, len)) if u64::from(*start) + u64::from(*len) == u64::from(j) => *len += 1,
+            _ => runs.push((j, 1)),
+        }
+    }
+    runs
+}
+
+/// The `cluster_base` entries and words of cluster lists (`start`, CSR over `ids`, each
+/// cluster's list sorted ascending) of clusters of `size` points; `None` if the words would
+/// not be addressable by 31 bits.
 pub fn pack(start: &[u32], ids: &[u32], size: u32) -> Option<(Vec<u32>, Vec<u32>)> {
+    // Where a run longer than a narrow word goes on past the narrow range (a list of over
+    // 65535 consecutive candidates, far beyond any neighbour cap), every cluster is wide.
+    pack_with(start, ids, size, true).or_else(|| pack_with(start, ids, size, false))
+}
+
+/// [`pack`], with narrow clusters where `narrow_allowed`; `None` also where a split run
+/// leaves the narrow range.
+fn pack_with(
+    start: &[u32],
+    ids: &[u32],
+    size: u32,
+    narrow_allowed: bool,
+) -> Option<(Vec<u32>, Vec<u32>)> {
     let clusters = start.len().saturating_sub(1);
     let (mut base, mut words) = (Vec::with_capacity(clusters), Vec::new());
     for c in 0..clusters {
-        let list = &ids[start[c] as usize..start[c + 1] as usize];
+        let runs = runs_of(&ids[start[c] as usize..start[c + 1] as usize]);
         let first = (c as u32).checked_mul(size)?;
         let at = u32::try_from(words.len())
             .ok()
             .filter(|&a| a < WIDE_CLUSTER)?;
-        let offsets: Option<Vec<u16>> = list.iter().map(|&j| narrow(j, first)).collect();
-        match offsets {
-            Some(offsets) => {
-                base.push(at);
-                words.extend(offsets.chunks(2).map(|pair| {
-                    u32::from(pair[0]) | (u32::from(pair.get(1).copied().unwrap_or(0)) << 16)
-                }));
+        if narrow_allowed && runs.iter().all(|&(j, _)| narrow(j, first).is_some()) {
+            base.push(at);
+            for (mut j, mut left) in runs {
+                while left > 0 {
+                    let part = left.min(NARROW_RUN);
+                    words.push(narrow(j, first)? | (part << 16));
+                    (j, left) = (j + part, left - part);
+                }
             }
-            None => {
-                base.push(at | WIDE_CLUSTER);
-                words.extend_from_slice(list);
+        } else {
+            base.push(at | WIDE_CLUSTER);
+            for (j, len) in runs {
+                words.extend([j, len]);
             }
         }
     }
-    u32::try_from(words.len()).ok()?;
+    u32::try_from(words.len())
+        .ok()
+        .filter(|&w| w <= WIDE_CLUSTER)?;
     Some((base, words))
 }
 
-/// Words cluster `c` stores for `count` candidates.
-fn words_of(base: u32, count: usize) -> usize {
-    if base & WIDE_CLUSTER != 0 {
-        count
-    } else {
-        count.div_ceil(2)
-    }
+/// Cluster `c`'s words: from its base to the next cluster's, or to `words` for the last.
+fn words_of(base: &[u32], c: usize, words: usize) -> std::ops::Range<usize> {
+    let at = (base[c] & !WIDE_CLUSTER) as usize;
+    let end = base
+        .get(c + 1)
+        .map_or(words, |&b| (b & !WIDE_CLUSTER) as usize);
+    at..end.max(at)
 }
 
-/// Checks that each cluster's words follow the previous cluster's, inside `words` words and
-/// filling them, so that every candidate slot a cluster counts reads its own words.
+/// Checks that each cluster's words begin where the previous cluster's end, inside `words`
+/// words, and that a wide cluster's words pair up: the structure a reader relies on before
+/// it reads the runs.
 pub fn check_layout(start: &[u32], base: &[u32], words: usize) -> Result<(), String> {
     let clusters = start.len().saturating_sub(1);
     if base.len() != clusters {
@@ -66,48 +106,73 @@ pub fn check_layout(start: &[u32], base: &[u32], words: usize) -> Result<(), Str
             base.len()
         ));
     }
+    if base.first().is_some_and(|&b| b & !WIDE_CLUSTER != 0) {
+        return Err("the first cluster's words do not begin at word 0".into());
+    }
     let mut next = 0usize;
     for c in 0..clusters {
-        let count = start[c + 1].saturating_sub(start[c]) as usize;
         let at = (base[c] & !WIDE_CLUSTER) as usize;
-        let need = words_of(base[c], count);
-        if at != next || at + need > words {
+        let end = base
+            .get(c + 1)
+            .map_or(words, |&b| (b & !WIDE_CLUSTER) as usize);
+        if at != next || end < at || end > words {
             return Err(format!(
-                "cluster {c}'s candidates (words {at}..{}) do not follow the previous cluster's (which end at word {next}) inside the {words} words",
-                at + need
+                "cluster {c}'s runs (words {at}..{end}) do not follow the previous cluster's (which end at word {next}) inside the {words} words"
             ));
         }
-        next = at + need;
-    }
-    if next != words {
-        return Err(format!(
-            "{} words after the last cluster's candidates",
-            words - next
-        ));
+        if base[c] & WIDE_CLUSTER != 0 && !(end - at).is_multiple_of(2) {
+            return Err(format!(
+                "wide cluster {c} has {} words, not pairs of start and length",
+                end - at
+            ));
+        }
+        next = end;
     }
     Ok(())
 }
 
 /// The cluster lists back as 32-bit indices (CSR over `start`), or what is wrong: a layout
-/// [`check_layout`] refuses, or an index past u32.
+/// [`check_layout`] refuses, an empty run, runs whose lengths do not add up to the cluster's
+/// candidates, or an index past u32.
 pub fn unpack(start: &[u32], base: &[u32], words: &[u32], size: u32) -> Result<Vec<u32>, String> {
     check_layout(start, base, words.len())?;
     let mut out = Vec::with_capacity(start.last().copied().unwrap_or(0) as usize);
-    for (c, &b) in base.iter().enumerate() {
+    for c in 0..base.len() {
         let count = start[c + 1].saturating_sub(start[c]) as usize;
-        let at = (b & !WIDE_CLUSTER) as usize;
-        if b & WIDE_CLUSTER != 0 {
-            out.extend_from_slice(&words[at..at + count]);
-            continue;
-        }
+        let own = &words[words_of(base, c, words.len())];
         let first = u64::from(c as u32) * u64::from(size);
-        for k in 0..count {
-            let half = (words[at + k / 2] >> (16 * (k % 2))) & 0xffff;
-            let j = (first + u64::from(half))
-                .checked_sub(u64::from(NARROW_BIAS))
-                .and_then(|j| u32::try_from(j).ok())
-                .ok_or_else(|| format!("cluster {c}'s candidate {k} lies outside u32"))?;
-            out.push(j);
+        let before = out.len();
+        let runs: Vec<(u64, u64)> = if base[c] & WIDE_CLUSTER != 0 {
+            own.chunks_exact(2)
+                .map(|w| (u64::from(w[0]), u64::from(w[1])))
+                .collect()
+        } else {
+            own.iter()
+                .map(|&w| {
+                    let j = (first + u64::from(w & 0xffff)).wrapping_sub(u64::from(NARROW_BIAS));
+                    (j, u64::from(w >> 16))
+                })
+                .collect()
+        };
+        for (r, (j, len)) in runs.into_iter().enumerate() {
+            if len == 0 {
+                return Err(format!("cluster {c}'s run {r} is empty"));
+            }
+            if j.checked_add(len).is_none_or(|end| end > 1 << 32) {
+                return Err(format!("cluster {c}'s run {r} lies outside u32"));
+            }
+            if (out.len() - before) as u64 + len > count as u64 {
+                return Err(format!(
+                    "cluster {c}'s runs hold more than its {count} candidates"
+                ));
+            }
+            out.extend((j..j + len).map(|j| j as u32));
+        }
+        if out.len() - before != count {
+            return Err(format!(
+                "cluster {c}'s runs hold {} of its {count} candidates",
+                out.len() - before
+            ));
         }
     }
     Ok(out)
@@ -118,30 +183,57 @@ mod tests {
     use super::*;
 
     #[test]
-    fn near_clusters_pack_narrow_far_ones_wide_and_both_come_back() {
-        // Three clusters of 32: near candidates, one 40000 points away, and an empty one.
-        let start = vec![0, 3, 5, 5];
-        let ids = vec![0, 5, 40, 1, 40_032];
+    fn runs_pack_narrow_near_and_wide_far_and_come_back() {
+        // Three clusters of 32: runs near their first point, one 40000 points away, and an
+        // empty one.
+        let start = vec![0, 6, 9, 9];
+        let ids = vec![0, 1, 2, 5, 40, 41, 1, 2, 40_032];
         let (base, words) = pack(&start, &ids, 32).unwrap();
-        assert_eq!(base, vec![0, 2 | WIDE_CLUSTER, 4]);
+        assert_eq!(base, vec![0, 3 | WIDE_CLUSTER, 7]);
         assert_eq!(
             words.len(),
-            4,
-            "two words for three narrow, two for two wide"
+            7,
+            "three narrow runs, two wide ones of two words"
         );
+        // A narrow run: its start biased from the cluster's first point, its length above.
+        assert_eq!(words[0], NARROW_BIAS | (3 << 16));
+        assert_eq!(&words[3..7], &[1, 2, 40_032, 1]);
         assert_eq!(unpack(&start, &base, &words, 32).unwrap(), ids);
-        // The first cluster's offsets are biased from its first point.
-        assert_eq!(words[0] & 0xffff, NARROW_BIAS);
-        // A base that skips words, or words past the last cluster, are refused.
-        assert!(unpack(&start, &[0, 3 | WIDE_CLUSTER, 5], &words, 32).is_err());
-        let mut longer = words.clone();
-        longer.push(0);
-        assert!(unpack(&start, &base, &longer, 32).is_err());
-        // The bias's edges: first − 32768 is narrow, first + 32767 too, one more is wide.
+        // A base that skips words, an odd wide cluster, runs that miss or pass the count,
+        // and an empty run are refused.
+        assert!(unpack(&start, &[0, 4 | WIDE_CLUSTER, 7], &words, 32).is_err());
+        assert!(unpack(&start, &[0, 3 | WIDE_CLUSTER, 6], &words, 32).is_err());
+        let mut short = words.clone();
+        short[0] = NARROW_BIAS | (2 << 16);
+        assert!(unpack(&start, &base, &short, 32).is_err());
+        let mut long = words.clone();
+        long[0] = NARROW_BIAS | (4 << 16);
+        assert!(unpack(&start, &base, &long, 32).is_err());
+        let mut empty = words.clone();
+        empty[2] = NARROW_BIAS;
+        assert!(unpack(&start, &base, &empty, 32).is_err());
+        // The bias's edges: a run starting at first − 32768 is narrow, first + 32767 too,
+        // one more is wide.
         let start = vec![0, 0, 2];
         let (base, _) = pack(&start, &[0, 32767 + 32], 32).unwrap();
         assert_eq!(base[1] & WIDE_CLUSTER, 0);
         let (base, _) = pack(&start, &[0, 32768 + 32], 32).unwrap();
         assert_ne!(base[1] & WIDE_CLUSTER, 0);
+    }
+
+    #[test]
+    fn a_run_longer_than_a_narrow_word_is_split_or_stored_wide() {
+        // Cluster 1024 (first point 32768) with 65545 consecutive candidates from 0: a
+        // narrow word of 65535 at offset 0, then one of 10 at offset 65535.
+        let mut start = vec![0u32; 1025];
+        start.push(65_545);
+        let ids: Vec<u32> = (0..65_545).collect();
+        let (base, words) = pack(&start, &ids, 32).unwrap();
+        assert_eq!(base[1024], 0);
+        assert_eq!(words, vec![u32::from(u16::MAX) << 16, 65_535 | (10 << 16)]);
+        assert_eq!(unpack(&start, &base, &words, 32).unwrap(), ids);
+        // From cluster 0, the second part would start past the narrow range: all wide.
+        let (base, words) = pack(&[0, 70_000], &(0..70_000).collect::<Vec<_>>(), 32).unwrap();
+        assert_eq!((base, words.clone()), (vec![WIDE_CLUSTER], vec![0, 70_000]));
     }
 }

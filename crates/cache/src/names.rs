@@ -6,7 +6,8 @@ pub const BALLS: &str = "balls";
 pub const REACH: &str = "reach";
 pub const CLUSTER_START: &str = "cluster_start";
 pub const CLUSTER_NEIGHBOURS: &str = "cluster_neighbours";
-/// Each cluster's first word of `cluster_neighbours` and whether it is wide (format 4).
+/// Each cluster's first word of `cluster_neighbours` and whether it is wide (format 4; its
+/// runs, format 5).
 pub const CLUSTER_BASE: &str = "cluster_base";
 pub const SPHERES: &str = "spheres";
 pub const BVH_NODES: &str = "bvh_nodes";

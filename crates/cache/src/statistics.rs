@@ -57,7 +57,8 @@ pub struct Statistics {
     pub bvh_nodes: u64,
     pub bvh_leaves: u64,
     pub bvh_depth: u64,
-    /// Clusters, and those storing 32-bit candidate indices (the others store 16-bit offsets).
+    /// Clusters, and those storing their runs from 32-bit starts (the others from 16-bit
+    /// offsets).
     pub clusters: u64,
     pub wide_clusters: u64,
 }

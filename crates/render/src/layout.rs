@@ -65,13 +65,14 @@ pub struct ExpandSettings {
     pub cluster_size: u32,
     pub mask_words: u32,
     pub has_normals: u32,
-    /// Entries of cluster_ids.
-    pub cluster_id_count: u32,
+    /// Words of cluster_ids: the clusters' runs of candidates.
+    pub run_words: u32,
     /// The clusters this dispatch derives: `first_cluster..end_cluster` (a step's masks may
     /// be derived in parts, one per submission, on a slow adapter).
     pub first_cluster: u32,
     pub end_cluster: u32,
-    pub pad2: u32,
+    /// Candidate slots of all clusters (the last `cluster_start`).
+    pub candidate_count: u32,
 }
 
 /// `struct Wide` in step.wgsl: a node of the 4-wide tree the trace walk descends, made by

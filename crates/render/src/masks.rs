@@ -9,8 +9,6 @@
 
 use std::sync::{Mutex, OnceLock};
 
-use bytemuck::Zeroable;
-
 use crate::bindings::{bind_entries, layout_entries};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
@@ -25,6 +23,8 @@ struct HeldMasks {
     step: u64,
     derived: u32,
     buffer: wgpu::Buffer,
+    /// The step's candidates, one per slot, expanded from its runs with the masks.
+    candidates: wgpu::Buffer,
     group: wgpu::BindGroup,
 }
 
@@ -66,8 +66,17 @@ pub(crate) struct NeighbourMasks {
 
 /// A storage buffer of `size` bytes the mask pass writes (readable back for tests).
 pub(crate) fn mask_buffer(gpu: &Gpu, size: u64) -> wgpu::Buffer {
+    storage_buffer(gpu, "neighbour masks", size)
+}
+
+/// A buffer for the candidates the mask pass expands, one per slot.
+pub(crate) fn candidate_buffer(gpu: &Gpu, size: u64) -> wgpu::Buffer {
+    storage_buffer(gpu, "candidates", size)
+}
+
+fn storage_buffer(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
     gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("neighbour masks"),
+        label: Some(label),
         size: size.max(EMPTY_BINDING),
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
@@ -91,7 +100,13 @@ impl NeighbourMasks {
             label: Some("masks"),
             entries: &layout_entries(&MASK_ARRAYS, false),
         });
-        let none = Self::group(gpu, &layout, &mask_buffer(gpu, EMPTY_BINDING), limit);
+        let none = Self::group(
+            gpu,
+            &layout,
+            &mask_buffer(gpu, EMPTY_BINDING),
+            &candidate_buffer(gpu, EMPTY_BINDING),
+            limit,
+        );
         NeighbourMasks {
             limit,
             expand_layout,
@@ -106,13 +121,14 @@ impl NeighbourMasks {
     fn group(
         gpu: &Gpu,
         layout: &wgpu::BindGroupLayout,
-        buffer: &wgpu::Buffer,
+        masks: &wgpu::Buffer,
+        candidates: &wgpu::Buffer,
         limit: u64,
     ) -> wgpu::BindGroup {
         gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("masks"),
             layout,
-            entries: &bind_entries(&MASK_ARRAYS, &[buffer], None, limit),
+            entries: &bind_entries(&MASK_ARRAYS, &[masks, candidates], None, limit),
         })
     }
 
@@ -174,18 +190,25 @@ impl NeighbourMasks {
         let mut held = self.lock()?;
         let current = held.as_ref().is_some_and(|h| h.step == step.id());
         if !current {
-            let needed = step.info.mask_bytes();
-            // The buffer is reused while it is large enough: the pass writes every word the
-            // step's clusters read.
-            let buffer = match held.take() {
-                Some(h) if h.buffer.size() >= needed => h.buffer,
-                _ => mask_buffer(gpu, needed),
+            let (needed, candidates_needed) = (step.info.mask_bytes(), step.info.candidate_bytes());
+            // The buffers are reused while they are large enough: the pass writes every word
+            // the step's clusters read.
+            let (buffer, candidates) = match held.take() {
+                Some(h) => (Some(h.buffer), Some(h.candidates)),
+                None => (None, None),
             };
-            let group = Self::group(gpu, &self.layout, &buffer, self.limit);
+            let buffer = buffer
+                .filter(|b| b.size() >= needed)
+                .unwrap_or_else(|| mask_buffer(gpu, needed));
+            let candidates = candidates
+                .filter(|b| b.size() >= candidates_needed)
+                .unwrap_or_else(|| candidate_buffer(gpu, candidates_needed));
+            let group = Self::group(gpu, &self.layout, &buffer, &candidates, self.limit);
             *held = Some(HeldMasks {
                 step: step.id(),
                 derived: 0,
                 buffer,
+                candidates,
                 group,
             });
         }
@@ -194,7 +217,8 @@ impl NeighbourMasks {
             .ok_or_else(|| Error::Validation("the neighbour masks were not made".into()))?;
         if h.derived < total {
             let end = h.derived.saturating_add(clusters.max(1)).min(total);
-            self.record(gpu, step, &h.buffer, h.derived..end, encoder, None)?;
+            let held = (&h.buffer, &h.candidates);
+            self.record(gpu, step, held, h.derived..end, encoder, None)?;
             h.derived = end;
         }
         Ok(MaskProgress {
@@ -224,9 +248,10 @@ impl NeighbourMasks {
 
     /// Bytes of the masks held now (0 before the first refined frame).
     pub(crate) fn held_bytes(&self) -> u64 {
-        self.held
-            .lock()
-            .map_or(0, |h| h.as_ref().map_or(0, |h| h.buffer.size()))
+        self.held.lock().map_or(0, |h| {
+            h.as_ref()
+                .map_or(0, |h| h.buffer.size() + h.candidates.size())
+        })
     }
 
     /// Records the pass that fills `masks` for `step`'s clusters `clusters` (rows of words,
@@ -235,7 +260,7 @@ impl NeighbourMasks {
         &self,
         gpu: &Gpu,
         step: &GpuStep,
-        masks: &wgpu::Buffer,
+        (masks, candidates): (&wgpu::Buffer, &wgpu::Buffer),
         clusters: std::ops::Range<u32>,
         encoder: &mut wgpu::CommandEncoder,
         timestamps: Option<&wgpu::QuerySet>,
@@ -247,10 +272,10 @@ impl NeighbourMasks {
             cluster_size: info.cluster_size,
             mask_words: info.mask_words,
             has_normals: u32::from(info.has_normals),
-            cluster_id_count: info.cluster_id_count,
+            run_words: info.run_words,
             first_cluster: clusters.start,
             end_cluster: clusters.end,
-            ..ExpandSettings::zeroed()
+            candidate_count: info.cluster_id_count,
         };
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("expand settings"),
@@ -273,6 +298,7 @@ impl NeighbourMasks {
             &b.cluster_ids,
             masks,
             &b.cluster_base,
+            candidates,
         ];
         let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), self.limit);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {

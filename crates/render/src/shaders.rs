@@ -116,9 +116,12 @@ pub const STEP_ARRAYS: [RangedArray; 10] = [
     step_array::CLUSTER_BASE,
 ];
 
-/// The neighbour masks as the trace and shade passes bind them (group 2): held by the
-/// tracer for the step it last refined, not by the step (masks.rs).
-pub const MASK_ARRAYS: [RangedArray; 1] = [array("neighbour_masks", "u32", 4, 2, 0, false)];
+/// The neighbour masks and the expanded candidates as the trace and shade passes bind them
+/// (group 2): held by the tracer for the step it last refined, not by the step (masks.rs).
+pub const MASK_ARRAYS: [RangedArray; 2] = [
+    array("neighbour_masks", "u32", 4, 2, 0, false),
+    array("candidates", "u32", 4, 2, 1, false),
+];
 
 /// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.
 pub const FRAME_ARRAYS: [RangedArray; 2] = [
@@ -130,7 +133,7 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
 pub const PRESENT_ARRAYS: [RangedArray; 1] = [array("image", "u32", 4, 0, 0, false)];
 
 /// The neighbour-mask pass's arrays (expand.wgsl, group 0).
-pub const EXPAND_ARRAYS: [RangedArray; 7] = [
+pub const EXPAND_ARRAYS: [RangedArray; 8] = [
     array("points", "Point", 16, 0, 0, false),
     array("normals", "u32", 4, 0, 1, false),
     array("reach", "f32", 4, 0, 2, false),
@@ -138,6 +141,7 @@ pub const EXPAND_ARRAYS: [RangedArray; 7] = [
     array("cluster_ids", "u32", 4, 0, 4, false),
     array("neighbour_masks", "u32", 4, 0, 5, true),
     array("cluster_base", "u32", 4, 0, 6, false),
+    array("candidates", "u32", 4, 0, 7, true),
 ];
 
 /// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:

@@ -366,10 +366,10 @@ fn pod_structs_mirror_the_wgsl_layouts() {
             cluster_size,
             mask_words,
             has_normals,
-            cluster_id_count,
+            run_words,
             first_cluster,
             end_cluster,
-            pad2
+            candidate_count
         ]
     );
     check_layout!(&trace, "Sphere", GpuSphere, [centre, radius]);
@@ -928,12 +928,13 @@ fn neighbour_masks_equal_the_cpu_lists() {
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        let buffer = dev
+        let (buffer, expanded) = dev
             .tracer
             .neighbour_masks(&dev.gpu, &step, &mut encoder, None)
             .unwrap();
         dev.gpu.queue.submit([encoder.finish()]);
         let masks: Vec<u32> = read_buffer(&dev.gpu, &buffer);
+        let expanded: Vec<u32> = read_buffer(&dev.gpu, &expanded);
         let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
         let normals: Option<Vec<u32>> = file
             .section(names::NORMALS)
@@ -941,6 +942,13 @@ fn neighbour_masks_equal_the_cpu_lists() {
         let reach: Vec<f32> = file.decode(names::REACH).unwrap();
         let start: Vec<u32> = file.decode(names::CLUSTER_START).unwrap();
         let ids = file.cluster_candidates(&start).unwrap();
+        // The pass expands the stored runs into every cluster's candidates, slot for slot.
+        assert_eq!(
+            &expanded[..ids.len()],
+            &ids[..],
+            "{}: the candidates expanded from the runs",
+            case.name
+        );
         let v = |a: [f32; 3]| V3::new(a[0], a[1], a[2]);
         let positions: Vec<V3<f32>> = points.iter().map(|p| v(p.position)).collect();
         let normals: Option<Vec<V3<f32>>> = normals.map(|ns| {
@@ -1074,11 +1082,11 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
         0,
         "a one-iteration frame derived masks"
     );
-    let largest = steps
-        .iter()
-        .map(|(_, s)| s.info.mask_bytes())
-        .max()
-        .unwrap();
+    // Each buffer is kept while large enough: at most the largest of each.
+    let largest = |bytes: fn(&slosh_render::StepInfo) -> u64| {
+        steps.iter().map(|(_, s)| bytes(&s.info)).max().unwrap()
+    };
+    let largest = largest(|i| i.mask_bytes()) + largest(|i| i.candidate_bytes());
     for round in 0..2 {
         for (k, (camera, step)) in steps.iter().enumerate() {
             let frame = shared
@@ -1094,7 +1102,7 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
             assert!(hits > 500, "{hits} hit pixels");
             assert!(frame.hits == alone[k].hits && frame.rgba == alone[k].rgba);
             assert!(
-                held >= step.info.mask_bytes() && held <= largest,
+                held >= step.info.mask_bytes() + step.info.candidate_bytes() && held <= largest,
                 "{held} bytes held"
             );
         }

@@ -324,7 +324,7 @@ fn measure(
         if let Some(buffer) = step.take_staging() {
             staging.recycle(buffer);
         }
-        let masks = tracer.neighbour_masks(
+        let (masks, candidates) = tracer.neighbour_masks(
             gpu,
             &step,
             &mut passes,
@@ -338,7 +338,7 @@ fn measure(
         gpu.queue.submit([passes.finish()]);
         gpu.wait()?;
         pass_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        mask_bytes = masks.size();
+        mask_bytes = masks.size() + candidates.size();
         if let Some((_, _, readback)) = &stamps {
             let ticks: Vec<u64> = slosh_render::read_buffer(gpu, readback)?;
             let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;

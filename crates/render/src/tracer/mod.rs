@@ -33,7 +33,7 @@ use crate::bindings::{bind_entries, capacity, layout_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, GpuSettings};
-use crate::masks::{MaskProgress, NeighbourMasks, cluster_count, mask_buffer};
+use crate::masks::{MaskProgress, NeighbourMasks, candidate_buffer, cluster_count, mask_buffer};
 use crate::shaders::{
     FRAME_ARRAYS, PRESENT_ARRAYS, TEXTURE_BINDING, TRACE_STACK_SIZES, present_wgsl, shade_wgsl,
     trace_wgsl,
@@ -616,22 +616,30 @@ impl Tracer {
         self.masks.held_bytes()
     }
 
-    /// `step`'s neighbour masks in a new buffer, their pass recorded into `encoder` and
-    /// timed into `timestamps` (a set of 2) where given: what a step's first refined frame
-    /// records, for tests that check the masks and benches that time the pass.
+    /// `step`'s neighbour masks and expanded candidates in new buffers, their pass recorded
+    /// into `encoder` and timed into `timestamps` (a set of 2) where given: what a step's
+    /// first refined frame records, for tests that check them and benches that time the
+    /// pass.
     pub fn neighbour_masks(
         &self,
         gpu: &Gpu,
         step: &GpuStep,
         encoder: &mut wgpu::CommandEncoder,
         timestamps: Option<&wgpu::QuerySet>,
-    ) -> Result<wgpu::Buffer> {
+    ) -> Result<(wgpu::Buffer, wgpu::Buffer)> {
         self.check_limit(step)?;
         let masks = mask_buffer(gpu, step.info.mask_bytes());
+        let candidates = candidate_buffer(gpu, step.info.candidate_bytes());
         let clusters = 0..cluster_count(step);
-        self.masks
-            .record(gpu, step, &masks, clusters, encoder, timestamps)?;
-        Ok(masks)
+        self.masks.record(
+            gpu,
+            step,
+            (&masks, &candidates),
+            clusters,
+            encoder,
+            timestamps,
+        )?;
+        Ok((masks, candidates))
     }
 
     /// Derives up to `clusters` more clusters of the neighbour masks of `step` into

@@ -251,6 +251,8 @@ impl GpuStep {
         }
         let mask_bytes = info.mask_bytes();
         split |= needs_ranges(gpu, file, "neighbour masks", &MASK_ARRAYS[0], mask_bytes)?;
+        let candidate_bytes = info.candidate_bytes();
+        split |= needs_ranges(gpu, file, "candidates", &MASK_ARRAYS[1], candidate_bytes)?;
         let mut stats = UploadStats {
             stored_bytes: host.stored_bytes,
             host_seconds: host.host_seconds,

@@ -26,6 +26,8 @@ pub struct StepInfo {
     pub item_count: u32,
     /// Candidates of all clusters (the last `cluster_start`).
     pub cluster_id_count: u32,
+    /// Words of `cluster_neighbours`: the clusters' runs of candidates.
+    pub run_words: u32,
     /// Words of neighbour mask of the largest cluster: its candidates over 32.
     pub mask_words: u32,
     /// Rows of `cluster_size` mask words that hold every cluster's block (see [`mask_row`]).
@@ -47,6 +49,12 @@ impl StepInfo {
     /// Bytes of the neighbour masks the tracer derives before a refined frame of the step.
     pub fn mask_bytes(&self) -> u64 {
         (self.mask_rows * u64::from(self.cluster_size) * 4).max(EMPTY_BINDING)
+    }
+
+    /// Bytes of the candidates, one per slot, that the tracer expands from the runs with
+    /// the masks.
+    pub fn candidate_bytes(&self) -> u64 {
+        (u64::from(self.cluster_id_count) * 4).max(EMPTY_BINDING)
     }
 }
 
@@ -275,6 +283,7 @@ impl<'a> HostStep<'a> {
             wide_count: 0,
             item_count: count(names::BVH_ITEMS) as u32,
             cluster_id_count: 0,
+            run_words: 0,
             mask_words: 0,
             mask_rows: 0,
             has_normals: f.section(names::NORMALS).is_some(),
@@ -316,6 +325,12 @@ impl<'a> HostStep<'a> {
         .map_err(|problem| invalid(step.file(), problem))?;
         (step.info.mask_words, step.info.mask_rows) = (words, rows);
         step.info.cluster_id_count = candidates;
+        step.info.run_words = u32::try_from(candidate_words).map_err(|_| {
+            invalid(
+                step.file(),
+                format!("{candidate_words} words of candidate runs exceed u32"),
+            )
+        })?;
         step.host_seconds = start.elapsed().as_secs_f64();
         Ok(step)
     }
