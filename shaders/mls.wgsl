@@ -3,14 +3,14 @@
 // plane, the local frame, the scaled polynomial fit with degree degradation, and exact roots.
 // Shared by trace.wgsl and shade.wgsl, which are appended to this file.
 
-// A ball's initial support normal and polynomial (mirrors `slosh_cache::GpuBall`).
-// Mirrors `slosh_cache::GpuBall`: the support normal (octahedral), h, the ten coefficients as
-// half floats two to a word, and the state word (bits 0–1 the state, 2–3 the degree, 4–31
-// the droplet's sphere).
+// A ball's initial support normal and polynomial. Mirrors `slosh_cache::GpuBall`: the
+// support normal (octahedral), h, the first six coefficients as half floats two to a word,
+// and the state word (bits 0–1 the state, 2–3 the degree, 4–31 the droplet's sphere); a
+// cubic's other four are in `ball_cubic` (two words per ball).
 struct Ball {
     normal: u32,
     h: f32,
-    coeffs: array<u32, 5>,
+    coeffs: array<u32, 3>,
     state: u32,
 }
 
@@ -434,28 +434,21 @@ fn half_to_f32(h: u32) -> f32 {
     return select(v, -v, negative);
 }
 
-// A ball's stored initial polynomial as f32, exactly the stored values (slosh_cache::GpuBall):
-// up to degree 2, six f32s cut to 24 bits (high halves in words 0–2, next bytes in words
-// 3–4); a cubic, ten half floats.
-fn ball_poly(b: Ball) -> Poly {
+// Ball `item`'s stored initial polynomial as f32, exactly the stored values
+// (slosh_cache::GpuBall::coeffs): half floats, the first six in the ball, a cubic's other
+// four in `ball_cubic`.
+fn ball_poly(b: Ball, item: u32) -> Poly {
     var p: Poly;
     p.degree = (b.state >> 2u) & 3u;
     let w = b.coeffs;
-    if p.degree <= 2u {
-        let hi = array<u32, 6>(w[0] << 16u, w[0] & 0xffff0000u, w[1] << 16u, w[1] & 0xffff0000u, w[2] << 16u, w[2] & 0xffff0000u);
-        let lo = array<u32, 6>(w[3] << 8u, w[3], w[3] >> 8u, w[3] >> 16u, w[4] << 8u, w[4]);
-        p.c = array<f32, 10>(
-            bitcast<f32>(hi[0] | (lo[0] & 0xff00u)), bitcast<f32>(hi[1] | (lo[1] & 0xff00u)),
-            bitcast<f32>(hi[2] | (lo[2] & 0xff00u)), bitcast<f32>(hi[3] | (lo[3] & 0xff00u)),
-            bitcast<f32>(hi[4] | (lo[4] & 0xff00u)), bitcast<f32>(hi[5] | (lo[5] & 0xff00u)),
-            0.0, 0.0, 0.0, 0.0,
-        );
-        return p;
+    var e = vec2<u32>(0u);
+    if p.degree == 3u {
+        e = ball_cubic_at(item);
     }
     p.c = array<f32, 10>(
         half_to_f32(w[0]), half_to_f32(w[0] >> 16u), half_to_f32(w[1]), half_to_f32(w[1] >> 16u),
-        half_to_f32(w[2]), half_to_f32(w[2] >> 16u), half_to_f32(w[3]), half_to_f32(w[3] >> 16u),
-        half_to_f32(w[4]), half_to_f32(w[4] >> 16u),
+        half_to_f32(w[2]), half_to_f32(w[2] >> 16u), half_to_f32(e.x), half_to_f32(e.x >> 16u),
+        half_to_f32(e.y), half_to_f32(e.y >> 16u),
     );
     return p;
 }

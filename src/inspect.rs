@@ -185,6 +185,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
     }
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
     let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+    let cubic = file.cubic_words(balls.len())?;
     let (start, neighbours) = file.neighbour_lists()?;
     let p = points[i];
     let b = balls[i];
@@ -197,7 +198,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
         "ball": {
             "normal": b.normal(), "h": b.h, "degree": b.degree(),
             "state": format!("{:?}", b.kind()), "sphere": b.sphere(),
-            "coefficients": b.coeffs(),
+            "coefficients": b.coeffs(cubic[i]),
         },
         "neighbours": &neighbours[start[i] as usize..start[i + 1] as usize],
     });

@@ -3,8 +3,8 @@
 
 use rayon::prelude::*;
 use slosh_cache::{
-    BallState, Element, Encoding, GpuBall, GpuPoint, GpuSphere, Header, MAX_SPHERES, MlsSettings,
-    SectionInput, Source, StepStats, Transform, candidates, names, octahedral,
+    BallState, CubicWords, Element, Encoding, GpuBall, GpuPoint, GpuSphere, Header, MAX_SPHERES,
+    MlsSettings, SectionInput, Source, StepStats, Transform, candidates, names, octahedral,
 };
 use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
@@ -108,7 +108,7 @@ fn gpu_sections(
             surface.spheres.len()
         )));
     }
-    let balls: Vec<GpuBall> = (0..n)
+    let (balls, cubic): (Vec<GpuBall>, Vec<CubicWords>) = (0..n)
         .into_par_iter()
         .map(|i| {
             let b = &surface.balls[i];
@@ -121,9 +121,9 @@ fn gpu_sections(
             let normal = [b.normal.x, b.normal.y, b.normal.z];
             let coeffs = b.poly.c.map(|c| c as f32);
             GpuBall::new(normal, b.h as f32, coeffs, b.poly.degree, kind, sphere)
-                .unwrap_or_else(|| GpuBall::unfitted(b.h as f32))
+                .unwrap_or_else(|| (GpuBall::unfitted(b.h as f32), [0; 2]))
         })
-        .collect();
+        .unzip();
     // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
     // rounded up to f32 keeps every stored list within its distance filter.
     let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
@@ -202,6 +202,16 @@ fn gpu_sections(
             by_element(Element::Sphere),
         ),
     ];
+    // A cubic's other four coefficients, where the bake fits cubics.
+    let cubic_words: Vec<u32> = cubic.iter().flatten().copied().collect();
+    if params.mls.degree == 3 {
+        sections.push(SectionInput::new(
+            names::BALL_CUBIC,
+            Element::U32,
+            &cubic_words,
+            Encoding::Shuffle4Zstd,
+        ));
+    }
     if let Some(ns) = &surface.normals {
         let normals: Vec<u32> = ns
             .par_iter()

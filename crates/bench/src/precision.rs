@@ -1,5 +1,5 @@
-//! `slosh bench precision`: what the compact layout of a step (format 4: octahedral normals,
-//! reduced-precision coefficients, lists recovered from the stored normals) costs. Each analytic
+//! `slosh bench precision`: what the compact layout of a step (format 5: octahedral normals,
+//! half-float coefficients, lists recovered from the stored normals) costs. Each analytic
 //! scene is baked once; its cache, read back, and the same step stored exactly (the bake's
 //! own values in f32, `slosh_testkit::bake_exact_and_stored`) are traced by the CPU tracer
 //! (the GPU's reference): error against the exact surface, hits against each other, and
@@ -176,8 +176,8 @@ impl Report for PrecisionReport {
             "# Stored precision: the compact layout against the step stored exactly\n\n\
              Written by `slosh bench precision --points {} --size {}`. Each scene ({} \
              particles, time step 3, normals from the scene) is baked once; its cache (format \
-             4: octahedral support and data normals, coefficients to 15 mantissa bits or, for \
-             cubics, half floats, neighbour lists recovered from the stored normals) is read back, and the same step is also kept \
+             5: octahedral support and data normals, coefficients as half floats, neighbour \
+             lists recovered from the stored normals) is read back, and the same step is also kept \
              exactly (the bake's own normals, coefficients and lists in f32). Both are traced \
              by the CPU tracer, the GPU's reference, at {}×{} pixels, with 1 and 3 iterations. \
              Distances are in particle spacings: the error of each hit against the exact \

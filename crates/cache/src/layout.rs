@@ -11,22 +11,25 @@ pub struct GpuPoint {
     pub radius: f32,
 }
 
-/// `struct Ball { normal: u32, h: f32, coeffs: array<u32, 5>, state: u32 }` (32 bytes,
-/// format 4): the initial support normal (octahedral, [`crate::octahedral`]), the smoothing
-/// length, the initial polynomial's coefficients in coordinates scaled by 1/h, and the state
+/// `struct Ball { normal: u32, h: f32, coeffs: array<u32, 3>, state: u32 }` (24 bytes,
+/// format 5): the initial support normal (octahedral, [`crate::octahedral`]), the smoothing
+/// length, the initial polynomial's first six coefficients in coordinates scaled by 1/h as
+/// IEEE half floats two to a word (coefficient 2k in the low half of word k), and the state
 /// word: bits 0–1 [`BallState`], bits 2–3 the degree fitted, bits 4–31 the droplet's sphere
-/// index. A polynomial of degree ≤ 2 has six coefficients, each an f32 rounded to 15 mantissa
-/// bits: its high 16 bits in the halves of words 0–2 (coefficient 2k low in word k), its next
-/// 8 bits in the bytes of words 3–4 (coefficient k in byte k % 4 of word 3 + k / 4). A cubic
-/// has ten, IEEE half floats two to a word (coefficient 2k in the low half of word k).
+/// index. A cubic's other four coefficients are in the `ball_cubic` section ([`CubicWords`]).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuBall {
     pub normal: u32,
     pub h: f32,
-    pub coeffs: [u32; 5],
+    pub coeffs: [u32; 3],
     pub state: u32,
 }
+
+/// A cubic's coefficients 6–9 as half floats, two to a word (coefficient 6 + 2k in the low
+/// half of word k): two words per point of the `ball_cubic` section, zero where the ball is
+/// not cubic.
+pub type CubicWords = [u32; 2];
 
 /// `struct Sphere { centre: vec3<f32>, radius: f32 }`: a droplet.
 #[repr(C)]
@@ -61,26 +64,30 @@ pub enum BallState {
     Droplet = 3,
 }
 
-/// Coefficients of a polynomial of degree ≤ 2.
-const QUADRATIC_COEFFS: usize = 6;
+/// Coefficients a ball holds itself: a polynomial of degree ≤ 2.
+const BALL_COEFFS: usize = 6;
 
-/// `x` rounded to the nearest f32 with 15 mantissa bits (ties away from zero), as bits whose
-/// low 8 are zero; `None` where that overflows.
-fn round_to_24_bits(x: f32) -> Option<u32> {
-    let sign = x.to_bits() & (1 << 31);
-    // A finite magnitude is below 0x7f80_0000: adding half a unit cannot overflow u32.
-    let magnitude = ((x.to_bits() & !(1 << 31)) + 0x80) & !0xff;
-    let rounded = f32::from_bits(sign | magnitude);
-    rounded.is_finite().then_some(rounded.to_bits())
+/// Two coefficients as half floats in one word (the first in the low half); `None` where one
+/// is not finite or beyond a half float's range.
+fn halves(a: f32, b: f32) -> Option<u32> {
+    let (a, b) = (half::f16::from_f32(a), half::f16::from_f32(b));
+    (a.is_finite() && b.is_finite())
+        .then(|| u32::from(a.to_bits()) | (u32::from(b.to_bits()) << 16))
+}
+
+/// A word's two half floats as f32, exactly.
+fn unhalves(w: u32) -> [f32; 2] {
+    [w as u16, (w >> 16) as u16].map(|h| half::f16::from_bits(h).to_f32())
 }
 
 /// Droplet spheres a ball's state word can name.
 pub const MAX_SPHERES: u32 = 1 << 28;
 
 impl GpuBall {
-    /// A ball from its parts: the normal encoded, the coefficients rounded to half floats;
-    /// `None` where a coefficient is not finite or beyond a half float's range (the caller
-    /// stores the ball unfitted), or the sphere index does not fit.
+    /// A ball from its parts, and a cubic's other coefficients: the normal encoded, the
+    /// coefficients rounded to half floats; `None` where a coefficient is not finite or
+    /// beyond a half float's range (the caller stores the ball unfitted), or the sphere index
+    /// does not fit.
     pub fn new(
         normal: [f64; 3],
         h: f32,
@@ -88,32 +95,21 @@ impl GpuBall {
         degree: u8,
         kind: BallState,
         sphere: u32,
-    ) -> Option<GpuBall> {
-        if sphere >= MAX_SPHERES || degree > 3 || coeffs.iter().any(|c| !c.is_finite()) {
+    ) -> Option<(GpuBall, CubicWords)> {
+        if sphere >= MAX_SPHERES || degree > 3 {
             return None;
         }
-        let mut words = [0u32; 5];
-        if degree <= 2 {
-            for (k, &c) in coeffs[..QUADRATIC_COEFFS].iter().enumerate() {
-                let bits = round_to_24_bits(c)?;
-                words[k / 2] |= (bits >> 16) << (16 * (k % 2));
-                words[3 + k / 4] |= ((bits >> 8) & 0xff) << (8 * (k % 4));
-            }
-        } else {
-            for (k, &c) in coeffs.iter().enumerate() {
-                let half = half::f16::from_f32(c);
-                if !half.is_finite() {
-                    return None;
-                }
-                words[k / 2] |= u32::from(half.to_bits()) << (16 * (k % 2));
-            }
-        }
-        Some(GpuBall {
+        let used = if degree == 3 { 10 } else { BALL_COEFFS };
+        let mut c = [0.0f32; 10];
+        c[..used].copy_from_slice(&coeffs[..used]);
+        let word = |k: usize| halves(c[2 * k], c[2 * k + 1]);
+        let ball = GpuBall {
             normal: crate::octahedral::encode(normal),
             h,
-            coeffs: words,
+            coeffs: [word(0)?, word(1)?, word(2)?],
             state: kind as u32 | (u32::from(degree) << 2) | (sphere << 4),
-        })
+        };
+        Some((ball, [word(3)?, word(4)?]))
     }
 
     /// A ball that is never a candidate: no support plane or fit, or one that could not be
@@ -122,7 +118,7 @@ impl GpuBall {
         GpuBall {
             normal: crate::octahedral::NO_NORMAL,
             h,
-            coeffs: [0; 5],
+            coeffs: [0; 3],
             state: BallState::Unfitted as u32,
         }
     }
@@ -157,23 +153,15 @@ impl GpuBall {
         crate::octahedral::decode_unit(self.normal)
     }
 
-    /// The ten coefficients as f32 (exactly the stored values; unused ones zero).
-    pub fn coeffs(&self) -> [f32; 10] {
-        let w = &self.coeffs;
-        if self.degree() <= 2 {
-            std::array::from_fn(|k| {
-                if k >= QUADRATIC_COEFFS {
-                    return 0.0;
-                }
-                let high = (w[k / 2] >> (16 * (k % 2))) & 0xffff;
-                let low = (w[3 + k / 4] >> (8 * (k % 4))) & 0xff;
-                f32::from_bits((high << 16) | (low << 8))
-            })
-        } else {
-            std::array::from_fn(|k| {
-                half::f16::from_bits((w[k / 2] >> (16 * (k % 2))) as u16).to_f32()
-            })
+    /// The ten coefficients as f32, exactly the stored values: the ball's six and, for a
+    /// cubic, the four of its `ball_cubic` words (unused ones zero).
+    pub fn coeffs(&self, cubic: CubicWords) -> [f32; 10] {
+        let mut c = [0.0f32; 10];
+        let words = if self.degree() == 3 { 5 } else { 3 };
+        for (k, w) in self.coeffs.iter().chain(&cubic).take(words).enumerate() {
+            c[2 * k..2 * k + 2].copy_from_slice(&unhalves(*w));
         }
+        c
     }
 }
 
@@ -237,34 +225,43 @@ mod tests {
     #[test]
     fn balls_keep_their_state_and_the_nearest_stored_coefficients() {
         let c: [f32; 10] = [0.1, -2.5e-3, 3.0, -7.25, 1e-6, 40.0, 0.5, -0.25, 1e3, 2e-5];
-        let quadratic = GpuBall::new([0.0, 0.6, 0.8], 0.02, c, 2, BallState::Degraded, 0).unwrap();
+        let half = |x: f32| half::f16::from_f32(x).to_f32();
+        let (quadratic, extra) =
+            GpuBall::new([0.0, 0.6, 0.8], 0.02, c, 2, BallState::Degraded, 0).unwrap();
+        assert_eq!(size_of::<GpuBall>(), 24);
         assert_eq!(
             (quadratic.kind(), quadratic.degree()),
             (BallState::Degraded, 2)
         );
-        let got = quadratic.coeffs();
+        assert_eq!(extra, [0, 0], "a quadratic has no cubic words");
+        let got = quadratic.coeffs(extra);
         for k in 0..6 {
-            // 15 mantissa bits: within half a unit of the last.
+            // The nearest half float: within half a unit of its 11 bits.
+            assert_eq!(got[k], half(c[k]), "{k}");
             assert!(
-                (got[k] - c[k]).abs() <= c[k].abs() * 2f32.powi(-16),
-                "{k}: {}",
-                got[k]
+                (got[k] - c[k]).abs() <= c[k].abs() * 2f32.powi(-11) + 3e-8,
+                "{k}"
             );
         }
         assert_eq!(&got[6..], &[0.0; 4], "a quadratic stores six");
-        let cubic = GpuBall::new([0.0, 0.0, -1.0], 0.02, c, 3, BallState::Droplet, 12345).unwrap();
+        let (cubic, extra) =
+            GpuBall::new([0.0, 0.0, -1.0], 0.02, c, 3, BallState::Droplet, 12345).unwrap();
         assert_eq!(
             (cubic.kind(), cubic.sphere(), cubic.degree()),
             (BallState::Droplet, Some(12345), 3)
         );
-        for (k, (&g, &x)) in cubic.coeffs().iter().zip(&c).enumerate() {
-            assert_eq!(g, half::f16::from_f32(x).to_f32(), "{k}");
+        for (k, (&g, &x)) in cubic.coeffs(extra).iter().zip(&c).enumerate() {
+            assert_eq!(g, half(x), "{k}");
         }
         let n = cubic.normal();
         assert!(n[2] < -0.999_999 && n[0].abs() < 1e-6, "{n:?}");
-        // What a half float cannot hold, a quadratic can; neither takes a NaN.
+        // What a half float cannot hold is refused (the bake stores the ball unfitted), in
+        // the ball's six or a cubic's other four; so is a NaN.
         let mut big = c;
         big[3] = 1e6;
+        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 2, BallState::Full, 0).is_none());
+        let mut big = c;
+        big[8] = 1e6;
         assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 3, BallState::Full, 0).is_none());
         assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 2, BallState::Full, 0).is_some());
         big[0] = f32::NAN;

@@ -32,7 +32,9 @@ pub use format::{
     ALIGN, CHUNK_RAW, ChunkEntry, Encoding, FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings,
     PREAMBLE_LEN, SectionEntry, SeriesRecord, Source, StepStats, Transform, hex64,
 };
-pub use layout::{BallState, Element, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MAX_SPHERES};
+pub use layout::{
+    BallState, CubicWords, Element, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MAX_SPHERES,
+};
 pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,
     step_file_name,

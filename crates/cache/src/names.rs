@@ -3,6 +3,9 @@
 pub const POINTS: &str = "points";
 pub const NORMALS: &str = "normals";
 pub const BALLS: &str = "balls";
+/// A cubic's coefficients 6–9, two words per point (format 5; only where the bake fits
+/// cubics).
+pub const BALL_CUBIC: &str = "ball_cubic";
 pub const REACH: &str = "reach";
 pub const CLUSTER_START: &str = "cluster_start";
 pub const CLUSTER_NEIGHBOURS: &str = "cluster_neighbours";

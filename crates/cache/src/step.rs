@@ -9,7 +9,7 @@ use slosh_mls::{
 use crate::bvh::Bvh;
 use crate::error::{Error, Result};
 use crate::format::{MlsSettings, Transform};
-use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere};
+use crate::layout::{BallState, CubicWords, GpuBall, GpuBvhNode, GpuPoint, GpuSphere};
 use crate::names;
 use crate::reader::CacheFile;
 use crate::{candidates, octahedral};
@@ -121,6 +121,27 @@ impl CacheFile {
         })
     }
 
+    /// Each of `balls` balls' cubic words ([`CubicWords`]): the `ball_cubic` section, or
+    /// zeros where the step has none (no cubics were fitted).
+    pub fn cubic_words(&self, balls: usize) -> Result<Vec<CubicWords>> {
+        if self.section(names::BALL_CUBIC).is_none() {
+            return Ok(vec![[0; 2]; balls]);
+        }
+        let words: Vec<u32> = self.decode(names::BALL_CUBIC)?;
+        if words.len() != 2 * balls {
+            return Err(Error::Invalid {
+                path: self.path().to_path_buf(),
+                problem: format!(
+                    "section '{}' holds {} words for {balls} balls (two each)",
+                    names::BALL_CUBIC,
+                    words.len()
+                ),
+            });
+        }
+        let words = words.chunks_exact(2).map(|w| [w[0], w[1]]).collect();
+        Ok(words)
+    }
+
     /// Every point's neighbour list (CSR), recovered from the cluster lists by the rule in
     /// `slosh_mls::expand_clusters`.
     pub fn neighbour_lists(&self) -> Result<(Vec<u32>, Vec<u32>)> {
@@ -160,6 +181,7 @@ impl LoadedStep {
             reach,
         } = geometry;
         let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+        let cubic = file.cubic_words(balls.len())?;
         let spheres: Vec<GpuSphere> = file.decode(names::SPHERES)?;
         if balls.len() != points.len() {
             return Err(invalid(format!(
@@ -203,14 +225,15 @@ impl LoadedStep {
             balls: points
                 .iter()
                 .zip(&balls)
-                .map(|(p, b)| Ball {
+                .zip(&cubic)
+                .map(|((p, b), cubic)| Ball {
                     centre: v3(p.position),
                     radius: p.radius,
                     h: b.h,
                     normal: v3(b.normal()),
                     poly: Poly {
                         degree: b.degree(),
-                        c: b.coeffs(),
+                        c: b.coeffs(*cubic),
                     },
                 })
                 .collect(),

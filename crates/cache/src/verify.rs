@@ -82,6 +82,7 @@ impl CacheFile {
         };
         let points: Vec<GpuPoint> = self.decode(names::POINTS).map_err(decode_err)?;
         let balls: Vec<GpuBall> = self.decode(names::BALLS).map_err(decode_err)?;
+        let cubic = self.cubic_words(balls.len()).map_err(decode_err)?;
         let spheres: Vec<GpuSphere> = self.decode(names::SPHERES).map_err(decode_err)?;
         let reach: Vec<f32> = self.decode(names::REACH).map_err(decode_err)?;
         let start: Vec<u32> = self.decode(names::CLUSTER_START).map_err(decode_err)?;
@@ -146,8 +147,9 @@ impl CacheFile {
                 "the candidate list of cluster {i} is not sorted, distinct and in range"
             ));
         }
-        if let Some(i) = balls.par_iter().position_first(|b| {
-            let finite = b.coeffs().iter().all(|c| c.is_finite()) && b.h.is_finite() && b.h > 0.0;
+        if let Some(i) = balls.par_iter().zip(&cubic).position_first(|(b, &cubic)| {
+            let finite =
+                b.coeffs(cubic).iter().all(|c| c.is_finite()) && b.h.is_finite() && b.h > 0.0;
             let sphere_ok = b.sphere().is_none_or(|s| (s as usize) < spheres.len());
             !finite || !sphere_ok || (b.sphere_bits() != 0 && b.kind() != BallState::Droplet)
         }) {

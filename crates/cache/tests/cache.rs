@@ -181,8 +181,8 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
         SectionInput::new(
             "balls",
             Element::Ball,
-            bytemuck::cast_slice::<f32, [f32; 8]>(&floats[..n / 8 * 8]),
-            Encoding::Shuffle32Zstd,
+            bytemuck::cast_slice::<f32, [f32; 6]>(&floats[..n / 6 * 6]),
+            Encoding::Shuffle4Zstd,
         ),
     ];
     let bytes = encode_step(header(), &sections, Compression::Level(1)).unwrap();

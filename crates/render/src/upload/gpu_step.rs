@@ -28,6 +28,8 @@ pub struct StepBuffers {
     /// The clusters' candidates, narrow or wide (`slosh_cache::candidates`).
     pub cluster_ids: wgpu::Buffer,
     pub balls: wgpu::Buffer,
+    /// A cubic's other four coefficients (`slosh_cache::CubicWords`), or an empty binding.
+    pub ball_cubic: wgpu::Buffer,
     pub spheres: wgpu::Buffer,
     pub bvh_items: wgpu::Buffer,
     pub field: wgpu::Buffer,
@@ -49,6 +51,7 @@ impl StepBuffers {
             &self.field,
             &self.wide_nodes,
             &self.cluster_base,
+            &self.ball_cubic,
         ]
     }
 
@@ -139,6 +142,7 @@ fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
         names::CLUSTER_BASE => &step_array::CLUSTER_BASE,
         names::CLUSTER_NEIGHBOURS => &step_array::CLUSTER_IDS,
         names::BALLS => &step_array::BALLS,
+        names::BALL_CUBIC => &step_array::BALL_CUBIC,
         names::SPHERES => &step_array::SPHERES,
         names::BVH_ITEMS => &step_array::BVH_ITEMS,
         WIDE_NODES => &step_array::WIDE_NODES,
@@ -278,7 +282,8 @@ impl GpuStep {
         };
         let (points, normals, reach) = (next()?, next()?, next()?);
         let (cluster_start, cluster_base, cluster_ids) = (next()?, next()?, next()?);
-        let (balls, spheres, bvh_items, wide_nodes) = (next()?, next()?, next()?, next()?);
+        let (balls, ball_cubic) = (next()?, next()?);
+        let (spheres, bvh_items, wide_nodes) = (next()?, next()?, next()?);
         let buffers = StepBuffers {
             points,
             normals,
@@ -287,6 +292,7 @@ impl GpuStep {
             cluster_base,
             cluster_ids,
             balls,
+            ball_cubic,
             spheres,
             bvh_items,
             field: field_values,

@@ -27,7 +27,7 @@ pub use checks::{MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, mask_row};
 pub use gpu_step::{GpuStep, StepBuffers, UploadOptions, UploadStats};
 pub use host::{HostField, HostStep, StepInfo};
 
-const SECTIONS: [&str; 10] = [
+const SECTIONS: [&str; 11] = [
     names::POINTS,
     names::NORMALS,
     names::REACH,
@@ -35,6 +35,7 @@ const SECTIONS: [&str; 10] = [
     names::CLUSTER_BASE,
     names::CLUSTER_NEIGHBOURS,
     names::BALLS,
+    names::BALL_CUBIC,
     names::SPHERES,
     names::BVH_NODES,
     names::BVH_ITEMS,
