@@ -418,20 +418,15 @@ struct Poly {
     c: array<f32, 10>,
 }
 
-// An IEEE half float (the low 16 bits of h) as f32, exactly, subnormals included: bit
-// arithmetic, so no adapter feature is needed and the value is the CPU's (`half`) bit for
-// bit. Infinities and NaN are never stored (the verifier refuses them).
-fn half_to_f32(h: u32) -> f32 {
-    let negative = (h & 0x8000u) != 0u;
-    let e = (h >> 10u) & 0x1fu;
-    let m = h & 0x3ffu;
-    var v = 0.0;
-    if e == 0u {
-        v = f32(m) * 5.9604645e-8; // m × 2^-24
-    } else {
-        v = bitcast<f32>(((e + 112u) << 23u) | (m << 13u));
-    }
-    return select(v, -v, negative);
+// A word's two IEEE half floats (the first in the low half) as f32, exactly, as the CPU
+// decodes them (`half`): `unpack2x16float`, with subnormals, which an adapter may flush,
+// assembled from their mantissa (m × 2^-24 is exact in f32).
+fn unpack_halves(w: u32) -> vec2<f32> {
+    let bits = vec2<u32>(w & 0xffffu, w >> 16u);
+    let subnormal = (bits & vec2<u32>(0x7c00u)) == vec2<u32>(0u);
+    let tiny = vec2<f32>(bits & vec2<u32>(0x3ffu)) * 5.9604645e-8;
+    let signed = select(tiny, -tiny, (bits & vec2<u32>(0x8000u)) != vec2<u32>(0u));
+    return select(unpack2x16float(w), signed, subnormal);
 }
 
 // Ball `item`'s stored initial polynomial as f32, exactly the stored values
@@ -445,11 +440,12 @@ fn ball_poly(b: Ball, item: u32) -> Poly {
     if p.degree == 3u {
         e = ball_cubic_at(item);
     }
-    p.c = array<f32, 10>(
-        half_to_f32(w[0]), half_to_f32(w[0] >> 16u), half_to_f32(w[1]), half_to_f32(w[1] >> 16u),
-        half_to_f32(w[2]), half_to_f32(w[2] >> 16u), half_to_f32(e.x), half_to_f32(e.x >> 16u),
-        half_to_f32(e.y), half_to_f32(e.y >> 16u),
-    );
+    let c01 = unpack_halves(w[0]);
+    let c23 = unpack_halves(w[1]);
+    let c45 = unpack_halves(w[2]);
+    let c67 = unpack_halves(e.x);
+    let c89 = unpack_halves(e.y);
+    p.c = array<f32, 10>(c01.x, c01.y, c23.x, c23.y, c45.x, c45.y, c67.x, c67.y, c89.x, c89.y);
     return p;
 }
 

@@ -102,6 +102,9 @@ pub enum Encoding {
     /// padding word becomes one run of zeros. Format 3.
     #[serde(rename = "shuffle16+zstd")]
     Shuffle16Zstd,
+    /// As `shuffle16+zstd`, within each 24-byte element (the balls). Format 5.
+    #[serde(rename = "shuffle24+zstd")]
+    Shuffle24Zstd,
     /// As `shuffle16+zstd`, within each 32-byte element. Format 3.
     #[serde(rename = "shuffle32+zstd")]
     Shuffle32Zstd,
@@ -118,6 +121,7 @@ impl Encoding {
             Encoding::Shuffle4Zstd => "shuffle4+zstd",
             Encoding::Delta4Shuffle4Zstd => "delta4+shuffle4+zstd",
             Encoding::Shuffle16Zstd => "shuffle16+zstd",
+            Encoding::Shuffle24Zstd => "shuffle24+zstd",
             Encoding::Shuffle32Zstd => "shuffle32+zstd",
             Encoding::Shuffle64Zstd => "shuffle64+zstd",
         }
@@ -129,9 +133,17 @@ impl Encoding {
             Encoding::Raw | Encoding::Zstd => None,
             Encoding::Shuffle4Zstd | Encoding::Delta4Shuffle4Zstd => Some(4),
             Encoding::Shuffle16Zstd => Some(16),
+            Encoding::Shuffle24Zstd => Some(24),
             Encoding::Shuffle32Zstd => Some(32),
             Encoding::Shuffle64Zstd => Some(64),
         }
+    }
+
+    /// Raw bytes per chunk of a section in this encoding: [`CHUNK_RAW`], or the largest
+    /// multiple of the shuffle width below it (24-byte elements do not divide 1 MiB).
+    pub fn chunk_raw(self) -> u64 {
+        let width = self.shuffle_width().unwrap_or(4) as u64;
+        CHUNK_RAW - CHUNK_RAW % width
     }
 
     /// The byte shuffle within whole elements of `size` bytes, then zstd (`shuffle4+zstd`
@@ -139,6 +151,7 @@ impl Encoding {
     pub fn shuffled_elements(size: usize) -> Encoding {
         match size {
             16 => Encoding::Shuffle16Zstd,
+            24 => Encoding::Shuffle24Zstd,
             32 => Encoding::Shuffle32Zstd,
             64 => Encoding::Shuffle64Zstd,
             _ => Encoding::Shuffle4Zstd,

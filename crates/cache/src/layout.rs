@@ -70,9 +70,11 @@ const BALL_COEFFS: usize = 6;
 /// Two coefficients as half floats in one word (the first in the low half); `None` where one
 /// is not finite or beyond a half float's range.
 fn halves(a: f32, b: f32) -> Option<u32> {
-    let (a, b) = (half::f16::from_f32(a), half::f16::from_f32(b));
-    (a.is_finite() && b.is_finite())
-        .then(|| u32::from(a.to_bits()) | (u32::from(b.to_bits()) << 16))
+    let half = |x: f32| {
+        let h = half::f16::from_f32(x);
+        h.is_finite().then(|| h.to_bits())
+    };
+    Some(u32::from(half(a)?) | (u32::from(half(b)?) << 16))
 }
 
 /// A word's two half floats as f32, exactly.
@@ -236,7 +238,7 @@ mod tests {
         assert_eq!(extra, [0, 0], "a quadratic has no cubic words");
         let got = quadratic.coeffs(extra);
         for k in 0..6 {
-            // The nearest half float: within half a unit of its 11 bits.
+            // The nearest half float: within half a unit of its 11 bits (subnormals kept).
             assert_eq!(got[k], half(c[k]), "{k}");
             assert!(
                 (got[k] - c[k]).abs() <= c[k].abs() * 2f32.powi(-11) + 3e-8,

@@ -8,7 +8,7 @@ use xxhash_rust::xxh3::xxh3_64;
 
 use crate::error::Result;
 use crate::format::{
-    ALIGN, CHUNK_RAW, ChunkEntry, Encoding, Footer, Header, MAJOR, MINOR, PREAMBLE_LEN, Preamble,
+    ALIGN, ChunkEntry, Encoding, Footer, Header, MAJOR, MINOR, PREAMBLE_LEN, Preamble,
     SectionEntry, align_up, hex64,
 };
 use crate::layout::Element;
@@ -65,7 +65,11 @@ pub fn encode_step(
     let jobs: Vec<(usize, &[u8])> = sections
         .iter()
         .enumerate()
-        .flat_map(|(i, s)| s.bytes.chunks(CHUNK_RAW as usize).map(move |c| (i, c)))
+        .flat_map(|(i, s)| {
+            s.bytes
+                .chunks(s.encoding.chunk_raw() as usize)
+                .map(move |c| (i, c))
+        })
         .collect();
     let packed: Vec<Option<Vec<u8>>> = jobs
         .par_iter()
@@ -82,7 +86,7 @@ pub fn encode_step(
     let mut encoded: Vec<(Encoding, Vec<u8>, Vec<ChunkEntry>)> = Vec::new();
     let mut at = 0;
     for s in sections {
-        let n = s.bytes.len().div_ceil(CHUNK_RAW as usize);
+        let n = s.bytes.len().div_ceil(s.encoding.chunk_raw() as usize);
         let chunks = &packed[at..at + n];
         let raws = &jobs[at..at + n];
         at += n;
@@ -124,7 +128,7 @@ pub fn encode_step(
                     raw: s.bytes.len() as u64,
                     encoding: *encoding,
                     xxh3: hex64(xxh3_64(bytes)),
-                    chunk_raw: CHUNK_RAW,
+                    chunk_raw: s.encoding.chunk_raw(),
                     chunks: chunks.clone(),
                 };
                 offset = align_up(offset + bytes.len());

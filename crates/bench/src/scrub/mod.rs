@@ -172,7 +172,7 @@ fn show_timed(
     Ok(start.elapsed().as_secs_f64())
 }
 
-/// Every compressed section of `path` re-encoded in chunks of `CHUNK_RAW` at each level (each
+/// Every compressed section of `path` re-encoded in its encoding's chunks at each level (each
 /// keeps its filter: shuffle, delta), then decoded on one core.
 fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
     let file = slosh_cache::CacheFile::open(path)?;
@@ -190,7 +190,7 @@ fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
         let mut packed = Vec::new();
         let t = Instant::now();
         for (encoding, raw) in &sections {
-            for chunk in raw.chunks(slosh_cache::CHUNK_RAW as usize) {
+            for chunk in raw.chunks(encoding.chunk_raw() as usize) {
                 let bytes = slosh_cache::encode_bytes(chunk, *encoding, level)?;
                 stored += bytes.len() as u64;
                 raw_bytes += chunk.len() as u64;
