@@ -418,15 +418,28 @@ struct Poly {
     c: array<f32, 10>,
 }
 
-// A word's two IEEE half floats (the first in the low half) as f32, exactly, as the CPU
-// decodes them (`half`): `unpack2x16float`, with subnormals, which an adapter may flush,
-// assembled from their mantissa (m × 2^-24 is exact in f32).
+// An IEEE half float (the low 16 bits of h) as f32, exactly, subnormals included: bit
+// arithmetic, so no adapter feature is needed and the value is the CPU's (`half`) bit for
+// bit. Infinities and NaN are never stored (the verifier refuses them).
+fn half_to_f32(h: u32) -> f32 {
+    let negative = (h & 0x8000u) != 0u;
+    let e = (h >> 10u) & 0x1fu;
+    let m = h & 0x3ffu;
+    var v = 0.0;
+    if e == 0u {
+        v = f32(m) * 5.9604645e-8; // m × 2^-24
+    } else {
+        v = bitcast<f32>(((e + 112u) << 23u) | (m << 13u));
+    }
+    return select(v, -v, negative);
+}
+
+// A word's two half floats (the first in the low half) as f32. Bit arithmetic: on the H200 at
+// 1 iteration (100k points) it ran 1 % faster than format 4's decoding, where
+// `unpack2x16float` with its subnormals assembled apart ran 3.5 % slower; and it needs no
+// adapter capability.
 fn unpack_halves(w: u32) -> vec2<f32> {
-    let bits = vec2<u32>(w & 0xffffu, w >> 16u);
-    let subnormal = (bits & vec2<u32>(0x7c00u)) == vec2<u32>(0u);
-    let tiny = vec2<f32>(bits & vec2<u32>(0x3ffu)) * 5.9604645e-8;
-    let signed = select(tiny, -tiny, (bits & vec2<u32>(0x8000u)) != vec2<u32>(0u));
-    return select(unpack2x16float(w), signed, subnormal);
+    return vec2<f32>(half_to_f32(w), half_to_f32(w >> 16u));
 }
 
 // Ball `item`'s stored initial polynomial as f32, exactly the stored values
