@@ -165,6 +165,19 @@ impl Gpu {
                 ),
             });
         }
+        // The balls' half floats are unpacked by `unpack2x16float` (every Vulkan, Metal and
+        // DX12 adapter has it; GLES may not).
+        if !adapter
+            .get_downlevel_capabilities()
+            .flags
+            .contains(wgpu::DownlevelFlags::SHADER_F16_IN_F32)
+        {
+            return Err(Error::Limits {
+                adapter: describe(&info),
+                problem: "the adapter cannot unpack half floats in shaders (SHADER_F16_IN_F32)"
+                    .into(),
+            });
+        }
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let binding_limit = limits.max_storage_buffer_binding_size;
         Ok(Gpu {

@@ -6,12 +6,14 @@ use slosh_render::shaders::{
     TRACE_STACK_SIZES, expand_wgsl, mls_wgsl, present_wgsl, shade_wgsl, trace_wgsl,
 };
 
+/// Validates with the one capability the passes need beyond the baseline: `unpack2x16float`
+/// (the balls' half floats), which `Gpu::from_parts` requires of the adapter.
 fn validate(name: &str, source: &str) -> naga::Module {
     let module = naga::front::wgsl::parse_str(source)
         .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
     naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::empty(),
+        naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32,
     )
     .validate(&module)
     .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
