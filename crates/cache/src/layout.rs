@@ -67,6 +67,9 @@ pub enum BallState {
 /// Coefficients a ball holds itself: a polynomial of degree ≤ 2.
 const BALL_COEFFS: usize = 6;
 
+/// The smallest normal half float, 2^-14: no stored coefficient lies closer to zero, but zero.
+pub const MIN_NORMAL_HALF: f32 = 1.0 / 16384.0;
+
 /// Two coefficients as half floats in one word (the first in the low half); `None` where one
 /// is not finite or beyond a half float's range. A value below the smallest normal half float
 /// (6.1e-5) is stored as a zero of its sign: the shaders' `unpack2x16float` may flush
@@ -256,6 +259,9 @@ mod tests {
             );
         }
         assert_eq!(&got[6..], &[0.0; 4], "a quadratic stores six");
+        // What the verifier requires: no subnormal half float (c[4] = 1e-6 became zero).
+        assert!(got.iter().all(|g| *g == 0.0 || g.abs() >= MIN_NORMAL_HALF));
+        assert_eq!(got[4], 0.0);
         let (cubic, extra) =
             GpuBall::new([0.0, 0.0, -1.0], 0.02, c, 3, BallState::Droplet, 12345).unwrap();
         assert_eq!(

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::error::{Error, Result};
-use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere};
+use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
 use crate::names;
 use crate::reader::CacheFile;
 
@@ -148,8 +148,13 @@ impl CacheFile {
             ));
         }
         if let Some(i) = balls.par_iter().zip(&cubic).position_first(|(b, &cubic)| {
-            let finite =
-                b.coeffs(cubic).iter().all(|c| c.is_finite()) && b.h.is_finite() && b.h > 0.0;
+            // Finite, and no subnormal half float (a GPU may flush those).
+            let finite = b
+                .coeffs(cubic)
+                .iter()
+                .all(|c| c.is_finite() && (*c == 0.0 || c.abs() >= MIN_NORMAL_HALF))
+                && b.h.is_finite()
+                && b.h > 0.0;
             let sphere_ok = b.sphere().is_none_or(|s| (s as usize) < spheres.len());
             !finite || !sphere_ok || (b.sphere_bits() != 0 && b.kind() != BallState::Droplet)
         }) {
