@@ -52,6 +52,8 @@ fn expand_runs(c: u32, first: u32, count: u32, lid: u32) {
     for (var k = lid; k < count; k += MASK_TILE) {
         candidates_set(first + k, NO_NEIGHBOUR);
     }
+    // Another thread's run may write a slot this thread emptied: the fill lands first.
+    storageBarrier();
     let base = workgroupUniformLoad(&cluster_base_word);
     let wide = (base & WIDE_CLUSTER) != 0u;
     let at = base & ~WIDE_CLUSTER;

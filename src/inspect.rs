@@ -185,7 +185,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
     }
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
     let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
-    let cubic = file.cubic_words(balls.len())?;
+    let cubic = file.cubic_words()?;
     let (start, neighbours) = file.neighbour_lists()?;
     let p = points[i];
     let b = balls[i];

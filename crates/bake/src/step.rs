@@ -203,12 +203,11 @@ fn gpu_sections(
         ),
     ];
     // A cubic's other four coefficients, where the bake fits cubics.
-    let cubic_words: Vec<u32> = cubic.iter().flatten().copied().collect();
     if params.mls.degree == 3 {
         sections.push(SectionInput::new(
             names::BALL_CUBIC,
             Element::U32,
-            &cubic_words,
+            bytemuck::cast_slice::<CubicWords, u32>(&cubic),
             Encoding::Shuffle4Zstd,
         ));
     }

@@ -39,23 +39,25 @@ fn runs_of(list: &[u32]) -> Vec<(u32, u32)> {
     runs
 }
 
-/// The `cluster_base` entries and words of cluster lists (`start`, CSR over `ids`, each
-/// cluster's list sorted ascending) of clusters of `size` points; `None` if the words would
-/// not be addressable by 31 bits.
-pub fn pack(start: &[u32], ids: &[u32], size: u32) -> Option<(Vec<u32>, Vec<u32>)> {
-    // Where a run longer than a narrow word goes on past the narrow range (a list of over
-    // 65535 consecutive candidates, far beyond any neighbour cap), every cluster is wide.
-    pack_with(start, ids, size, true).or_else(|| pack_with(start, ids, size, false))
+/// A narrow cluster's words for `runs`: each run cut into parts of at most [`NARROW_RUN`],
+/// one word per part; `None` where a part starts outside the narrow range of `first`.
+fn narrow_words(runs: &[(u32, u32)], first: u32) -> Option<Vec<u32>> {
+    let mut words = Vec::with_capacity(runs.len());
+    for &(mut j, mut left) in runs {
+        while left > 0 {
+            let part = left.min(NARROW_RUN);
+            words.push(narrow(j, first)? | (part << 16));
+            (j, left) = (j + part, left - part);
+        }
+    }
+    Some(words)
 }
 
-/// [`pack`], with narrow clusters where `narrow_allowed`; `None` also where a split run
-/// leaves the narrow range.
-fn pack_with(
-    start: &[u32],
-    ids: &[u32],
-    size: u32,
-    narrow_allowed: bool,
-) -> Option<(Vec<u32>, Vec<u32>)> {
+/// The `cluster_base` entries and words of cluster lists (`start`, CSR over `ids`, each
+/// cluster's list sorted ascending) of clusters of `size` points; `None` if the words would
+/// not be addressable by 31 bits. A cluster is narrow where every part of its runs starts in
+/// the narrow range, else wide.
+pub fn pack(start: &[u32], ids: &[u32], size: u32) -> Option<(Vec<u32>, Vec<u32>)> {
     let clusters = start.len().saturating_sub(1);
     let (mut base, mut words) = (Vec::with_capacity(clusters), Vec::new());
     for c in 0..clusters {
@@ -64,19 +66,14 @@ fn pack_with(
         let at = u32::try_from(words.len())
             .ok()
             .filter(|&a| a < WIDE_CLUSTER)?;
-        if narrow_allowed && runs.iter().all(|&(j, _)| narrow(j, first).is_some()) {
-            base.push(at);
-            for (mut j, mut left) in runs {
-                while left > 0 {
-                    let part = left.min(NARROW_RUN);
-                    words.push(narrow(j, first)? | (part << 16));
-                    (j, left) = (j + part, left - part);
-                }
+        match narrow_words(&runs, first) {
+            Some(narrow) => {
+                base.push(at);
+                words.extend(narrow);
             }
-        } else {
-            base.push(at | WIDE_CLUSTER);
-            for (j, len) in runs {
-                words.extend([j, len]);
+            None => {
+                base.push(at | WIDE_CLUSTER);
+                words.extend(runs.iter().flat_map(|&(j, len)| [j, len]));
             }
         }
     }
@@ -232,7 +229,7 @@ mod tests {
         assert_eq!(base[1024], 0);
         assert_eq!(words, vec![u32::from(u16::MAX) << 16, 65_535 | (10 << 16)]);
         assert_eq!(unpack(&start, &base, &words, 32).unwrap(), ids);
-        // From cluster 0, the second part would start past the narrow range: all wide.
+        // From cluster 0, the second part would start past the narrow range: wide.
         let (base, words) = pack(&[0, 70_000], &(0..70_000).collect::<Vec<_>>(), 32).unwrap();
         assert_eq!((base, words.clone()), (vec![WIDE_CLUSTER], vec![0, 70_000]));
     }

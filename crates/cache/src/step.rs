@@ -121,25 +121,33 @@ impl CacheFile {
         })
     }
 
-    /// Each of `balls` balls' cubic words ([`CubicWords`]): the `ball_cubic` section, or
-    /// zeros where the step has none (no cubics were fitted).
-    pub fn cubic_words(&self, balls: usize) -> Result<Vec<CubicWords>> {
+    /// Checks the `ball_cubic` section against the header: present where the bake fits
+    /// cubics (`mls.degree` 3), two words per point where present.
+    pub fn check_ball_cubic(&self) -> Result<()> {
+        let header = self.header();
+        let problem = match self.section(names::BALL_CUBIC) {
+            None if header.mls.degree == 3 => "is missing from a step of cubic fits".to_string(),
+            Some(e) if e.count != 2 * header.points => format!(
+                "holds {} words for {} points (two each)",
+                e.count, header.points
+            ),
+            _ => return Ok(()),
+        };
+        Err(Error::Invalid {
+            path: self.path().to_path_buf(),
+            problem: format!("section '{}' {problem}", names::BALL_CUBIC),
+        })
+    }
+
+    /// Each ball's cubic words ([`CubicWords`]): the `ball_cubic` section, or zeros where
+    /// the step has none (no cubics were fitted).
+    pub fn cubic_words(&self) -> Result<Vec<CubicWords>> {
+        self.check_ball_cubic()?;
         if self.section(names::BALL_CUBIC).is_none() {
-            return Ok(vec![[0; 2]; balls]);
+            return Ok(vec![[0; 2]; self.header().points as usize]);
         }
         let words: Vec<u32> = self.decode(names::BALL_CUBIC)?;
-        if words.len() != 2 * balls {
-            return Err(Error::Invalid {
-                path: self.path().to_path_buf(),
-                problem: format!(
-                    "section '{}' holds {} words for {balls} balls (two each)",
-                    names::BALL_CUBIC,
-                    words.len()
-                ),
-            });
-        }
-        let words = words.chunks_exact(2).map(|w| [w[0], w[1]]).collect();
-        Ok(words)
+        Ok(words.chunks_exact(2).map(|w| [w[0], w[1]]).collect())
     }
 
     /// Every point's neighbour list (CSR), recovered from the cluster lists by the rule in
@@ -181,7 +189,7 @@ impl LoadedStep {
             reach,
         } = geometry;
         let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
-        let cubic = file.cubic_words(balls.len())?;
+        let cubic = file.cubic_words()?;
         let spheres: Vec<GpuSphere> = file.decode(names::SPHERES)?;
         if balls.len() != points.len() {
             return Err(invalid(format!(

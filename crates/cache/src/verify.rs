@@ -78,11 +78,13 @@ impl CacheFile {
                 problem,
                 ..
             } => format!("section '{section}' (at byte {offset}): {problem}"),
+            // The file's path is said once, by the caller.
+            Error::Invalid { problem, .. } => problem,
             other => other.to_string(),
         };
         let points: Vec<GpuPoint> = self.decode(names::POINTS).map_err(decode_err)?;
         let balls: Vec<GpuBall> = self.decode(names::BALLS).map_err(decode_err)?;
-        let cubic = self.cubic_words(balls.len()).map_err(decode_err)?;
+        let cubic = self.cubic_words().map_err(decode_err)?;
         let spheres: Vec<GpuSphere> = self.decode(names::SPHERES).map_err(decode_err)?;
         let reach: Vec<f32> = self.decode(names::REACH).map_err(decode_err)?;
         let start: Vec<u32> = self.decode(names::CLUSTER_START).map_err(decode_err)?;

@@ -47,7 +47,7 @@ pub const TEXTURE_BINDING: u32 = 101;
 pub const TRACE_STACK_SIZES: [u32; 3] = [32, 64, 96];
 
 /// Bindings per storage array: an array may span this many of the adapter's largest
-/// bindings (3 × 128 MiB on lavapipe: the balls of 16M points). The 15 arrays then take 45
+/// bindings (3 × 128 MiB on lavapipe: the balls of 16M points). The 13 arrays then take 39
 /// storage bindings per stage, within lavapipe's 48.
 pub const RANGES: u32 = 3;
 
@@ -94,27 +94,23 @@ pub mod step_array {
     pub const POINTS: RangedArray = array("points", "Point", 16, 0, 0, false);
     pub const NORMALS: RangedArray = array("normals", "u32", 4, 0, 1, false);
     pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 2, false);
-    pub const CLUSTER_IDS: RangedArray = array("cluster_ids", "u32", 4, 0, 3, false);
     pub const BALLS: RangedArray = array("balls", "Ball", 24, 0, 4, false);
     pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 5, false);
     pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 6, false);
     pub const FIELD: RangedArray = array("field", "f32", 4, 0, 7, false);
     pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 8, false);
-    pub const CLUSTER_BASE: RangedArray = array("cluster_base", "u32", 4, 0, 9, false);
     pub const BALL_CUBIC: RangedArray = array("ball_cubic", "vec2<u32>", 8, 0, 10, false);
 }
 
-pub const STEP_ARRAYS: [RangedArray; 11] = [
+pub const STEP_ARRAYS: [RangedArray; 9] = [
     step_array::POINTS,
     step_array::NORMALS,
     step_array::CLUSTER_START,
-    step_array::CLUSTER_IDS,
     step_array::BALLS,
     step_array::SPHERES,
     step_array::BVH_ITEMS,
     step_array::FIELD,
     step_array::WIDE_NODES,
-    step_array::CLUSTER_BASE,
     step_array::BALL_CUBIC,
 ];
 

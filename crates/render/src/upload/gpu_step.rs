@@ -23,9 +23,11 @@ pub struct StepBuffers {
     /// Read by the neighbour-mask pass only (the tracer's, before a refined frame).
     pub reach: wgpu::Buffer,
     pub cluster_start: wgpu::Buffer,
-    /// Each cluster's first word of `cluster_ids` and whether it is wide.
+    /// Each cluster's first word of `cluster_ids` and whether it is wide; read by the mask
+    /// pass only.
     pub cluster_base: wgpu::Buffer,
-    /// The clusters' candidates, narrow or wide (`slosh_cache::candidates`).
+    /// The clusters' runs of candidates (`slosh_cache::candidates`); read by the mask pass
+    /// only, which expands them.
     pub cluster_ids: wgpu::Buffer,
     pub balls: wgpu::Buffer,
     /// A cubic's other four coefficients (`slosh_cache::CubicWords`), or an empty binding.
@@ -44,13 +46,11 @@ impl StepBuffers {
             &self.points,
             &self.normals,
             &self.cluster_start,
-            &self.cluster_ids,
             &self.balls,
             &self.spheres,
             &self.bvh_items,
             &self.field,
             &self.wide_nodes,
-            &self.cluster_base,
             &self.ball_cubic,
         ]
     }
@@ -61,7 +61,10 @@ impl StepBuffers {
             .iter()
             .map(|b| b.size())
             .sum::<u64>()
-            + self.reach.size()
+            + [&self.reach, &self.cluster_base, &self.cluster_ids]
+                .iter()
+                .map(|b| b.size())
+                .sum::<u64>()
     }
 }
 
@@ -131,16 +134,16 @@ pub struct GpuStep {
     staging: Option<wgpu::Buffer>,
 }
 
-/// How the passes bind each array of [`HostStep::gpu_arrays`]: the reach is read only by the
-/// mask pass; a name that is no array is an error, never a guess.
+/// How the passes bind each array of [`HostStep::gpu_arrays`]: the reach and the candidate
+/// runs are read only by the mask pass; a name that is no array is an error, never a guess.
 fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
     Ok(match name {
         names::POINTS => &step_array::POINTS,
         names::NORMALS => &step_array::NORMALS,
         names::REACH => &EXPAND_ARRAYS[2],
         names::CLUSTER_START => &step_array::CLUSTER_START,
-        names::CLUSTER_BASE => &step_array::CLUSTER_BASE,
-        names::CLUSTER_NEIGHBOURS => &step_array::CLUSTER_IDS,
+        names::CLUSTER_NEIGHBOURS => &EXPAND_ARRAYS[4],
+        names::CLUSTER_BASE => &EXPAND_ARRAYS[6],
         names::BALLS => &step_array::BALLS,
         names::BALL_CUBIC => &step_array::BALL_CUBIC,
         names::SPHERES => &step_array::SPHERES,

@@ -240,30 +240,15 @@ impl<'a> HostStep<'a> {
             ));
         }
         let entries: Vec<Option<&SectionEntry>> = SECTIONS.iter().map(|n| f.section(n)).collect();
-        // Data normals are optional, and a cubic's other coefficients where no cubic is fitted.
-        let optional = |name: &str| {
-            name == names::NORMALS || (name == names::BALL_CUBIC && header.mls.degree < 3)
-        };
+        // Data normals are optional; a cubic's other coefficients are where cubics are fitted.
         for (name, entry) in SECTIONS.iter().zip(&entries) {
-            if entry.is_none() && !optional(name) {
+            if entry.is_none() && ![names::NORMALS, names::BALL_CUBIC].contains(name) {
                 return Err(invalid(f, format!("no section '{name}'")));
             }
         }
+        f.check_ball_cubic()?;
         let point_count = u32::try_from(header.points)
             .map_err(|_| invalid(f, format!("{} points exceed u32", header.points)))?;
-        if let Some(cubic) = f.section(names::BALL_CUBIC)
-            && cubic.count != 2 * header.points
-        {
-            return Err(invalid(
-                f,
-                format!(
-                    "section '{}' holds {} words for {} points (two each)",
-                    names::BALL_CUBIC,
-                    cubic.count,
-                    header.points
-                ),
-            ));
-        }
         // Raw sections are checksummed in place and those the host reads decoded, all in
         // parallel; the field alongside.
         let (sections, field) = rayon::join(
