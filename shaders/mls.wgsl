@@ -54,7 +54,8 @@ struct Settings {
     has_field: u32,
     // Words of neighbour mask of the largest cluster.
     mask_words: u32,
-    // Entries of the 4-wide tree and of bvh_items.
+    // Entries of the 4-wide tree, and the items its leaves range over (balls, then droplet
+    // spheres).
     wide_count: u32,
     item_count: u32,
     // The field's colour map (colormap.rs: Colormap).

@@ -88,10 +88,9 @@ fn key_before(t: f32, item: u32, other_t: f32, other_item: u32) -> bool {
 fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, best: ptr<function, Candidate>) {
     let n = settings.point_count;
     let end = min(first + count, settings.item_count);
-    for (var k = first; k < end; k++) {
+    for (var item = first; item < end; item++) {
         // An item is a ball (its point's centre and radius of trust) or a droplet sphere;
         // anything else is skipped.
-        let item = bvh_items_at(k);
         var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
         if item < n {
             let p = points_at(item);

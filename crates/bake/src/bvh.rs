@@ -1,6 +1,10 @@
-//! Step 8 of the bake: a BVH2 over the candidates' boxes, built by obvhs (PLOC pairing each
-//! cluster among its nearest neighbours in Morton order, then reinsertion) and rewritten into
-//! the cache's node layout: children adjacent, root first, boxes rounded outward to f32.
+//! Step 8 of the bake: a BVH2 over the candidates' boxes, its leaves ranges of consecutive
+//! items. Candidates in index (Morton) order are grouped into leaves of up to
+//! [`MAX_LEAF_ITEMS`] that lie close together and span at most [`MAX_LEAF_RANGE`] items;
+//! obvhs builds the tree over the groups' boxes (PLOC pairing each cluster among its nearest
+//! neighbours in Morton order, then reinsertion, one group per leaf), rewritten into the
+//! cache's node layout: children adjacent, root first, boxes rounded outward to f32. A leaf
+//! names its items as a range, so the cache holds no item list (format 6).
 
 use std::time::Duration;
 
@@ -10,10 +14,14 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::ploc::PlocSearchDistance;
 use rayon::prelude::*;
-use slosh_cache::{Bvh, GpuBvhNode};
+use slosh_cache::{Bvh, GpuBvhNode, MAX_LEAF_RANGE};
 
-/// Up to this many items share a leaf (obvhs collapses by SAH cost below it).
+/// Up to this many candidates share a leaf.
 pub const MAX_LEAF_ITEMS: u32 = 8;
+
+/// A leaf's box spans at most this many of its largest member's diameters on every axis: a
+/// jump of the Morton curve starts a new leaf instead of stretching one box across it.
+const LEAF_SPAN_DIAMETERS: f64 = 3.0;
 
 fn down(v: f64) -> f32 {
     let f = v as f32;
@@ -25,27 +33,72 @@ fn up(v: f64) -> f32 {
     if f64::from(f) < v { f.next_up() } else { f }
 }
 
-/// Builds the BVH over `items`: (item id, centre, radius) spheres in local coordinates.
+/// A leaf-to-be: items `first..=last` (some of which may not be candidates) and the
+/// candidates' bounds.
+struct Group {
+    first: u32,
+    last: u32,
+    members: u32,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    diameter: f64,
+}
+
+/// Consecutive candidates grouped into leaves (`items` ascending by id).
+fn groups(items: &[(u32, [f64; 3], f64)]) -> Vec<Group> {
+    let mut out: Vec<Group> = Vec::with_capacity(items.len() / 4 + 1);
+    for &(id, c, r) in items {
+        let (lo, hi) = (c.map(|v| v - r), c.map(|v| v + r));
+        if let Some(g) = out.last_mut() {
+            let diameter = g.diameter.max(2.0 * r);
+            let fits = (0..3)
+                .all(|a| g.hi[a].max(hi[a]) - g.lo[a].min(lo[a]) <= LEAF_SPAN_DIAMETERS * diameter);
+            if fits && g.members < MAX_LEAF_ITEMS && id - g.first < MAX_LEAF_RANGE {
+                g.last = id;
+                g.members += 1;
+                g.diameter = diameter;
+                for a in 0..3 {
+                    g.lo[a] = g.lo[a].min(lo[a]);
+                    g.hi[a] = g.hi[a].max(hi[a]);
+                }
+                continue;
+            }
+        }
+        out.push(Group {
+            first: id,
+            last: id,
+            members: 1,
+            lo,
+            hi,
+            diameter: 2.0 * r,
+        });
+    }
+    out
+}
+
+/// Builds the BVH over `items`: (item id, centre, radius) spheres in local coordinates, ids
+/// ascending.
 pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
+    debug_assert!(items.windows(2).all(|w| w[0].0 < w[1].0));
     if items.is_empty() {
         return Bvh::default();
     }
-    let boxes: Vec<Aabb> = items
+    let groups = groups(items);
+    let boxes: Vec<Aabb> = groups
         .par_iter()
-        .map(|(_, c, r)| {
+        .map(|g| {
             Aabb::new(
-                Vec3A::new(down(c[0] - r), down(c[1] - r), down(c[2] - r)),
-                Vec3A::new(up(c[0] + r), up(c[1] + r), up(c[2] + r)),
+                Vec3A::new(down(g.lo[0]), down(g.lo[1]), down(g.lo[2])),
+                Vec3A::new(up(g.hi[0]), up(g.hi[1]), up(g.hi[2])),
             )
         })
         .collect();
     // obvhs's fast preset, but PLOC searching one neighbour either side at every depth (its
     // fast path) instead of a wider search near the root: balls of about one size tiling a
-    // surface gain nothing from the wider search. On the H200 host at 1M points the build
-    // took 218–274 ms on 16 threads (470–595 ms on 2) against 256–326 ms (560–736 ms), with
-    // 5 % more nodes; frames traced within a few per cent either way (docs/bake.md).
+    // surface gain nothing from the wider search (docs/bake.md). One group per leaf: a leaf
+    // must be one range of items.
     let params = BvhBuildParams {
-        max_prims_per_leaf: MAX_LEAF_ITEMS,
+        max_prims_per_leaf: 1,
         ploc_search_distance: PlocSearchDistance::Minimum,
         search_depth_threshold: 0,
         ..BvhBuildParams::fast_build()
@@ -54,7 +107,6 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
     // Rewrite breadth first from the root so that the layout is ours whatever obvhs keeps
     // internally: every inner node's two children sit in consecutive slots.
     let mut nodes: Vec<GpuBvhNode> = Vec::with_capacity(built.nodes.len());
-    let mut leaf_items: Vec<u32> = Vec::with_capacity(items.len());
     let mut queue = std::collections::VecDeque::from([(0usize, 0usize)]);
     nodes.push(bytemuck::Zeroable::zeroed());
     while let Some((src, dst)) = queue.pop_front() {
@@ -68,12 +120,10 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
             first: 0,
         };
         if node.is_leaf() {
-            out.first = leaf_items.len() as u32;
-            out.count = node.prim_count;
-            let first = node.first_index as usize;
-            for p in &built.primitive_indices[first..first + node.prim_count as usize] {
-                leaf_items.push(items[*p as usize].0);
-            }
+            debug_assert_eq!(node.prim_count, 1);
+            let g = &groups[built.primitive_indices[node.first_index as usize] as usize];
+            out.first = g.first;
+            out.count = g.last - g.first + 1;
         } else {
             out.first = nodes.len() as u32;
             let child = node.first_index as usize;
@@ -84,8 +134,52 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
         }
         nodes[dst] = out;
     }
-    Bvh {
-        nodes,
-        items: leaf_items,
+    Bvh { nodes }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn leaves_are_ranges_that_hold_every_item_once_and_close_together() {
+        // A line of unit balls with gaps in the ids (non-candidates) and a jump in space.
+        let mut items = Vec::new();
+        for i in 0..40u32 {
+            if i % 7 == 3 {
+                continue;
+            }
+            let x = if i < 20 {
+                f64::from(i)
+            } else {
+                1000.0 + f64::from(i)
+            };
+            items.push((i, [x, 0.0, 0.0], 1.0));
+        }
+        let bvh = build(&items);
+        let mut seen = vec![0; 40];
+        for leaf in bvh.nodes.iter().filter(|n| n.count > 0) {
+            assert!(leaf.count <= MAX_LEAF_RANGE);
+            let members: Vec<&(u32, [f64; 3], f64)> = items
+                .iter()
+                .filter(|(id, ..)| (leaf.first..leaf.first + leaf.count).contains(id))
+                .collect();
+            assert!(!members.is_empty() && members.len() as u32 <= MAX_LEAF_ITEMS);
+            for (id, c, r) in &members {
+                seen[*id as usize] += 1;
+                assert!(
+                    (0..3)
+                        .all(|a| f64::from(leaf.lo[a]) <= c[a] - r
+                            && f64::from(leaf.hi[a]) >= c[a] + r),
+                    "leaf {leaf:?} does not hold item {id}"
+                );
+            }
+            // Never across the jump: a leaf's box spans at most three diameters.
+            assert!(leaf.hi[0] - leaf.lo[0] <= 6.0, "{leaf:?}");
+        }
+        for (id, &count) in seen.iter().enumerate() {
+            let candidate = items.iter().any(|(i, ..)| *i as usize == id);
+            assert_eq!(count, usize::from(candidate), "item {id}");
+        }
     }
 }

@@ -538,22 +538,14 @@ fn step_header(input: &StepInput, params: &BakeParams) -> Header {
     }
 }
 
-/// The BVH's sections.
-fn bvh_sections(bvh: &slosh_cache::Bvh) -> [SectionInput; 2] {
-    [
-        SectionInput::new(
-            names::BVH_NODES,
-            Element::BvhNode,
-            &bvh.nodes,
-            by_element(Element::BvhNode),
-        ),
-        SectionInput::new(
-            names::BVH_ITEMS,
-            Element::U32,
-            &bvh.items,
-            Encoding::Shuffle4Zstd,
-        ),
-    ]
+/// The BVH's section: its nodes (a leaf names its items as a range).
+fn bvh_sections(bvh: &slosh_cache::Bvh) -> [SectionInput; 1] {
+    [SectionInput::new(
+        names::BVH_NODES,
+        Element::BvhNode,
+        &bvh.nodes,
+        by_element(Element::BvhNode),
+    )]
 }
 
 /// A step without particles (a Lagrangian or DEM run before its first injection): a valid

@@ -5,13 +5,17 @@ use slosh_mls::BallIndex;
 
 use crate::layout::GpuBvhNode;
 
-/// Nodes and leaf items of a step's BVH. Items number balls `0..n` and droplet spheres
-/// `n..n + spheres`, as [`BallIndex`] expects.
+/// The nodes of a step's BVH. Items number balls `0..n` and droplet spheres
+/// `n..n + spheres`, as [`BallIndex`] expects; a leaf holds items `first..first + count`,
+/// which may include balls that are not candidates (the walk's visitor skips those).
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
     pub nodes: Vec<GpuBvhNode>,
-    pub items: Vec<u32>,
 }
+
+/// The most items one leaf's range spans (format 6): the trace walk packs a leaf's count in
+/// four bits of its stack link.
+pub const MAX_LEAF_RANGE: u32 = 15;
 
 /// Entry parameter of the ray into the box for t ≥ 0, if it enters at all.
 fn enter(node: &GpuBvhNode, origin: [f64; 3], inv_dir: [f64; 3]) -> Option<f64> {
@@ -50,9 +54,16 @@ impl BallIndex for Bvh {
             }
             let node = &self.nodes[index as usize];
             if node.count > 0 {
-                let (first, count) = (node.first as usize, node.count as usize);
-                if let Some(items) = self.items.get(first..first + count) {
-                    best = visit(items);
+                let mut ids = [0u32; MAX_LEAF_RANGE as usize];
+                let (first, end) = (node.first, node.first.saturating_add(node.count));
+                // A longer range (which no bake writes, and the verifier refuses) is visited
+                // in parts.
+                for start in (first..end).step_by(ids.len()) {
+                    let part = (end - start).min(MAX_LEAF_RANGE) as usize;
+                    for (k, id) in ids[..part].iter_mut().enumerate() {
+                        *id = start + k as u32;
+                    }
+                    best = visit(&ids[..part]);
                 }
                 continue;
             }

@@ -41,7 +41,7 @@ pub struct GpuSphere {
 
 /// `struct BvhNode { lo: vec3<f32>, count: u32, hi: vec3<f32>, first: u32 }`: a BVH2 node.
 /// `count == 0`: inner node, children at `first` and `first + 1`. `count > 0`: leaf over
-/// `bvh_items[first .. first + count]`. Node 0 is the root.
+/// items `first .. first + count` (balls, then droplet spheres). Node 0 is the root.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuBvhNode {

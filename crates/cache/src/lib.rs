@@ -21,7 +21,7 @@ mod step;
 mod verify;
 mod writer;
 
-pub use bvh::Bvh;
+pub use bvh::{Bvh, MAX_LEAF_RANGE};
 /// The section codecs by themselves (for measuring encodings); readers use
 /// [`CacheFile::decode_into`].
 pub use codec::{

@@ -14,6 +14,5 @@ pub const CLUSTER_NEIGHBOURS: &str = "cluster_neighbours";
 pub const CLUSTER_BASE: &str = "cluster_base";
 pub const SPHERES: &str = "spheres";
 pub const BVH_NODES: &str = "bvh_nodes";
-pub const BVH_ITEMS: &str = "bvh_items";
 /// Per-point field sections are named `field.<variable>`.
 pub const FIELD_PREFIX: &str = "field.";

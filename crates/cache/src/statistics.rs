@@ -87,10 +87,7 @@ impl Statistics {
                 degrees[usize::from(b.degree())] += 1;
             }
         }
-        let bvh = Bvh {
-            nodes,
-            items: Vec::new(),
-        };
+        let bvh = Bvh { nodes };
         Ok(Statistics {
             neighbours: Summary::of(counts.iter().map(|&c| f64::from(c))),
             neighbour_histogram: histogram,

@@ -258,7 +258,6 @@ impl LoadedStep {
         .map_err(|e| invalid(e.to_string()))?;
         let bvh = Bvh {
             nodes: file.decode::<GpuBvhNode>(names::BVH_NODES)?,
-            items: file.decode(names::BVH_ITEMS)?,
         };
         Ok(LoadedStep {
             surface,

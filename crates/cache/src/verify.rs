@@ -3,14 +3,14 @@
 
 use rayon::prelude::*;
 
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, MAX_LEAF_RANGE};
 use crate::error::{Error, Result};
 use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
 use crate::names;
 use crate::reader::CacheFile;
 
 /// Sections that `check_invariants` decodes.
-const STRUCTURAL: [&str; 8] = [
+const STRUCTURAL: [&str; 7] = [
     names::POINTS,
     names::BALLS,
     names::SPHERES,
@@ -18,7 +18,6 @@ const STRUCTURAL: [&str; 8] = [
     names::CLUSTER_START,
     names::CLUSTER_NEIGHBOURS,
     names::BVH_NODES,
-    names::BVH_ITEMS,
 ];
 
 /// What a successful verification covered.
@@ -98,7 +97,6 @@ impl CacheFile {
             nodes: self
                 .decode::<GpuBvhNode>(names::BVH_NODES)
                 .map_err(decode_err)?,
-            items: self.decode(names::BVH_ITEMS).map_err(decode_err)?,
         };
         if points.len() != n || balls.len() != n || reach.len() != n || start.len() != clusters + 1
         {
@@ -170,7 +168,8 @@ impl CacheFile {
                 "droplet sphere {d} is not finite or has no positive radius"
             ));
         }
-        // Every candidate (fitted ball or sphere) is reachable exactly once; nothing else is.
+        // Every candidate (fitted ball or sphere) is in exactly one leaf's range; a range may
+        // also cover balls that are not candidates, which the walk skips.
         bvh.depth()
             .ok_or("the BVH's child links leave the node array or are not a tree")?;
         let items = n + spheres.len();
@@ -184,27 +183,30 @@ impl CacheFile {
             if node.count == 0 {
                 continue;
             }
-            let range = node.first as usize..node.first as usize + node.count as usize;
-            let leaf = bvh
-                .items
-                .get(range)
-                .ok_or("a BVH leaf points past the item list")?;
-            for &item in leaf {
-                let slot = seen
-                    .get_mut(item as usize)
-                    .ok_or(format!("BVH item {item} is out of range"))?;
-                if std::mem::replace(slot, true) {
-                    return Err(format!("BVH item {item} appears twice"));
-                }
+            // A leaf is a range of items; the balls in it that are not candidates are
+            // skipped by the walk, but no item belongs to two leaves.
+            if node.count > MAX_LEAF_RANGE {
+                return Err(format!(
+                    "a BVH leaf spans {} items; at most {MAX_LEAF_RANGE}: {node:?}",
+                    node.count
+                ));
             }
+            let range = node.first as usize..node.first as usize + node.count as usize;
+            let leaf = seen.get_mut(range.clone()).ok_or(format!(
+                "a BVH leaf holds items {}..{} of {items}",
+                range.start, range.end
+            ))?;
+            if let Some(k) = leaf.iter().position(|&s| s) {
+                return Err(format!("BVH item {} is in two leaves", range.start + k));
+            }
+            leaf.fill(true);
         }
         if let Some(i) = balls.par_iter().zip(&seen).position_first(|(b, &seen)| {
-            seen != matches!(b.kind(), BallState::Full | BallState::Degraded)
+            !seen && matches!(b.kind(), BallState::Full | BallState::Degraded)
         }) {
             return Err(format!(
-                "ball {i} ({:?}) is {} the BVH",
-                balls[i].kind(),
-                if seen[i] { "in" } else { "missing from" }
+                "ball {i} ({:?}) is missing from the BVH",
+                balls[i].kind()
             ));
         }
         if let Some(d) = seen[n..].iter().position(|s| !s) {

@@ -33,7 +33,8 @@ pub struct GpuSettings {
     pub has_field: u32,
     /// Words of neighbour mask of the largest cluster.
     pub mask_words: u32,
-    /// Entries of the 4-wide tree and of bvh_items.
+    /// Entries of the 4-wide tree, and the items its leaves range over (balls, then
+    /// droplet spheres).
     pub wide_count: u32,
     pub item_count: u32,
     /// The field's colour map (`Colormap as u32`).

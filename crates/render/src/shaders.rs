@@ -96,19 +96,17 @@ pub mod step_array {
     pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 2, false);
     pub const BALLS: RangedArray = array("balls", "Ball", 24, 0, 4, false);
     pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 5, false);
-    pub const BVH_ITEMS: RangedArray = array("bvh_items", "u32", 4, 0, 6, false);
     pub const FIELD: RangedArray = array("field", "f32", 4, 0, 7, false);
     pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 8, false);
     pub const BALL_CUBIC: RangedArray = array("ball_cubic", "vec2<u32>", 8, 0, 10, false);
 }
 
-pub const STEP_ARRAYS: [RangedArray; 9] = [
+pub const STEP_ARRAYS: [RangedArray; 8] = [
     step_array::POINTS,
     step_array::NORMALS,
     step_array::CLUSTER_START,
     step_array::BALLS,
     step_array::SPHERES,
-    step_array::BVH_ITEMS,
     step_array::FIELD,
     step_array::WIDE_NODES,
     step_array::BALL_CUBIC,

@@ -33,7 +33,6 @@ pub struct StepBuffers {
     /// A cubic's other four coefficients (`slosh_cache::CubicWords`), or an empty binding.
     pub ball_cubic: wgpu::Buffer,
     pub spheres: wgpu::Buffer,
-    pub bvh_items: wgpu::Buffer,
     pub field: wgpu::Buffer,
     /// The 4-wide tree the walk descends, made by the host half from the baked BVH2.
     pub wide_nodes: wgpu::Buffer,
@@ -48,7 +47,6 @@ impl StepBuffers {
             &self.cluster_start,
             &self.balls,
             &self.spheres,
-            &self.bvh_items,
             &self.field,
             &self.wide_nodes,
             &self.ball_cubic,
@@ -147,7 +145,6 @@ fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
         names::BALLS => &step_array::BALLS,
         names::BALL_CUBIC => &step_array::BALL_CUBIC,
         names::SPHERES => &step_array::SPHERES,
-        names::BVH_ITEMS => &step_array::BVH_ITEMS,
         WIDE_NODES => &step_array::WIDE_NODES,
         other => {
             return Err(invalid(
@@ -286,7 +283,7 @@ impl GpuStep {
         let (points, normals, reach) = (next()?, next()?, next()?);
         let (cluster_start, cluster_base, cluster_ids) = (next()?, next()?, next()?);
         let (balls, ball_cubic) = (next()?, next()?);
-        let (spheres, bvh_items, wide_nodes) = (next()?, next()?, next()?);
+        let (spheres, wide_nodes) = (next()?, next()?);
         let buffers = StepBuffers {
             points,
             normals,
@@ -297,7 +294,6 @@ impl GpuStep {
             balls,
             ball_cubic,
             spheres,
-            bvh_items,
             field: field_values,
             wide_nodes,
         };

@@ -283,7 +283,8 @@ impl<'a> HostStep<'a> {
             cluster_size: header.neighbour_cluster.max(1),
             bvh_depth: header.stats.bvh_depth,
             wide_count: 0,
-            item_count: count(names::BVH_ITEMS) as u32,
+            // Leaves name ranges of items: the balls, then the droplet spheres.
+            item_count: (u64::from(point_count) + count(names::SPHERES)) as u32,
             cluster_id_count: 0,
             run_words: 0,
             mask_words: 0,

@@ -27,7 +27,7 @@ pub use checks::{MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, mask_row};
 pub use gpu_step::{GpuStep, StepBuffers, UploadOptions, UploadStats};
 pub use host::{HostField, HostStep, StepInfo};
 
-const SECTIONS: [&str; 11] = [
+const SECTIONS: [&str; 10] = [
     names::POINTS,
     names::NORMALS,
     names::REACH,
@@ -38,7 +38,6 @@ const SECTIONS: [&str; 11] = [
     names::BALL_CUBIC,
     names::SPHERES,
     names::BVH_NODES,
-    names::BVH_ITEMS,
 ];
 
 /// The one section the GPU never holds: the host half widens it (`wide.rs`).
