@@ -66,10 +66,13 @@ impl Default for EngineOptions {
     }
 }
 
-/// Loader threads by default: a quarter of the cores, 2 to 4 (each load decodes and copies on
-/// rayon's threads too; on the H200 host 8 loaders streamed 1M-point steps slower than 4).
+/// Loader threads by default: three eighths of the cores, 2 to 6 (each load decodes and
+/// copies on rayon's threads too). On the H200 host's 16 cores, cache format 6, 4 and 6
+/// loaders alternated in one call: 1M-point steps streamed at 94.8, 90.4, 93.7 steps/s with
+/// 4 and 99.9, 99.1, 104.8 with 6; 8 gave 120.9 beside 6's 124.1 in another
+/// (`docs/results-scrub.md`).
 pub fn default_loaders() -> usize {
-    std::thread::available_parallelism().map_or(2, |n| (n.get() / 4).clamp(2, 4))
+    std::thread::available_parallelism().map_or(2, |n| (n.get() * 3 / 8).clamp(2, 6))
 }
 
 /// The default budget: half the adapter's device-local memory where it can be read (the
