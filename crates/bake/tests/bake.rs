@@ -193,6 +193,59 @@ fn every_single_byte_flip_is_detected() {
     assert!(undetected.is_empty(), "undetected flips at {undetected:?}");
 }
 
+/// Format 6's leaves are ranges of items: the verifier refuses a leaf that spans more than
+/// the tracer's 15 items, two leaves that share an item, and a fitted ball no leaf holds.
+#[test]
+fn bvh_leaves_that_overrun_overlap_or_drop_a_candidate_are_refused() {
+    let (_, input) = scene_input(SceneKind::Sphere, 2000, 0);
+    let baked = bake_step(&input, &params()).unwrap();
+    let at = baked
+        .sections
+        .iter()
+        .position(|s| s.name == names::BVH_NODES)
+        .unwrap();
+    let nodes: Vec<slosh_cache::GpuBvhNode> = baked.sections[at]
+        .bytes
+        .chunks_exact(size_of::<slosh_cache::GpuBvhNode>())
+        .map(bytemuck::pod_read_unaligned)
+        .collect();
+    let leaves: Vec<usize> = (0..nodes.len()).filter(|&i| nodes[i].count > 0).collect();
+    let verify = |nodes: &[slosh_cache::GpuBvhNode]| {
+        let mut sections = baked.sections.clone();
+        sections[at].bytes = bytemuck::cast_slice(nodes).to_vec();
+        let bytes = encode_step(baked.header.clone(), &sections, Compression::None).unwrap();
+        let file =
+            CacheFile::from_bytes(FileBytes::from_vec(Path::new("leaves.slc"), bytes)).unwrap();
+        file.verify().map_err(|e| e.to_string())
+    };
+    verify(&nodes).unwrap();
+    // Every leaf ends at a candidate: the bake groups candidates, and a range reaches its last.
+    let mut long = nodes.clone();
+    long[leaves[0]].count = 16;
+    let err = verify(&long).unwrap_err();
+    assert!(err.contains("spans 16 items; at most 15"), "{err}");
+    let mut overlap = nodes.clone();
+    overlap[leaves[1]].first = nodes[leaves[0]].first;
+    overlap[leaves[1]].count = 1;
+    let err = verify(&overlap).unwrap_err();
+    assert!(
+        err.contains(&format!(
+            "BVH item {} is in two leaves",
+            nodes[leaves[0]].first
+        )),
+        "{err}"
+    );
+    let mut short = nodes.clone();
+    let leaf = *leaves.iter().find(|&&l| nodes[l].count > 1).unwrap();
+    short[leaf].count -= 1;
+    let last = nodes[leaf].first + nodes[leaf].count - 1;
+    let err = verify(&short).unwrap_err();
+    assert!(
+        err.contains(&format!("ball {last} (")) && err.contains("is missing from the BVH"),
+        "{err}"
+    );
+}
+
 #[test]
 fn selection_drops_non_finite_and_interior_and_keeps_fields_aligned() {
     let (_, mut input) = scene_input(SceneKind::Sphere, 2000, 0);
