@@ -12,6 +12,10 @@ pub const MAX_BVH_DEPTH: u64 = 62;
 pub const MAX_LINK_FIRST: u32 = (1 << 28) - 1;
 pub const MAX_LEAF_LINK_COUNT: u32 = u32::MAX >> MAX_LINK_FIRST.count_ones();
 
+// Every leaf a bake writes (format 6: a range of at most `MAX_LEAF_RANGE` items) packs into a
+// stack link.
+const _: () = assert!(slosh_cache::MAX_LEAF_RANGE <= MAX_LEAF_LINK_COUNT);
+
 /// Checks that the `bvh_nodes` section is a tree the trace pass can walk: every node packs
 /// into a stack link, a leaf's items lie in the item list, and an inner node's children come
 /// after it (so every descent ends: trace.wgsl is compiled without loop guards,
