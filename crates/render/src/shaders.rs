@@ -47,8 +47,9 @@ pub const TEXTURE_BINDING: u32 = 101;
 pub const TRACE_STACK_SIZES: [u32; 3] = [32, 64, 96];
 
 /// Bindings per storage array: an array may span this many of the adapter's largest
-/// bindings (3 × 128 MiB on lavapipe: the balls of 16M points). The 13 arrays then take 39
-/// storage bindings per stage, within lavapipe's 48.
+/// bindings (3 × 128 MiB on lavapipe: the balls of 16M points). The trace pass's arrays then
+/// take `context::STORAGE_BUFFERS_NEEDED` storage bindings per stage (36), within lavapipe's
+/// 48.
 pub const RANGES: u32 = 3;
 
 /// The binding of a pass's uniform block, after every array's ranges.
