@@ -152,8 +152,9 @@ fn expand(
             if word * 32u >= count {
                 continue;
             }
-            let own = points_at(centre).position;
-            let r = reach_at(centre);
+            let own_point = points_at(centre);
+            let own = own_point.position;
+            let r = reach_of(own_point);
             let reach2 = r * r;
             var own_normal = vec3<f32>(0.0);
             if cfg.has_normals != 0u {

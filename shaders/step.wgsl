@@ -1,10 +1,20 @@
 // The step data types every module shares, bound from the cache's sections byte for byte or
 // built by expand.wgsl; prepended to each module by crates/render's shaders.rs.
 
-// Mirrors crates/cache/src/layout.rs.
+// Mirrors crates/cache/src/layout.rs: the radius of trust and the reach as half floats, the
+// radius in the low half (both normal half floats, so any unpack2x16float decodes them as the
+// CPU does).
 struct Point {
     position: vec3<f32>,
-    radius: f32,
+    radii: u32,
+}
+
+fn radius_of(p: Point) -> f32 {
+    return unpack2x16float(p.radii).x;
+}
+
+fn reach_of(p: Point) -> f32 {
+    return unpack2x16float(p.radii).y;
 }
 
 // A data normal, or a ball's support normal: one word, the octahedral map's two signed

@@ -94,7 +94,7 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
         var sphere = vec4<f32>(0.0, 0.0, 0.0, -1.0);
         if item < n {
             let p = points_at(item);
-            sphere = vec4<f32>(p.position, p.radius);
+            sphere = vec4<f32>(p.position, radius_of(p));
         } else if item - n < settings.sphere_count {
             let d = spheres_at(item - n);
             sphere = vec4<f32>(d.centre, d.radius);

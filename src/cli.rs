@@ -88,7 +88,7 @@ pub struct PlayArgs {
     /// Folder for screenshots and exported frames.
     #[arg(long, default_value = ".")]
     pub output: PathBuf,
-    /// Loader threads (default: a quarter of the cores, 2 to 4).
+    /// Loader threads (default: three eighths of the cores, 2 to 6).
     #[arg(long)]
     pub loaders: Option<usize>,
     /// Pause every step load this long (tests a frame loop that must not wait on loads).
@@ -159,7 +159,7 @@ pub struct ScrubBenchArgs {
     /// Seed of the jumps.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Loader threads of the engine (default: a quarter of the cores, 2 to 4).
+    /// Loader threads of the engine (default: three eighths of the cores, 2 to 6).
     #[arg(long)]
     pub loaders: Option<usize>,
     /// Pool size in steps for sequential playback and page-cache jumps (so that steps stream

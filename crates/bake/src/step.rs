@@ -5,6 +5,7 @@ use rayon::prelude::*;
 use slosh_cache::{
     BallState, CubicWords, Element, Encoding, GpuBall, GpuPoint, GpuSphere, Header, MAX_SPHERES,
     MlsSettings, SectionInput, Source, StepStats, Transform, candidates, names, octahedral,
+    stored_radius,
 };
 use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
@@ -46,8 +47,9 @@ pub struct BakedStep {
     pub sections: Vec<SectionInput>,
 }
 
-/// The BVH's items: every ball that `is_candidate` keeps (in index order), then the droplet
-/// spheres (ids after the balls').
+/// The BVH's items: every ball that `is_candidate` keeps (in index order), with the radius
+/// its point stores (rounded up, [`stored_radius`]), then the droplet spheres (ids after the
+/// balls').
 fn bvh_items(
     is_candidate: impl Fn(usize) -> bool + Sync,
     centre: impl Fn(usize) -> [f64; 3] + Sync,
@@ -58,7 +60,10 @@ fn bvh_items(
     let mut items: Vec<(u32, [f64; 3], f64)> = (0..n)
         .into_par_iter()
         .filter(|&i| is_candidate(i))
-        .map(|i| (i as u32, centre(i), radii[i]))
+        .map(|i| {
+            let stored = stored_radius(radii[i]).map_or(radii[i], f64::from);
+            (i as u32, centre(i), stored)
+        })
         .collect();
     for (d, s) in spheres.iter().enumerate() {
         items.push((
@@ -75,6 +80,13 @@ fn bvh_items(
 fn by_element(element: Element) -> Encoding {
     Encoding::shuffled_elements(element.size())
 }
+
+/// The sections stored raw: the bulk of what a step holds on the GPU, which compresses by
+/// 1.3–2.2× only (`docs/cache-format.md`). Loading them is a checksummed copy from the map
+/// into staging memory; decoding them was what bounded scrubbing from the page cache. The
+/// balls (2.9–6× smaller compressed), the tree and the offsets stay compressed, which keeps a
+/// step's file within 48 bytes per point.
+const STORED_RAW: Encoding = Encoding::Raw;
 
 /// A step's sections in the GPU layouts, but for the BVH's, its field sections, and each
 /// ball's state as stored.
@@ -93,13 +105,6 @@ fn gpu_sections(
         problem,
     };
     let f32x3 = |v: slosh_mls::V3<f64>| [v.x as f32, v.y as f32, v.z as f32];
-    let points: Vec<GpuPoint> = (0..n)
-        .into_par_iter()
-        .map(|i| GpuPoint {
-            position: f32x3(surface.points[i]),
-            radius: surface.radii[i] as f32,
-        })
-        .collect();
     // The compact layout (`docs/cache-format.md`, "Balls"): a fit whose coefficients a half
     // float cannot hold is stored unfitted, and the BVH is rebuilt without it.
     if surface.spheres.len() as u64 > u64::from(MAX_SPHERES) {
@@ -135,12 +140,16 @@ fn gpu_sections(
             ))
         })?;
     // The reach as f32, raised where needed so that the expansion, which measures distances
-    // in f32 on the stored positions, keeps every neighbour the f64 lists hold.
-    let stored: Vec<slosh_mls::V3<f32>> = points
-        .par_iter()
-        .map(|p| slosh_mls::V3::new(p.position[0], p.position[1], p.position[2]))
+    // in f32 on the stored positions, keeps every neighbour the f64 lists hold; the point
+    // stores the half float at or above it.
+    let stored: Vec<slosh_mls::V3<f32>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let [x, y, z] = f32x3(surface.points[i]);
+            slosh_mls::V3::new(x, y, z)
+        })
         .collect();
-    let reach: Vec<f32> = (0..n)
+    let points: Vec<GpuPoint> = (0..n)
         .into_par_iter()
         .map(|i| {
             let far2 = surface
@@ -152,9 +161,15 @@ fn gpu_sections(
             while r * r < far2 || f64::from(r) < surface.reach[i] {
                 r = r.next_up();
             }
-            r
+            let p = stored[i];
+            GpuPoint::new([p.x, p.y, p.z], surface.radii[i], f64::from(r)).ok_or_else(|| {
+                input_err(format!(
+                    "point {i}: radius {} or reach {r} (local units) is not a half float",
+                    surface.radii[i]
+                ))
+            })
         })
-        .collect();
+        .collect::<Result<_, _>>()?;
     let spheres: Vec<GpuSphere> = surface
         .spheres
         .iter()
@@ -164,19 +179,13 @@ fn gpu_sections(
         })
         .collect();
     let mut sections = vec![
-        SectionInput::new(
-            names::POINTS,
-            Element::Point,
-            &points,
-            by_element(Element::Point),
-        ),
+        SectionInput::new(names::POINTS, Element::Point, &points, STORED_RAW),
         SectionInput::new(
             names::BALLS,
             Element::Ball,
             &balls,
             by_element(Element::Ball),
         ),
-        SectionInput::new(names::REACH, Element::F32, &reach, Encoding::Shuffle4Zstd),
         SectionInput::new(
             names::CLUSTER_START,
             Element::U32,
@@ -193,7 +202,7 @@ fn gpu_sections(
             names::CLUSTER_NEIGHBOURS,
             Element::U32,
             &cluster_words,
-            Encoding::Shuffle4Zstd,
+            STORED_RAW,
         ),
         SectionInput::new(
             names::SPHERES,
@@ -218,12 +227,7 @@ fn gpu_sections(
             .collect();
         sections.insert(
             1,
-            SectionInput::new(
-                names::NORMALS,
-                Element::Octahedral,
-                &normals,
-                Encoding::Shuffle4Zstd,
-            ),
+            SectionInput::new(names::NORMALS, Element::Octahedral, &normals, STORED_RAW),
         );
     }
     let mut fields = Vec::with_capacity(params.fields.len());

@@ -10,7 +10,7 @@ pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
 pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files of another major version (older ones with the command that re-bakes
 /// them); minor versions only add.
-pub const MAJOR: u16 = 6;
+pub const MAJOR: u16 = 7;
 pub const MINOR: u16 = 0;
 /// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every

@@ -3,12 +3,57 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// `struct Point { position: vec3<f32>, radius: f32 }`: a point and its radius of trust.
+/// `struct Point { position: vec3<f32>, radii: u32 }` (format 7): a point, and its radius of
+/// trust (low half) and its neighbour list's reach (high half) as half floats, each the
+/// smallest normal half float at or above the value the bake computed. Both are bounds (a
+/// ball's extent, a distance filter), so rounding them up keeps what they bound; the bake
+/// builds the BVH over the stored radii.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuPoint {
     pub position: [f32; 3],
-    pub radius: f32,
+    pub radii: u32,
+}
+
+impl GpuPoint {
+    /// A point from its position, radius of trust and reach (local units); `None` where a
+    /// radius is not finite, negative, or beyond a half float's range.
+    pub fn new(position: [f32; 3], radius: f64, reach: f64) -> Option<GpuPoint> {
+        let word = u32::from(half_at_or_above(radius)?.to_bits())
+            | (u32::from(half_at_or_above(reach)?.to_bits()) << 16);
+        Some(GpuPoint {
+            position,
+            radii: word,
+        })
+    }
+
+    /// The radius of trust, as stored.
+    pub fn radius(&self) -> f32 {
+        unhalves(self.radii)[0]
+    }
+
+    /// How far the point's neighbour list reaches, as stored.
+    pub fn reach(&self) -> f32 {
+        unhalves(self.radii)[1]
+    }
+}
+
+/// The smallest normal half float at or above `x` (≥ 0), as f32: the radius of trust a point
+/// stores for `x` (`GpuPoint::new`); `None` where there is none.
+pub fn stored_radius(x: f64) -> Option<f32> {
+    half_at_or_above(x).map(half::f16::to_f32)
+}
+
+/// The smallest normal half float ≥ `x`, for `x` in `[0, 65504]`; `None` otherwise.
+fn half_at_or_above(x: f64) -> Option<half::f16> {
+    if !(x >= 0.0 && x <= f64::from(half::f16::MAX.to_f32())) {
+        return None;
+    }
+    let mut h = half::f16::from_f64(x).max(half::f16::MIN_POSITIVE);
+    while f64::from(h.to_f32()) < x {
+        h = half::f16::from_bits(h.to_bits() + 1);
+    }
+    Some(h)
 }
 
 /// `struct Ball { normal: u32, h: f32, coeffs: array<u32, 3>, state: u32 }` (24 bytes,
@@ -234,6 +279,38 @@ impl Element {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn points_store_radius_and_reach_rounded_up_to_normal_half_floats() {
+        assert_eq!(size_of::<GpuPoint>(), 16);
+        // Values across the range a local frame gives (its half-extent is 1), those a half
+        // float holds exactly, and one below the smallest normal half float.
+        for x in [3.7e-3, 4.5e-3, 0.0123456, 0.25, 1.0, 3.4641, 1e-7, 0.0] {
+            let p = GpuPoint::new([0.1, -0.2, 0.3], x, 2.0 * x).unwrap();
+            for (stored, want) in [(p.radius(), x), (p.reach(), 2.0 * x)] {
+                let stored = f64::from(stored);
+                assert!(stored >= want, "{stored} < {want}");
+                assert!(stored >= f64::from(MIN_NORMAL_HALF), "{stored}");
+                // The smallest one at or above: one step of 11 bits below it is too small.
+                let below = half::f16::from_f64(stored).to_bits() - 1;
+                let below = f64::from(half::f16::from_bits(below).to_f32());
+                assert!(
+                    below < want || stored == f64::from(MIN_NORMAL_HALF),
+                    "{below} >= {want}"
+                );
+                assert!(
+                    stored <= want.max(6.2e-5) * (1.0 + 2f64.powi(-10)),
+                    "{stored}"
+                );
+            }
+            assert_eq!(f64::from(stored_radius(x).unwrap()), f64::from(p.radius()));
+        }
+        // What a half float cannot hold is refused (the bake reports the step).
+        for bad in [f64::NAN, -1e-3, 7e4, f64::INFINITY] {
+            assert!(GpuPoint::new([0.0; 3], bad, 0.1).is_none(), "{bad}");
+            assert!(GpuPoint::new([0.0; 3], 0.1, bad).is_none(), "{bad}");
+        }
+    }
 
     #[test]
     fn balls_keep_their_state_and_the_nearest_stored_coefficients() {

@@ -34,6 +34,7 @@ pub use format::{
 };
 pub use layout::{
     BallState, CubicWords, Element, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MAX_SPHERES,
+    stored_radius,
 };
 pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,

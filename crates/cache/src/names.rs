@@ -6,7 +6,6 @@ pub const BALLS: &str = "balls";
 /// A cubic's coefficients 6–9, two words per point (format 5; only where the bake fits
 /// cubics).
 pub const BALL_CUBIC: &str = "ball_cubic";
-pub const REACH: &str = "reach";
 pub const CLUSTER_START: &str = "cluster_start";
 pub const CLUSTER_NEIGHBOURS: &str = "cluster_neighbours";
 /// Each cluster's first word of `cluster_neighbours` and whether it is wide (format 4; its

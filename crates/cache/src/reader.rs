@@ -414,6 +414,28 @@ impl CacheFile {
             })
     }
 
+    /// Run `k` of a section as stored (its chunk, or the whole section where the table has no
+    /// chunks; `spans` from [`SectionEntry::chunk_spans`]), its checksum checked: a raw run is
+    /// then ready to copy where it belongs. Whoever copies it asks [`CacheFile::unchanged`]
+    /// afterwards (the map may go to zeros under the copy).
+    pub fn checked_run(
+        &self,
+        entry: &SectionEntry,
+        spans: &[(std::ops::Range<usize>, std::ops::Range<usize>)],
+        k: usize,
+    ) -> Result<&[u8]> {
+        let Some((st, _)) = spans.get(k) else {
+            return Err(self.section_error(entry, format!("no run {k}")));
+        };
+        let bytes = &self.stored(entry)[st.clone()];
+        let (what, sum) = match entry.chunks.get(k) {
+            Some(chunk) => (format!("chunk {k}"), &chunk.xxh3),
+            None => ("section".to_string(), &entry.xxh3),
+        };
+        self.check_sum(entry, &what, st.start, bytes, sum)?;
+        Ok(bytes)
+    }
+
     /// Checks run `k` of a section (its chunk, or the whole section where the table has no
     /// chunks; `spans` from [`SectionEntry::chunk_spans`]) and decodes it into `out`, exactly
     /// the run's raw bytes. Runs decode independently, so a caller can put each straight
@@ -426,15 +448,12 @@ impl CacheFile {
         out: &mut [u8],
         scratch: &mut Vec<u8>,
     ) -> Result<()> {
-        let Some((st, _)) = spans.get(k) else {
-            return Err(self.section_error(entry, format!("no run {k}")));
+        let bytes = self.checked_run(entry, spans, k)?;
+        let st = &spans[k].0;
+        let what = match entry.chunks.get(k) {
+            Some(_) => format!("chunk {k}"),
+            None => "section".to_string(),
         };
-        let bytes = &self.stored(entry)[st.clone()];
-        let (what, sum) = match entry.chunks.get(k) {
-            Some(chunk) => (format!("chunk {k}"), &chunk.xxh3),
-            None => ("section".to_string(), &entry.xxh3),
-        };
-        self.check_sum(entry, &what, st.start, bytes, sum)?;
         let decoded = decode_into(bytes, entry.encoding, out, scratch);
         // The bytes may have gone to zeros after their checksum was taken: that, not the
         // decoder's complaint about them, is what happened.

@@ -94,7 +94,7 @@ impl Statistics {
             radii: Summary::of(
                 points
                     .iter()
-                    .map(|p| f64::from(p.radius) * h.transform.scale),
+                    .map(|p| f64::from(p.radius()) * h.transform.scale),
             ),
             degrees,
             fit_full: h.stats.fit_full,

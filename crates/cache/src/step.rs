@@ -53,7 +53,7 @@ impl MlsSettings {
 }
 
 /// What neighbour lists are recovered from: stored points (with radii), positions and data
-/// normals as vectors, reaches.
+/// normals as vectors, reaches (from the points' words).
 pub(crate) struct Geometry {
     pub(crate) points: Vec<GpuPoint>,
     pub(crate) positions: Vec<V3<f32>>,
@@ -68,15 +68,12 @@ impl CacheFile {
             .section(names::NORMALS)
             .map(|_| self.decode(names::NORMALS))
             .transpose()?;
-        let reach: Vec<f32> = self.decode(names::REACH)?;
-        if reach.len() != points.len() || normals.as_ref().is_some_and(|n| n.len() != points.len())
-        {
+        if normals.as_ref().is_some_and(|n| n.len() != points.len()) {
             return Err(Error::Invalid {
                 path: self.path().to_path_buf(),
                 problem: format!(
-                    "{} points, {} reaches, {:?} normals",
+                    "{} points, {:?} normals",
                     points.len(),
-                    reach.len(),
                     normals.as_ref().map(Vec::len)
                 ),
             });
@@ -86,8 +83,8 @@ impl CacheFile {
             // As the shaders decode them: on the octahedron, not normalised (the neighbour rule
             // tests signs; the fits normalise).
             normals: normals.map(|ns| ns.iter().map(|&n| v3(octahedral::decode(n))).collect()),
+            reach: points.iter().map(GpuPoint::reach).collect(),
             points,
-            reach,
         })
     }
 
@@ -215,7 +212,7 @@ impl LoadedStep {
             origin: [0.0; 3],
             points: positions,
             normals,
-            radii: points.iter().map(|p| p.radius).collect(),
+            radii: points.iter().map(|p| p.radius()).collect(),
             h: header.smoothing_length as f32,
             spacing: header.spacing as f32,
             offset: header.surface_offset as f32,
@@ -236,7 +233,7 @@ impl LoadedStep {
                 .zip(&cubic)
                 .map(|((p, b), cubic)| Ball {
                     centre: v3(p.position),
-                    radius: p.radius,
+                    radius: p.radius(),
                     h: b.h,
                     normal: v3(b.normal()),
                     poly: Poly {

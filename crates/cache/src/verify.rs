@@ -10,11 +10,10 @@ use crate::names;
 use crate::reader::CacheFile;
 
 /// Sections that `check_invariants` decodes.
-const STRUCTURAL: [&str; 7] = [
+const STRUCTURAL: [&str; 6] = [
     names::POINTS,
     names::BALLS,
     names::SPHERES,
-    names::REACH,
     names::CLUSTER_START,
     names::CLUSTER_NEIGHBOURS,
     names::BVH_NODES,
@@ -85,7 +84,6 @@ impl CacheFile {
         let balls: Vec<GpuBall> = self.decode(names::BALLS).map_err(decode_err)?;
         let cubic = self.cubic_words().map_err(decode_err)?;
         let spheres: Vec<GpuSphere> = self.decode(names::SPHERES).map_err(decode_err)?;
-        let reach: Vec<f32> = self.decode(names::REACH).map_err(decode_err)?;
         let start: Vec<u32> = self.decode(names::CLUSTER_START).map_err(decode_err)?;
         let neighbours = self.cluster_candidates(&start).map_err(decode_err)?;
         let size = header.neighbour_cluster as usize;
@@ -98,24 +96,14 @@ impl CacheFile {
                 .decode::<GpuBvhNode>(names::BVH_NODES)
                 .map_err(decode_err)?,
         };
-        if points.len() != n || balls.len() != n || reach.len() != n || start.len() != clusters + 1
-        {
+        if points.len() != n || balls.len() != n || start.len() != clusters + 1 {
             return Err(format!(
                 "the header says {n} points in {clusters} clusters; sections hold {} points, {} \
-                 balls, {} reaches, {} cluster offsets",
+                 balls, {} cluster offsets",
                 points.len(),
                 balls.len(),
-                reach.len(),
                 start.len()
             ));
-        }
-        // The per-element checks run in parallel and report the first offender, as a serial
-        // scan would: at 1M points they were a tenth of a second on one core after every bake.
-        if let Some(i) = reach
-            .par_iter()
-            .position_first(|r| !(r.is_finite() && *r >= 0.0))
-        {
-            return Err(format!("point {i} has an invalid reach {}", reach[i]));
         }
         for entry in &header.sections {
             let per_point =
@@ -127,11 +115,23 @@ impl CacheFile {
                 ));
             }
         }
-        if let Some(i) = points
-            .par_iter()
-            .position_first(|p| !(p.position.iter().all(|c| c.is_finite()) && p.radius > 0.0))
-        {
-            return Err(format!("point {i} is not finite or has no positive radius"));
+        // The per-element checks run in parallel and report the first offender, as a serial
+        // scan would: at 1M points they were a tenth of a second on one core after every bake.
+        // Radius and reach are normal half floats (the shaders may flush subnormals), the
+        // radius positive; `normal_half` holds for both.
+        let normal_half = |x: f32| x.is_finite() && x >= MIN_NORMAL_HALF;
+        if let Some(i) = points.par_iter().position_first(|p| {
+            !(p.position.iter().all(|c| c.is_finite())
+                && normal_half(p.radius())
+                && normal_half(p.reach()))
+        }) {
+            let p = points[i];
+            return Err(format!(
+                "point {i} is not finite or has a radius ({}) or reach ({}) that is not a \
+                 positive normal half float",
+                p.radius(),
+                p.reach()
+            ));
         }
         if start.first() != Some(&0)
             || start.windows(2).any(|w| w[0] > w[1])

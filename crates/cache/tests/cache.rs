@@ -107,9 +107,9 @@ fn truncation_at_any_length_is_a_clear_error() {
 #[test]
 fn a_newer_major_version_is_refused_by_name() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8..12].copy_from_slice(&[7, 0, 0, 0]);
+    bytes[8..12].copy_from_slice(&[8, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
-    assert!(err.contains("newer") && err.contains("7.0"), "{err}");
+    assert!(err.contains("newer") && err.contains("8.0"), "{err}");
 }
 
 #[test]
@@ -254,15 +254,15 @@ fn every_single_byte_flip_is_detected() {
     }
 }
 
-/// A file of an older major version (format 5.0 listed each BVH leaf's items, where 6.0
-/// names them as a range) is refused with both versions and the command that re-bakes it
-/// from its source.
+/// A file of an older major version (format 6.0 stored an f32 radius where 7.0 stores the
+/// radius and the reach as half floats) is refused with both versions and the command that
+/// re-bakes it from its source.
 #[test]
 fn an_older_major_version_is_refused_with_the_rebake_command() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8..12].copy_from_slice(&[5, 0, 0, 0]);
+    bytes[8..12].copy_from_slice(&[6, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
-    for part in ["test.slc", "5.0", "6.0", "older", "slosh bake test --out"] {
+    for part in ["test.slc", "6.0", "7.0", "older", "slosh bake test --out"] {
         assert!(err.contains(part), "{part}: {err}");
     }
 }

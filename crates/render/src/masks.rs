@@ -293,7 +293,6 @@ impl NeighbourMasks {
         let buffers = [
             &b.points,
             &b.normals,
-            &b.reach,
             &b.cluster_start,
             &b.cluster_ids,
             masks,

@@ -130,15 +130,14 @@ pub const FRAME_ARRAYS: [RangedArray; 2] = [
 pub const PRESENT_ARRAYS: [RangedArray; 1] = [array("image", "u32", 4, 0, 0, false)];
 
 /// The neighbour-mask pass's arrays (expand.wgsl, group 0).
-pub const EXPAND_ARRAYS: [RangedArray; 8] = [
+pub const EXPAND_ARRAYS: [RangedArray; 7] = [
     array("points", "Point", 16, 0, 0, false),
     array("normals", "u32", 4, 0, 1, false),
-    array("reach", "f32", 4, 0, 2, false),
-    array("cluster_start", "u32", 4, 0, 3, false),
-    array("cluster_ids", "u32", 4, 0, 4, false),
-    array("neighbour_masks", "u32", 4, 0, 5, true),
-    array("cluster_base", "u32", 4, 0, 6, false),
-    array("candidates", "u32", 4, 0, 7, true),
+    array("cluster_start", "u32", 4, 0, 2, false),
+    array("cluster_ids", "u32", 4, 0, 3, false),
+    array("neighbour_masks", "u32", 4, 0, 4, true),
+    array("cluster_base", "u32", 4, 0, 5, false),
+    array("candidates", "u32", 4, 0, 6, true),
 ];
 
 /// Elements of `element_size` bytes in one range under a binding limit of `limit` bytes:

@@ -312,7 +312,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
     let trace = validate("trace", &trace_wgsl(32, LIMITS[0], true));
     let shade = validate("shade", &shade_wgsl(LIMITS[0], true));
     for module in [&trace, &shade] {
-        check_layout!(module, "Point", GpuPoint, [position, radius]);
+        check_layout!(module, "Point", GpuPoint, [position, radii]);
         check_layout!(module, "Ball", GpuBall, [normal, h, coeffs, state]);
         check_layout!(
             module,
@@ -358,7 +358,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
         );
     }
     let expand = validate("expand", &expand_wgsl(LIMITS[0], true));
-    check_layout!(&expand, "Point", GpuPoint, [position, radius]);
+    check_layout!(&expand, "Point", GpuPoint, [position, radii]);
     check_layout!(
         &expand,
         "ExpandSettings",
@@ -941,7 +941,7 @@ fn neighbour_masks_equal_the_cpu_lists() {
         let normals: Option<Vec<u32>> = file
             .section(names::NORMALS)
             .map(|_| file.decode(names::NORMALS).unwrap());
-        let reach: Vec<f32> = file.decode(names::REACH).unwrap();
+        let reach: Vec<f32> = points.iter().map(GpuPoint::reach).collect();
         let start: Vec<u32> = file.decode(names::CLUSTER_START).unwrap();
         let ids = file.cluster_candidates(&start).unwrap();
         // The pass expands the stored runs into every cluster's candidates, slot for slot.

@@ -1,8 +1,9 @@
-//! One staging buffer per step, filled in parallel: raw sections copied from the map,
-//! compressed ones decoded run by run straight into it, the copies recorded.
+//! One staging buffer per step, filled in parallel: raw sections checksummed and copied from
+//! the map run by run, compressed ones decoded run by run straight into it, the copies
+//! recorded.
 
 use rayon::prelude::*;
-use slosh_cache::{CacheFile, SectionEntry};
+use slosh_cache::{CacheFile, Encoding, SectionEntry};
 
 use super::EMPTY_BINDING;
 use super::host::Source;
@@ -109,6 +110,18 @@ pub(super) fn storage_buffers(
             }
             match piece {
                 Piece::Copy(bytes) => view.slice(..bytes.len()).copy_from_slice(bytes),
+                Piece::Run {
+                    file,
+                    entry,
+                    spans,
+                    k,
+                } if entry.encoding == Encoding::Raw => {
+                    // A raw run is checksummed and copied straight in: one pass over the map.
+                    // Opening the file checked that raw chunks are stored as they are, so the
+                    // run fills its view.
+                    let bytes = file.checked_run(entry, spans, k)?;
+                    view.slice(..bytes.len()).copy_from_slice(bytes);
+                }
                 Piece::Run {
                     file,
                     entry,

@@ -20,8 +20,6 @@ use crate::staging::StagingPool;
 pub struct StepBuffers {
     pub points: wgpu::Buffer,
     pub normals: wgpu::Buffer,
-    /// Read by the neighbour-mask pass only (the tracer's, before a refined frame).
-    pub reach: wgpu::Buffer,
     pub cluster_start: wgpu::Buffer,
     /// Each cluster's first word of `cluster_ids` and whether it is wide; read by the mask
     /// pass only.
@@ -59,7 +57,7 @@ impl StepBuffers {
             .iter()
             .map(|b| b.size())
             .sum::<u64>()
-            + [&self.reach, &self.cluster_base, &self.cluster_ids]
+            + [&self.cluster_base, &self.cluster_ids]
                 .iter()
                 .map(|b| b.size())
                 .sum::<u64>()
@@ -132,16 +130,15 @@ pub struct GpuStep {
     staging: Option<wgpu::Buffer>,
 }
 
-/// How the passes bind each array of [`HostStep::gpu_arrays`]: the reach and the candidate
-/// runs are read only by the mask pass; a name that is no array is an error, never a guess.
+/// How the passes bind each array of [`HostStep::gpu_arrays`]: the candidate runs and their
+/// offsets are read only by the mask pass; a name that is no array is an error, never a guess.
 fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
     Ok(match name {
         names::POINTS => &step_array::POINTS,
         names::NORMALS => &step_array::NORMALS,
-        names::REACH => &EXPAND_ARRAYS[2],
         names::CLUSTER_START => &step_array::CLUSTER_START,
-        names::CLUSTER_NEIGHBOURS => &EXPAND_ARRAYS[4],
-        names::CLUSTER_BASE => &EXPAND_ARRAYS[6],
+        names::CLUSTER_NEIGHBOURS => &EXPAND_ARRAYS[3],
+        names::CLUSTER_BASE => &EXPAND_ARRAYS[5],
         names::BALLS => &step_array::BALLS,
         names::BALL_CUBIC => &step_array::BALL_CUBIC,
         names::SPHERES => &step_array::SPHERES,
@@ -280,14 +277,13 @@ impl GpuStep {
             it.next()
                 .ok_or_else(|| Error::Validation("upload produced too few buffers".into()))
         };
-        let (points, normals, reach) = (next()?, next()?, next()?);
+        let (points, normals) = (next()?, next()?);
         let (cluster_start, cluster_base, cluster_ids) = (next()?, next()?, next()?);
         let (balls, ball_cubic) = (next()?, next()?);
         let (spheres, wide_nodes) = (next()?, next()?);
         let buffers = StepBuffers {
             points,
             normals,
-            reach,
             cluster_start,
             cluster_base,
             cluster_ids,

@@ -134,13 +134,14 @@ impl HeldFile<'_> {
 #[derive(Debug)]
 enum SectionData {
     Absent,
-    /// Raw in the file, checksummed in place: copied straight from the map.
+    /// Raw in the file and read by the host half, checksummed in place.
     Stored,
     /// Decoded by the host half, which reads it (the tree, the cluster offsets).
     Decoded(Vec<u8>),
-    /// Compressed, decoded run by run straight into the staging memory by the GPU half: a
-    /// run decodes into a cache-sized buffer and is copied on while hot, so the section is
-    /// never written to and read back from main memory in full.
+    /// Left to the GPU half, run by run: a raw run is checksummed and copied from the map
+    /// into the staging memory; a compressed one decodes into a cache-sized buffer and is
+    /// copied on while hot, so the section is never written to and read back from main
+    /// memory in full.
     Deferred,
 }
 
@@ -258,7 +259,7 @@ impl<'a> HostStep<'a> {
                     .zip(&entries)
                     .map(|(name, entry)| -> Result<SectionData> {
                         match entry {
-                            Some(e) if e.encoding == Encoding::Raw => {
+                            Some(e) if e.encoding == Encoding::Raw && HOST_READS.contains(name) => {
                                 f.checked_stored(e)?;
                                 Ok(SectionData::Stored)
                             }

@@ -27,10 +27,9 @@ pub use checks::{MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, mask_row};
 pub use gpu_step::{GpuStep, StepBuffers, UploadOptions, UploadStats};
 pub use host::{HostField, HostStep, StepInfo};
 
-const SECTIONS: [&str; 10] = [
+const SECTIONS: [&str; 9] = [
     names::POINTS,
     names::NORMALS,
-    names::REACH,
     names::CLUSTER_START,
     names::CLUSTER_BASE,
     names::CLUSTER_NEIGHBOURS,
