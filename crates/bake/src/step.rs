@@ -81,12 +81,18 @@ fn by_element(element: Element) -> Encoding {
     Encoding::shuffled_elements(element.size())
 }
 
-/// The sections stored raw: the bulk of what a step holds on the GPU, which compresses by
-/// 1.3–2.2× only (`docs/cache-format.md`). Loading them is a checksummed copy from the map
-/// into staging memory; decoding them was what bounded scrubbing from the page cache. The
-/// balls (2.9–6× smaller compressed), the tree and the offsets stay compressed, which keeps a
-/// step's file within 48 bytes per point.
-const STORED_RAW: Encoding = Encoding::Raw;
+/// The ranks in which sections are stored raw while the step stays within its budget
+/// (`slosh_cache::RAW_BUDGET_BYTES_PER_POINT`, `docs/cache-format.md`): the BVH nodes, which
+/// the host half reads on every load, then the bulk of what a step holds on the GPU that
+/// compresses least (1.3–2.2×). A raw section loads as a checksummed copy from the map or a
+/// read in place; decoding them was what bounded scrubbing from the page cache. The balls
+/// (1.6–6× smaller compressed) and the offsets stay compressed.
+mod raw_rank {
+    pub const BVH_NODES: u8 = 0;
+    pub const POINTS: u8 = 1;
+    pub const NORMALS: u8 = 2;
+    pub const CLUSTER_NEIGHBOURS: u8 = 3;
+}
 
 /// A step's sections in the GPU layouts, but for the BVH's, its field sections, and each
 /// ball's state as stored.
@@ -179,7 +185,13 @@ fn gpu_sections(
         })
         .collect();
     let mut sections = vec![
-        SectionInput::new(names::POINTS, Element::Point, &points, STORED_RAW),
+        SectionInput::new(
+            names::POINTS,
+            Element::Point,
+            &points,
+            by_element(Element::Point),
+        )
+        .raw_within_budget(raw_rank::POINTS),
         SectionInput::new(
             names::BALLS,
             Element::Ball,
@@ -202,8 +214,9 @@ fn gpu_sections(
             names::CLUSTER_NEIGHBOURS,
             Element::U32,
             &cluster_words,
-            STORED_RAW,
-        ),
+            Encoding::Shuffle4Zstd,
+        )
+        .raw_within_budget(raw_rank::CLUSTER_NEIGHBOURS),
         SectionInput::new(
             names::SPHERES,
             Element::Sphere,
@@ -227,7 +240,13 @@ fn gpu_sections(
             .collect();
         sections.insert(
             1,
-            SectionInput::new(names::NORMALS, Element::Octahedral, &normals, STORED_RAW),
+            SectionInput::new(
+                names::NORMALS,
+                Element::Octahedral,
+                &normals,
+                Encoding::Shuffle4Zstd,
+            )
+            .raw_within_budget(raw_rank::NORMALS),
         );
     }
     let mut fields = Vec::with_capacity(params.fields.len());
@@ -549,7 +568,8 @@ fn bvh_sections(bvh: &slosh_cache::Bvh) -> [SectionInput; 1] {
         Element::BvhNode,
         &bvh.nodes,
         by_element(Element::BvhNode),
-    )]
+    )
+    .raw_within_budget(raw_rank::BVH_NODES)]
 }
 
 /// A step without particles (a Lagrangian or DEM run before its first injection): a valid

@@ -45,4 +45,4 @@ pub use reader::CacheFile;
 pub use statistics::{Statistics, Summary};
 pub use step::LoadedStep;
 pub use verify::VerifyReport;
-pub use writer::{Compression, SectionInput, encode_step, write_step};
+pub use writer::{Compression, RAW_BUDGET_BYTES_PER_POINT, SectionInput, encode_step, write_step};

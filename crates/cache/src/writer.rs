@@ -13,14 +13,25 @@ use crate::format::{
 };
 use crate::layout::Element;
 
-/// One section to write: its element bytes and the encoding to try.
+/// One section to write: its element bytes, the encoding to try, and whether it is stored
+/// raw where the step's budget allows ([`RAW_BUDGET_BYTES_PER_POINT`]).
 #[derive(Debug, Clone)]
 pub struct SectionInput {
     pub name: String,
     pub element: Element,
     pub bytes: Vec<u8>,
     pub encoding: Encoding,
+    /// Stored raw, in ascending order of this rank, while the step's sections stay within
+    /// the budget; `None`: stored with `encoding` wherever that saves 10 %.
+    pub raw_rank: Option<u8>,
 }
+
+/// The stored bytes per point a step's sections may take when the bake compresses: sections
+/// with a [`SectionInput::raw_rank`] are stored raw, rank by rank, while the sections' total
+/// stays within this many bytes per point. A raw section loads as a checksummed copy from
+/// the map, with no decoding on the player's hot path; the budget keeps a step's file
+/// within 48 bytes per point (issue 27) with room for its header, padding and table.
+pub const RAW_BUDGET_BYTES_PER_POINT: u64 = 46;
 
 impl SectionInput {
     pub fn new<T: bytemuck::Pod>(
@@ -40,7 +51,14 @@ impl SectionInput {
             element,
             bytes,
             encoding,
+            raw_rank: None,
         }
+    }
+
+    /// The section stored raw where the budget allows, before those of higher `rank`.
+    pub fn raw_within_budget(mut self, rank: u8) -> SectionInput {
+        self.raw_rank = Some(rank);
+        self
     }
 }
 
@@ -61,7 +79,8 @@ pub fn encode_step(
     compression: Compression,
 ) -> Result<Vec<u8>, std::io::Error> {
     // Every chunk of every section encoded in parallel; a section keeps its encoding only
-    // where that saves at least 10 % over all its chunks.
+    // where that saves at least 10 % over all its chunks, and is stored raw instead where its
+    // raw rank comes up within the budget.
     let jobs: Vec<(usize, &[u8])> = sections
         .iter()
         .enumerate()
@@ -83,15 +102,57 @@ pub fn encode_step(
             }
         })
         .collect::<std::io::Result<_>>()?;
-    let mut encoded: Vec<(Encoding, Vec<u8>, Vec<ChunkEntry>)> = Vec::new();
+    // Each section's chunks among the jobs, and whether its encoding saves 10 %.
     let mut at = 0;
-    for s in sections {
-        let n = s.bytes.len().div_ceil(s.encoding.chunk_raw() as usize);
-        let chunks = &packed[at..at + n];
-        let raws = &jobs[at..at + n];
-        at += n;
-        let packed_len: usize = chunks.iter().flatten().map(Vec::len).sum();
-        let keep = chunks.iter().all(Option::is_some) && packed_len * 10 <= s.bytes.len() * 9;
+    let spans: Vec<std::ops::Range<usize>> = sections
+        .iter()
+        .map(|s| {
+            let n = s.bytes.len().div_ceil(s.encoding.chunk_raw() as usize);
+            at += n;
+            at - n..at
+        })
+        .collect();
+    let packed_len = |k: usize| -> usize {
+        packed[spans[k].clone()]
+            .iter()
+            .flatten()
+            .map(Vec::len)
+            .sum()
+    };
+    let mut keep: Vec<bool> = sections
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            packed[spans[k].clone()].iter().all(Option::is_some)
+                && packed_len(k) * 10 <= s.bytes.len() * 9
+        })
+        .collect();
+    // Sections with a raw rank go raw, rank by rank, while the total stays within budget.
+    let stored_len = |k: usize, keep: &[bool]| {
+        if keep[k] {
+            packed_len(k)
+        } else {
+            sections[k].bytes.len()
+        }
+    };
+    let mut total: usize = (0..sections.len()).map(|k| stored_len(k, &keep)).sum();
+    let budget = (header.points.saturating_mul(RAW_BUDGET_BYTES_PER_POINT)) as usize;
+    let mut ranked: Vec<usize> = (0..sections.len())
+        .filter(|&k| sections[k].raw_rank.is_some() && keep[k])
+        .collect();
+    ranked.sort_by_key(|&k| sections[k].raw_rank);
+    for k in ranked {
+        let raw_total = total - packed_len(k) + sections[k].bytes.len();
+        if raw_total <= budget {
+            keep[k] = false;
+            total = raw_total;
+        }
+    }
+    let mut encoded: Vec<(Encoding, Vec<u8>, Vec<ChunkEntry>)> = Vec::new();
+    for (k, s) in sections.iter().enumerate() {
+        let chunks = &packed[spans[k].clone()];
+        let raws = &jobs[spans[k].clone()];
+        let keep = keep[k];
         let parts: Vec<&[u8]> = if keep {
             chunks.iter().flatten().map(Vec::as_slice).collect()
         } else {

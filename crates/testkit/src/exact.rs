@@ -12,9 +12,10 @@ use crate::KitError;
 
 /// The compact cache of `input` read back (as [`crate::bake_in_memory`]), and its step
 /// "stored exactly": the same surface with the bake's f64 support normals, coefficients and
-/// data normals rounded once to f32 and its own neighbour lists, in place of what the
-/// layout stores (octahedral normals, half-float coefficients, lists recovered from the
-/// stored normals). Positions, radii, h, droplets and the BVH are the cache's in both.
+/// data normals, radii of trust and reaches rounded once to f32 and its own neighbour lists,
+/// in place of what the layout stores (octahedral normals, half-float coefficients, radii
+/// and reaches rounded up to half floats, lists recovered from the stored values).
+/// Positions, h, droplets and the BVH are the cache's in both.
 pub fn bake_exact_and_stored(
     input: &StepInput,
     params: &BakeParams,
@@ -26,10 +27,15 @@ pub fn bake_exact_and_stored(
     let stored = LoadedStep::load(&file)?;
     let f32x3 = |v: V3<f64>| V3::new(v.x as f32, v.y as f32, v.z as f32);
     let mut exact = stored.surface.into_parts();
-    for (ball, own) in exact.balls.iter_mut().zip(&parts.balls) {
+    // The radii of trust and the reaches as computed, not rounded up to the stored half
+    // floats (the stored BVH's boxes hold the smaller balls too).
+    for ((ball, own), &radius) in exact.balls.iter_mut().zip(&parts.balls).zip(&parts.radii) {
         ball.normal = f32x3(own.normal);
         ball.poly.c = own.poly.c.map(|c| c as f32);
+        ball.radius = radius as f32;
     }
+    exact.radii = parts.radii.iter().map(|&r| r as f32).collect();
+    exact.reach = parts.reach.iter().map(|&r| r as f32).collect();
     exact.normals = parts
         .normals
         .as_ref()
