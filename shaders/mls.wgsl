@@ -4,14 +4,20 @@
 // Shared by trace.wgsl and shade.wgsl, which are appended to this file.
 
 // A ball's initial support normal and polynomial. Mirrors `slosh_cache::GpuBall`: the
-// support normal (octahedral), h, the first six coefficients as half floats two to a word,
-// and the state word (bits 0–1 the state, 2–3 the degree, 4–31 the droplet's sphere); a
-// cubic's other four are in `ball_cubic` (two words per ball).
+// support normal (octahedral), the first six coefficients as half floats two to a word (a
+// droplet member's first word names its sphere instead), and the state word (bits 0–1 the
+// state, 2–3 the degree, 16–31 h as a half float); a cubic's other four are in `ball_cubic`
+// (two words per ball).
 struct Ball {
     normal: u32,
-    h: f32,
     coeffs: array<u32, 3>,
     state: u32,
+}
+
+// The ball's smoothing length: a normal half float (the verifier refuses any other), so
+// every adapter decodes what the CPU does.
+fn ball_h(b: Ball) -> f32 {
+    return unpack2x16float(b.state).y;
 }
 
 // One pixel of the hit buffer; mirrors `slosh_render::GpuHit`. Position and t are in the

@@ -125,7 +125,7 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
         if (ball.state & 3u) >= 2u {
             continue;
         }
-        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball, item), ball.h, settings.surface_offset, t_lo, iv.t_out);
+        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball, item), ball_h(ball), settings.surface_offset, t_lo, iv.t_out);
         if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
             && key_before(hit.t, item, (*best).t, (*best).item) {
             (*best).found = true;
@@ -298,7 +298,7 @@ fn trace_refined(@builtin(global_invocation_id) gid: vec3<u32>) {
             store(p, ray, c.item, start);
             return;
         }
-        let out = refine(ray, c.item, balls_at(c.item).h, start, c.t_lo, c.t_out);
+        let out = refine(ray, c.item, ball_h(balls_at(c.item)), start, c.t_lo, c.t_out);
         if out.status != STATUS_MISS && finite(out.t) {
             store(p, ray, c.item, out);
             return;

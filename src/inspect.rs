@@ -196,7 +196,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
         "world": h.transform.to_world(local),
         "radius_local": p.radius(), "reach_local": p.reach(),
         "ball": {
-            "normal": b.normal(), "h": b.h, "degree": b.degree(),
+            "normal": b.normal(), "h": b.h(), "degree": b.degree(),
             "state": format!("{:?}", b.kind()), "sphere": b.sphere(),
             "coefficients": b.coeffs(cubic[i]),
         },

@@ -121,7 +121,7 @@ fn gpu_sections(
     }
     let (balls, cubic): (Vec<GpuBall>, Vec<CubicWords>) = (0..n)
         .into_par_iter()
-        .map(|i| {
+        .map(|i| -> Result<(GpuBall, CubicWords), BakeError> {
             let b = &surface.balls[i];
             let (kind, sphere) = match surface.ball_fits[i] {
                 BallFit::Fitted(FitStatus::Full) => (BallState::Full, 0),
@@ -131,9 +131,17 @@ fn gpu_sections(
             };
             let normal = [b.normal.x, b.normal.y, b.normal.z];
             let coeffs = b.poly.c.map(|c| c as f32);
-            GpuBall::new(normal, b.h as f32, coeffs, b.poly.degree, kind, sphere)
-                .unwrap_or_else(|| (GpuBall::unfitted(b.h as f32), [0; 2]))
+            // h is at half precision already (`slosh_mls::half_precision`), so exact in f32.
+            let h = b.h as f32;
+            let unfitted = || {
+                GpuBall::unfitted(h)
+                    .map(|ball| (ball, [0; 2]))
+                    .ok_or_else(|| input_err(format!("ball {i}: h = {h} is not a half float")))
+            };
+            GpuBall::new(normal, h, coeffs, b.poly.degree, kind, sphere).map_or_else(unfitted, Ok)
         })
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
         .unzip();
     // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
     // rounded up to f32 keeps every stored list within its distance filter.

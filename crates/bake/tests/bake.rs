@@ -80,11 +80,12 @@ fn tracing_a_cache_gives_the_hits_of_the_in_memory_surface() {
             h_factor: 1.0,
         };
         let reference = oracle.render(&camera, &f64_params);
-        // The lists come back from the clusters in f32 with nothing lost (a rounding tie at
-        // the reach may add one).
+        // The lists come back from the clusters with nothing lost; the reach, stored rounded
+        // up to a half float (at most 2⁻¹⁰ of it), may admit the candidates of that thin
+        // shell: 3 × 2⁻¹⁰ of a list's points at most where they are spread evenly in 3D.
         let (stored, exact) = (step.surface.neighbours.total(), oracle.neighbours.total());
         assert!(
-            stored >= exact && stored * 1000 <= exact * 1001,
+            stored >= exact && stored * 1000 <= exact * 1003,
             "{kind:?}: {stored} neighbours from the cache, {exact} in memory"
         );
         let spacing = oracle.spacing;

@@ -23,6 +23,7 @@ pub fn encode(raw: &[u8], encoding: Encoding, level: i32) -> std::io::Result<Vec
         Encoding::Delta4Shuffle4Zstd => zstd::bulk::compress(&shuffle4(&delta4(raw)), level),
         Encoding::Shuffle4Zstd
         | Encoding::Shuffle16Zstd
+        | Encoding::Shuffle20Zstd
         | Encoding::Shuffle24Zstd
         | Encoding::Shuffle32Zstd
         | Encoding::Shuffle64Zstd => {
@@ -67,6 +68,7 @@ pub fn decode_into(
         Encoding::Shuffle4Zstd
         | Encoding::Delta4Shuffle4Zstd
         | Encoding::Shuffle16Zstd
+        | Encoding::Shuffle20Zstd
         | Encoding::Shuffle24Zstd
         | Encoding::Shuffle32Zstd
         | Encoding::Shuffle64Zstd => {
@@ -136,6 +138,7 @@ fn transpose_width(from: &[u8], to: &mut [u8], width: usize, direction: Directio
     match width {
         4 => transpose(from, to, 4, direction),
         16 => transpose(from, to, 16, direction),
+        20 => transpose(from, to, 20, direction),
         24 => transpose(from, to, 24, direction),
         32 => transpose(from, to, 32, direction),
         64 => transpose(from, to, 64, direction),

@@ -10,7 +10,7 @@ pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
 pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files of another major version (older ones with the command that re-bakes
 /// them); minor versions only add.
-pub const MAJOR: u16 = 7;
+pub const MAJOR: u16 = 8;
 pub const MINOR: u16 = 0;
 /// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
@@ -102,7 +102,10 @@ pub enum Encoding {
     /// padding word becomes one run of zeros. Format 3.
     #[serde(rename = "shuffle16+zstd")]
     Shuffle16Zstd,
-    /// As `shuffle16+zstd`, within each 24-byte element (the balls). Format 5.
+    /// As `shuffle16+zstd`, within each 20-byte element (the balls). Format 8.
+    #[serde(rename = "shuffle20+zstd")]
+    Shuffle20Zstd,
+    /// As `shuffle16+zstd`, within each 24-byte element (format 5's to 7's balls). Format 5.
     #[serde(rename = "shuffle24+zstd")]
     Shuffle24Zstd,
     /// As `shuffle16+zstd`, within each 32-byte element. Format 3.
@@ -121,6 +124,7 @@ impl Encoding {
             Encoding::Shuffle4Zstd => "shuffle4+zstd",
             Encoding::Delta4Shuffle4Zstd => "delta4+shuffle4+zstd",
             Encoding::Shuffle16Zstd => "shuffle16+zstd",
+            Encoding::Shuffle20Zstd => "shuffle20+zstd",
             Encoding::Shuffle24Zstd => "shuffle24+zstd",
             Encoding::Shuffle32Zstd => "shuffle32+zstd",
             Encoding::Shuffle64Zstd => "shuffle64+zstd",
@@ -133,6 +137,7 @@ impl Encoding {
             Encoding::Raw | Encoding::Zstd => None,
             Encoding::Shuffle4Zstd | Encoding::Delta4Shuffle4Zstd => Some(4),
             Encoding::Shuffle16Zstd => Some(16),
+            Encoding::Shuffle20Zstd => Some(20),
             Encoding::Shuffle24Zstd => Some(24),
             Encoding::Shuffle32Zstd => Some(32),
             Encoding::Shuffle64Zstd => Some(64),
@@ -140,7 +145,7 @@ impl Encoding {
     }
 
     /// Raw bytes per chunk of a section in this encoding: [`CHUNK_RAW`], or the largest
-    /// multiple of the shuffle width below it (24-byte elements do not divide 1 MiB).
+    /// multiple of the shuffle width below it (20- and 24-byte elements do not divide 1 MiB).
     pub fn chunk_raw(self) -> u64 {
         let width = self.shuffle_width().unwrap_or(4) as u64;
         CHUNK_RAW - CHUNK_RAW % width
@@ -151,6 +156,7 @@ impl Encoding {
     pub fn shuffled_elements(size: usize) -> Encoding {
         match size {
             16 => Encoding::Shuffle16Zstd,
+            20 => Encoding::Shuffle20Zstd,
             24 => Encoding::Shuffle24Zstd,
             32 => Encoding::Shuffle32Zstd,
             64 => Encoding::Shuffle64Zstd,

@@ -56,17 +56,18 @@ fn half_at_or_above(x: f64) -> Option<half::f16> {
     Some(h)
 }
 
-/// `struct Ball { normal: u32, h: f32, coeffs: array<u32, 3>, state: u32 }` (24 bytes,
-/// format 5): the initial support normal (octahedral, [`crate::octahedral`]), the smoothing
-/// length, the initial polynomial's first six coefficients in coordinates scaled by 1/h as
-/// IEEE half floats two to a word (coefficient 2k in the low half of word k), and the state
-/// word: bits 0–1 [`BallState`], bits 2–3 the degree fitted, bits 4–31 the droplet's sphere
-/// index. A cubic's other four coefficients are in the `ball_cubic` section ([`CubicWords`]).
+/// `struct Ball { normal: u32, coeffs: array<u32, 3>, state: u32 }` (20 bytes, format 8):
+/// the initial support normal (octahedral, [`crate::octahedral`]), the initial polynomial's
+/// first six coefficients in coordinates scaled by 1/h as IEEE half floats two to a word
+/// (coefficient 2k in the low half of word k), and the state word: bits 0–1 [`BallState`],
+/// bits 2–3 the degree fitted, bits 16–31 the smoothing length h as a half float (the bake
+/// fits with h at that precision, `slosh_mls::half_precision`). A droplet member's first
+/// coefficient word holds its sphere's index instead (it has no polynomial to draw). A
+/// cubic's other four coefficients are in the `ball_cubic` section ([`CubicWords`]).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuBall {
     pub normal: u32,
-    pub h: f32,
     pub coeffs: [u32; 3],
     pub state: u32,
 }
@@ -138,14 +139,26 @@ fn unhalves(w: u32) -> [f32; 2] {
     [w as u16, (w >> 16) as u16].map(|h| half::f16::from_bits(h).to_f32())
 }
 
-/// Droplet spheres a ball's state word can name.
+/// Droplet spheres a cache can hold (the BVH's item ids and the trace's links take 28 bits).
 pub const MAX_SPHERES: u32 = 1 << 28;
+
+/// The state word: kind and degree in the low bits, h as a half float in the high half.
+fn state_word(kind: BallState, degree: u8, h: half::f16) -> u32 {
+    kind as u32 | (u32::from(degree) << 2) | (u32::from(h.to_bits()) << 16)
+}
+
+/// `h` as the half float a ball stores: `None` unless a normal half float holds it exactly
+/// (the bake fits with h at half precision, so it always does there).
+fn exact_half(h: f32) -> Option<half::f16> {
+    let stored = half::f16::from_f32(h);
+    (stored.is_normal() && stored.to_f32() == h && h > 0.0).then_some(stored)
+}
 
 impl GpuBall {
     /// A ball from its parts, and a cubic's other coefficients: the normal encoded, the
     /// coefficients rounded to half floats; `None` where a coefficient is not finite or
-    /// beyond a half float's range (the caller stores the ball unfitted), or the sphere index
-    /// does not fit.
+    /// beyond a half float's range (the caller stores the ball unfitted), h is not a normal
+    /// half float, or the sphere index does not fit.
     pub fn new(
         normal: [f64; 3],
         h: f32,
@@ -157,28 +170,37 @@ impl GpuBall {
         if sphere >= MAX_SPHERES || degree > 3 {
             return None;
         }
+        let stored_h = exact_half(h)?;
         let used = if degree == 3 { 10 } else { BALL_COEFFS };
         let mut c = [0.0f32; 10];
         c[..used].copy_from_slice(&coeffs[..used]);
         let word = |k: usize| halves(c[2 * k], c[2 * k + 1]);
+        let (coeffs, cubic) = if kind == BallState::Droplet {
+            ([sphere, 0, 0], [0, 0])
+        } else {
+            ([word(0)?, word(1)?, word(2)?], [word(3)?, word(4)?])
+        };
         let ball = GpuBall {
             normal: crate::octahedral::encode(normal),
-            h,
-            coeffs: [word(0)?, word(1)?, word(2)?],
-            state: kind as u32 | (u32::from(degree) << 2) | (sphere << 4),
+            coeffs,
+            state: state_word(kind, degree, stored_h),
         };
-        Some((ball, [word(3)?, word(4)?]))
+        Some((ball, cubic))
     }
 
     /// A ball that is never a candidate: no support plane or fit, or one that could not be
-    /// stored.
-    pub fn unfitted(h: f32) -> GpuBall {
-        GpuBall {
+    /// stored. `None` where h is not a normal half float.
+    pub fn unfitted(h: f32) -> Option<GpuBall> {
+        Some(GpuBall {
             normal: crate::octahedral::NO_NORMAL,
-            h,
             coeffs: [0; 3],
-            state: BallState::Unfitted as u32,
-        }
+            state: state_word(BallState::Unfitted, 0, exact_half(h)?),
+        })
+    }
+
+    /// The smoothing length, as stored.
+    pub fn h(&self) -> f32 {
+        half::f16::from_bits((self.state >> 16) as u16).to_f32()
     }
 
     pub fn kind(&self) -> BallState {
@@ -198,12 +220,7 @@ impl GpuBall {
 
     /// The droplet sphere this ball belongs to.
     pub fn sphere(&self) -> Option<u32> {
-        (self.kind() == BallState::Droplet).then_some(self.sphere_bits())
-    }
-
-    /// The state word's sphere field (zero unless the ball is a droplet's).
-    pub fn sphere_bits(&self) -> u32 {
-        self.state >> 4
+        (self.kind() == BallState::Droplet).then_some(self.coeffs[0])
     }
 
     /// The support normal, normalised (zero where none was stored).
@@ -212,9 +229,13 @@ impl GpuBall {
     }
 
     /// The ten coefficients as f32, exactly the stored values: the ball's six and, for a
-    /// cubic, the four of its `ball_cubic` words (unused ones zero).
+    /// cubic, the four of its `ball_cubic` words (unused ones zero; all zero for a droplet
+    /// member, whose first word names its sphere).
     pub fn coeffs(&self, cubic: CubicWords) -> [f32; 10] {
         let mut c = [0.0f32; 10];
+        if self.kind() == BallState::Droplet {
+            return c;
+        }
         let words = if self.degree() == 3 { 5 } else { 3 };
         for (k, w) in self.coeffs.iter().chain(&cubic).take(words).enumerate() {
             c[2 * k..2 * k + 2].copy_from_slice(&unhalves(*w));
@@ -313,16 +334,19 @@ mod tests {
     }
 
     #[test]
-    fn balls_keep_their_state_and_the_nearest_stored_coefficients() {
+    fn balls_keep_their_state_h_and_the_nearest_stored_coefficients() {
         let c: [f32; 10] = [0.1, -2.5e-3, 3.0, -7.25, 1e-6, 40.0, 0.5, -0.25, 1e3, 2e-5];
         let half = |x: f32| half::f16::from_f32(x).to_f32();
+        // The bake fits with h at half precision (`slosh_mls::half_precision`).
+        let h = half(0.02);
         let (quadratic, extra) =
-            GpuBall::new([0.0, 0.6, 0.8], 0.02, c, 2, BallState::Degraded, 0).unwrap();
-        assert_eq!(size_of::<GpuBall>(), 24);
+            GpuBall::new([0.0, 0.6, 0.8], h, c, 2, BallState::Degraded, 0).unwrap();
+        assert_eq!(size_of::<GpuBall>(), 20);
         assert_eq!(
-            (quadratic.kind(), quadratic.degree()),
-            (BallState::Degraded, 2)
+            (quadratic.kind(), quadratic.degree(), quadratic.h()),
+            (BallState::Degraded, 2, h)
         );
+        assert_eq!(quadratic.sphere(), None);
         assert_eq!(extra, [0, 0], "a quadratic has no cubic words");
         let got = quadratic.coeffs(extra);
         for k in 0..6 {
@@ -339,11 +363,10 @@ mod tests {
         // What the verifier requires: no subnormal half float (c[4] = 1e-6 became zero).
         assert!(got.iter().all(|g| *g == 0.0 || g.abs() >= MIN_NORMAL_HALF));
         assert_eq!(got[4], 0.0);
-        let (cubic, extra) =
-            GpuBall::new([0.0, 0.0, -1.0], 0.02, c, 3, BallState::Droplet, 12345).unwrap();
+        let (cubic, extra) = GpuBall::new([0.0, 0.0, -1.0], h, c, 3, BallState::Full, 0).unwrap();
         assert_eq!(
-            (cubic.kind(), cubic.sphere(), cubic.degree()),
-            (BallState::Droplet, Some(12345), 3)
+            (cubic.kind(), cubic.degree(), cubic.h()),
+            (BallState::Full, 3, h)
         );
         for (k, (&g, &x)) in cubic.coeffs(extra).iter().zip(&c).enumerate() {
             let want = if x.abs() < 6.1e-5 { 0.0 } else { half(x) };
@@ -351,19 +374,39 @@ mod tests {
         }
         let n = cubic.normal();
         assert!(n[2] < -0.999_999 && n[0].abs() < 1e-6, "{n:?}");
+        // A droplet member names its sphere where its polynomial would be.
+        let (member, extra) = GpuBall::new(
+            [0.0, 0.0, 1.0],
+            h,
+            c,
+            2,
+            BallState::Droplet,
+            MAX_SPHERES - 1,
+        )
+        .unwrap();
+        assert_eq!(
+            (member.kind(), member.sphere(), member.h(), extra),
+            (BallState::Droplet, Some(MAX_SPHERES - 1), h, [0, 0])
+        );
+        assert_eq!(member.coeffs(extra), [0.0; 10]);
+        let unfitted = GpuBall::unfitted(h).unwrap();
+        assert_eq!((unfitted.kind(), unfitted.h()), (BallState::Unfitted, h));
         // What a half float cannot hold is refused (the bake stores the ball unfitted), in
-        // the ball's six or a cubic's other four; so is a NaN.
+        // the ball's six or a cubic's other four; so is a NaN, and an h that is not a
+        // normal half float.
         let mut big = c;
         big[3] = 1e6;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 2, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 2, BallState::Full, 0).is_none());
         let mut big = c;
         big[8] = 1e6;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 3, BallState::Full, 0).is_none());
-        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 2, BallState::Full, 0).is_some());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 3, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 2, BallState::Full, 0).is_some());
         big[0] = f32::NAN;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], 0.02, big, 2, BallState::Full, 0).is_none());
-        assert!(
-            GpuBall::new([0.0, 0.0, 1.0], 0.02, c, 2, BallState::Droplet, MAX_SPHERES).is_none()
-        );
+        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 2, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], h, c, 2, BallState::Droplet, MAX_SPHERES).is_none());
+        for bad_h in [0.02, 0.0, -h, 1e-6, 1e5, f32::NAN] {
+            assert!(GpuBall::new([0.0, 0.0, 1.0], bad_h, c, 2, BallState::Full, 0).is_none());
+            assert!(GpuBall::unfitted(bad_h).is_none(), "{bad_h}");
+        }
     }
 }

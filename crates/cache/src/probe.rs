@@ -59,7 +59,7 @@ impl SurfaceProbe {
             positions: geometry.positions,
             normals: geometry.normals,
             reach: geometry.reach,
-            h: balls.iter().map(|b| b.h).collect(),
+            h: balls.iter().map(GpuBall::h).collect(),
             cluster_size: file.header().neighbour_cluster.max(1) as usize,
             cluster_start,
             candidates,

@@ -205,7 +205,7 @@ impl LoadedStep {
                     used: b.degree(),
                 }),
                 BallState::Unfitted => BallFit::None,
-                BallState::Droplet => BallFit::Droplet(b.sphere_bits()),
+                BallState::Droplet => BallFit::Droplet(b.coeffs[0]),
             })
             .collect();
         let surface = Surface::from_parts(SurfaceParts {
@@ -234,7 +234,7 @@ impl LoadedStep {
                 .map(|((p, b), cubic)| Ball {
                     centre: v3(p.position),
                     radius: p.radius(),
-                    h: b.h,
+                    h: b.h(),
                     normal: v3(b.normal()),
                     poly: Poly {
                         degree: b.degree(),

@@ -148,15 +148,21 @@ impl CacheFile {
             ));
         }
         if let Some(i) = balls.par_iter().zip(&cubic).position_first(|(b, &cubic)| {
-            // Finite, and no subnormal half float (a GPU may flush those).
+            // Finite, and no subnormal half float (a GPU may flush those); h a positive
+            // normal half float; the state word's reserved bits 4–15 zero; a droplet member's
+            // sphere in range, its other coefficient words zero.
             let finite = b
                 .coeffs(cubic)
                 .iter()
                 .all(|c| c.is_finite() && (*c == 0.0 || c.abs() >= MIN_NORMAL_HALF))
-                && b.h.is_finite()
-                && b.h > 0.0;
-            let sphere_ok = b.sphere().is_none_or(|s| (s as usize) < spheres.len());
-            !finite || !sphere_ok || (b.sphere_bits() != 0 && b.kind() != BallState::Droplet)
+                && b.h().is_finite()
+                && b.h() >= MIN_NORMAL_HALF;
+            let reserved = (b.state >> 4) & 0xfff != 0;
+            let sphere_ok = match b.sphere() {
+                Some(s) => (s as usize) < spheres.len() && b.coeffs[1..] == [0, 0],
+                None => true,
+            };
+            !finite || !sphere_ok || reserved
         }) {
             return Err(format!("ball {i} is invalid: {:?}", balls[i]));
         }

@@ -107,9 +107,9 @@ fn truncation_at_any_length_is_a_clear_error() {
 #[test]
 fn a_newer_major_version_is_refused_by_name() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8..12].copy_from_slice(&[8, 0, 0, 0]);
+    bytes[8..12].copy_from_slice(&[9, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
-    assert!(err.contains("newer") && err.contains("8.0"), "{err}");
+    assert!(err.contains("newer") && err.contains("9.0"), "{err}");
 }
 
 #[test]
@@ -135,6 +135,8 @@ fn element_shuffles_round_trip_whole_elements_only() {
     for (encoding, width) in [
         (Encoding::Shuffle4Zstd, 4),
         (Encoding::Shuffle16Zstd, 16),
+        (Encoding::Shuffle20Zstd, 20),
+        (Encoding::Shuffle24Zstd, 24),
         (Encoding::Shuffle32Zstd, 32),
         (Encoding::Shuffle64Zstd, 64),
     ] {
@@ -148,7 +150,8 @@ fn element_shuffles_round_trip_whole_elements_only() {
             assert!(out == raw, "{} at {count} elements", encoding.name());
         }
         if width > 4 {
-            let err = encode_bytes(&[0u8; 20], encoding, 1).unwrap_err();
+            // 36 bytes are no whole number of elements of any of these widths.
+            let err = encode_bytes(&[0u8; 36], encoding, 1).unwrap_err();
             assert!(err.to_string().contains("whole"), "{err}");
         }
     }
@@ -181,15 +184,22 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
         SectionInput::new(
             "balls",
             Element::Ball,
-            bytemuck::cast_slice::<f32, [f32; 6]>(&floats[..n / 6 * 6]),
-            Encoding::Shuffle4Zstd,
+            bytemuck::cast_slice::<f32, [f32; 5]>(&floats[..n / 5 * 5]),
+            Encoding::Shuffle20Zstd,
         ),
     ];
     let bytes = encode_step(header(), &sections, Compression::Level(1)).unwrap();
     let file = open(bytes.clone()).unwrap();
     for (entry, input) in file.header().sections.iter().zip(&sections) {
         assert_eq!(entry.chunks.len(), 4, "{}", entry.name);
-        assert_eq!(entry.chunk_raw, CHUNK_RAW);
+        // 20-byte elements do not divide 1 MiB: their chunks hold 1,048,560 bytes.
+        assert_eq!(
+            entry.chunk_raw,
+            input.encoding.chunk_raw(),
+            "{}",
+            entry.name
+        );
+        assert!(CHUNK_RAW - entry.chunk_raw < 32, "{}", entry.name);
         let mut out = vec![0u8; entry.raw as usize];
         file.decode_into(entry, &mut out, &mut Vec::new()).unwrap();
         assert!(out == input.bytes, "{} differs after decoding", entry.name);
@@ -254,15 +264,15 @@ fn every_single_byte_flip_is_detected() {
     }
 }
 
-/// A file of an older major version (format 6.0 stored an f32 radius where 7.0 stores the
-/// radius and the reach as half floats) is refused with both versions and the command that
-/// re-bakes it from its source.
+/// A file of an older major version (format 7.0 stored 24-byte balls with h as an f32 where
+/// 8.0 stores 20-byte balls with h in the state word) is refused with both versions and the
+/// command that re-bakes it from its source.
 #[test]
 fn an_older_major_version_is_refused_with_the_rebake_command() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8..12].copy_from_slice(&[6, 0, 0, 0]);
+    bytes[8..12].copy_from_slice(&[7, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
-    for part in ["test.slc", "6.0", "7.0", "older", "slosh bake test --out"] {
+    for part in ["test.slc", "7.0", "8.0", "older", "slosh bake test --out"] {
         assert!(err.contains(part), "{part}: {err}");
     }
 }

@@ -48,7 +48,9 @@ pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
     weight,
 };
-pub use surface::{BallFit, BesideFits, Surface, SurfaceError, SurfaceParams, SurfaceParts};
+pub use surface::{
+    BallFit, BesideFits, Surface, SurfaceError, SurfaceParams, SurfaceParts, half_precision,
+};
 pub use timing::StageClock;
 pub use tracer::{Camera, CameraBasis, MAX_CANDIDATES, TraceHit};
 pub use up::guess_up;

@@ -268,7 +268,7 @@ impl<T: Real> SurfaceParts<T> {
         }
         // h from the dense fluid, not the spray: the median radius, which sparse points
         // (large radii) cannot inflate while they are fewer than half.
-        let h = params.h_scale * quantile(&radii, H_QUANTILE);
+        let h = half_precision(params.h_scale * quantile(&radii, H_QUANTILE));
         let dense_spacing = quantile(&nearest, H_QUANTILE);
         // A ball is trusted no farther than its data reach: beyond 2h a fit has no weight;
         // and no farther than two dense spacings, since every hit lies in its ball: a sparse
@@ -281,7 +281,7 @@ impl<T: Real> SurfaceParts<T> {
         }
         let ball_h = |i: usize| {
             if params.per_point_h {
-                params.h_scale * radii[i]
+                half_precision(params.h_scale * radii[i])
             } else {
                 h
             }
@@ -554,6 +554,14 @@ pub(crate) fn gather<T: Real>(
 fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     (len.is_finite() && len > 1e-12).then(|| [n[0] / len, n[1] / len, n[2] / len])
+}
+
+/// `h` at half-float precision: the nearest normal half float (2⁻¹⁴ to 65504), so that a
+/// cache stores every ball's smoothing length exactly in half a word (format 8) and the fits
+/// use what it stores. A relative change of at most 2⁻¹¹ to a smoothing length.
+pub fn half_precision(h: f64) -> f64 {
+    let nearest = half::f16::from_f64(h).clamp(half::f16::MIN_POSITIVE, half::f16::MAX);
+    f64::from(nearest.to_f32())
 }
 
 /// The quantile of the radii that sets h, and of the nearest distances that sets the spray's

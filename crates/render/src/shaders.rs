@@ -95,7 +95,7 @@ pub mod step_array {
     pub const POINTS: RangedArray = array("points", "Point", 16, 0, 0, false);
     pub const NORMALS: RangedArray = array("normals", "u32", 4, 0, 1, false);
     pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 2, false);
-    pub const BALLS: RangedArray = array("balls", "Ball", 24, 0, 4, false);
+    pub const BALLS: RangedArray = array("balls", "Ball", 20, 0, 4, false);
     pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 5, false);
     pub const FIELD: RangedArray = array("field", "f32", 4, 0, 7, false);
     pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 8, false);

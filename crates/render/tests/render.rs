@@ -313,7 +313,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
     let shade = validate("shade", &shade_wgsl(LIMITS[0], true));
     for module in [&trace, &shade] {
         check_layout!(module, "Point", GpuPoint, [position, radii]);
-        check_layout!(module, "Ball", GpuBall, [normal, h, coeffs, state]);
+        check_layout!(module, "Ball", GpuBall, [normal, coeffs, state]);
         check_layout!(
             module,
             "Hit",
