@@ -18,7 +18,7 @@ pub mod timeline;
 
 pub use engine::{
     Engine, EngineOptions, FrameReport, FrameRequest, GpuSource, Pace, Prepared, Probe, Quality,
-    default_budget, default_loaders,
+    Uploaded, default_budget, default_loaders,
 };
 pub use error::{Error, Result};
 pub use frame_budget::FrameBudget;

@@ -23,7 +23,7 @@ mod raw_case;
 mod report;
 
 pub use raw_case::RawCaseReport;
-pub use report::{CodecRow, Cold, ScrubReport, SeriesReport};
+pub use report::{CodecRow, Cold, JumpBreakdown, ScrubReport, SeriesReport};
 
 /// What `slosh bench scrub` measures and where it writes.
 #[derive(Debug, Clone)]
@@ -142,17 +142,46 @@ struct LoadTimes {
 
 impl LoadTimes {
     fn add(&mut self, report: &FrameReport) {
-        let n = report.uploaded.len();
-        for _ in 0..n {
-            self.host_ms.push(report.upload_host_ms / n as f64);
-            self.record_ms.push(report.upload_record_ms / n as f64);
+        for u in &report.uploaded {
+            self.host_ms.push(u.host_ms);
+            self.record_ms.push(u.record_ms);
+        }
+    }
+}
+
+/// Where one jump's time went: the host and record halves of the step asked for, and the rest.
+struct JumpParts {
+    total: f64,
+    host: f64,
+    record: f64,
+}
+
+impl JumpBreakdown {
+    /// Medians over all jumps, and means over the slowest tenth.
+    fn of(parts: &[JumpParts]) -> JumpBreakdown {
+        let rest = |p: &JumpParts| p.total - p.host - p.record;
+        let column = |f: &dyn Fn(&JumpParts) -> f64| median(parts.iter().map(f).collect());
+        let mut slowest: Vec<&JumpParts> = parts.iter().collect();
+        slowest.sort_by(|a, b| b.total.total_cmp(&a.total));
+        slowest.truncate(parts.len().div_ceil(10));
+        let mean = |f: &dyn Fn(&JumpParts) -> f64| {
+            slowest.iter().map(|p| f(p)).sum::<f64>() / slowest.len().max(1) as f64
+        };
+        JumpBreakdown {
+            median: [column(&|p| p.host), column(&|p| p.record), column(&rest)],
+            slowest_tenth: [
+                mean(&|p| p.total),
+                mean(&|p| p.host),
+                mean(&|p| p.record),
+                mean(&rest),
+            ],
         }
     }
 }
 
 /// Frames until `position` is drawn (not a stand-in); the seconds from the request.
 fn show(engine: &mut Engine, request: &mut FrameRequest, position: usize) -> Result<f64> {
-    show_timed(engine, request, position, &mut LoadTimes::default())
+    show_with(engine, request, position, |_| {})
 }
 
 /// [`show`], adding the loads that arrived to `loads`.
@@ -162,13 +191,23 @@ fn show_timed(
     position: usize,
     loads: &mut LoadTimes,
 ) -> Result<f64> {
+    show_with(engine, request, position, |report| loads.add(report))
+}
+
+/// [`show`], handing `each` every frame's report.
+fn show_with(
+    engine: &mut Engine,
+    request: &mut FrameRequest,
+    position: usize,
+    mut each: impl FnMut(&FrameReport),
+) -> Result<f64> {
     let start = Instant::now();
     let pace = Pace {
         real_time: true,
         pause: Duration::ZERO,
         timeout: Duration::from_secs(60),
     };
-    engine.show_and_wait(request, position, pace, |_, report| loads.add(report))?;
+    engine.show_and_wait(request, position, pace, |_, report| each(report))?;
     Ok(start.elapsed().as_secs_f64())
 }
 
@@ -412,12 +451,24 @@ fn measure(
     let mut engine = Engine::open(gpu.clone(), dir, options(step_gpu_bytes * 3))?;
     show(&mut engine, &mut request, 0)?;
     let mut page_cache = Vec::new();
+    let mut jump_parts = Vec::new();
     while page_cache.len() < args.jumps {
         let target = rng.random_range(0..steps);
         if engine.resident().contains(&target) || engine.prefetching().contains(&target) {
             continue;
         }
-        page_cache.push(show(&mut engine, &mut request, target)? * 1e3);
+        let (mut host, mut record) = (0.0, 0.0);
+        let total = show_with(&mut engine, &mut request, target, |report| {
+            if let Some(u) = report.uploaded.iter().find(|u| u.position == target) {
+                (host, record) = (u.host_ms, u.record_ms);
+            }
+        })? * 1e3;
+        page_cache.push(total);
+        jump_parts.push(JumpParts {
+            total,
+            host,
+            record,
+        });
     }
     // Jumps from storage: the page cache dropped before each one (root only).
     let cold = if args.cold {
@@ -476,6 +527,7 @@ fn measure(
         streaming_record_ms: median(loads.record_ms),
         jumps_pool: jumps_pool.map(spread),
         jumps_page_cache: spread(page_cache),
+        jump_parts: JumpBreakdown::of(&jump_parts),
         cold,
         codecs: codec_table(&paths[0])?,
     })

@@ -52,7 +52,11 @@ impl FrameStats {
             }
         }
         if !report.uploaded.is_empty() {
-            self.upload_ms = report.upload_host_ms + report.upload_record_ms;
+            self.upload_ms = report
+                .uploaded
+                .iter()
+                .map(|u| u.host_ms + u.record_ms)
+                .sum();
         }
     }
 

@@ -137,13 +137,19 @@ pub struct FrameReport {
     /// Neighbour masks derived this frame ahead of a refined one, under a frame budget.
     pub masks: Option<MaskProgress>,
     pub progress: Option<Progress>,
-    /// Steps made resident this frame, by position.
-    pub uploaded: Vec<usize>,
+    /// Steps made resident this frame, with the ms of their upload's halves.
+    pub uploaded: Vec<Uploaded>,
     /// Steps that failed this frame, by position, with why.
     pub failures: Vec<(usize, String)>,
-    /// Host ms of the steps uploaded this frame (decode and checks) and their recording ms.
-    pub upload_host_ms: f64,
-    pub upload_record_ms: f64,
+}
+
+/// A step made resident: its position, the ms of its host half (open, checks, decoding) and
+/// of its record half (buffers filled, copies recorded), both run by a loader.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Uploaded {
+    pub position: usize,
+    pub host_ms: f64,
+    pub record_ms: f64,
 }
 
 /// The streaming engine over one cache directory.
@@ -602,9 +608,11 @@ impl Engine {
                         }
                         self.step_fields.insert(loaded.index, prepared.field);
                         commands.push(prepared.commands);
-                        report.uploaded.push(position);
-                        report.upload_host_ms += upload.host_seconds * 1e3;
-                        report.upload_record_ms += upload.record_seconds * 1e3;
+                        report.uploaded.push(Uploaded {
+                            position,
+                            host_ms: upload.host_seconds * 1e3,
+                            record_ms: upload.record_seconds * 1e3,
+                        });
                         let n = self.pool.len() as u64;
                         self.step_bytes = (self.step_bytes * (n - 1) + bytes) / n.max(1);
                     }
