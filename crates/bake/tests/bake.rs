@@ -247,6 +247,57 @@ fn bvh_leaves_that_overrun_overlap_or_drop_a_candidate_are_refused() {
     );
 }
 
+/// Format 8's half floats: a baked step with a point's radius or reach, or a ball's h, made
+/// zero or subnormal (a GPU may flush those), or a state word's reserved bits set, is refused
+/// by the verifier with its message; the step as baked passes, its h exactly the header's.
+#[test]
+fn radii_reaches_and_h_that_are_not_normal_half_floats_are_refused() {
+    let (_, input) = scene_input(SceneKind::Sphere, 2000, 0);
+    let baked = bake_step(&input, &params()).unwrap();
+    let index = |name: &str| baked.sections.iter().position(|s| s.name == name).unwrap();
+    let (points_at, balls_at) = (index(names::POINTS), index(names::BALLS));
+    let points: Vec<slosh_cache::GpuPoint> =
+        bytemuck::pod_collect_to_vec(&baked.sections[points_at].bytes);
+    let balls: Vec<slosh_cache::GpuBall> =
+        bytemuck::pod_collect_to_vec(&baked.sections[balls_at].bytes);
+    let h = baked.header.smoothing_length as f32;
+    assert!(
+        balls.iter().all(|b| b.h() == h),
+        "every ball stores the global h exactly"
+    );
+    let verify = |points: &[slosh_cache::GpuPoint], balls: &[slosh_cache::GpuBall]| {
+        let mut sections = baked.sections.clone();
+        sections[points_at].bytes = bytemuck::cast_slice(points).to_vec();
+        sections[balls_at].bytes = bytemuck::cast_slice(balls).to_vec();
+        let bytes = encode_step(baked.header.clone(), &sections, Compression::None).unwrap();
+        let file =
+            CacheFile::from_bytes(FileBytes::from_vec(Path::new("halves.slc"), bytes)).unwrap();
+        file.verify().map_err(|e| e.to_string())
+    };
+    verify(&points, &balls).unwrap();
+    // A subnormal radius (the low half's smallest subnormal), then a zero reach.
+    for (word, what) in [(0x0001, "radius"), (0x0000_ffff, "reach")] {
+        let mut bad = points.clone();
+        bad[7].radii &= word;
+        let err = verify(&bad, &balls).unwrap_err();
+        assert!(
+            err.contains("point 7 ") && err.contains("not a positive normal half float"),
+            "{what}: {err}"
+        );
+    }
+    // h zero, then reserved state bits set.
+    for mask in [0x0000_ffff_u32, 0xffff_ffff] {
+        let mut bad = balls.clone();
+        bad[11].state = if mask == 0xffff_ffff {
+            bad[11].state | 1 << 9
+        } else {
+            bad[11].state & mask
+        };
+        let err = verify(&points, &bad).unwrap_err();
+        assert!(err.contains("ball 11 is invalid"), "{err}");
+    }
+}
+
 #[test]
 fn selection_drops_non_finite_and_interior_and_keeps_fields_aligned() {
     let (_, mut input) = scene_input(SceneKind::Sphere, 2000, 0);
