@@ -118,8 +118,9 @@ fn scrub_bench_streams_a_series_on_the_engine() {
         .filter(|l| l.starts_with("| 2000 points, 12 steps ("))
         .map(|l| l.split('|').map(str::trim).collect())
         .collect();
-    // Throughput, the resident-jump goal, step costs, five codec levels.
-    assert_eq!(rows.len(), 8, "{report}");
+    // Throughput, the resident-jump goal, where the jumps' time went, step costs, five codec
+    // levels.
+    assert_eq!(rows.len(), 9, "{report}");
     assert!(rows[1][2].contains("jump to a resident step"), "{report}");
     let number = |s: &str| -> f64 { s.split_whitespace().next().unwrap().parse().unwrap() };
     let throughput = &rows[0];
@@ -129,7 +130,17 @@ fn scrub_bench_streams_a_series_on_the_engine() {
             assert!(number(part) > 0.0, "{cell}: {report}");
         }
     }
-    let (sections, all) = rows[2][2].split_once('/').unwrap();
+    // A jump loads the step asked for after it is asked for: its halves were found, and they
+    // lie within the jump (the rest is not negative).
+    let parts = |cell: &str| -> Vec<f64> { cell.split('/').map(number).collect() };
+    let (median, slowest) = (parts(rows[2][2]), parts(rows[2][3]));
+    assert!(median[0] > 0.0 && median[1] > 0.0, "halves: {report}");
+    assert!(median[2] >= 0.0 && slowest[3] >= 0.0, "rest: {report}");
+    assert!(
+        (slowest[0] - slowest[1] - slowest[2] - slowest[3]).abs() <= 0.025,
+        "the parts add up, to the decimals shown: {report}"
+    );
+    let (sections, all) = rows[3][2].split_once('/').unwrap();
     assert!(
         number(all) > number(sections),
         "derived buffers count: {report}"
