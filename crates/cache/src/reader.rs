@@ -428,11 +428,8 @@ impl CacheFile {
             return Err(self.section_error(entry, format!("no run {k}")));
         };
         let bytes = &self.stored(entry)[st.clone()];
-        let (what, sum) = match entry.chunks.get(k) {
-            Some(chunk) => (format!("chunk {k}"), &chunk.xxh3),
-            None => ("section".to_string(), &entry.xxh3),
-        };
-        self.check_sum(entry, &what, st.start, bytes, sum)?;
+        let sum = entry.chunks.get(k).map_or(&entry.xxh3, |chunk| &chunk.xxh3);
+        self.check_sum(entry, &run_label(entry, k), st.start, bytes, sum)?;
         Ok(bytes)
     }
 
@@ -450,10 +447,6 @@ impl CacheFile {
     ) -> Result<()> {
         let bytes = self.checked_run(entry, spans, k)?;
         let st = &spans[k].0;
-        let what = match entry.chunks.get(k) {
-            Some(_) => format!("chunk {k}"),
-            None => "section".to_string(),
-        };
         let decoded = decode_into(bytes, entry.encoding, out, scratch);
         // The bytes may have gone to zeros after their checksum was taken: that, not the
         // decoder's complaint about them, is what happened.
@@ -462,6 +455,7 @@ impl CacheFile {
             let problem = if entry.chunks.is_empty() {
                 e.to_string()
             } else {
+                let what = run_label(entry, k);
                 format!("{what} (stored bytes {}..{}): {e}", st.start, st.end)
             };
             self.section_error(entry, problem)
@@ -508,5 +502,15 @@ impl CacheFile {
         let mut out: Vec<T> = bytemuck::zeroed_vec(entry.count as usize);
         self.decode_into(entry, bytemuck::cast_slice_mut(&mut out), &mut Vec::new())?;
         Ok(out)
+    }
+}
+
+/// How errors name run `k` of a section: its chunk, or the whole section where the table
+/// has no chunks.
+fn run_label(entry: &SectionEntry, k: usize) -> String {
+    if entry.chunks.get(k).is_some() {
+        format!("chunk {k}")
+    } else {
+        "section".to_string()
     }
 }
