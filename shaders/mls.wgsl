@@ -60,9 +60,9 @@ struct Settings {
     has_field: u32,
     // Words of neighbour mask of the largest cluster.
     mask_words: u32,
-    // Entries of the 4-wide tree, and the items its leaves range over (balls, then droplet
-    // spheres).
-    wide_count: u32,
+    // Nodes of the BVH2 (entries of the 4-wide tree widened from it), and the items its
+    // leaves range over (balls, then droplet spheres).
+    node_count: u32,
     item_count: u32,
     // The field's colour map (colormap.rs: Colormap).
     colormap: u32,

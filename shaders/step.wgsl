@@ -63,26 +63,3 @@ struct Sphere {
     centre: vec3<f32>,
     radius: f32,
 }
-
-// A node of the 4-wide tree the walk descends, made by the upload's host half from the baked
-// BVH2 (mirrors `slosh_render::layout::GpuWide`, crates/render/src/upload/wide.rs): each slot
-// holds a grandchild of the entry's BVH2 node (or a child that is a leaf), its box per axis
-// across the four lanes and its link; an empty slot is the point (1e30, 1e30, 1e30), which no
-// ray enters in time.
-struct Wide {
-    lo_x: vec4<f32>,
-    hi_x: vec4<f32>,
-    lo_y: vec4<f32>,
-    hi_y: vec4<f32>,
-    lo_z: vec4<f32>,
-    hi_z: vec4<f32>,
-    links: vec4<u32>,
-    pad: vec4<u32>,
-}
-
-// A slot's link, as the trace walk stacks it: an inner node's entry, or a leaf's first item
-// in the low 28 bits and its item count above, so a pop needs no read of the node itself.
-// The upload refuses trees that do not fit (slosh_render::MAX_LEAF_LINK_COUNT,
-// MAX_LINK_FIRST). LINK_COUNT_SHIFT and LINK_FIRST are generated from MAX_LINK_FIRST by
-// shaders.rs (`shared_constants_wgsl`).
-

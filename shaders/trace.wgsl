@@ -1,5 +1,5 @@
-// The trace pass: one thread per pixel. Camera ray → the 4-wide tree the upload widens the
-// baked BVH2 into (stack based, nearest slot in hand, pruned by the best hit)
+// The trace pass: one thread per pixel. Camera ray → the 4-wide tree widened from the baked
+// BVH2 (widen.wgsl; stack based, nearest slot in hand, pruned by the best hit)
 // → the nearest initial hit (a ball's baked polynomial inside its ball, or a droplet sphere;
 // an exact tie goes to the lower item) → with more iterations, refinement of that candidate
 // (mls.wgsl), handing over to the next initial hit when it leaves its ball. Droplet spheres
@@ -11,7 +11,7 @@
 const STACK_SIZE: u32 = 64u;
 
 fn has_nodes() -> bool {
-    return settings.wide_count > 0u;
+    return settings.node_count > 0u;
 }
 
 // The ray as the slab tests take it: t = p / d − o / d per axis, one fused multiply-add. A

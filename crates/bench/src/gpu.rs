@@ -583,7 +583,7 @@ impl Report for GpuReport {
         }
         let _ = writeln!(
             md,
-            "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree checked and widened into the 4-wide tree), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, waited for (no pass runs per upload: the tracer derives the neighbour masks of the step it refines, before its first refined frame). Median of 5. Bytes on the GPU count the sections and the wide tree.\n"
+            "## Upload per step\n\nFrom a step in memory (as from the page cache): the host half (checksums, the sections it reads decoded, the tree checked), the recording (buffers created, a `mapped_at_creation` staging buffer filled, compressed sections decoded straight into it), `copy_buffer_to_buffer` into device-local storage, waited for (no pass runs per upload: the tracer widens the BVH2 of the step it draws into the 4-wide tree, and derives the neighbour masks of the step it refines, before their first frames). Median of 5. Bytes on the GPU count the sections.\n"
         );
         let _ = writeln!(
             md,

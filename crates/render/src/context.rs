@@ -4,12 +4,13 @@ use std::sync::OnceLock;
 
 use crate::bindings::layout_entries;
 use crate::error::{Error, Result};
-use crate::shaders::{FRAME_ARRAYS, MASK_ARRAYS, RANGES, STEP_ARRAYS};
+use crate::shaders::{FRAME_ARRAYS, MASK_ARRAYS, RANGES, STEP_ARRAYS, TREE_ARRAYS};
 
-/// Storage buffers bound per shader stage by the step, frame and mask bind groups: every
+/// Storage buffers bound per shader stage by the step, frame, mask and tree bind groups: every
 /// array in `RANGES` bindings.
 pub const STORAGE_BUFFERS_NEEDED: u32 =
-    (STEP_ARRAYS.len() + FRAME_ARRAYS.len() + MASK_ARRAYS.len()) as u32 * RANGES;
+    (STEP_ARRAYS.len() + FRAME_ARRAYS.len() + MASK_ARRAYS.len() + TREE_ARRAYS.len()) as u32
+        * RANGES;
 
 /// The smallest binding limit [`Gpu::limit_bindings`] takes (ranges stay aligned above it).
 pub const MIN_BINDING_LIMIT: u64 = 1 << 16;

@@ -33,9 +33,9 @@ pub struct GpuSettings {
     pub has_field: u32,
     /// Words of neighbour mask of the largest cluster.
     pub mask_words: u32,
-    /// Entries of the 4-wide tree, and the items its leaves range over (balls, then
-    /// droplet spheres).
-    pub wide_count: u32,
+    /// Nodes of the BVH2 (entries of the 4-wide tree widened from it), and the items its
+    /// leaves range over (balls, then droplet spheres).
+    pub node_count: u32,
     pub item_count: u32,
     /// The field's colour map (`Colormap as u32`).
     pub colormap: u32,
@@ -76,10 +76,19 @@ pub struct ExpandSettings {
     pub candidate_count: u32,
 }
 
-/// `struct Wide` in step.wgsl: a node of the 4-wide tree the trace walk descends, made by
-/// the upload's host half from the baked BVH2 (`upload/wide.rs`). Slot i's box per axis
-/// across the four lanes, and its link (an inner node's entry, or a leaf's packed items);
-/// an empty slot is the point [`EMPTY_SLOT`] with link 0.
+/// `struct WidenSettings` in widen.wgsl: the uniforms of the widening pass.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct WidenSettings {
+    pub node_count: u32,
+    /// Threads per row of the dispatch's grid (workgroups in x × the workgroup size).
+    pub row_threads: u32,
+}
+
+/// `struct Wide` in step.wgsl: an entry of the 4-wide tree the trace walk descends, widened
+/// by the tracer from a BVH2 node (`shaders/widen.wgsl`): slot i's box per axis across the
+/// four lanes, and its link (an inner grandchild's node index, or a leaf's packed items); an
+/// empty slot is the point [`EMPTY_SLOT`] with link 0.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuWide {

@@ -1,6 +1,7 @@
 //! The GPU half of slosh: a cache step streamed into wgpu storage buffers, the MLS ray tracer
 //! (`shaders/trace.wgsl` over `shaders/mls.wgsl`, with the neighbour masks of the step it
-//! refines derived by `shaders/expand.wgsl`), the shade pass (`shaders/shade.wgsl`) or the water pass with secondary
+//! refines derived by `shaders/expand.wgsl`, and the 4-wide tree of the step it draws widened
+//! from its BVH2 by `shaders/widen.wgsl`), the shade pass (`shaders/shade.wgsl`) or the water pass with secondary
 //! rays (`shaders/water.wgsl`) as compute shaders, and frames read back for files or timed
 //! with GPU timestamps. The WGSL is a port of `slosh_mls`; the tests hold it to the CPU f64
 //! oracle.
@@ -15,16 +16,18 @@ pub mod layout;
 mod masks;
 pub use masks::MaskProgress;
 mod output;
+mod pass;
 pub mod shaders;
 mod staging;
 mod tracer;
 mod upload;
 pub mod water;
+mod widen;
 
 pub use colormap::Colormap;
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
-pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, status};
+pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, WidenSettings, status};
 pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use staging::StagingPool;
 pub use tracer::{

@@ -7,12 +7,13 @@
 //! last refined, and derives it again, in the same submission as the frame, when a refined
 //! frame asks for another step. One-iteration frames (scrubbing) never run the pass.
 
-use std::sync::{Mutex, OnceLock};
+use std::sync::Mutex;
 
-use crate::bindings::{bind_entries, layout_entries};
+use crate::bindings::bind_entries;
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
+use crate::pass::{PassLayouts, StepPass, storage_buffer, uniform_buffer};
 use crate::shaders::{EXPAND_ARRAYS, MASK_ARRAYS, expand_wgsl};
 use crate::upload::{EMPTY_BINDING, GpuStep};
 
@@ -48,17 +49,10 @@ pub(crate) fn cluster_count(step: &GpuStep) -> u32 {
         .div_ceil(step.info.cluster_size.max(1))
 }
 
-/// The mask pass's pipelines (per split, on first use), the trace passes' group-2 layout,
-/// and the one set of masks held.
+/// The mask pass, the trace passes' empty group 2, and the one set of masks held.
 #[derive(Debug)]
 pub(crate) struct NeighbourMasks {
-    /// The storage binding limit the pass is compiled for (the tracer's).
-    limit: u64,
-    expand_layout: wgpu::BindGroupLayout,
-    expand_pipeline_layout: wgpu::PipelineLayout,
-    pipelines: [OnceLock<wgpu::ComputePipeline>; 2],
-    /// Group 2 of the trace and shade passes.
-    pub(crate) layout: wgpu::BindGroupLayout,
+    pass: StepPass,
     /// Group 2 over an empty buffer, for frames that do not refine.
     none: wgpu::BindGroup,
     held: Mutex<Option<HeldMasks>>,
@@ -74,48 +68,26 @@ pub(crate) fn candidate_buffer(gpu: &Gpu, size: u64) -> wgpu::Buffer {
     storage_buffer(gpu, "candidates", size)
 }
 
-fn storage_buffer(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
-    gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(EMPTY_BINDING),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    })
-}
-
 impl NeighbourMasks {
     pub(crate) fn new(gpu: &Gpu, limit: u64) -> NeighbourMasks {
-        let device = &gpu.device;
-        let expand_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("expand"),
-            entries: &layout_entries(&EXPAND_ARRAYS, true),
-        });
-        let expand_pipeline_layout =
-            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("expand"),
-                bind_group_layouts: &[Some(&expand_layout)],
-                immediate_size: 0,
-            });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("masks"),
-            entries: &layout_entries(&MASK_ARRAYS, false),
-        });
+        let layouts = PassLayouts::new(gpu, "expand", &EXPAND_ARRAYS, "masks", &MASK_ARRAYS);
         let none = Self::group(
             gpu,
-            &layout,
+            &layouts.output,
             &mask_buffer(gpu, EMPTY_BINDING),
             &candidate_buffer(gpu, EMPTY_BINDING),
             limit,
         );
         NeighbourMasks {
-            limit,
-            expand_layout,
-            expand_pipeline_layout,
-            pipelines: Default::default(),
-            layout,
+            pass: StepPass::new(layouts, "expand", expand_wgsl, limit),
             none,
             held: Mutex::new(None),
         }
+    }
+
+    /// The layout of the trace and shade passes' group 2.
+    pub(crate) fn layout(&self) -> &wgpu::BindGroupLayout {
+        &self.pass.layouts.output
     }
 
     fn group(
@@ -130,31 +102,6 @@ impl NeighbourMasks {
             layout,
             entries: &bind_entries(&MASK_ARRAYS, &[masks, candidates], None, limit),
         })
-    }
-
-    fn pipeline(&self, gpu: &Gpu, split: bool) -> Result<&wgpu::ComputePipeline> {
-        let slot = &self.pipelines[usize::from(split)];
-        if let Some(pipeline) = slot.get() {
-            return Ok(pipeline);
-        }
-        let device = &gpu.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("expand"),
-            source: wgpu::ShaderSource::Wgsl(expand_wgsl(self.limit, split).into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("expand"),
-            layout: Some(&self.expand_pipeline_layout),
-            module: &module,
-            entry_point: Some("expand"),
-            compilation_options: wgpu::PipelineCompilationOptions::default(),
-            cache: None,
-        });
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(Error::Validation(e.to_string()));
-        }
-        Ok(slot.get_or_init(|| pipeline))
     }
 
     /// The trace passes' group 2 for a frame of `step`: the empty one where the frame does
@@ -203,7 +150,7 @@ impl NeighbourMasks {
             let candidates = candidates
                 .filter(|b| b.size() >= candidates_needed)
                 .unwrap_or_else(|| candidate_buffer(gpu, candidates_needed));
-            let group = Self::group(gpu, &self.layout, &buffer, &candidates, self.limit);
+            let group = Self::group(gpu, self.layout(), &buffer, &candidates, self.pass.limit);
             *held = Some(HeldMasks {
                 step: step.id(),
                 derived: 0,
@@ -277,18 +224,7 @@ impl NeighbourMasks {
             end_cluster: clusters.end,
             candidate_count: info.cluster_id_count,
         };
-        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("expand settings"),
-            size: size_of::<ExpandSettings>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM,
-            mapped_at_creation: true,
-        });
-        uniform
-            .slice(..)
-            .get_mapped_range_mut()
-            .map_err(|e| Error::Readback(e.to_string()))?
-            .copy_from_slice(bytemuck::bytes_of(&settings));
-        uniform.unmap();
+        let uniform = uniform_buffer(gpu, "expand settings", &settings)?;
         let b = &step.buffers;
         let buffers = [
             &b.points,
@@ -299,13 +235,13 @@ impl NeighbourMasks {
             &b.cluster_base,
             candidates,
         ];
-        let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), self.limit);
+        let entries = bind_entries(&EXPAND_ARRAYS, &buffers, Some(&uniform), self.pass.limit);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("expand"),
-            layout: &self.expand_layout,
+            layout: &self.pass.layouts.pass,
             entries: &entries,
         });
-        let pipeline = self.pipeline(gpu, step.split)?;
+        let pipeline = self.pass.pipeline(gpu, step.split)?;
         let max_groups = device.limits().max_compute_workgroups_per_dimension;
         // One workgroup per cluster.
         let groups = if info.mask_words == 0 {

@@ -8,9 +8,13 @@
 //! `NAME_at(i)` (`NAME_set(i, v)` to write). A module built with `split` picks the range from
 //! the index's high bits; one built without reads range 0 alone, as a plain array.
 
-/// The step data types (Point, Normal, Sphere, Wide, stack links) every module
-/// begins with.
+/// The step data types (Point, normals, candidates, Sphere) every module but the widening
+/// and present passes' begins with.
 pub const STEP_WGSL: &str = include_str!("../../../shaders/step.wgsl");
+
+/// The 4-wide tree's entry (Wide, stack links): the widening pass writes it, the trace walk
+/// reads it.
+pub const WIDE_WGSL: &str = include_str!("../../../shaders/wide.wgsl");
 
 /// The shared MLS maths alone.
 pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
@@ -18,6 +22,10 @@ pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
 /// The neighbour-mask pass, entry point `expand`, run by the tracer before a step's first
 /// refined frame (masks.rs).
 pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
+
+/// The widening pass, entry point `widen`, run by the tracer before the first frame of a step
+/// whose tree it does not hold (widen.rs).
+pub const WIDEN_WGSL: &str = include_str!("../../../shaders/widen.wgsl");
 
 /// The trace pass and the water pass, which traces secondary rays: mls.wgsl + trace.wgsl +
 /// light.wgsl + water.wgsl, entry points `trace_initial`, `trace_refined` and `water`.
@@ -98,18 +106,16 @@ pub mod step_array {
     pub const BALLS: RangedArray = array("balls", "Ball", 20, 0, 4, false);
     pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 5, false);
     pub const FIELD: RangedArray = array("field", "f32", 4, 0, 7, false);
-    pub const WIDE_NODES: RangedArray = array("wide_nodes", "Wide", 128, 0, 8, false);
     pub const BALL_CUBIC: RangedArray = array("ball_cubic", "vec2<u32>", 8, 0, 10, false);
 }
 
-pub const STEP_ARRAYS: [RangedArray; 8] = [
+pub const STEP_ARRAYS: [RangedArray; 7] = [
     step_array::POINTS,
     step_array::NORMALS,
     step_array::CLUSTER_START,
     step_array::BALLS,
     step_array::SPHERES,
     step_array::FIELD,
-    step_array::WIDE_NODES,
     step_array::BALL_CUBIC,
 ];
 
@@ -118,6 +124,16 @@ pub const STEP_ARRAYS: [RangedArray; 8] = [
 pub const MASK_ARRAYS: [RangedArray; 2] = [
     array("neighbour_masks", "u32", 4, 2, 0, false),
     array("candidates", "u32", 4, 2, 1, false),
+];
+
+/// The 4-wide tree the trace walk descends, as the trace and water passes bind it (group 3):
+/// held by the tracer for the step it last drew, widened from that step's BVH2 (widen.rs).
+pub const TREE_ARRAYS: [RangedArray; 1] = [array("wide_nodes", "Wide", 128, 3, 0, false)];
+
+/// The widening pass's arrays (widen.wgsl, group 0): a step's BVH2 in, the wide tree out.
+pub const WIDEN_ARRAYS: [RangedArray; 2] = [
+    array("bvh_nodes", "BvhNode", 32, 0, 0, false),
+    array("wide_nodes", "Wide", 128, 0, 1, true),
 ];
 
 /// A frame's arrays (group 1): the hits, three 16-byte words per pixel, and the pixels.
@@ -274,6 +290,18 @@ pub fn expand_wgsl(limit: u64, split: bool) -> String {
     )
 }
 
+/// Threads of a widening workgroup: one per BVH2 node.
+pub const WIDEN_GROUP: u32 = 64;
+
+/// The widening pass's module.
+pub fn widen_wgsl(limit: u64, split: bool) -> String {
+    format!(
+        "{}const WIDEN_GROUP: u32 = {WIDEN_GROUP}u;\n{WIDE_WGSL}{}{WIDEN_WGSL}",
+        shared_constants_wgsl(),
+        ranged_wgsl(&WIDEN_ARRAYS, limit, split)
+    )
+}
+
 /// The present pass's module.
 pub fn present_wgsl(limit: u64, split: bool) -> String {
     format!(
@@ -287,10 +315,11 @@ fn frame_module(source: &str, limit: u64, split: bool) -> String {
         .iter()
         .chain(&FRAME_ARRAYS)
         .chain(&MASK_ARRAYS)
+        .chain(&TREE_ARRAYS)
         .copied()
         .collect();
     format!(
-        "{}{STEP_WGSL}{}{source}",
+        "{}{STEP_WGSL}{WIDE_WGSL}{}{source}",
         shared_constants_wgsl(),
         ranged_wgsl(&arrays, limit, split)
     )

@@ -3,7 +3,7 @@
 //! naga's layouts, and a golden image.
 
 use slosh_render::shaders::{
-    TRACE_STACK_SIZES, expand_wgsl, mls_wgsl, present_wgsl, shade_wgsl, trace_wgsl,
+    TRACE_STACK_SIZES, expand_wgsl, mls_wgsl, present_wgsl, shade_wgsl, trace_wgsl, widen_wgsl,
 };
 
 /// Validates with the one capability the passes need beyond the baseline: `unpack2x16float`
@@ -32,6 +32,7 @@ fn every_wgsl_file_validates_with_naga() {
             validate(&format!("mls + shade {how}"), &shade_wgsl(limit, split));
             validate(&format!("expand.wgsl {how}"), &expand_wgsl(limit, split));
             validate(&format!("present.wgsl {how}"), &present_wgsl(limit, split));
+            validate(&format!("widen.wgsl {how}"), &widen_wgsl(limit, split));
             for entries in TRACE_STACK_SIZES {
                 let source = trace_wgsl(entries, limit, split);
                 assert!(source.contains(&format!("const STACK_SIZE: u32 = {entries}u;")));
@@ -347,7 +348,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 field_max,
                 has_field,
                 mask_words,
-                wide_count,
+                node_count,
                 item_count,
                 colormap,
                 first_row,
@@ -380,6 +381,25 @@ fn pod_structs_mirror_the_wgsl_layouts() {
         "Wide",
         slosh_render::layout::GpuWide,
         [lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, links, pad]
+    );
+    let widen = validate("widen", &widen_wgsl(LIMITS[0], true));
+    check_layout!(
+        &widen,
+        "Wide",
+        slosh_render::layout::GpuWide,
+        [lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, links, pad]
+    );
+    check_layout!(
+        &widen,
+        "BvhNode",
+        slosh_cache::GpuBvhNode,
+        [lo, count, hi, first]
+    );
+    check_layout!(
+        &widen,
+        "WidenSettings",
+        slosh_render::WidenSettings,
+        [node_count, row_threads]
     );
 }
 
@@ -1048,6 +1068,85 @@ fn the_key_light_comes_from_where_it_is_set() {
     assert!(bottom > top * 3 / 2, "lit from below: {top} vs {bottom}");
 }
 
+/// Pixels of `frame` that hit the surface.
+fn hit_pixels(frame: &Frame) -> usize {
+    frame
+        .hits
+        .iter()
+        .filter(|h| h.status != status::MISS)
+        .count()
+}
+
+/// Scenes of (kind, points, seed) baked at degree 2, uploaded, each with a camera framing it
+/// in 64 pixels.
+fn uploaded_scenes(dev: &Device, scenes: &[(SceneKind, usize, u64)]) -> Vec<(Camera, GpuStep)> {
+    scenes
+        .iter()
+        .map(|&(kind, n, seed)| {
+            let input = input_of(&SceneSpec::new(kind, n, seed));
+            let (file, _) = bake(&input, 2, 0.0);
+            let camera = slosh_testkit::framing_camera(&input.positions, 64);
+            (camera, GpuStep::upload(&dev.gpu, &file, None).unwrap())
+        })
+        .collect()
+}
+
+/// Each step's frame from a tracer of its own (one that has drawn no other step).
+fn frames_alone(
+    dev: &Device,
+    steps: &[(Camera, GpuStep)],
+    params: impl Fn(&GpuStep) -> TraceParams,
+) -> Vec<Frame> {
+    steps
+        .iter()
+        .map(|(camera, step)| {
+            Tracer::new(&dev.gpu)
+                .unwrap()
+                .render(&dev.gpu, step, camera, &params(step))
+                .unwrap()
+        })
+        .collect()
+}
+
+/// The tracer holds the 4-wide tree of one step, the one it last drew: one-iteration frames
+/// of three steps taken in turn (the largest last, so the held buffer is reused by the
+/// smaller and replaced by the larger) equal those of a tracer that saw only one of them; a
+/// stale tree would walk another step's boxes to this step's balls.
+#[test]
+fn the_tracer_widens_the_tree_of_the_step_it_draws() {
+    let Some(dev) = device() else { return };
+    let steps = uploaded_scenes(
+        dev,
+        &[
+            (SceneKind::Torus, 4000, 9),
+            (SceneKind::Sphere, 3000, 5),
+            (SceneKind::Sphere, 9000, 2),
+        ],
+    );
+    let params = |step: &GpuStep| TraceParams::for_step(step, 1);
+    let alone = frames_alone(dev, &steps, params);
+    let shared = Tracer::new(&dev.gpu).unwrap();
+    assert_eq!(shared.tree_bytes(), 0, "a tree before the first frame");
+    let mut largest = 0;
+    for round in 0..2 {
+        for (k, (camera, step)) in steps.iter().enumerate() {
+            let frame = shared
+                .render(&dev.gpu, step, camera, &params(step))
+                .unwrap();
+            let hits = hit_pixels(&frame);
+            largest = largest.max(step.info.wide_bytes());
+            let held = shared.tree_bytes();
+            eprintln!("round {round}, step {k}: {hits} hits, {held} bytes of tree held");
+            assert!(hits > 500, "{hits} hit pixels");
+            assert!(frame.hits == alone[k].hits && frame.rgba == alone[k].rgba);
+            assert!(
+                held >= step.info.wide_bytes() && held <= largest,
+                "{held} bytes held"
+            );
+        }
+    }
+}
+
 /// The tracer holds the neighbour masks of one step, the one it last refined: refined frames
 /// of two steps taken in turn equal those of a tracer that saw only one of them (stale masks
 /// would refine with another step's neighbour lists), a one-iteration frame derives none, and
@@ -1055,25 +1154,12 @@ fn the_key_light_comes_from_where_it_is_set() {
 #[test]
 fn the_tracer_derives_the_masks_of_the_step_it_refines() {
     let Some(dev) = device() else { return };
-    let steps: Vec<(Camera, GpuStep)> = [(SceneKind::Sphere, 3000, 5), (SceneKind::Torus, 4000, 9)]
-        .into_iter()
-        .map(|(kind, n, seed)| {
-            let input = input_of(&SceneSpec::new(kind, n, seed));
-            let (file, _) = bake(&input, 2, 0.0);
-            let camera = slosh_testkit::framing_camera(&input.positions, 64);
-            (camera, GpuStep::upload(&dev.gpu, &file, None).unwrap())
-        })
-        .collect();
+    let steps = uploaded_scenes(
+        dev,
+        &[(SceneKind::Sphere, 3000, 5), (SceneKind::Torus, 4000, 9)],
+    );
     let refined = |step: &GpuStep| TraceParams::for_step(step, 3);
-    let alone: Vec<Frame> = steps
-        .iter()
-        .map(|(camera, step)| {
-            Tracer::new(&dev.gpu)
-                .unwrap()
-                .render(&dev.gpu, step, camera, &refined(step))
-                .unwrap()
-        })
-        .collect();
+    let alone = frames_alone(dev, &steps, refined);
     let shared = Tracer::new(&dev.gpu).unwrap();
     let (camera, step) = &steps[0];
     shared
@@ -1094,11 +1180,7 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
             let frame = shared
                 .render(&dev.gpu, step, camera, &refined(step))
                 .unwrap();
-            let hits = frame
-                .hits
-                .iter()
-                .filter(|h| h.status != status::MISS)
-                .count();
+            let hits = hit_pixels(&frame);
             let held = shared.mask_bytes();
             eprintln!("round {round}, step {k}: {hits} hits, {held} bytes of masks held");
             assert!(hits > 500, "{hits} hit pixels");

@@ -4,7 +4,7 @@
 //! `shaders/trace.wgsl`'s entry points share one BVH walk to the next candidate in the order
 //! of initial hits: `trace_initial` (one iteration, no refinement code, a small kernel) and
 //! `trace_refined` (Adamson & Alexa: refine that candidate, hand over to the next when the
-//! hit leaves its ball). The walk descends the 4-wide tree the upload's host half built
+//! hit leaves its ball). The walk descends the 4-wide tree the tracer widens
 //! (four boxes per 128-byte read over half the levels), keeps the node in hand in registers
 //! and descends to a leaf before testing it (while-while, after Aila & Laine), stacking the
 //! other entered slots, farthest first, as packed (first, count) links, so a pop reads no
@@ -23,7 +23,8 @@
 //! `register_native_texture`); [`Tracer::record`] records trace, shade (or water) and present
 //! into the caller's encoder; [`Tracer::run`] and [`Tracer::render`] submit, wait and read
 //! back. The tracer holds the neighbour masks of the step it last refined (`masks.rs`,
-//! group 2); a frame of one iteration binds an empty group there.
+//! group 2; a frame of one iteration binds an empty group there) and the 4-wide tree of the
+//! step it last drew (`widen.rs`, group 3).
 
 use std::sync::OnceLock;
 
@@ -39,9 +40,11 @@ use crate::shaders::{
     trace_wgsl,
 };
 
+use crate::upload::GpuStep;
+use crate::widen::Widening;
+
 /// The format of a frame's texture: the shaded pixels' bytes as they are (sRGB-encoded).
 pub const FRAME_TEXTURE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-use crate::upload::GpuStep;
 
 mod params;
 mod readback;
@@ -98,6 +101,7 @@ pub struct Tracer {
     present_pipeline_layout: wgpu::PipelineLayout,
     frame_layout: wgpu::BindGroupLayout,
     masks: NeighbourMasks,
+    widening: Widening,
     /// The binding limit the modules and bind groups are made for (`Gpu::max_binding` when
     /// the tracer was built).
     limit: u64,
@@ -205,9 +209,15 @@ impl Tracer {
             entries: &layout_entries(&FRAME_ARRAYS, true),
         });
         let masks = NeighbourMasks::new(gpu, gpu.max_binding());
+        let widening = Widening::new(gpu, gpu.max_binding());
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("slosh"),
-            bind_group_layouts: &[Some(step_layout), Some(&frame_layout), Some(&masks.layout)],
+            bind_group_layouts: &[
+                Some(step_layout),
+                Some(&frame_layout),
+                Some(masks.layout()),
+                Some(widening.layout()),
+            ],
             immediate_size: 0,
         });
         let mut present_entries = layout_entries(&PRESENT_ARRAYS, false);
@@ -243,6 +253,7 @@ impl Tracer {
             present_pipeline_layout,
             frame_layout,
             masks,
+            widening,
             limit: gpu.max_binding(),
         };
         // The shade pass is built now: a device that cannot take the layout fails here.
@@ -480,7 +491,7 @@ impl Tracer {
         &self,
         step: &GpuStep,
         targets: &FrameTargets,
-        masks: &wgpu::BindGroup,
+        [masks, tree]: [&wgpu::BindGroup; 2],
         passes: [&wgpu::ComputePipeline; 3],
         rows: RowSet,
         present_frame: bool,
@@ -509,6 +520,7 @@ impl Tracer {
             pass.set_bind_group(0, step.bind_group(), &[]);
             pass.set_bind_group(1, &targets.frame_group, &[]);
             pass.set_bind_group(2, masks, &[]);
+            pass.set_bind_group(3, tree, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         // The texture takes the image once its last rows are in, so it never shows a frame
@@ -599,10 +611,11 @@ impl Tracer {
         let masks = self
             .masks
             .group_for(gpu, step, params.iterations > 1, encoder)?;
+        let tree = self.widening.group_for(gpu, step, encoder)?;
         self.encode(
             step,
             targets,
-            &masks,
+            [&masks, &tree],
             [trace, shade, present],
             rows,
             present_frame,
@@ -614,6 +627,11 @@ impl Tracer {
     /// Bytes of the neighbour masks the tracer holds (one step's, once a frame refined).
     pub fn mask_bytes(&self) -> u64 {
         self.masks.held_bytes()
+    }
+
+    /// Bytes of the 4-wide tree the tracer holds (the last drawn step's).
+    pub fn tree_bytes(&self) -> u64 {
+        self.widening.held_bytes()
     }
 
     /// `step`'s neighbour masks and expanded candidates in new buffers, their pass recorded

@@ -110,7 +110,7 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         field_max,
         has_field: u32::from(step.field.is_some()),
         mask_words: info.mask_words,
-        wide_count: info.wide_count,
+        node_count: info.node_count,
         item_count: info.item_count,
         colormap: params.colormap as u32,
         first_row: 0,

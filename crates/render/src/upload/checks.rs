@@ -1,6 +1,7 @@
 //! The checks a step's sections pass before the GPU sees them: a tree the trace walk can
 //! finish, neighbour-mask offsets the shaders can index, and a field's finite range.
 
+use rayon::prelude::*;
 use slosh_cache::names;
 
 /// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
@@ -8,7 +9,8 @@ use slosh_cache::names;
 pub const MAX_BVH_DEPTH: u64 = 62;
 
 /// The traversal stack packs a node as `first | count << 28` (trace.wgsl: `link`), so a
-/// leaf holds at most this many items and `first` stays below 2^28.
+/// leaf holds at most this many items, and `first` and an inner node's index (its wide
+/// entry, widen.wgsl) stay below 2^28.
 pub const MAX_LINK_FIRST: u32 = (1 << 28) - 1;
 pub const MAX_LEAF_LINK_COUNT: u32 = u32::MAX >> MAX_LINK_FIRST.count_ones();
 
@@ -16,14 +18,22 @@ pub const MAX_LEAF_LINK_COUNT: u32 = u32::MAX >> MAX_LINK_FIRST.count_ones();
 // stack link.
 const _: () = assert!(slosh_cache::MAX_LEAF_RANGE <= MAX_LEAF_LINK_COUNT);
 
-/// Checks that the `bvh_nodes` section is a tree the trace pass can walk: every node packs
-/// into a stack link, a leaf's items lie in the item list, and an inner node's children come
-/// after it (so every descent ends: trace.wgsl is compiled without loop guards,
-/// `Tracer`'s `trace_module`).
-pub(super) fn check_tree(nodes: &[u8], items: u64) -> Result<(), String> {
+/// Checks that the `bvh_nodes` section is a tree the trace pass can walk, and returns its
+/// node count: every node packs into a stack link, a leaf's items lie in the item list, and
+/// an inner node's children come after it (so every descent ends: trace.wgsl is compiled
+/// without loop guards, `Tracer`'s `trace_module`). Each node is checked alone, so the
+/// nodes are checked in parallel; the first bad one is named.
+pub(super) fn check_tree(nodes: &[u8], items: u64) -> Result<u32, String> {
     let word = |c: &[u8], at: usize| u32::from_le_bytes([c[at], c[at + 1], c[at + 2], c[at + 3]]);
     let node_count = (nodes.len() / 32) as u64;
-    for (i, node) in nodes.chunks_exact(32).enumerate() {
+    if node_count > u64::from(MAX_LINK_FIRST) + 1 {
+        return Err(format!(
+            "section '{}' holds {node_count} nodes; the tracer links at most {}",
+            names::BVH_NODES,
+            u64::from(MAX_LINK_FIRST) + 1
+        ));
+    }
+    let bad = nodes.par_chunks_exact(32).enumerate().find_map_first(|(i, node)| {
         let (count, first) = (word(node, 12), word(node, 28));
         let (wide, first64) = (u64::from(count), u64::from(first));
         let problem = if count > MAX_LEAF_LINK_COUNT || first > MAX_LINK_FIRST {
@@ -42,15 +52,18 @@ pub(super) fn check_tree(nodes: &[u8], items: u64) -> Result<(), String> {
                 first64 + 1
             )
         } else {
-            continue;
+            return None;
         };
-        return Err(format!(
+        Some(format!(
             "BVH node {i} (byte {} of section '{}') {problem}",
             i * 32,
             names::BVH_NODES
-        ));
+        ))
+    });
+    match bad {
+        Some(problem) => Err(problem),
+        None => Ok(node_count as u32),
     }
-    Ok(())
 }
 
 /// The first row of cluster `cluster`'s neighbour-mask words, `first` being its first
@@ -135,7 +148,7 @@ mod tests {
             nodes.iter().flat_map(|&(c, f)| node(c, f)).collect()
         };
         // Root with two leaves of 3 and 2 items.
-        assert_eq!(check_tree(&tree(&[(0, 1), (3, 0), (2, 3)]), 5), Ok(()));
+        assert_eq!(check_tree(&tree(&[(0, 1), (3, 0), (2, 3)]), 5), Ok(3));
         let cycle = check_tree(&tree(&[(0, 1), (0, 0), (2, 3)]), 5).unwrap_err();
         assert!(
             cycle.contains("BVH node 1 (byte 32") && cycle.contains("follow"),

@@ -7,12 +7,14 @@ use std::time::Instant;
 use slosh_cache::{CacheFile, names};
 
 use super::fill::storage_buffers;
-use super::host::{HostField, HostStep, Source, StepInfo, WIDE_NODES};
+use super::host::{HostField, HostStep, Source, StepInfo};
 use super::{EMPTY_BINDING, field_buffer_size, invalid};
 use crate::bindings::{bind_entries, needs_split};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
-use crate::shaders::{EXPAND_ARRAYS, MASK_ARRAYS, RangedArray, STEP_ARRAYS, step_array};
+use crate::shaders::{
+    EXPAND_ARRAYS, MASK_ARRAYS, RangedArray, STEP_ARRAYS, TREE_ARRAYS, WIDEN_ARRAYS, step_array,
+};
 use crate::staging::StagingPool;
 
 /// The storage buffers of one step.
@@ -32,8 +34,9 @@ pub struct StepBuffers {
     pub ball_cubic: wgpu::Buffer,
     pub spheres: wgpu::Buffer,
     pub field: wgpu::Buffer,
-    /// The 4-wide tree the walk descends, made by the host half from the baked BVH2.
-    pub wide_nodes: wgpu::Buffer,
+    /// The baked BVH2, read by the widening pass only (the tracer widens it into the 4-wide
+    /// tree of the step it draws, `widen.rs`).
+    pub bvh_nodes: wgpu::Buffer,
 }
 
 impl StepBuffers {
@@ -46,18 +49,17 @@ impl StepBuffers {
             &self.balls,
             &self.spheres,
             &self.field,
-            &self.wide_nodes,
             &self.ball_cubic,
         ]
     }
 
-    /// Every byte the step holds on the GPU: sections, the wide tree and the field.
+    /// Every byte the step holds on the GPU: sections and the field.
     pub fn bytes(&self) -> u64 {
         self.in_binding_order()
             .iter()
             .map(|b| b.size())
             .sum::<u64>()
-            + [&self.cluster_base, &self.cluster_ids]
+            + [&self.cluster_base, &self.cluster_ids, &self.bvh_nodes]
                 .iter()
                 .map(|b| b.size())
                 .sum::<u64>()
@@ -131,7 +133,8 @@ pub struct GpuStep {
 }
 
 /// How the passes bind each array of [`HostStep::gpu_arrays`]: the candidate runs and their
-/// offsets are read only by the mask pass; a name that is no array is an error, never a guess.
+/// offsets are read only by the mask pass, the BVH2 only by the widening pass; a name that
+/// is no array is an error, never a guess.
 fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
     Ok(match name {
         names::POINTS => &step_array::POINTS,
@@ -142,7 +145,7 @@ fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
         names::BALLS => &step_array::BALLS,
         names::BALL_CUBIC => &step_array::BALL_CUBIC,
         names::SPHERES => &step_array::SPHERES,
-        WIDE_NODES => &step_array::WIDE_NODES,
+        names::BVH_NODES => &WIDEN_ARRAYS[0],
         other => {
             return Err(invalid(
                 file,
@@ -234,7 +237,7 @@ impl GpuStep {
         let start = Instant::now();
         let file = host.file();
         let info = host.info.clone();
-        // Every array, sections, the wide tree and the masks a refined frame derives, within
+        // Every array, sections, the wide tree and the masks the tracer derives, within
         // RANGES bindings: one split decides how every pass of the step's frames reads.
         let mut split = false;
         let gpu_arrays = host.gpu_arrays();
@@ -252,6 +255,7 @@ impl GpuStep {
         }
         let mask_bytes = info.mask_bytes();
         split |= needs_ranges(gpu, file, "neighbour masks", &MASK_ARRAYS[0], mask_bytes)?;
+        split |= needs_ranges(gpu, file, "wide tree", &TREE_ARRAYS[0], info.wide_bytes())?;
         let candidate_bytes = info.candidate_bytes();
         split |= needs_ranges(gpu, file, "candidates", &MASK_ARRAYS[1], candidate_bytes)?;
         let mut stats = UploadStats {
@@ -280,7 +284,7 @@ impl GpuStep {
         let (points, normals) = (next()?, next()?);
         let (cluster_start, cluster_base, cluster_ids) = (next()?, next()?, next()?);
         let (balls, ball_cubic) = (next()?, next()?);
-        let (spheres, wide_nodes) = (next()?, next()?);
+        let (spheres, bvh_nodes) = (next()?, next()?);
         let buffers = StepBuffers {
             points,
             normals,
@@ -291,7 +295,7 @@ impl GpuStep {
             ball_cubic,
             spheres,
             field: field_values,
-            wide_nodes,
+            bvh_nodes,
         };
         let binding_limit = gpu.max_binding();
         let bind_group = step_group(gpu, &buffers, binding_limit);

@@ -8,10 +8,10 @@ use rayon::prelude::*;
 use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
 
 use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mask_layout};
-use super::wide::wide_tree;
-use super::{EMPTY_BINDING, HOST_ONLY, HOST_READS, SECTIONS, field_buffer_size, invalid, slot_of};
+use super::{
+    EMPTY_BINDING, HOST_READS, SECTIONS, WIDE_NODE_BYTES, field_buffer_size, invalid, slot_of,
+};
 use crate::error::Result;
-use crate::layout::GpuWide;
 
 /// What the passes need to know about a step, read from its header and sections.
 #[derive(Debug, Clone, PartialEq)]
@@ -21,8 +21,9 @@ pub struct StepInfo {
     pub cluster_size: u32,
     /// Depth of the step's BVH (the traversal stack needs one entry more).
     pub bvh_depth: u64,
-    /// Entries of the 4-wide tree (`wide.rs`) and of the BVH's item list.
-    pub wide_count: u32,
+    /// Nodes of the BVH2 (entries of the 4-wide tree the tracer widens from it) and items
+    /// of its item list.
+    pub node_count: u32,
     pub item_count: u32,
     /// Candidates of all clusters (the last `cluster_start`).
     pub cluster_id_count: u32,
@@ -49,6 +50,12 @@ impl StepInfo {
     /// Bytes of the neighbour masks the tracer derives before a refined frame of the step.
     pub fn mask_bytes(&self) -> u64 {
         (self.mask_rows * u64::from(self.cluster_size) * 4).max(EMPTY_BINDING)
+    }
+
+    /// Bytes of the 4-wide tree the tracer widens from the BVH2 before a frame of the step:
+    /// an entry per node.
+    pub fn wide_bytes(&self) -> u64 {
+        (u64::from(self.node_count) * WIDE_NODE_BYTES).max(EMPTY_BINDING)
     }
 
     /// Bytes of the candidates, one per slot, that the tracer expands from the runs with
@@ -154,8 +161,6 @@ pub struct HostStep<'a> {
     file: HeldFile<'a>,
     /// Each `SECTIONS` slot's bytes, or where they come from.
     sections: Vec<SectionData>,
-    /// The 4-wide tree's entries, made from the BVH2 here.
-    wide: Vec<GpuWide>,
     pub field: Option<HostField>,
     pub info: StepInfo,
     pub host_seconds: f64,
@@ -201,14 +206,11 @@ impl<'a> HostStep<'a> {
         }
     }
 
-    /// The arrays the GPU half uploads, by label: the sections in `SECTIONS`' order but the
-    /// BVH2 nodes, then the wide tree.
+    /// The arrays the GPU half uploads, by name: the sections in `SECTIONS`' order.
     pub(super) fn gpu_arrays(&self) -> Vec<(&'static str, Source<'_>)> {
         SECTIONS
             .iter()
-            .filter(|name| **name != HOST_ONLY)
             .map(|name| (*name, self.section_source(slot_of(name))))
-            .chain([(WIDE_NODES, Source::Bytes(bytemuck::cast_slice(&self.wide)))])
             .collect()
     }
 
@@ -283,7 +285,7 @@ impl<'a> HostStep<'a> {
             sphere_count: count(names::SPHERES) as u32,
             cluster_size: header.neighbour_cluster.max(1),
             bvh_depth: header.stats.bvh_depth,
-            wide_count: 0,
+            node_count: 0,
             // Leaves name ranges of items: the balls, then the droplet spheres.
             item_count: (u64::from(point_count) + count(names::SPHERES)) as u32,
             cluster_id_count: 0,
@@ -307,7 +309,6 @@ impl<'a> HostStep<'a> {
         let mut step = HostStep {
             file,
             sections,
-            wide: Vec::new(),
             field,
             info,
             host_seconds: 0.0,
@@ -315,11 +316,8 @@ impl<'a> HostStep<'a> {
         };
         let items = u64::from(step.info.item_count);
         let nodes = step.host_bytes(slot_of(names::BVH_NODES));
-        let wide = check_tree(nodes, items)
-            .and_then(|()| wide_tree(nodes))
-            .map_err(|problem| invalid(step.file(), problem))?;
-        step.info.wide_count = wide.len() as u32;
-        step.wide = wide;
+        step.info.node_count =
+            check_tree(nodes, items).map_err(|problem| invalid(step.file(), problem))?;
         let (words, rows, candidates) = mask_layout(
             step.host_bytes(slot_of(names::CLUSTER_START)),
             step.host_bytes(slot_of(names::CLUSTER_BASE)),
@@ -339,9 +337,6 @@ impl<'a> HostStep<'a> {
         Ok(step)
     }
 }
-
-/// The label of the wide tree's array among [`HostStep::gpu_arrays`].
-pub(super) const WIDE_NODES: &str = "wide nodes";
 
 /// The bytes of an array the GPU half uploads: in memory (decoded, the field, or raw in the
 /// mapped file), or a compressed section's runs, decoded straight into the staging memory.

@@ -1,9 +1,9 @@
 //! A cache step streamed into GPU storage buffers, in two halves. The host half
 //! ([`HostStep`], `host.rs`) opens and checks the file, checksums its raw sections in place,
-//! decodes the two sections it reads (BVH nodes, cluster offsets), checks the tree and the
-//! mask layout (`checks.rs`) and widens the tree into the 4-wide one the walk descends
-//! (`wide.rs`; the BVH2 itself never goes to the GPU); it needs no device and runs on any
-//! thread. The GPU half
+//! decodes the sections it reads (BVH nodes, cluster offsets) where they are compressed, and
+//! checks the tree and the mask layout (`checks.rs`); it needs no device and runs on any
+//! thread. The BVH2 goes to the GPU as baked: the tracer widens the one it draws into the
+//! 4-wide tree its walk descends (`widen.rs`). The GPU half
 //! ([`GpuStep::create`], `gpu_step.rs`) creates the buffers and fills one staging buffer
 //! (`fill.rs`; from a [`StagingPool`](crate::StagingPool), so its pages are already faulted
 //! in) on rayon's threads: raw sections copied from the map, compressed ones decoded run by
@@ -17,7 +17,6 @@ mod checks;
 mod fill;
 mod gpu_step;
 mod host;
-mod wide;
 
 use slosh_cache::{CacheFile, names};
 
@@ -39,9 +38,6 @@ const SECTIONS: [&str; 9] = [
     names::BVH_NODES,
 ];
 
-/// The one section the GPU never holds: the host half widens it (`wide.rs`).
-const HOST_ONLY: &str = names::BVH_NODES;
-
 /// The sections the host half reads (the tree check, the mask and candidate layouts), so
 /// decodes itself.
 const HOST_READS: [&str; 3] = [names::BVH_NODES, names::CLUSTER_START, names::CLUSTER_BASE];
@@ -50,7 +46,7 @@ fn slot_of(name: &str) -> usize {
     SECTIONS.iter().position(|n| *n == name).unwrap_or_default()
 }
 
-/// Bytes of an entry of the 4-wide tree (`struct Wide` in mls.wgsl).
+/// Bytes of an entry of the 4-wide tree (`struct Wide` in step.wgsl).
 const WIDE_NODE_BYTES: u64 = 128;
 
 /// wgpu refuses zero-sized bindings, and a binding must hold one element of its array:
