@@ -1,6 +1,7 @@
 // The widening pass, run by the tracer when a frame draws a step other than the one whose
 // tree it holds (crates/render's widen.rs): the step's baked BVH2 (bvh_nodes, as the cache
-// stores it) into the 4-wide tree the trace walk descends (wide_nodes, step.wgsl: Wide).
+// stores it: boxes on a grid) into the 4-wide tree the trace walk descends (wide_nodes,
+// wide.wgsl: Wide, boxes in f32).
 //
 // One thread per BVH2 node, and entry i of the wide tree is node i's: its slots are node i's
 // grandchildren (or a child that is a leaf), each with its box and its link, a leaf's packed
@@ -10,32 +11,50 @@
 // Entries of other leaves are never read and never written. The upload's host half refused
 // trees whose links would not fit (slosh_render::MAX_LINK_FIRST, checks.rs).
 
-// Mirrors `slosh_cache::GpuBvhNode`: count 0 is an inner node with children first and
-// first + 1; otherwise a leaf over items first .. first + count.
+// Mirrors `slosh_cache::GpuBvhNode`: the box's six grid coordinates two to a word (lo x |
+// lo y << 16, lo z | hi x << 16, hi y | hi z << 16), and the link, packed as the walk stacks
+// it: count 0 is an inner node with children first and first + 1, otherwise a leaf over
+// items first .. first + count.
 struct BvhNode {
-    lo: vec3<f32>,
-    count: u32,
-    hi: vec3<f32>,
-    first: u32,
+    bounds: vec3<u32>,
+    link: u32,
 }
 
-// Mirrors `slosh_render::WidenSettings`.
+// Mirrors `slosh_render::WidenSettings`: the grid (slosh_cache::BvhGrid) and the dispatch.
 struct WidenSettings {
+    origin: vec3<f32>,
     node_count: u32,
+    step: vec3<f32>,
     // Threads per row of the dispatch's grid (workgroups in x × WIDEN_GROUP).
     row_threads: u32,
 }
 
 @group(0) @binding(100) var<uniform> widen_settings: WidenSettings;
 
-// A leaf as the walk stacks it: first item in the low bits, count above.
-fn leaf_link(n: BvhNode) -> u32 {
-    return n.first | (n.count << LINK_COUNT_SHIFT);
+fn is_leaf(n: BvhNode) -> bool {
+    return (n.link >> LINK_COUNT_SHIFT) != 0u;
 }
 
-// The link a slot holding node `index` gets.
+fn first_of(n: BvhNode) -> u32 {
+    return n.link & LINK_FIRST;
+}
+
+// The link a slot holding node `index` gets: a leaf's own (already packed as the walk stacks
+// it), or the inner node's index, its entry.
 fn link_of(n: BvhNode, index: u32) -> u32 {
-    return select(index, leaf_link(n), n.count > 0u);
+    return select(index, n.link, is_leaf(n));
+}
+
+// A box's corners: origin + q × step per axis, the step a power of two, so one rounding as
+// slosh_cache::BvhGrid::decode does.
+fn low_corner(n: BvhNode) -> vec3<f32> {
+    let q = vec3<u32>(n.bounds.x & 0xffffu, n.bounds.x >> 16u, n.bounds.y & 0xffffu);
+    return widen_settings.origin + vec3<f32>(q) * widen_settings.step;
+}
+
+fn high_corner(n: BvhNode) -> vec3<f32> {
+    let q = vec3<u32>(n.bounds.y >> 16u, n.bounds.z & 0xffffu, n.bounds.z >> 16u);
+    return widen_settings.origin + vec3<f32>(q) * widen_settings.step;
 }
 
 // WIDEN_GROUP is generated from slosh_render's shaders.rs.
@@ -46,7 +65,7 @@ fn widen(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let node = bvh_nodes_at(i);
-    if node.count > 0u && i != 0u {
+    if is_leaf(node) && i != 0u {
         return;
     }
     // Up to four slots; the unused stay the empty point with link 0.
@@ -54,25 +73,25 @@ fn widen(@builtin(global_invocation_id) gid: vec3<u32>) {
     var hi = lo;
     var links = vec4<u32>(0u);
     var slot = 0u;
-    if node.count > 0u {
-        lo[0] = node.lo;
-        hi[0] = node.hi;
-        links[0] = leaf_link(node);
+    if is_leaf(node) {
+        lo[0] = low_corner(node);
+        hi[0] = high_corner(node);
+        links[0] = node.link;
     } else {
         for (var c = 0u; c < 2u; c++) {
-            let child = bvh_nodes_at(node.first + c);
-            if child.count > 0u {
-                lo[slot] = child.lo;
-                hi[slot] = child.hi;
-                links[slot] = leaf_link(child);
+            let child = bvh_nodes_at(first_of(node) + c);
+            if is_leaf(child) {
+                lo[slot] = low_corner(child);
+                hi[slot] = high_corner(child);
+                links[slot] = child.link;
                 slot++;
                 continue;
             }
             for (var g = 0u; g < 2u; g++) {
-                let index = child.first + g;
+                let index = first_of(child) + g;
                 let grandchild = bvh_nodes_at(index);
-                lo[slot] = grandchild.lo;
-                hi[slot] = grandchild.hi;
+                lo[slot] = low_corner(grandchild);
+                hi[slot] = high_corner(grandchild);
                 links[slot] = link_of(grandchild, index);
                 slot++;
             }

@@ -14,7 +14,7 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::ploc::PlocSearchDistance;
 use rayon::prelude::*;
-use slosh_cache::{Bvh, GpuBvhNode, MAX_LEAF_RANGE};
+use slosh_cache::{Bvh, BvhNode, MAX_LEAF_RANGE};
 
 /// Up to this many candidates share a leaf.
 pub const MAX_LEAF_ITEMS: u32 = 8;
@@ -106,14 +106,20 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
     let built = build_bvh2(&boxes, params, &mut Duration::default());
     // Rewrite breadth first from the root so that the layout is ours whatever obvhs keeps
     // internally: every inner node's two children sit in consecutive slots.
-    let mut nodes: Vec<GpuBvhNode> = Vec::with_capacity(built.nodes.len());
+    let empty = BvhNode {
+        lo: [0.0; 3],
+        count: 0,
+        hi: [0.0; 3],
+        first: 0,
+    };
+    let mut nodes: Vec<BvhNode> = Vec::with_capacity(built.nodes.len());
     let mut queue = std::collections::VecDeque::from([(0usize, 0usize)]);
-    nodes.push(bytemuck::Zeroable::zeroed());
+    nodes.push(empty);
     while let Some((src, dst)) = queue.pop_front() {
         let node = &built.nodes[src];
         let lo = node.aabb().min;
         let hi = node.aabb().max;
-        let mut out = GpuBvhNode {
+        let mut out = BvhNode {
             lo: [lo.x, lo.y, lo.z],
             count: 0,
             hi: [hi.x, hi.y, hi.z],
@@ -129,7 +135,7 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
             let child = node.first_index as usize;
             for c in 0..2 {
                 queue.push_back((child + c, nodes.len()));
-                nodes.push(bytemuck::Zeroable::zeroed());
+                nodes.push(empty);
             }
         }
         nodes[dst] = out;

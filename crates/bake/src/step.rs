@@ -492,8 +492,13 @@ pub fn bake_step_parts(
             (crate::bvh::build(&items), start.elapsed().as_secs_f64())
         }
     };
+    // Boxes the grid cannot hold come from coordinates beyond f32's range, which the
+    // recentring rules out; refused rather than stored wrong.
+    let (bvh_grid, stored_nodes) = bvh.stored().ok_or_else(|| {
+        input_err("the BVH's boxes do not fit the grid of its root's box".to_string())
+    })?;
     // After the spheres, before the fields: the order every cache has had.
-    sections.extend(bvh_sections(&bvh));
+    sections.extend(bvh_sections(&stored_nodes));
     sections.extend(fields);
 
     let mut stats = StepStats {
@@ -533,6 +538,7 @@ pub fn bake_step_parts(
         smoothing_length: surface.h,
         spacing: surface.spacing,
         surface_offset: surface.offset,
+        bvh_grid,
         stats,
         up,
         ..step_header(input, params)
@@ -558,6 +564,7 @@ fn step_header(input: &StepInput, params: &BakeParams) -> Header {
         smoothing_length: 0.0,
         spacing: 0.0,
         surface_offset: 0.0,
+        bvh_grid: slosh_cache::BvhGrid::default(),
         neighbour_cluster: NEIGHBOUR_CLUSTER,
         mls: MlsSettings::from_params(&params.mls),
         bake: params.record(),
@@ -569,12 +576,12 @@ fn step_header(input: &StepInput, params: &BakeParams) -> Header {
     }
 }
 
-/// The BVH's section: its nodes (a leaf names its items as a range).
-fn bvh_sections(bvh: &slosh_cache::Bvh) -> [SectionInput; 1] {
+/// The BVH's section: its nodes on the header's grid (a leaf names its items as a range).
+fn bvh_sections(nodes: &[slosh_cache::GpuBvhNode]) -> [SectionInput; 1] {
     [SectionInput::new(
         names::BVH_NODES,
         Element::BvhNode,
-        &bvh.nodes,
+        nodes,
         by_element(Element::BvhNode),
     )
     .raw_within_budget(raw_rank::BVH_NODES)]
@@ -585,7 +592,7 @@ fn bvh_sections(bvh: &slosh_cache::Bvh) -> [SectionInput; 1] {
 fn empty_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
     let surface = SurfaceParts::<f64>::empty(&params.mls);
     let (mut sections, fields, _) = gpu_sections(&surface, input, &[], params)?;
-    sections.extend(bvh_sections(&slosh_cache::Bvh::default()));
+    sections.extend(bvh_sections(&[]));
     sections.extend(fields);
     Ok(BakedStep {
         header: step_header(input, params),

@@ -194,8 +194,9 @@ fn every_single_byte_flip_is_detected() {
     assert!(undetected.is_empty(), "undetected flips at {undetected:?}");
 }
 
-/// Format 6's leaves are ranges of items: the verifier refuses a leaf that spans more than
-/// the tracer's 15 items, two leaves that share an item, and a fitted ball no leaf holds.
+/// Format 6's leaves are ranges of items (at most 15, which format 9's four count bits hold
+/// by construction): the verifier refuses two leaves that share an item, a leaf past the item
+/// list, and a fitted ball no leaf holds.
 #[test]
 fn bvh_leaves_that_overrun_overlap_or_drop_a_candidate_are_refused() {
     let (_, input) = scene_input(SceneKind::Sphere, 2000, 0);
@@ -210,7 +211,8 @@ fn bvh_leaves_that_overrun_overlap_or_drop_a_candidate_are_refused() {
         .chunks_exact(size_of::<slosh_cache::GpuBvhNode>())
         .map(bytemuck::pod_read_unaligned)
         .collect();
-    let leaves: Vec<usize> = (0..nodes.len()).filter(|&i| nodes[i].count > 0).collect();
+    let leaves: Vec<usize> = (0..nodes.len()).filter(|&i| nodes[i].count() > 0).collect();
+    let link = |first: u32, count: u32| first | count << slosh_cache::LINK_FIRST_BITS;
     let verify = |nodes: &[slosh_cache::GpuBvhNode]| {
         let mut sections = baked.sections.clone();
         sections[at].bytes = bytemuck::cast_slice(nodes).to_vec();
@@ -221,25 +223,25 @@ fn bvh_leaves_that_overrun_overlap_or_drop_a_candidate_are_refused() {
     };
     verify(&nodes).unwrap();
     // Every leaf ends at a candidate: the bake groups candidates, and a range reaches its last.
-    let mut long = nodes.clone();
-    long[leaves[0]].count = 16;
-    let err = verify(&long).unwrap_err();
-    assert!(err.contains("spans 16 items; at most 15"), "{err}");
+    let items = (input.positions.len() + 1) as u32;
+    let mut past = nodes.clone();
+    past[leaves[0]].link = link(items, 3);
+    let err = verify(&past).unwrap_err();
+    assert!(err.contains(&format!("holds items {items}..")), "{err}");
     let mut overlap = nodes.clone();
-    overlap[leaves[1]].first = nodes[leaves[0]].first;
-    overlap[leaves[1]].count = 1;
+    overlap[leaves[1]].link = link(nodes[leaves[0]].first(), 1);
     let err = verify(&overlap).unwrap_err();
     assert!(
         err.contains(&format!(
             "BVH item {} is in two leaves",
-            nodes[leaves[0]].first
+            nodes[leaves[0]].first()
         )),
         "{err}"
     );
     let mut short = nodes.clone();
-    let leaf = *leaves.iter().find(|&&l| nodes[l].count > 1).unwrap();
-    short[leaf].count -= 1;
-    let last = nodes[leaf].first + nodes[leaf].count - 1;
+    let leaf = *leaves.iter().find(|&&l| nodes[l].count() > 1).unwrap();
+    short[leaf].link = link(nodes[leaf].first(), nodes[leaf].count() - 1);
+    let last = nodes[leaf].first() + nodes[leaf].count() - 1;
     let err = verify(&short).unwrap_err();
     assert!(
         err.contains(&format!("ball {last} (")) && err.contains("is missing from the BVH"),

@@ -3,14 +3,50 @@
 
 use slosh_mls::BallIndex;
 
-use crate::layout::GpuBvhNode;
+use crate::bvh_grid::{BvhGrid, GpuBvhNode};
+
+/// A BVH2 node with its box in f32, as the bake builds it and as the CPU walks it once
+/// decoded from the cache's grid ([`crate::BvhGrid`]). `count == 0`: inner node, children at
+/// `first` and `first + 1`. `count > 0`: leaf over items `first .. first + count` (balls, then
+/// droplet spheres). Node 0 is the root.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BvhNode {
+    pub lo: [f32; 3],
+    pub count: u32,
+    pub hi: [f32; 3],
+    pub first: u32,
+}
 
 /// The nodes of a step's BVH. Items number balls `0..n` and droplet spheres
 /// `n..n + spheres`, as [`BallIndex`] expects; a leaf holds items `first..first + count`,
 /// which may include balls that are not candidates (the walk's visitor skips those).
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
-    pub nodes: Vec<GpuBvhNode>,
+    pub nodes: Vec<BvhNode>,
+}
+
+impl Bvh {
+    /// The tree as the cache stores it: a grid over the root's box and every node on it
+    /// (boxes rounded outwards); `None` where a node cannot be stored.
+    pub fn stored(&self) -> Option<(BvhGrid, Vec<GpuBvhNode>)> {
+        let grid = self
+            .nodes
+            .first()
+            .map_or_else(BvhGrid::default, |root| BvhGrid::covering(root.lo, root.hi));
+        let nodes = self
+            .nodes
+            .iter()
+            .map(|n| grid.encode(n))
+            .collect::<Option<Vec<_>>>()?;
+        Some((grid, nodes))
+    }
+
+    /// The tree the stored `nodes` on `grid` stand for.
+    pub fn from_stored(grid: &BvhGrid, nodes: &[GpuBvhNode]) -> Bvh {
+        Bvh {
+            nodes: nodes.iter().map(|n| grid.decode(n)).collect(),
+        }
+    }
 }
 
 /// The most items one leaf's range spans (format 6): the trace walk packs a leaf's count in
@@ -18,7 +54,7 @@ pub struct Bvh {
 pub const MAX_LEAF_RANGE: u32 = 15;
 
 /// Entry parameter of the ray into the box for t ≥ 0, if it enters at all.
-fn enter(node: &GpuBvhNode, origin: [f64; 3], inv_dir: [f64; 3]) -> Option<f64> {
+fn enter(node: &BvhNode, origin: [f64; 3], inv_dir: [f64; 3]) -> Option<f64> {
     let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
     for a in 0..3 {
         let (lo, hi) = (f64::from(node.lo[a]), f64::from(node.hi[a]));

@@ -10,7 +10,7 @@ pub const MAGIC: [u8; 8] = *b"\x89SLC\r\n\x1a\n";
 pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files of another major version (older ones with the command that re-bakes
 /// them); minor versions only add.
-pub const MAJOR: u16 = 8;
+pub const MAJOR: u16 = 9;
 pub const MINOR: u16 = 0;
 /// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
@@ -102,7 +102,7 @@ pub enum Encoding {
     /// padding word becomes one run of zeros. Format 3.
     #[serde(rename = "shuffle16+zstd")]
     Shuffle16Zstd,
-    /// As `shuffle16+zstd`, within each 20-byte element (the balls). Format 8.
+    /// As `shuffle16+zstd`, within each 20-byte element (format 8's balls). Format 8.
     #[serde(rename = "shuffle20+zstd")]
     Shuffle20Zstd,
     /// As `shuffle16+zstd`, within each 24-byte element (format 5's to 7's balls). Format 5.
@@ -341,6 +341,9 @@ pub struct Header {
     /// units (`mls.offset` particle radii; absent before bake revision 7: none).
     #[serde(default)]
     pub surface_offset: f64,
+    /// The grid the `bvh_nodes` boxes are stored on (format 9).
+    #[serde(default)]
+    pub bvh_grid: crate::BvhGrid,
     /// Points per neighbour cluster: `cluster_neighbours` holds one candidate list per run of
     /// this many consecutive points.
     pub neighbour_cluster: u32,

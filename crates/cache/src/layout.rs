@@ -85,18 +85,6 @@ pub struct GpuSphere {
     pub radius: f32,
 }
 
-/// `struct BvhNode { lo: vec3<f32>, count: u32, hi: vec3<f32>, first: u32 }`: a BVH2 node.
-/// `count == 0`: inner node, children at `first` and `first + 1`. `count > 0`: leaf over
-/// items `first .. first + count` (balls, then droplet spheres). Node 0 is the root.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
-pub struct GpuBvhNode {
-    pub lo: [f32; 3],
-    pub count: u32,
-    pub hi: [f32; 3],
-    pub first: u32,
-}
-
 /// What a ball is, in the low two bits of [`GpuBall::state`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BallState {
@@ -287,7 +275,7 @@ impl Element {
         match self {
             Element::Point | Element::Sphere | Element::Vec4 => 16,
             Element::Ball => size_of::<GpuBall>(),
-            Element::BvhNode => size_of::<GpuBvhNode>(),
+            Element::BvhNode => size_of::<crate::GpuBvhNode>(),
             Element::Octahedral | Element::U32 | Element::F32 => 4,
         }
     }

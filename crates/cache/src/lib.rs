@@ -4,6 +4,7 @@
 //! `slosh bake` and the renderers; `docs/cache-format.md` specifies it byte by byte.
 
 mod bvh;
+mod bvh_grid;
 pub mod candidates;
 mod codec;
 mod error;
@@ -21,7 +22,8 @@ mod step;
 mod verify;
 mod writer;
 
-pub use bvh::{Bvh, MAX_LEAF_RANGE};
+pub use bvh::{Bvh, BvhNode, MAX_LEAF_RANGE};
+pub use bvh_grid::{BvhGrid, GpuBvhNode, LINK_FIRST_BITS};
 /// The section codecs by themselves (for measuring encodings); readers use
 /// [`CacheFile::decode_into`].
 pub use codec::{
@@ -33,8 +35,7 @@ pub use format::{
     PREAMBLE_LEN, SectionEntry, SeriesRecord, Source, StepStats, Transform, hex64,
 };
 pub use layout::{
-    BallState, CubicWords, Element, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MAX_SPHERES,
-    stored_radius,
+    BallState, CubicWords, Element, GpuBall, GpuPoint, GpuSphere, MAX_SPHERES, stored_radius,
 };
 pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,

@@ -8,6 +8,8 @@ use bytemuck::Pod;
 use slosh_fileio::FileBytes;
 use xxhash_rust::xxh3::xxh3_64;
 
+use crate::bvh::Bvh;
+use crate::bvh_grid::GpuBvhNode;
 use crate::codec::decode_into;
 use crate::error::{Error, Result};
 use crate::format::{
@@ -486,6 +488,12 @@ impl CacheFile {
     }
 
     /// Decodes a whole section into a new vector of `T`.
+    /// The BVH, its boxes decoded from the header's grid.
+    pub fn bvh(&self) -> Result<Bvh> {
+        let nodes: Vec<GpuBvhNode> = self.decode(crate::names::BVH_NODES)?;
+        Ok(Bvh::from_stored(&self.header().bvh_grid, &nodes))
+    }
+
     pub fn decode<T: Pod>(&self, name: &str) -> Result<Vec<T>> {
         let entry = self.required(name)?;
         let element = Element::from_name(&entry.element).map(Element::size);

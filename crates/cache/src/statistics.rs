@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use crate::{BallState, Bvh, CacheFile, GpuBall, GpuBvhNode, GpuPoint, Result, names};
+use crate::{BallState, CacheFile, GpuBall, GpuPoint, Result, names};
 
 /// Min, mean and max of a quantity.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -70,7 +70,6 @@ impl Statistics {
         let (start, _) = file.neighbour_lists()?;
         let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
         let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
-        let nodes: Vec<GpuBvhNode> = file.decode(names::BVH_NODES)?;
         let base: Vec<u32> = file.decode(names::CLUSTER_BASE)?;
         let wide = crate::candidates::WIDE_CLUSTER;
         let counts: Vec<u32> = start
@@ -87,7 +86,7 @@ impl Statistics {
                 degrees[usize::from(b.degree())] += 1;
             }
         }
-        let bvh = Bvh { nodes };
+        let bvh = file.bvh()?;
         Ok(Statistics {
             neighbours: Summary::of(counts.iter().map(|&c| f64::from(c))),
             neighbour_histogram: histogram,

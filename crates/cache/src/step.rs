@@ -9,7 +9,7 @@ use slosh_mls::{
 use crate::bvh::Bvh;
 use crate::error::{Error, Result};
 use crate::format::{MlsSettings, Transform};
-use crate::layout::{BallState, CubicWords, GpuBall, GpuBvhNode, GpuPoint, GpuSphere};
+use crate::layout::{BallState, CubicWords, GpuBall, GpuPoint, GpuSphere};
 use crate::names;
 use crate::reader::CacheFile;
 use crate::{candidates, octahedral};
@@ -253,9 +253,7 @@ impl LoadedStep {
             params,
         })
         .map_err(|e| invalid(e.to_string()))?;
-        let bvh = Bvh {
-            nodes: file.decode::<GpuBvhNode>(names::BVH_NODES)?,
-        };
+        let bvh = file.bvh()?;
         Ok(LoadedStep {
             surface,
             bvh,

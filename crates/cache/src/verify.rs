@@ -3,9 +3,8 @@
 
 use rayon::prelude::*;
 
-use crate::bvh::{Bvh, MAX_LEAF_RANGE};
 use crate::error::{Error, Result};
-use crate::layout::{BallState, GpuBall, GpuBvhNode, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
+use crate::layout::{BallState, GpuBall, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
 use crate::names;
 use crate::reader::CacheFile;
 
@@ -91,11 +90,7 @@ impl CacheFile {
             return Err("the neighbour cluster size is 0".into());
         }
         let clusters = n.div_ceil(size);
-        let bvh = Bvh {
-            nodes: self
-                .decode::<GpuBvhNode>(names::BVH_NODES)
-                .map_err(decode_err)?,
-        };
+        let bvh = self.bvh().map_err(decode_err)?;
         if points.len() != n || balls.len() != n || start.len() != clusters + 1 {
             return Err(format!(
                 "the header says {n} points in {clusters} clusters; sections hold {} points, {} \
@@ -189,14 +184,9 @@ impl CacheFile {
             if node.count == 0 {
                 continue;
             }
-            // A leaf is a range of items; the balls in it that are not candidates are
-            // skipped by the walk, but no item belongs to two leaves.
-            if node.count > MAX_LEAF_RANGE {
-                return Err(format!(
-                    "a BVH leaf spans {} items; at most {MAX_LEAF_RANGE}: {node:?}",
-                    node.count
-                ));
-            }
+            // A leaf is a range of items (at most `MAX_LEAF_RANGE`, which its four bits of
+            // count hold); the balls in it that are not candidates are skipped by the walk,
+            // but no item belongs to two leaves.
             let range = node.first as usize..node.first as usize + node.count as usize;
             let leaf = seen.get_mut(range.clone()).ok_or(format!(
                 "a BVH leaf holds items {}..{} of {items}",

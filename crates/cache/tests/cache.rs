@@ -25,6 +25,7 @@ fn header() -> Header {
         smoothing_length: 0.1,
         spacing: 0.05,
         surface_offset: 0.0,
+        bvh_grid: BvhGrid::default(),
         neighbour_cluster: 32,
         mls: MlsSettings::from_params(&slosh_mls::SurfaceParams::default()),
         bake: serde_json::json!({"test": true}),
@@ -107,9 +108,9 @@ fn truncation_at_any_length_is_a_clear_error() {
 #[test]
 fn a_newer_major_version_is_refused_by_name() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8..12].copy_from_slice(&[9, 0, 0, 0]);
+    bytes[8..12].copy_from_slice(&[10, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
-    assert!(err.contains("newer") && err.contains("9.0"), "{err}");
+    assert!(err.contains("newer") && err.contains("10.0"), "{err}");
 }
 
 #[test]
@@ -178,7 +179,7 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
         SectionInput::new(
             "nodes",
             Element::BvhNode,
-            bytemuck::cast_slice::<f32, [f32; 8]>(&floats[..n / 8 * 8]),
+            bytemuck::cast_slice::<f32, [f32; 4]>(&floats[..n / 8 * 8]),
             Encoding::Shuffle32Zstd,
         ),
         SectionInput::new(
@@ -264,15 +265,15 @@ fn every_single_byte_flip_is_detected() {
     }
 }
 
-/// A file of an older major version (format 7.0 stored 24-byte balls with h as an f32 where
-/// 8.0 stores 20-byte balls with h in the state word) is refused with both versions and the
-/// command that re-bakes it from its source.
+/// A file of an older major version (format 8.0 stored BVH nodes of 32 bytes, boxes in f32,
+/// where 9.0 stores 16-byte nodes on a grid) is refused with both versions and the command
+/// that re-bakes it from its source.
 #[test]
 fn an_older_major_version_is_refused_with_the_rebake_command() {
     let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
-    bytes[8..12].copy_from_slice(&[7, 0, 0, 0]);
+    bytes[8..12].copy_from_slice(&[8, 0, 0, 0]);
     let err = open(bytes).unwrap_err().to_string();
-    for part in ["test.slc", "7.0", "8.0", "older", "slosh bake test --out"] {
+    for part in ["test.slc", "8.0", "9.0", "older", "slosh bake test --out"] {
         assert!(err.contains(part), "{part}: {err}");
     }
 }

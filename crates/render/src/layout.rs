@@ -80,7 +80,10 @@ pub struct ExpandSettings {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct WidenSettings {
+    /// The grid the nodes' boxes are stored on (`slosh_cache::BvhGrid`).
+    pub origin: [f32; 3],
     pub node_count: u32,
+    pub step: [f32; 3],
     /// Threads per row of the dispatch's grid (workgroups in x × the workgroup size).
     pub row_threads: u32,
 }

@@ -132,7 +132,7 @@ pub const TREE_ARRAYS: [RangedArray; 1] = [array("wide_nodes", "Wide", 128, 3, 0
 
 /// The widening pass's arrays (widen.wgsl, group 0): a step's BVH2 in, the wide tree out.
 pub const WIDEN_ARRAYS: [RangedArray; 2] = [
-    array("bvh_nodes", "BvhNode", 32, 0, 0, false),
+    array("bvh_nodes", "BvhNode", 16, 0, 0, false),
     array("wide_nodes", "Wide", 128, 0, 1, true),
 ];
 

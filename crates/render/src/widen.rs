@@ -106,8 +106,11 @@ impl Widening {
         let groups = nodes.div_ceil(WIDEN_GROUP);
         let max_groups = device.limits().max_compute_workgroups_per_dimension;
         let row_groups = groups.min(max_groups);
+        let grid = &step.info.bvh_grid;
         let settings = WidenSettings {
+            origin: grid.origin,
             node_count: nodes,
+            step: grid.step,
             row_threads: row_groups * WIDEN_GROUP,
         };
         let uniform = uniform_buffer(gpu, "widen settings", &settings)?;

@@ -389,17 +389,12 @@ fn pod_structs_mirror_the_wgsl_layouts() {
         slosh_render::layout::GpuWide,
         [lo_x, hi_x, lo_y, hi_y, lo_z, hi_z, links, pad]
     );
-    check_layout!(
-        &widen,
-        "BvhNode",
-        slosh_cache::GpuBvhNode,
-        [lo, count, hi, first]
-    );
+    check_layout!(&widen, "BvhNode", slosh_cache::GpuBvhNode, [bounds, link]);
     check_layout!(
         &widen,
         "WidenSettings",
         slosh_render::WidenSettings,
-        [node_count, row_threads]
+        [origin, node_count, step, row_threads]
     );
 }
 

@@ -2,7 +2,7 @@
 //! finish, neighbour-mask offsets the shaders can index, and a field's finite range.
 
 use rayon::prelude::*;
-use slosh_cache::names;
+use slosh_cache::{GpuBvhNode, names};
 
 /// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
 /// tree has 31 levels, each stacking up to three slots.
@@ -11,7 +11,7 @@ pub const MAX_BVH_DEPTH: u64 = 62;
 /// The traversal stack packs a node as `first | count << 28` (trace.wgsl: `link`), so a
 /// leaf holds at most this many items, and `first` and an inner node's index (its wide
 /// entry, widen.wgsl) stay below 2^28.
-pub const MAX_LINK_FIRST: u32 = (1 << 28) - 1;
+pub const MAX_LINK_FIRST: u32 = (1 << slosh_cache::LINK_FIRST_BITS) - 1;
 pub const MAX_LEAF_LINK_COUNT: u32 = u32::MAX >> MAX_LINK_FIRST.count_ones();
 
 // Every leaf a bake writes (format 6: a range of at most `MAX_LEAF_RANGE` items) packs into a
@@ -24,8 +24,8 @@ const _: () = assert!(slosh_cache::MAX_LEAF_RANGE <= MAX_LEAF_LINK_COUNT);
 /// without loop guards, `Tracer`'s `trace_module`). Each node is checked alone, so the
 /// nodes are checked in parallel; the first bad one is named.
 pub(super) fn check_tree(nodes: &[u8], items: u64) -> Result<u32, String> {
-    let word = |c: &[u8], at: usize| u32::from_le_bytes([c[at], c[at + 1], c[at + 2], c[at + 3]]);
-    let node_count = (nodes.len() / 32) as u64;
+    const NODE: usize = size_of::<GpuBvhNode>();
+    let node_count = (nodes.len() / NODE) as u64;
     if node_count > u64::from(MAX_LINK_FIRST) + 1 {
         return Err(format!(
             "section '{}' holds {node_count} nodes; the tracer links at most {}",
@@ -33,15 +33,12 @@ pub(super) fn check_tree(nodes: &[u8], items: u64) -> Result<u32, String> {
             u64::from(MAX_LINK_FIRST) + 1
         ));
     }
-    let bad = nodes.par_chunks_exact(32).enumerate().find_map_first(|(i, node)| {
-        let (count, first) = (word(node, 12), word(node, 28));
+    let bad = nodes.par_chunks_exact(NODE).enumerate().find_map_first(|(i, node)| {
+        let node: GpuBvhNode = bytemuck::pod_read_unaligned(node);
+        let (count, first) = (node.count(), node.first());
         let (wide, first64) = (u64::from(count), u64::from(first));
-        let problem = if count > MAX_LEAF_LINK_COUNT || first > MAX_LINK_FIRST {
-            format!(
-                "has count {count} and first {first}; the tracer takes leaves of at most {MAX_LEAF_LINK_COUNT} items and indices below {}",
-                MAX_LINK_FIRST + 1
-            )
-        } else if count > 0 && first64 + wide > items {
+        // A stored link packs as a stack link does (`slosh_cache::LINK_FIRST_BITS`).
+        let problem = if count > 0 && first64 + wide > items {
             format!(
                 "holds items {first}..{} of a list of {items}",
                 first64 + wide
@@ -56,7 +53,7 @@ pub(super) fn check_tree(nodes: &[u8], items: u64) -> Result<u32, String> {
         };
         Some(format!(
             "BVH node {i} (byte {} of section '{}') {problem}",
-            i * 32,
+            i * NODE,
             names::BVH_NODES
         ))
     });
@@ -127,19 +124,17 @@ pub(super) fn finite_range(bytes: &[u8]) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::check_tree;
+    use slosh_cache::{BvhGrid, BvhNode};
 
-    /// A node as the `bvh_nodes` section stores it: lo, count, hi, first.
+    /// A node as the `bvh_nodes` section stores it.
     fn node(count: u32, first: u32) -> Vec<u8> {
-        let mut out = Vec::new();
-        for v in [0.0f32, 0.0, 0.0] {
-            out.extend(v.to_le_bytes());
-        }
-        out.extend(count.to_le_bytes());
-        for v in [1.0f32, 1.0, 1.0] {
-            out.extend(v.to_le_bytes());
-        }
-        out.extend(first.to_le_bytes());
-        out
+        let node = BvhNode {
+            lo: [0.0; 3],
+            count,
+            hi: [1.0; 3],
+            first,
+        };
+        bytemuck::bytes_of(&BvhGrid::default().encode(&node).unwrap()).to_vec()
     }
 
     #[test]
@@ -151,13 +146,11 @@ mod tests {
         assert_eq!(check_tree(&tree(&[(0, 1), (3, 0), (2, 3)]), 5), Ok(3));
         let cycle = check_tree(&tree(&[(0, 1), (0, 0), (2, 3)]), 5).unwrap_err();
         assert!(
-            cycle.contains("BVH node 1 (byte 32") && cycle.contains("follow"),
+            cycle.contains("BVH node 1 (byte 16") && cycle.contains("follow"),
             "{cycle}"
         );
         let outside = check_tree(&tree(&[(0, 1), (3, 0), (2, 4)]), 5).unwrap_err();
         assert!(outside.contains("items 4..6 of a list of 5"), "{outside}");
-        let wide = check_tree(&tree(&[(16, 0)]), 16).unwrap_err();
-        assert!(wide.contains("at most 15 items"), "{wide}");
         let dangling = check_tree(&tree(&[(0, 1), (3, 0)]), 5).unwrap_err();
         assert!(
             dangling.contains("children 1 and 2 in a tree of 2 nodes"),

@@ -5,7 +5,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use rayon::prelude::*;
-use slosh_cache::{CacheFile, Encoding, SectionEntry, Transform, names};
+use slosh_cache::{BvhGrid, CacheFile, Encoding, SectionEntry, Transform, names};
 
 use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mask_layout};
 use super::{
@@ -24,6 +24,8 @@ pub struct StepInfo {
     /// Nodes of the BVH2 (entries of the 4-wide tree the tracer widens from it) and items
     /// of its item list.
     pub node_count: u32,
+    /// The grid the BVH2's boxes are stored on.
+    pub bvh_grid: BvhGrid,
     pub item_count: u32,
     /// Candidates of all clusters (the last `cluster_start`).
     pub cluster_id_count: u32,
@@ -286,6 +288,7 @@ impl<'a> HostStep<'a> {
             cluster_size: header.neighbour_cluster.max(1),
             bvh_depth: header.stats.bvh_depth,
             node_count: 0,
+            bvh_grid: header.bvh_grid,
             // Leaves name ranges of items: the balls, then the droplet spheres.
             item_count: (u64::from(point_count) + count(names::SPHERES)) as u32,
             cluster_id_count: 0,
