@@ -4,20 +4,34 @@
 // Shared by trace.wgsl and shade.wgsl, which are appended to this file.
 
 // A ball's initial support normal and polynomial. Mirrors `slosh_cache::GpuBall`: the
-// support normal (octahedral), the first six coefficients as half floats two to a word (a
-// droplet member's first word names its sphere instead), and the state word (bits 0–1 the
-// state, 2–3 the degree, 16–31 h as a half float); a cubic's other four are in `ball_cubic`
-// (two words per ball).
+// support normal (octahedral) and the first six coefficients as half floats two to a word (a
+// droplet member's first word names its sphere instead); a cubic's other four are in
+// `ball_cubic` (two words per ball).
 struct Ball {
     normal: u32,
     coeffs: array<u32, 3>,
-    state: u32,
 }
 
-// The ball's smoothing length: a normal half float (the verifier refuses any other), so
-// every adapter decodes what the CPU does.
-fn ball_h(b: Ball) -> f32 {
-    return unpack2x16float(b.state).y;
+// Ball i's state (slosh_cache::BallBits): four bits, eight balls to a word of ball_states;
+// bits 0–1 what it is (0 full, 1 degraded, 2 unfitted, 3 droplet member), 2–3 the degree.
+fn ball_state(i: u32) -> u32 {
+    return (ball_states_at(i >> 3u) >> ((i & 7u) * 4u)) & 15u;
+}
+
+// Unfitted balls and droplet members (states 2 and 3) are never candidates.
+fn is_candidate(state: u32) -> bool {
+    return (state & 3u) < 2u;
+}
+
+// Ball i's smoothing length: the step's one h, or its own from ball_h (two half floats to a
+// word) where h is per point. Normal half floats (the verifier refuses any other), so every
+// adapter decodes what the CPU does.
+fn ball_h(i: u32) -> f32 {
+    if settings.per_point_h != 0u {
+        let pair = unpack2x16float(ball_h_at(i >> 1u));
+        return select(pair.x, pair.y, (i & 1u) == 1u);
+    }
+    return settings.h;
 }
 
 // One pixel of the hit buffer; mirrors `slosh_render::GpuHit`. Position and t are in the
@@ -75,6 +89,9 @@ struct Settings {
     // How far outside the MLS surface the drawn surface lies along its normal, in local
     // units (docs/algorithm.md: the offset).
     surface_offset: f32,
+    // The step's h (a half float), and whether each ball has its own instead (ball_h).
+    h: f32,
+    per_point_h: u32,
 }
 
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's
@@ -428,9 +445,9 @@ struct Poly {
 // Ball `item`'s stored initial polynomial as f32, exactly the stored values
 // (slosh_cache::GpuBall::coeffs): half floats, the first six in the ball, a cubic's other
 // four in `ball_cubic`.
-fn ball_poly(b: Ball, item: u32) -> Poly {
+fn ball_poly(b: Ball, item: u32, state: u32) -> Poly {
     var p: Poly;
-    p.degree = (b.state >> 2u) & 3u;
+    p.degree = state >> 2u;
     let w = b.coeffs;
     var e = vec2<u32>(0u);
     if p.degree == 3u {

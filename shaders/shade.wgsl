@@ -14,7 +14,7 @@
 // h), or the ball's own value where no weight reaches.
 fn field_value_at(hit: Hit) -> f32 {
     let nb = neighbourhood(hit.item);
-    let h = ball_h(balls_at(hit.item)) * settings.h_factor;
+    let h = ball_h(hit.item) * settings.h_factor;
     let h2 = h * h;
     var sum = 0.0;
     var wsum = 0.0;

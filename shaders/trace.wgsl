@@ -119,13 +119,14 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
         if iv.t_in > (*best).t || iv.t_out < after_t || t_lo > iv.t_out {
             continue;
         }
-        // The ball (24 bytes) is read only once the ray is known to cross its sphere.
+        // The ball (16 bytes) and its state are read only once the ray is known to cross its
+        // sphere, both before the test, so that the two loads overlap.
         let ball = balls_at(item);
-        // Unfitted balls and droplet members are never candidates.
-        if (ball.state & 3u) >= 2u {
+        let state = ball_state(item);
+        if !is_candidate(state) {
             continue;
         }
-        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball, item), ball_h(ball), settings.surface_offset, t_lo, iv.t_out);
+        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball, item, state), ball_h(item), settings.surface_offset, t_lo, iv.t_out);
         if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
             && key_before(hit.t, item, (*best).t, (*best).item) {
             (*best).found = true;
@@ -224,7 +225,7 @@ fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
         return out;
     }
     let ball = balls_at(c.item);
-    let initial = ball_poly(ball, c.item);
+    let initial = ball_poly(ball, c.item, ball_state(c.item));
     out.status = STATUS_ITERATION_LIMIT;
     out.normal = hit_normal(ball_frame(ball), initial, c.x, c.y);
     out.iterations = 1u;
@@ -298,7 +299,7 @@ fn trace_refined(@builtin(global_invocation_id) gid: vec3<u32>) {
             store(p, ray, c.item, start);
             return;
         }
-        let out = refine(ray, c.item, ball_h(balls_at(c.item)), start, c.t_lo, c.t_out);
+        let out = refine(ray, c.item, ball_h(c.item), start, c.t_lo, c.t_out);
         if out.status != STATUS_MISS && finite(out.t) {
             store(p, ray, c.item, out);
             return;

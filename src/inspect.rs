@@ -7,8 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use slosh_cache::{
-    CacheFile, GpuBall, GpuPoint, Header, Manifest, SectionEntry, SeriesKey, names,
-    parse_step_file_name,
+    CacheFile, GpuPoint, Header, Manifest, SectionEntry, SeriesKey, names, parse_step_file_name,
 };
 
 use crate::config::inspect::InspectConfig;
@@ -184,7 +183,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
         );
     }
     let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
-    let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+    let balls = file.balls()?;
     let cubic = file.cubic_words()?;
     let (start, neighbours) = file.neighbour_lists()?;
     let p = points[i];
@@ -196,7 +195,7 @@ fn point_record(file: &CacheFile, i: usize) -> Result<serde_json::Value> {
         "world": h.transform.to_world(local),
         "radius_local": p.radius(), "reach_local": p.reach(),
         "ball": {
-            "normal": b.normal(), "h": b.h(), "degree": b.degree(),
+            "normal": b.normal(), "h": b.h, "degree": b.degree(),
             "state": format!("{:?}", b.kind()), "sphere": b.sphere(),
             "coefficients": b.coeffs(cubic[i]),
         },

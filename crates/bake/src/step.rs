@@ -3,9 +3,9 @@
 
 use rayon::prelude::*;
 use slosh_cache::{
-    BallState, CubicWords, Element, Encoding, GpuBall, GpuPoint, GpuSphere, Header, MAX_SPHERES,
-    MlsSettings, SectionInput, Source, StepStats, Transform, candidates, names, octahedral,
-    stored_radius,
+    BallBits, BallState, CubicWords, Element, Encoding, GpuBall, GpuPoint, GpuSphere, Header,
+    MAX_SPHERES, MlsSettings, SectionInput, Source, StepStats, Transform, candidates, exact_half,
+    names, octahedral, pack_h, stored_radius,
 };
 use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
@@ -119,9 +119,9 @@ fn gpu_sections(
             surface.spheres.len()
         )));
     }
-    let (balls, cubic): (Vec<GpuBall>, Vec<CubicWords>) = (0..n)
+    let stored: Vec<(GpuBall, BallBits, CubicWords)> = (0..n)
         .into_par_iter()
-        .map(|i| -> Result<(GpuBall, CubicWords), BakeError> {
+        .map(|i| {
             let b = &surface.balls[i];
             let (kind, sphere) = match surface.ball_fits[i] {
                 BallFit::Fitted(FitStatus::Full) => (BallState::Full, 0),
@@ -131,18 +131,33 @@ fn gpu_sections(
             };
             let normal = [b.normal.x, b.normal.y, b.normal.z];
             let coeffs = b.poly.c.map(|c| c as f32);
-            // h is at half precision already (`slosh_mls::half_precision`), so exact in f32.
-            let h = b.h as f32;
-            let unfitted = || {
-                GpuBall::unfitted(h)
-                    .map(|ball| (ball, [0; 2]))
-                    .ok_or_else(|| input_err(format!("ball {i}: h = {h} is not a half float")))
-            };
-            GpuBall::new(normal, h, coeffs, b.poly.degree, kind, sphere).map_or_else(unfitted, Ok)
+            GpuBall::new(normal, coeffs, b.poly.degree, kind, sphere).unwrap_or_else(|| {
+                let (ball, bits) = GpuBall::unfitted();
+                (ball, bits, [0; 2])
+            })
         })
-        .collect::<Result<Vec<_>, _>>()?
-        .into_iter()
-        .unzip();
+        .collect();
+    let balls: Vec<GpuBall> = stored.iter().map(|s| s.0).collect();
+    let bits: Vec<BallBits> = stored.iter().map(|s| s.1).collect();
+    let cubic: Vec<CubicWords> = stored.iter().map(|s| s.2).collect();
+    // h is at half precision already (`slosh_mls::half_precision`), so exact in f32: per
+    // point in `ball_h`, or the header's one value, which every ball then has.
+    let per_point_h = if params.mls.per_point_h {
+        let h: Vec<f32> = surface.balls.iter().map(|b| b.h as f32).collect();
+        Some(pack_h(&h).ok_or_else(|| input_err("a ball's h is not a half float".into()))?)
+    } else {
+        if let Some(i) = surface.balls.iter().position(|b| b.h != surface.h) {
+            return Err(input_err(format!(
+                "ball {i} has h = {} where the step's is {}",
+                surface.balls[i].h, surface.h
+            )));
+        }
+        // A step without particles has no h.
+        if n > 0 && exact_half(surface.h as f32).is_none() {
+            return Err(input_err(format!("h = {} is not a half float", surface.h)));
+        }
+        None
+    };
     // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
     // rounded up to f32 keeps every stored list within its distance filter.
     let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
@@ -207,6 +222,12 @@ fn gpu_sections(
             by_element(Element::Ball),
         ),
         SectionInput::new(
+            names::BALL_STATES,
+            Element::U32,
+            &BallBits::pack(&bits),
+            Encoding::Shuffle4Zstd,
+        ),
+        SectionInput::new(
             names::CLUSTER_START,
             Element::U32,
             &cluster_start,
@@ -232,6 +253,14 @@ fn gpu_sections(
             by_element(Element::Sphere),
         ),
     ];
+    if let Some(words) = &per_point_h {
+        sections.push(SectionInput::new(
+            names::BALL_H,
+            Element::U32,
+            words,
+            Encoding::Shuffle4Zstd,
+        ));
+    }
     // A cubic's other four coefficients, where the bake fits cubics.
     if params.mls.degree == 3 {
         sections.push(SectionInput::new(
@@ -285,7 +314,7 @@ fn gpu_sections(
             }
         });
     }
-    let kinds = balls.par_iter().map(GpuBall::kind).collect();
+    let kinds = bits.iter().map(|b| b.kind()).collect();
     Ok((sections, fields, kinds))
 }
 

@@ -249,55 +249,76 @@ fn bvh_leaves_that_overrun_overlap_or_drop_a_candidate_are_refused() {
     );
 }
 
-/// Format 8's half floats: a baked step with a point's radius or reach, or a ball's h, made
-/// zero or subnormal (a GPU may flush those), or a state word's reserved bits set, is refused
-/// by the verifier with its message; the step as baked passes, its h exactly the header's.
+/// Format 8's and 9's half floats and ball states: a baked step with a point's radius or
+/// reach made zero or subnormal (a GPU may flush those), the header's h not a half float, a
+/// ball's own h (per-point h) made zero, its `ball_h` section missing, or state bits set past
+/// the last ball, is refused by the verifier with its message; the steps as baked pass.
 #[test]
-fn radii_reaches_and_h_that_are_not_normal_half_floats_are_refused() {
-    let (_, input) = scene_input(SceneKind::Sphere, 2000, 0);
+fn radii_reaches_h_and_states_that_do_not_fit_are_refused() {
+    let (_, input) = scene_input(SceneKind::Sphere, 2003, 0);
     let baked = bake_step(&input, &params()).unwrap();
-    let index = |name: &str| baked.sections.iter().position(|s| s.name == name).unwrap();
-    let (points_at, balls_at) = (index(names::POINTS), index(names::BALLS));
-    let points: Vec<slosh_cache::GpuPoint> =
-        bytemuck::pod_collect_to_vec(&baked.sections[points_at].bytes);
-    let balls: Vec<slosh_cache::GpuBall> =
-        bytemuck::pod_collect_to_vec(&baked.sections[balls_at].bytes);
-    let h = baked.header.smoothing_length as f32;
-    assert!(
-        balls.iter().all(|b| b.h() == h),
-        "every ball stores the global h exactly"
-    );
-    let verify = |points: &[slosh_cache::GpuPoint], balls: &[slosh_cache::GpuBall]| {
-        let mut sections = baked.sections.clone();
-        sections[points_at].bytes = bytemuck::cast_slice(points).to_vec();
-        sections[balls_at].bytes = bytemuck::cast_slice(balls).to_vec();
-        let bytes = encode_step(baked.header.clone(), &sections, Compression::None).unwrap();
+    let verify_sections = |header: &slosh_cache::Header, sections: &[slosh_cache::SectionInput]| {
+        let bytes = encode_step(header.clone(), sections, Compression::None).unwrap();
         let file =
             CacheFile::from_bytes(FileBytes::from_vec(Path::new("halves.slc"), bytes)).unwrap();
         file.verify().map_err(|e| e.to_string())
     };
-    verify(&points, &balls).unwrap();
+    let index = |sections: &[slosh_cache::SectionInput], name: &str| {
+        sections.iter().position(|s| s.name == name)
+    };
+    let points_at = index(&baked.sections, names::POINTS).unwrap();
+    let points: Vec<slosh_cache::GpuPoint> =
+        bytemuck::pod_collect_to_vec(&baked.sections[points_at].bytes);
+    let with_points = |points: &[slosh_cache::GpuPoint]| {
+        let mut sections = baked.sections.clone();
+        sections[points_at].bytes = bytemuck::cast_slice(points).to_vec();
+        verify_sections(&baked.header, &sections)
+    };
+    with_points(&points).unwrap();
+    assert!(
+        index(&baked.sections, names::BALL_H).is_none(),
+        "one h for the step: no ball_h"
+    );
     // A subnormal radius (the low half's smallest subnormal), then a zero reach.
     for (word, what) in [(0x0001, "radius"), (0x0000_ffff, "reach")] {
         let mut bad = points.clone();
         bad[7].radii &= word;
-        let err = verify(&bad, &balls).unwrap_err();
+        let err = with_points(&bad).unwrap_err();
         assert!(
             err.contains("point 7 ") && err.contains("not a positive normal half float"),
             "{what}: {err}"
         );
     }
-    // h zero, then reserved state bits set.
-    for mask in [0x0000_ffff_u32, 0xffff_ffff] {
-        let mut bad = balls.clone();
-        bad[11].state = if mask == 0xffff_ffff {
-            bad[11].state | 1 << 9
-        } else {
-            bad[11].state & mask
-        };
-        let err = verify(&points, &bad).unwrap_err();
-        assert!(err.contains("ball 11 is invalid"), "{err}");
-    }
+    let mut header = baked.header.clone();
+    header.smoothing_length = 0.1;
+    let err = verify_sections(&header, &baked.sections).unwrap_err();
+    assert!(err.contains("the header's h (0.1)"), "{err}");
+    // State bits past the last ball.
+    let n = baked.header.points as usize;
+    assert_ne!(n % 8, 0, "{n} points fill their last state word");
+    let mut sections = baked.sections.clone();
+    let states = index(&sections, names::BALL_STATES).unwrap();
+    let last = sections[states].bytes.len() - 1;
+    sections[states].bytes[last] |= 0x80;
+    let err = verify_sections(&baked.header, &sections).unwrap_err();
+    assert!(
+        err.contains("'ball_states' sets bits past its last ball"),
+        "{err}"
+    );
+    // h per point: each ball's in `ball_h`, two to a word.
+    let mut per_point = params();
+    per_point.mls.per_point_h = true;
+    let baked = bake_step(&input, &per_point).unwrap();
+    verify_sections(&baked.header, &baked.sections).unwrap();
+    let at = index(&baked.sections, names::BALL_H).unwrap();
+    let mut sections = baked.sections.clone();
+    sections[at].bytes[20..22].copy_from_slice(&[0, 0]);
+    let err = verify_sections(&baked.header, &sections).unwrap_err();
+    assert!(err.contains("ball 10 is invalid"), "{err}");
+    let mut sections = baked.sections.clone();
+    sections.remove(at);
+    let err = verify_sections(&baked.header, &sections).unwrap_err();
+    assert!(err.contains("section 'ball_h' is missing"), "{err}");
 }
 
 #[test]

@@ -3,6 +3,8 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use crate::ball_state::BallBits;
+
 /// `struct Point { position: vec3<f32>, radii: u32 }` (format 7): a point, and its radius of
 /// trust (low half) and its neighbour list's reach (high half) as half floats, each the
 /// smallest normal half float at or above the value the bake computed. Both are bounds (a
@@ -56,20 +58,19 @@ fn half_at_or_above(x: f64) -> Option<half::f16> {
     Some(h)
 }
 
-/// `struct Ball { normal: u32, coeffs: array<u32, 3>, state: u32 }` (20 bytes, format 8):
-/// the initial support normal (octahedral, [`crate::octahedral`]), the initial polynomial's
-/// first six coefficients in coordinates scaled by 1/h as IEEE half floats two to a word
-/// (coefficient 2k in the low half of word k), and the state word: bits 0–1 [`BallState`],
-/// bits 2–3 the degree fitted, bits 16–31 the smoothing length h as a half float (the bake
-/// fits with h at that precision, `slosh_mls::half_precision`). A droplet member's first
-/// coefficient word holds its sphere's index instead (it has no polynomial to draw). A
-/// cubic's other four coefficients are in the `ball_cubic` section ([`CubicWords`]).
+/// `struct Ball { normal: u32, coeffs: array<u32, 3> }` (16 bytes, format 9): the initial
+/// support normal (octahedral, [`crate::octahedral`]) and the initial polynomial's first six
+/// coefficients in coordinates scaled by 1/h as IEEE half floats two to a word (coefficient
+/// 2k in the low half of word k). A droplet member's first coefficient word holds its
+/// sphere's index instead (it has no polynomial to draw). What the ball is and the degree
+/// fitted are four bits of the `ball_states` section ([`BallBits`]), h the header's (or the
+/// `ball_h` section's, where h is per point), and a cubic's other four coefficients are in
+/// the `ball_cubic` section ([`CubicWords`]); [`crate::StoredBall`] gathers them.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct GpuBall {
     pub normal: u32,
     pub coeffs: [u32; 3],
-    pub state: u32,
 }
 
 /// A cubic's coefficients 6–9 as half floats, two to a word (coefficient 6 + 2k in the low
@@ -85,12 +86,12 @@ pub struct GpuSphere {
     pub radius: f32,
 }
 
-/// What a ball is, in the low two bits of [`GpuBall::state`].
+/// What a ball is, in the low two bits of its [`BallBits`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BallState {
     /// Fitted at the requested degree.
     Full = 0,
-    /// Fitted at a lower degree ([`GpuBall::degree`]).
+    /// Fitted at a lower degree ([`BallBits::degree`]).
     Degraded = 1,
     /// No support plane or fit: never a candidate.
     Unfitted = 2,
@@ -123,42 +124,28 @@ fn halves(a: f32, b: f32) -> Option<u32> {
 }
 
 /// A word's two half floats as f32, exactly.
-fn unhalves(w: u32) -> [f32; 2] {
+pub(crate) fn unhalves(w: u32) -> [f32; 2] {
     [w as u16, (w >> 16) as u16].map(|h| half::f16::from_bits(h).to_f32())
 }
 
 /// Droplet spheres a cache can hold (the BVH's item ids and the trace's links take 28 bits).
 pub const MAX_SPHERES: u32 = 1 << 28;
 
-/// The state word: kind and degree in the low bits, h as a half float in the high half.
-fn state_word(kind: BallState, degree: u8, h: half::f16) -> u32 {
-    kind as u32 | (u32::from(degree) << 2) | (u32::from(h.to_bits()) << 16)
-}
-
-/// `h` as the half float a ball stores: `None` unless a normal half float holds it exactly
-/// (the bake fits with h at half precision, so it always does there).
-fn exact_half(h: f32) -> Option<half::f16> {
-    let stored = half::f16::from_f32(h);
-    (stored.is_normal() && stored.to_f32() == h && h > 0.0).then_some(stored)
-}
-
 impl GpuBall {
-    /// A ball from its parts, and a cubic's other coefficients: the normal encoded, the
-    /// coefficients rounded to half floats; `None` where a coefficient is not finite or
-    /// beyond a half float's range (the caller stores the ball unfitted), h is not a normal
-    /// half float, or the sphere index does not fit.
+    /// A ball from its parts, its state bits, and a cubic's other coefficients: the normal
+    /// encoded, the coefficients rounded to half floats; `None` where a coefficient is not
+    /// finite or beyond a half float's range (the caller stores the ball unfitted), or the
+    /// sphere index or degree does not fit.
     pub fn new(
         normal: [f64; 3],
-        h: f32,
         coeffs: [f32; 10],
         degree: u8,
         kind: BallState,
         sphere: u32,
-    ) -> Option<(GpuBall, CubicWords)> {
+    ) -> Option<(GpuBall, BallBits, CubicWords)> {
         if sphere >= MAX_SPHERES || degree > 3 {
             return None;
         }
-        let stored_h = exact_half(h)?;
         let used = if degree == 3 { 10 } else { BALL_COEFFS };
         let mut c = [0.0f32; 10];
         c[..used].copy_from_slice(&coeffs[..used]);
@@ -171,64 +158,18 @@ impl GpuBall {
         let ball = GpuBall {
             normal: crate::octahedral::encode(normal),
             coeffs,
-            state: state_word(kind, degree, stored_h),
         };
-        Some((ball, cubic))
+        Some((ball, BallBits::new(kind, degree), cubic))
     }
 
     /// A ball that is never a candidate: no support plane or fit, or one that could not be
-    /// stored. `None` where h is not a normal half float.
-    pub fn unfitted(h: f32) -> Option<GpuBall> {
-        Some(GpuBall {
+    /// stored.
+    pub fn unfitted() -> (GpuBall, BallBits) {
+        let ball = GpuBall {
             normal: crate::octahedral::NO_NORMAL,
             coeffs: [0; 3],
-            state: state_word(BallState::Unfitted, 0, exact_half(h)?),
-        })
-    }
-
-    /// The smoothing length, as stored.
-    pub fn h(&self) -> f32 {
-        half::f16::from_bits((self.state >> 16) as u16).to_f32()
-    }
-
-    pub fn kind(&self) -> BallState {
-        match self.state & 3 {
-            0 => BallState::Full,
-            1 => BallState::Degraded,
-            2 => BallState::Unfitted,
-            _ => BallState::Droplet,
-        }
-    }
-
-    /// Degree of the stored polynomial (lower than requested where the data could not
-    /// carry it).
-    pub fn degree(&self) -> u8 {
-        ((self.state >> 2) & 3) as u8
-    }
-
-    /// The droplet sphere this ball belongs to.
-    pub fn sphere(&self) -> Option<u32> {
-        (self.kind() == BallState::Droplet).then_some(self.coeffs[0])
-    }
-
-    /// The support normal, normalised (zero where none was stored).
-    pub fn normal(&self) -> [f32; 3] {
-        crate::octahedral::decode_unit(self.normal)
-    }
-
-    /// The ten coefficients as f32, exactly the stored values: the ball's six and, for a
-    /// cubic, the four of its `ball_cubic` words (unused ones zero; all zero for a droplet
-    /// member, whose first word names its sphere).
-    pub fn coeffs(&self, cubic: CubicWords) -> [f32; 10] {
-        let mut c = [0.0f32; 10];
-        if self.kind() == BallState::Droplet {
-            return c;
-        }
-        let words = if self.degree() == 3 { 5 } else { 3 };
-        for (k, w) in self.coeffs.iter().chain(&cubic).take(words).enumerate() {
-            c[2 * k..2 * k + 2].copy_from_slice(&unhalves(*w));
-        }
-        c
+        };
+        (ball, BallBits::new(BallState::Unfitted, 0))
     }
 }
 
@@ -322,17 +263,20 @@ mod tests {
     }
 
     #[test]
-    fn balls_keep_their_state_h_and_the_nearest_stored_coefficients() {
+    fn balls_keep_their_state_and_the_nearest_stored_coefficients() {
+        use crate::ball_state::StoredBall;
         let c: [f32; 10] = [0.1, -2.5e-3, 3.0, -7.25, 1e-6, 40.0, 0.5, -0.25, 1e3, 2e-5];
         let half = |x: f32| half::f16::from_f32(x).to_f32();
-        // The bake fits with h at half precision (`slosh_mls::half_precision`).
         let h = half(0.02);
-        let (quadratic, extra) =
-            GpuBall::new([0.0, 0.6, 0.8], h, c, 2, BallState::Degraded, 0).unwrap();
-        assert_eq!(size_of::<GpuBall>(), 20);
+        let stored =
+            |(ball, bits, _): (GpuBall, BallBits, CubicWords)| StoredBall { ball, bits, h };
+        let made = GpuBall::new([0.0, 0.6, 0.8], c, 2, BallState::Degraded, 0).unwrap();
+        let extra = made.2;
+        let quadratic = stored(made);
+        assert_eq!(size_of::<GpuBall>(), 16);
         assert_eq!(
-            (quadratic.kind(), quadratic.degree(), quadratic.h()),
-            (BallState::Degraded, 2, h)
+            (quadratic.kind(), quadratic.degree()),
+            (BallState::Degraded, 2)
         );
         assert_eq!(quadratic.sphere(), None);
         assert_eq!(extra, [0, 0], "a quadratic has no cubic words");
@@ -351,11 +295,10 @@ mod tests {
         // What the verifier requires: no subnormal half float (c[4] = 1e-6 became zero).
         assert!(got.iter().all(|g| *g == 0.0 || g.abs() >= MIN_NORMAL_HALF));
         assert_eq!(got[4], 0.0);
-        let (cubic, extra) = GpuBall::new([0.0, 0.0, -1.0], h, c, 3, BallState::Full, 0).unwrap();
-        assert_eq!(
-            (cubic.kind(), cubic.degree(), cubic.h()),
-            (BallState::Full, 3, h)
-        );
+        let made = GpuBall::new([0.0, 0.0, -1.0], c, 3, BallState::Full, 0).unwrap();
+        let extra = made.2;
+        let cubic = stored(made);
+        assert_eq!((cubic.kind(), cubic.degree()), (BallState::Full, 3));
         for (k, (&g, &x)) in cubic.coeffs(extra).iter().zip(&c).enumerate() {
             let want = if x.abs() < 6.1e-5 { 0.0 } else { half(x) };
             assert_eq!(g, want, "{k}");
@@ -363,38 +306,28 @@ mod tests {
         let n = cubic.normal();
         assert!(n[2] < -0.999_999 && n[0].abs() < 1e-6, "{n:?}");
         // A droplet member names its sphere where its polynomial would be.
-        let (member, extra) = GpuBall::new(
-            [0.0, 0.0, 1.0],
-            h,
-            c,
-            2,
-            BallState::Droplet,
-            MAX_SPHERES - 1,
-        )
-        .unwrap();
+        let made =
+            GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Droplet, MAX_SPHERES - 1).unwrap();
+        let extra = made.2;
+        let member = stored(made);
         assert_eq!(
-            (member.kind(), member.sphere(), member.h(), extra),
-            (BallState::Droplet, Some(MAX_SPHERES - 1), h, [0, 0])
+            (member.kind(), member.sphere(), extra),
+            (BallState::Droplet, Some(MAX_SPHERES - 1), [0, 0])
         );
         assert_eq!(member.coeffs(extra), [0.0; 10]);
-        let unfitted = GpuBall::unfitted(h).unwrap();
-        assert_eq!((unfitted.kind(), unfitted.h()), (BallState::Unfitted, h));
+        let (ball, bits) = GpuBall::unfitted();
+        assert_eq!(stored((ball, bits, [0; 2])).kind(), BallState::Unfitted);
         // What a half float cannot hold is refused (the bake stores the ball unfitted), in
-        // the ball's six or a cubic's other four; so is a NaN, and an h that is not a
-        // normal half float.
+        // the ball's six or a cubic's other four; so is a NaN.
         let mut big = c;
         big[3] = 1e6;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 2, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_none());
         let mut big = c;
         big[8] = 1e6;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 3, BallState::Full, 0).is_none());
-        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 2, BallState::Full, 0).is_some());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 3, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_some());
         big[0] = f32::NAN;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], h, big, 2, BallState::Full, 0).is_none());
-        assert!(GpuBall::new([0.0, 0.0, 1.0], h, c, 2, BallState::Droplet, MAX_SPHERES).is_none());
-        for bad_h in [0.02, 0.0, -h, 1e-6, 1e5, f32::NAN] {
-            assert!(GpuBall::new([0.0, 0.0, 1.0], bad_h, c, 2, BallState::Full, 0).is_none());
-            assert!(GpuBall::unfitted(bad_h).is_none(), "{bad_h}");
-        }
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Droplet, MAX_SPHERES).is_none());
     }
 }

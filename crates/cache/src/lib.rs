@@ -3,6 +3,7 @@
 //! layout of the WGSL storage buffers, plus a manifest per series. The one contract between
 //! `slosh bake` and the renderers; `docs/cache-format.md` specifies it byte by byte.
 
+mod ball_state;
 mod bvh;
 mod bvh_grid;
 pub mod candidates;
@@ -22,6 +23,7 @@ mod step;
 mod verify;
 mod writer;
 
+pub use ball_state::{BALLS_PER_STATE_WORD, BallBits, StoredBall, exact_half, h_of, pack_h};
 pub use bvh::{Bvh, BvhNode, MAX_LEAF_RANGE};
 pub use bvh_grid::{BvhGrid, GpuBvhNode, LINK_FIRST_BITS};
 /// The section codecs by themselves (for measuring encodings); readers use

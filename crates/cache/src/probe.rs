@@ -6,7 +6,6 @@ use slosh_mls::{MIN_WEIGHT, V3, expand_one, weight};
 
 use crate::error::{Error, Result};
 use crate::format::Transform;
-use crate::layout::GpuBall;
 use crate::names;
 use crate::reader::CacheFile;
 
@@ -44,7 +43,7 @@ impl SurfaceProbe {
     /// Decodes what probing `file` needs.
     pub fn open(file: &CacheFile) -> Result<SurfaceProbe> {
         let geometry = file.geometry()?;
-        let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+        let balls = file.balls()?;
         let cluster_start: Vec<u32> = file.decode(names::CLUSTER_START)?;
         let candidates = file.cluster_candidates(&cluster_start)?;
         let n = geometry.positions.len();
@@ -59,7 +58,7 @@ impl SurfaceProbe {
             positions: geometry.positions,
             normals: geometry.normals,
             reach: geometry.reach,
-            h: balls.iter().map(GpuBall::h).collect(),
+            h: balls.iter().map(|b| b.h).collect(),
             cluster_size: file.header().neighbour_cluster.max(1) as usize,
             cluster_start,
             candidates,

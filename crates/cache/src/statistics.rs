@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use crate::{BallState, CacheFile, GpuBall, GpuPoint, Result, names};
+use crate::{BallState, CacheFile, GpuPoint, Result, names};
 
 /// Min, mean and max of a quantity.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -69,7 +69,7 @@ impl Statistics {
         let h = file.header();
         let (start, _) = file.neighbour_lists()?;
         let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
-        let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+        let balls = file.balls()?;
         let base: Vec<u32> = file.decode(names::CLUSTER_BASE)?;
         let wide = crate::candidates::WIDE_CLUSTER;
         let counts: Vec<u32> = start

@@ -9,7 +9,7 @@ use slosh_mls::{
 use crate::bvh::Bvh;
 use crate::error::{Error, Result};
 use crate::format::{MlsSettings, Transform};
-use crate::layout::{BallState, CubicWords, GpuBall, GpuPoint, GpuSphere};
+use crate::layout::{BallState, CubicWords, GpuPoint, GpuSphere};
 use crate::names;
 use crate::reader::CacheFile;
 use crate::{candidates, octahedral};
@@ -185,7 +185,7 @@ impl LoadedStep {
             normals,
             reach,
         } = geometry;
-        let balls: Vec<GpuBall> = file.decode(names::BALLS)?;
+        let balls = file.balls()?;
         let cubic = file.cubic_words()?;
         let spheres: Vec<GpuSphere> = file.decode(names::SPHERES)?;
         if balls.len() != points.len() {
@@ -205,7 +205,7 @@ impl LoadedStep {
                     used: b.degree(),
                 }),
                 BallState::Unfitted => BallFit::None,
-                BallState::Droplet => BallFit::Droplet(b.coeffs[0]),
+                BallState::Droplet => BallFit::Droplet(b.ball.coeffs[0]),
             })
             .collect();
         let surface = Surface::from_parts(SurfaceParts {
@@ -234,7 +234,7 @@ impl LoadedStep {
                 .map(|((p, b), cubic)| Ball {
                     centre: v3(p.position),
                     radius: p.radius(),
-                    h: b.h(),
+                    h: b.h,
                     normal: v3(b.normal()),
                     poly: Poly {
                         degree: b.degree(),

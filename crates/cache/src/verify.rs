@@ -3,8 +3,9 @@
 
 use rayon::prelude::*;
 
+use crate::ball_state::{BALLS_PER_STATE_WORD, exact_half};
 use crate::error::{Error, Result};
-use crate::layout::{BallState, GpuBall, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
+use crate::layout::{BallState, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
 use crate::names;
 use crate::reader::CacheFile;
 
@@ -80,7 +81,7 @@ impl CacheFile {
             other => other.to_string(),
         };
         let points: Vec<GpuPoint> = self.decode(names::POINTS).map_err(decode_err)?;
-        let balls: Vec<GpuBall> = self.decode(names::BALLS).map_err(decode_err)?;
+        let balls = self.balls().map_err(decode_err)?;
         let cubic = self.cubic_words().map_err(decode_err)?;
         let spheres: Vec<GpuSphere> = self.decode(names::SPHERES).map_err(decode_err)?;
         let start: Vec<u32> = self.decode(names::CLUSTER_START).map_err(decode_err)?;
@@ -142,25 +143,47 @@ impl CacheFile {
                 "the candidate list of cluster {i} is not sorted, distinct and in range"
             ));
         }
+        // A step without particles has no h.
+        let global_h = !header.mls.per_point_h && n > 0;
+        if global_h && exact_half(header.smoothing_length as f32).is_none() {
+            return Err(format!(
+                "the header's h ({}) is not a positive normal half float",
+                header.smoothing_length
+            ));
+        }
         if let Some(i) = balls.par_iter().zip(&cubic).position_first(|(b, &cubic)| {
             // Finite, and no subnormal half float (a GPU may flush those); h a positive
-            // normal half float; the state word's reserved bits 4–15 zero; a droplet member's
-            // sphere in range, its other coefficient words zero.
+            // normal half float; a droplet member's sphere in range, its other coefficient
+            // words zero.
             let finite = b
                 .coeffs(cubic)
                 .iter()
                 .all(|c| c.is_finite() && (*c == 0.0 || c.abs() >= MIN_NORMAL_HALF))
-                && b.h().is_finite()
-                && b.h() >= MIN_NORMAL_HALF;
-            let reserved = (b.state >> 4) & 0xfff != 0;
+                && exact_half(b.h).is_some();
             let sphere_ok = match b.sphere() {
-                Some(s) => (s as usize) < spheres.len() && b.coeffs[1..] == [0, 0],
+                Some(s) => (s as usize) < spheres.len() && b.ball.coeffs[1..] == [0, 0],
                 None => true,
             };
-            !finite || !sphere_ok || reserved
+            !finite || !sphere_ok
         }) {
             return Err(format!("ball {i} is invalid: {:?}", balls[i]));
         }
+        // The places of `ball_states` and `ball_h` past the last ball hold nothing.
+        let unused = |name: &str, per_word: usize, bits: usize| -> Result<(), String> {
+            let Some(entry) = self.section(name) else {
+                return Ok(());
+            };
+            let used = n % per_word;
+            let last: Vec<u32> = self.decode(&entry.name).map_err(decode_err)?;
+            match last.last() {
+                Some(&w) if used > 0 && w >> (bits * used) != 0 => Err(format!(
+                    "section '{name}' sets bits past its last ball ({w:#010x})"
+                )),
+                _ => Ok(()),
+            }
+        };
+        unused(names::BALL_STATES, BALLS_PER_STATE_WORD, 4)?;
+        unused(names::BALL_H, 2, 16)?;
         if let Some(d) = spheres
             .iter()
             .position(|s| !(s.centre.iter().all(|c| c.is_finite()) && s.radius > 0.0))

@@ -185,7 +185,7 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
         SectionInput::new(
             "balls",
             Element::Ball,
-            bytemuck::cast_slice::<f32, [f32; 5]>(&floats[..n / 5 * 5]),
+            bytemuck::cast_slice::<f32, [f32; 4]>(&floats[..n / 20 * 20]),
             Encoding::Shuffle20Zstd,
         ),
     ];

@@ -49,8 +49,11 @@ pub struct GpuSettings {
     /// How far outside the MLS surface the drawn surface lies along its normal, in local
     /// units (the step's `surface_offset`).
     pub surface_offset: f32,
+    /// The step's h (a half float), and whether each ball has its own instead (`ball_h`).
+    pub h: f32,
+    pub per_point_h: u32,
     /// WGSL rounds the struct's size up to 16 bytes.
-    pub pad: [u32; 3],
+    pub pad: u32,
 }
 
 /// The key light's direction by default, normalize(0.4, −0.3, 0.85): from the front left,

@@ -103,13 +103,15 @@ pub mod step_array {
     pub const POINTS: RangedArray = array("points", "Point", 16, 0, 0, false);
     pub const NORMALS: RangedArray = array("normals", "u32", 4, 0, 1, false);
     pub const CLUSTER_START: RangedArray = array("cluster_start", "u32", 4, 0, 2, false);
-    pub const BALLS: RangedArray = array("balls", "Ball", 20, 0, 4, false);
+    pub const BALLS: RangedArray = array("balls", "Ball", 16, 0, 4, false);
     pub const SPHERES: RangedArray = array("spheres", "Sphere", 16, 0, 5, false);
     pub const FIELD: RangedArray = array("field", "f32", 4, 0, 7, false);
     pub const BALL_CUBIC: RangedArray = array("ball_cubic", "vec2<u32>", 8, 0, 10, false);
+    pub const BALL_STATES: RangedArray = array("ball_states", "u32", 4, 0, 8, false);
+    pub const BALL_H: RangedArray = array("ball_h", "u32", 4, 0, 9, false);
 }
 
-pub const STEP_ARRAYS: [RangedArray; 7] = [
+pub const STEP_ARRAYS: [RangedArray; 9] = [
     step_array::POINTS,
     step_array::NORMALS,
     step_array::CLUSTER_START,
@@ -117,6 +119,8 @@ pub const STEP_ARRAYS: [RangedArray; 7] = [
     step_array::SPHERES,
     step_array::FIELD,
     step_array::BALL_CUBIC,
+    step_array::BALL_STATES,
+    step_array::BALL_H,
 ];
 
 /// The neighbour masks and the expanded candidates as the trace and shade passes bind them

@@ -61,14 +61,16 @@ impl Widening {
         if let Some(h) = held.as_ref().filter(|h| h.step == step.id()) {
             return Ok(h.group.clone());
         }
-        // The buffer is reused while it is large enough: the pass writes every entry the
-        // walk can reach.
+        // The buffer is reused while it is large enough (the pass writes every entry the walk
+        // can reach), and made a quarter larger than asked: steps of one series differ a
+        // little in node count, and a new buffer in the middle of playback costs an
+        // allocation.
         let needed = step.info.wide_bytes();
         let buffer = held
             .take()
             .map(|h| h.buffer)
             .filter(|b| b.size() >= needed)
-            .unwrap_or_else(|| storage_buffer(gpu, "wide tree", needed));
+            .unwrap_or_else(|| storage_buffer(gpu, "wide tree", needed + needed / 4));
         self.record(gpu, step, &buffer, encoder)?;
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("wide tree"),

@@ -79,6 +79,8 @@ struct Case {
     spec: SceneSpec,
     /// The surface's offset in particle radii (`SurfaceParams::offset`).
     offset: f64,
+    /// Each ball with its own h (`SurfaceParams::per_point_h`, the `ball_h` section).
+    per_point_h: bool,
 }
 
 fn cases() -> Vec<Case> {
@@ -98,36 +100,49 @@ fn cases() -> Vec<Case> {
             name: "sphere",
             spec: SceneSpec::new(SceneKind::Sphere, 3000, 7),
             offset: 0.0,
+            per_point_h: false,
         },
         Case {
             name: "torus",
             spec: SceneSpec::new(SceneKind::Torus, 4000, 7),
             offset: 0.0,
+            per_point_h: false,
         },
         Case {
             name: "tank",
             spec: SceneSpec::new(SceneKind::Tank, 6000, 7),
             offset: 0.0,
+            per_point_h: false,
         },
         Case {
             name: "droplets",
             spec: SceneSpec::new(SceneKind::Droplets, 4000, 7),
             offset: 0.0,
+            per_point_h: false,
         },
         Case {
             name: "hard: noisy sphere, flipped and bad normals, duplicates, offset 1e5",
             spec: noisy,
             offset: 0.0,
+            per_point_h: false,
         },
         Case {
             name: "hard: thin sheet, opposing normals",
             spec: SceneSpec::new(SceneKind::Sheet, 3000, 7),
             offset: 0.0,
+            per_point_h: false,
         },
         Case {
             name: "tank, surface drawn ¾ of a particle radius outside",
             spec: SceneSpec::new(SceneKind::Tank, 6000, 7),
             offset: 0.75,
+            per_point_h: false,
+        },
+        Case {
+            name: "torus, h per point",
+            spec: SceneSpec::new(SceneKind::Torus, 4000, 7),
+            offset: 0.0,
+            per_point_h: true,
         },
     ]
 }
@@ -138,9 +153,19 @@ fn input_of(spec: &SceneSpec) -> StepInput {
 }
 
 fn bake(input: &StepInput, degree: u8, offset: f64) -> (CacheFile, BakeParams) {
+    bake_with(input, degree, offset, false)
+}
+
+fn bake_with(
+    input: &StepInput,
+    degree: u8,
+    offset: f64,
+    per_point_h: bool,
+) -> (CacheFile, BakeParams) {
     let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     params.mls.degree = degree;
     params.mls.offset = offset;
+    params.mls.per_point_h = per_point_h;
     let file = slosh_testkit::bake_in_memory(input, &params, Path::new("memory.slc")).unwrap();
     (file, params)
 }
@@ -211,7 +236,7 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
         let input = input_of(&case.spec);
         let camera = slosh_testkit::framing_camera(&input.positions, SIZE);
         for degree in [2u8, 3] {
-            let (file, params) = bake(&input, degree, case.offset);
+            let (file, params) = bake_with(&input, degree, case.offset, case.per_point_h);
             let step = GpuStep::upload(&dev.gpu, &file, None).unwrap();
             let oracle =
                 Surface::<f64>::build(&input.positions, input.normals.as_deref(), &params.mls)
@@ -314,7 +339,7 @@ fn pod_structs_mirror_the_wgsl_layouts() {
     let shade = validate("shade", &shade_wgsl(LIMITS[0], true));
     for module in [&trace, &shade] {
         check_layout!(module, "Point", GpuPoint, [position, radii]);
-        check_layout!(module, "Ball", GpuBall, [normal, coeffs, state]);
+        check_layout!(module, "Ball", GpuBall, [normal, coeffs]);
         check_layout!(
             module,
             "Hit",
@@ -354,7 +379,9 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 first_row,
                 key_light,
                 row_stride,
-                surface_offset
+                surface_offset,
+                h,
+                per_point_h
             ]
         );
     }
@@ -924,6 +951,7 @@ fn neighbour_masks_equal_the_cpu_lists() {
         name: "wide clusters: a 70k-point sphere",
         spec: SceneSpec::new(SceneKind::Sphere, 70_000, 7),
         offset: 0.0,
+        per_point_h: false,
     };
     for case in cases().into_iter().chain([wide]) {
         let input = input_of(&case.spec);
@@ -1106,7 +1134,8 @@ fn frames_alone(
 /// The tracer holds the 4-wide tree of one step, the one it last drew: one-iteration frames
 /// of three steps taken in turn (the largest last, so the held buffer is reused by the
 /// smaller and replaced by the larger) equal those of a tracer that saw only one of them; a
-/// stale tree would walk another step's boxes to this step's balls.
+/// stale tree would walk another step's boxes to this step's balls. The buffer is at most a
+/// quarter larger than the largest tree drawn.
 #[test]
 fn the_tracer_widens_the_tree_of_the_step_it_draws() {
     let Some(dev) = device() else { return };
@@ -1135,7 +1164,7 @@ fn the_tracer_widens_the_tree_of_the_step_it_draws() {
             assert!(hits > 500, "{hits} hit pixels");
             assert!(frame.hits == alone[k].hits && frame.rgba == alone[k].rgba);
             assert!(
-                held >= step.info.wide_bytes() && held <= largest,
+                held >= step.info.wide_bytes() && held <= largest + largest / 4,
                 "{held} bytes held"
             );
         }

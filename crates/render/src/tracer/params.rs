@@ -117,7 +117,9 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         key_light: unit_or_default(params.key_light),
         row_stride: 1,
         surface_offset: info.surface_offset,
-        pad: [0; 3],
+        h: info.h,
+        per_point_h: u32::from(info.per_point_h),
+        pad: 0,
     }
 }
 

@@ -32,6 +32,10 @@ pub struct StepBuffers {
     pub balls: wgpu::Buffer,
     /// A cubic's other four coefficients (`slosh_cache::CubicWords`), or an empty binding.
     pub ball_cubic: wgpu::Buffer,
+    /// Each ball's kind and degree, four bits, eight to a word (`slosh_cache::BallBits`).
+    pub ball_states: wgpu::Buffer,
+    /// Each ball's h, two half floats to a word, or an empty binding where h is the step's.
+    pub ball_h: wgpu::Buffer,
     pub spheres: wgpu::Buffer,
     pub field: wgpu::Buffer,
     /// The baked BVH2, read by the widening pass only (the tracer widens it into the 4-wide
@@ -50,6 +54,8 @@ impl StepBuffers {
             &self.spheres,
             &self.field,
             &self.ball_cubic,
+            &self.ball_states,
+            &self.ball_h,
         ]
     }
 
@@ -144,6 +150,8 @@ fn array_of(file: &CacheFile, name: &str) -> Result<&'static RangedArray> {
         names::CLUSTER_BASE => &EXPAND_ARRAYS[5],
         names::BALLS => &step_array::BALLS,
         names::BALL_CUBIC => &step_array::BALL_CUBIC,
+        names::BALL_STATES => &step_array::BALL_STATES,
+        names::BALL_H => &step_array::BALL_H,
         names::SPHERES => &step_array::SPHERES,
         names::BVH_NODES => &WIDEN_ARRAYS[0],
         other => {
@@ -284,6 +292,7 @@ impl GpuStep {
         let (points, normals) = (next()?, next()?);
         let (cluster_start, cluster_base, cluster_ids) = (next()?, next()?, next()?);
         let (balls, ball_cubic) = (next()?, next()?);
+        let (ball_states, ball_h) = (next()?, next()?);
         let (spheres, bvh_nodes) = (next()?, next()?);
         let buffers = StepBuffers {
             points,
@@ -293,6 +302,8 @@ impl GpuStep {
             cluster_ids,
             balls,
             ball_cubic,
+            ball_states,
+            ball_h,
             spheres,
             field: field_values,
             bvh_nodes,

@@ -26,6 +26,9 @@ pub struct StepInfo {
     pub node_count: u32,
     /// The grid the BVH2's boxes are stored on.
     pub bvh_grid: BvhGrid,
+    /// The step's h (local units), and whether each ball has its own instead (`ball_h`).
+    pub h: f32,
+    pub per_point_h: bool,
     pub item_count: u32,
     /// Candidates of all clusters (the last `cluster_start`).
     pub cluster_id_count: u32,
@@ -245,13 +248,16 @@ impl<'a> HostStep<'a> {
             ));
         }
         let entries: Vec<Option<&SectionEntry>> = SECTIONS.iter().map(|n| f.section(n)).collect();
-        // Data normals are optional; a cubic's other coefficients are where cubics are fitted.
+        // Data normals are optional; a cubic's other coefficients are where cubics are fitted,
+        // the balls' own h where h is per point.
         for (name, entry) in SECTIONS.iter().zip(&entries) {
-            if entry.is_none() && ![names::NORMALS, names::BALL_CUBIC].contains(name) {
+            let optional = [names::NORMALS, names::BALL_CUBIC, names::BALL_H];
+            if entry.is_none() && !optional.contains(name) {
                 return Err(invalid(f, format!("no section '{name}'")));
             }
         }
         f.check_ball_cubic()?;
+        f.check_ball_words()?;
         let point_count = u32::try_from(header.points)
             .map_err(|_| invalid(f, format!("{} points exceed u32", header.points)))?;
         // Raw sections are checksummed in place and those the host reads decoded, all in
@@ -289,6 +295,8 @@ impl<'a> HostStep<'a> {
             bvh_depth: header.stats.bvh_depth,
             node_count: 0,
             bvh_grid: header.bvh_grid,
+            h: header.smoothing_length as f32,
+            per_point_h: header.mls.per_point_h,
             // Leaves name ranges of items: the balls, then the droplet spheres.
             item_count: (u64::from(point_count) + count(names::SPHERES)) as u32,
             cluster_id_count: 0,

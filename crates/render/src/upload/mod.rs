@@ -26,7 +26,7 @@ pub use checks::{MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, mask_row};
 pub use gpu_step::{GpuStep, StepBuffers, UploadOptions, UploadStats};
 pub use host::{HostField, HostStep, StepInfo};
 
-const SECTIONS: [&str; 9] = [
+const SECTIONS: [&str; 11] = [
     names::POINTS,
     names::NORMALS,
     names::CLUSTER_START,
@@ -34,6 +34,8 @@ const SECTIONS: [&str; 9] = [
     names::CLUSTER_NEIGHBOURS,
     names::BALLS,
     names::BALL_CUBIC,
+    names::BALL_STATES,
+    names::BALL_H,
     names::SPHERES,
     names::BVH_NODES,
 ];
