@@ -18,9 +18,19 @@ fn ball_state(i: u32) -> u32 {
     return (ball_states_at(i >> 3u) >> ((i & 7u) * 4u)) & 15u;
 }
 
-// Unfitted balls and droplet members (states 2 and 3) are never candidates.
-fn is_candidate(state: u32) -> bool {
-    return (state & 3u) < 2u;
+// Unfitted balls and droplet members (states 2 and 3) are never candidates, and they alone
+// have no normal (the octahedral "no normal", first coordinate −32768), so the ball tells.
+fn is_candidate(b: Ball) -> bool {
+    return (b.normal & 0xffffu) != 0x8000u;
+}
+
+// The degree ball i was fitted at: the step's one degree where it has no degraded fits
+// (settings.ball_degree ≤ 3), so the walk reads no state, else the ball's state.
+fn ball_degree(i: u32) -> u32 {
+    if settings.ball_degree <= 3u {
+        return settings.ball_degree;
+    }
+    return ball_state(i) >> 2u;
 }
 
 // Ball i's smoothing length: the step's one h, or its own from ball_h (two half floats to a
@@ -92,6 +102,8 @@ struct Settings {
     // The step's h (a half float), and whether each ball has its own instead (ball_h).
     h: f32,
     per_point_h: u32,
+    // The degree every ball was fitted at, or 4 where some are degraded (layout.rs).
+    ball_degree: u32,
 }
 
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's
@@ -445,9 +457,9 @@ struct Poly {
 // Ball `item`'s stored initial polynomial as f32, exactly the stored values
 // (slosh_cache::GpuBall::coeffs): half floats, the first six in the ball, a cubic's other
 // four in `ball_cubic`.
-fn ball_poly(b: Ball, item: u32, state: u32) -> Poly {
+fn ball_poly(b: Ball, item: u32) -> Poly {
     var p: Poly;
-    p.degree = state >> 2u;
+    p.degree = ball_degree(item);
     let w = b.coeffs;
     var e = vec2<u32>(0u);
     if p.degree == 3u {

@@ -119,14 +119,12 @@ fn visit_leaf(ray: Ray, first: u32, count: u32, after_t: f32, after_item: u32, b
         if iv.t_in > (*best).t || iv.t_out < after_t || t_lo > iv.t_out {
             continue;
         }
-        // The ball (16 bytes) and its state are read only once the ray is known to cross its
-        // sphere, both before the test, so that the two loads overlap.
+        // The ball (16 bytes) is read only once the ray is known to cross its sphere.
         let ball = balls_at(item);
-        let state = ball_state(item);
-        if !is_candidate(state) {
+        if !is_candidate(ball) {
             continue;
         }
-        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball, item, state), ball_h(item), settings.surface_offset, t_lo, iv.t_out);
+        let hit = intersect_poly(ray, sphere.xyz, ball_frame(ball), ball_poly(ball, item), ball_h(item), settings.surface_offset, t_lo, iv.t_out);
         if hit.ok && finite(hit.t) && key_before(after_t, after_item, hit.t, item)
             && key_before(hit.t, item, (*best).t, (*best).item) {
             (*best).found = true;
@@ -225,7 +223,7 @@ fn initial_outcome(ray: Ray, c: Candidate) -> Outcome {
         return out;
     }
     let ball = balls_at(c.item);
-    let initial = ball_poly(ball, c.item, ball_state(c.item));
+    let initial = ball_poly(ball, c.item);
     out.status = STATUS_ITERATION_LIMIT;
     out.normal = hit_normal(ball_frame(ball), initial, c.x, c.y);
     out.iterations = 1u;

@@ -305,6 +305,21 @@ fn radii_reaches_h_and_states_that_do_not_fit_are_refused() {
         err.contains("'ball_states' sets bits past its last ball"),
         "{err}"
     );
+    // A candidate without a normal (the walk would skip it), and a header that counts
+    // degraded fits the states do not hold (the renderers would draw every ball at the
+    // header's degree, or read states they need not).
+    let balls_at = index(&baked.sections, names::BALLS).unwrap();
+    let mut sections = baked.sections.clone();
+    sections[balls_at].bytes[16 * 5..16 * 5 + 4].copy_from_slice(&0x8000_8000u32.to_le_bytes());
+    let err = verify_sections(&baked.header, &sections).unwrap_err();
+    assert!(err.contains("ball 5 is invalid"), "{err}");
+    let mut header = baked.header.clone();
+    header.stats.fit_degraded += 1;
+    let err = verify_sections(&header, &baked.sections).unwrap_err();
+    assert!(
+        err.contains("balls are degraded; the header counts"),
+        "{err}"
+    );
     // h per point: each ball's in `ball_h`, two to a word.
     let mut per_point = params();
     per_point.mls.per_point_h = true;

@@ -61,8 +61,10 @@ fn half_at_or_above(x: f64) -> Option<half::f16> {
 /// `struct Ball { normal: u32, coeffs: array<u32, 3> }` (16 bytes, format 9): the initial
 /// support normal (octahedral, [`crate::octahedral`]) and the initial polynomial's first six
 /// coefficients in coordinates scaled by 1/h as IEEE half floats two to a word (coefficient
-/// 2k in the low half of word k). A droplet member's first coefficient word holds its
-/// sphere's index instead (it has no polynomial to draw). What the ball is and the degree
+/// 2k in the low half of word k). A ball that is no candidate (unfitted, or a droplet
+/// member) has no normal ([`crate::octahedral::NO_NORMAL`]) and every candidate has one, so
+/// the trace walk tells them apart by the ball alone; a droplet member's first coefficient
+/// word holds its sphere's index (it has no polynomial to draw). What the ball is and the degree
 /// fitted are four bits of the `ball_states` section ([`BallBits`]), h the header's (or the
 /// `ball_h` section's, where h is per point), and a cubic's other four coefficients are in
 /// the `ball_cubic` section ([`CubicWords`]); [`crate::StoredBall`] gathers them.
@@ -132,10 +134,16 @@ pub(crate) fn unhalves(w: u32) -> [f32; 2] {
 pub const MAX_SPHERES: u32 = 1 << 28;
 
 impl GpuBall {
+    /// Whether the ball is a candidate (fitted, full or degraded): it has a normal.
+    pub fn is_candidate(&self) -> bool {
+        self.normal & 0xffff != crate::octahedral::NO_NORMAL & 0xffff
+    }
+
     /// A ball from its parts, its state bits, and a cubic's other coefficients: the normal
-    /// encoded, the coefficients rounded to half floats; `None` where a coefficient is not
-    /// finite or beyond a half float's range (the caller stores the ball unfitted), or the
-    /// sphere index or degree does not fit.
+    /// encoded (none for a droplet member), the coefficients rounded to half floats; `None`
+    /// where a coefficient is not finite or beyond a half float's range, a fitted ball's
+    /// normal is not a direction (the caller stores the ball unfitted), or the sphere index
+    /// or degree does not fit.
     pub fn new(
         normal: [f64; 3],
         coeffs: [f32; 10],
@@ -150,20 +158,24 @@ impl GpuBall {
         let mut c = [0.0f32; 10];
         c[..used].copy_from_slice(&coeffs[..used]);
         let word = |k: usize| halves(c[2 * k], c[2 * k + 1]);
-        let (coeffs, cubic) = if kind == BallState::Droplet {
-            ([sphere, 0, 0], [0, 0])
-        } else {
-            ([word(0)?, word(1)?, word(2)?], [word(3)?, word(4)?])
+        let (normal, coeffs, cubic) = match kind {
+            BallState::Droplet => (crate::octahedral::NO_NORMAL, [sphere, 0, 0], [0, 0]),
+            BallState::Unfitted => return None,
+            BallState::Full | BallState::Degraded => {
+                let normal = crate::octahedral::encode(normal);
+                if normal == crate::octahedral::NO_NORMAL {
+                    return None;
+                }
+                let coeffs = [word(0)?, word(1)?, word(2)?];
+                (normal, coeffs, [word(3)?, word(4)?])
+            }
         };
-        let ball = GpuBall {
-            normal: crate::octahedral::encode(normal),
-            coeffs,
-        };
+        let ball = GpuBall { normal, coeffs };
         Some((ball, BallBits::new(kind, degree), cubic))
     }
 
     /// A ball that is never a candidate: no support plane or fit, or one that could not be
-    /// stored.
+    /// stored. It has no normal.
     pub fn unfitted() -> (GpuBall, BallBits) {
         let ball = GpuBall {
             normal: crate::octahedral::NO_NORMAL,
@@ -317,6 +329,11 @@ mod tests {
         assert_eq!(member.coeffs(extra), [0.0; 10]);
         let (ball, bits) = GpuBall::unfitted();
         assert_eq!(stored((ball, bits, [0; 2])).kind(), BallState::Unfitted);
+        // Candidates, and only they, have a normal; a fit without one is not stored.
+        assert!(quadratic.ball.is_candidate() && cubic.ball.is_candidate());
+        assert!(!member.ball.is_candidate() && !ball.is_candidate());
+        assert!(GpuBall::new([0.0; 3], c, 2, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Unfitted, 0).is_none());
         // What a half float cannot hold is refused (the bake stores the ball unfitted), in
         // the ball's six or a cubic's other four; so is a NaN.
         let mut big = c;

@@ -164,9 +164,25 @@ impl CacheFile {
                 Some(s) => (s as usize) < spheres.len() && b.ball.coeffs[1..] == [0, 0],
                 None => true,
             };
-            !finite || !sphere_ok
+            // A candidate, and only a candidate, has a normal (the trace walk tests the
+            // ball alone); a full fit has the degree asked for.
+            let candidate = matches!(b.kind(), BallState::Full | BallState::Degraded);
+            let normal_ok = b.ball.is_candidate() == candidate;
+            let degree_ok = b.kind() != BallState::Full || b.degree() == header.mls.degree;
+            !finite || !sphere_ok || !normal_ok || !degree_ok
         }) {
             return Err(format!("ball {i} is invalid: {:?}", balls[i]));
+        }
+        // The renderers draw every ball at the header's degree where it counts none degraded.
+        let degraded = balls
+            .iter()
+            .filter(|b| b.kind() == BallState::Degraded)
+            .count() as u64;
+        if degraded != header.stats.fit_degraded {
+            return Err(format!(
+                "{degraded} balls are degraded; the header counts {}",
+                header.stats.fit_degraded
+            ));
         }
         // The places of `ball_states` and `ball_h` past the last ball hold nothing.
         let unused = |name: &str, per_word: usize, bits: usize| -> Result<(), String> {

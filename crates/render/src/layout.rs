@@ -52,8 +52,9 @@ pub struct GpuSettings {
     /// The step's h (a half float), and whether each ball has its own instead (`ball_h`).
     pub h: f32,
     pub per_point_h: u32,
-    /// WGSL rounds the struct's size up to 16 bytes.
-    pub pad: u32,
+    /// The degree every ball was fitted at (0–3) where the step has no degraded fits, so the
+    /// trace reads no ball's state; 4 where it has.
+    pub ball_degree: u32,
 }
 
 /// The key light's direction by default, normalize(0.4, −0.3, 0.85): from the front left,

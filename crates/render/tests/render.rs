@@ -381,7 +381,8 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 row_stride,
                 surface_offset,
                 h,
-                per_point_h
+                per_point_h,
+                ball_degree
             ]
         );
     }

@@ -119,7 +119,7 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         surface_offset: info.surface_offset,
         h: info.h,
         per_point_h: u32::from(info.per_point_h),
-        pad: 0,
+        ball_degree: info.ball_degree.map_or(4, u32::from),
     }
 }
 

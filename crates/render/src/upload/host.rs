@@ -29,6 +29,9 @@ pub struct StepInfo {
     /// The step's h (local units), and whether each ball has its own instead (`ball_h`).
     pub h: f32,
     pub per_point_h: bool,
+    /// The degree every ball was fitted at, where the step has no degraded fits (the header's
+    /// count, which the verifier holds to the balls' states).
+    pub ball_degree: Option<u8>,
     pub item_count: u32,
     /// Candidates of all clusters (the last `cluster_start`).
     pub cluster_id_count: u32,
@@ -297,6 +300,7 @@ impl<'a> HostStep<'a> {
             bvh_grid: header.bvh_grid,
             h: header.smoothing_length as f32,
             per_point_h: header.mls.per_point_h,
+            ball_degree: (header.stats.fit_degraded == 0).then_some(header.mls.degree),
             // Leaves name ranges of items: the balls, then the droplet spheres.
             item_count: (u64::from(point_count) + count(names::SPHERES)) as u32,
             cluster_id_count: 0,
