@@ -213,15 +213,26 @@ fn bvh_leaves_that_overrun_overlap_or_drop_a_candidate_are_refused() {
         .collect();
     let leaves: Vec<usize> = (0..nodes.len()).filter(|&i| nodes[i].count() > 0).collect();
     let link = |first: u32, count: u32| first | count << slosh_cache::LINK_FIRST_BITS;
-    let verify = |nodes: &[slosh_cache::GpuBvhNode]| {
+    let verify_with = |header: &slosh_cache::Header, nodes: &[slosh_cache::GpuBvhNode]| {
         let mut sections = baked.sections.clone();
         sections[at].bytes = bytemuck::cast_slice(nodes).to_vec();
-        let bytes = encode_step(baked.header.clone(), &sections, Compression::None).unwrap();
+        let bytes = encode_step(header.clone(), &sections, Compression::None).unwrap();
         let file =
             CacheFile::from_bytes(FileBytes::from_vec(Path::new("leaves.slc"), bytes)).unwrap();
         file.verify().map_err(|e| e.to_string())
     };
+    let verify = |nodes: &[slosh_cache::GpuBvhNode]| verify_with(&baked.header, nodes);
     verify(&nodes).unwrap();
+    // Format 9's grid: one that is not a grid, and one moved off the boxes the bake built
+    // (the walk would miss what the boxes no longer hold: a wrong picture).
+    let mut header = baked.header.clone();
+    header.bvh_grid.step[1] = 0.0;
+    let err = verify_with(&header, &nodes).unwrap_err();
+    assert!(err.contains("not finite with power-of-two steps"), "{err}");
+    let mut header = baked.header.clone();
+    header.bvh_grid.origin[2] += 64.0 * header.bvh_grid.step[2];
+    let err = verify_with(&header, &nodes).unwrap_err();
+    assert!(err.contains("lies outside its leaf's box"), "{err}");
     // Every leaf ends at a candidate: the bake groups candidates, and a range reaches its last.
     let items = (input.positions.len() + 1) as u32;
     let mut past = nodes.clone();

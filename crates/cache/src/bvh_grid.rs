@@ -94,6 +94,13 @@ impl BvhGrid {
         }
     }
 
+    /// Whether the grid is one: a finite origin, and steps that are finite powers of two
+    /// (normal f32s with no mantissa bits), so that decoding has one rounding.
+    pub fn is_valid(&self) -> bool {
+        let power_of_two = |s: f32| s.is_normal() && s > 0.0 && s.to_bits() & 0x007f_ffff == 0;
+        self.origin.iter().all(|c| c.is_finite()) && self.step.iter().all(|&s| power_of_two(s))
+    }
+
     /// Grid coordinate `q` of axis `a` (what widen.wgsl computes).
     fn at(&self, a: usize, q: u32) -> f32 {
         self.origin[a] + q as f32 * self.step[a]
@@ -158,6 +165,11 @@ mod tests {
         let (lo, hi) = ([-3.5f32, 1e5, 0.0], [2.25f32, 1e5 + 7.0, 0.0]);
         let grid = BvhGrid::covering(lo, hi);
         assert!(grid.step.iter().all(|s| s.log2().fract() == 0.0));
+        assert!(grid.is_valid() && BvhGrid::default().is_valid());
+        for bad in [0.0, 3.0, f32::NAN, f32::INFINITY, -0.5] {
+            let step = [grid.step[0], bad, grid.step[2]];
+            assert!(!BvhGrid { step, ..grid }.is_valid(), "{bad}");
+        }
         // Boxes spread over the root's by a Weyl sequence (multiples of irrationals, mod 1).
         let weyl = |k: u32, a: f64| ((f64::from(k) + 1.0) * a).fract() as f32;
         for k in 0..2000u32 {

@@ -212,6 +212,12 @@ impl CacheFile {
         // also cover balls that are not candidates, which the walk skips.
         bvh.depth()
             .ok_or("the BVH's child links leave the node array or are not a tree")?;
+        let grid = header.bvh_grid;
+        if !grid.is_valid() {
+            return Err(format!(
+                "the BVH's grid {grid:?} is not finite with power-of-two steps"
+            ));
+        }
         let items = n + spheres.len();
         let mut seen = vec![false; items];
         for node in &bvh.nodes {
@@ -235,6 +241,31 @@ impl CacheFile {
                 return Err(format!("BVH item {} is in two leaves", range.start + k));
             }
             leaf.fill(true);
+            // The leaf's box holds the balls and spheres the walk tests in it (a box that
+            // does not would hide them: a wrong picture, not an error), to within an f32
+            // rounding of the stored centres.
+            let held = |centre: [f32; 3], radius: f32| {
+                (0..3).all(|a| {
+                    let slack = 4.0 * f32::EPSILON * (centre[a].abs() + radius);
+                    node.lo[a] <= centre[a] - radius + slack
+                        && node.hi[a] >= centre[a] + radius - slack
+                })
+            };
+            for item in range {
+                let inside = match item.checked_sub(n) {
+                    Some(d) => held(spheres[d].centre, spheres[d].radius),
+                    None => {
+                        !matches!(balls[item].kind(), BallState::Full | BallState::Degraded)
+                            || held(points[item].position, points[item].radius())
+                    }
+                };
+                if !inside {
+                    return Err(format!(
+                        "BVH item {item} lies outside its leaf's box {:?} .. {:?}",
+                        node.lo, node.hi
+                    ));
+                }
+            }
         }
         if let Some(i) = balls.par_iter().zip(&seen).position_first(|(b, &seen)| {
             !seen && matches!(b.kind(), BallState::Full | BallState::Degraded)

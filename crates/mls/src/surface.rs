@@ -557,7 +557,8 @@ fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
 }
 
 /// `h` at half-float precision: the nearest normal half float (2⁻¹⁴ to 65504), so that a
-/// cache stores every ball's smoothing length exactly in half a word (format 8) and the fits
+/// cache stores every smoothing length exactly as a half float (format 8; format 9: the
+/// header's one h, or half a word per ball where h is per point) and the fits
 /// use what it stores. A relative change of at most 2⁻¹¹ to a smoothing length.
 pub fn half_precision(h: f64) -> f64 {
     let nearest = half::f16::from_f64(h).clamp(half::f16::MIN_POSITIVE, half::f16::MAX);

@@ -261,6 +261,15 @@ impl<'a> HostStep<'a> {
         }
         f.check_ball_cubic()?;
         f.check_ball_words()?;
+        if !header.bvh_grid.is_valid() {
+            return Err(invalid(
+                f,
+                format!(
+                    "the BVH's grid {:?} is not finite with power-of-two steps",
+                    header.bvh_grid
+                ),
+            ));
+        }
         let point_count = u32::try_from(header.points)
             .map_err(|_| invalid(f, format!("{} points exceed u32", header.points)))?;
         // Raw sections are checksummed in place and those the host reads decoded, all in
