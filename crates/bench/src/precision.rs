@@ -1,5 +1,6 @@
-//! `slosh bench precision`: what the compact layout of a step (format 5: octahedral normals,
-//! half-float coefficients, lists recovered from the stored normals) costs. Each analytic
+//! `slosh bench precision`: what the compact layout of a step (octahedral normals, half-float
+//! coefficients, radii and reaches, BVH boxes on a grid, lists recovered from the stored
+//! normals) costs. Each analytic
 //! scene is baked once; its cache, read back, and the same step stored exactly (the bake's
 //! own values in f32, `slosh_testkit::bake_exact_and_stored`) are traced by the CPU tracer
 //! (the GPU's reference): error against the exact surface, hits against each other, and
@@ -176,8 +177,9 @@ impl Report for PrecisionReport {
             "# Stored precision: the compact layout against the step stored exactly\n\n\
              Written by `slosh bench precision --points {} --size {}`. Each scene ({} \
              particles, time step 3, normals from the scene) is baked once; its cache (format \
-             5: octahedral support and data normals, coefficients as half floats, neighbour \
-             lists recovered from the stored normals) is read back, and the same step is also kept \
+             {}: octahedral support and data normals, coefficients, radii and reaches as half \
+             floats, BVH boxes on a 16-bit grid, neighbour lists recovered from the stored \
+             normals) is read back, and the same step is also kept \
              exactly (the bake's own normals, coefficients and lists in f32). Both are traced \
              by the CPU tracer, the GPU's reference, at {}×{} pixels, with 1 and 3 iterations. \
              Distances are in particle spacings: the error of each hit against the exact \
@@ -189,7 +191,12 @@ impl Report for PrecisionReport {
              | scene | noise | iterations | B/pt | RMS to surface (exact / stored) | p99 to surface (exact / stored) | normal ° | \
              \\|Δt\\| p99 vs exact | \\|Δt\\| max vs exact | hit/miss differ |\n\
              |---|---|---|---|---|---|---|---|---|---|\n{table}",
-            args.points, args.size, args.points, args.size, args.size,
+            args.points,
+            args.size,
+            args.points,
+            slosh_cache::MAJOR,
+            args.size,
+            args.size,
         )
     }
 }

@@ -1,13 +1,11 @@
 //! What a ball stores beside its 16 bytes (format 9): four bits of state, eight balls to a
 //! word of the `ball_states` section, and h, the header's one value or, where h is per point,
-//! a half float two to a word of the `ball_h` section. [`StoredBall`] gathers a ball's parts
-//! as the CPU reads them; the shaders read the same words (`ball_state`, `ball_h` in
+//! a half float two to a word of the `ball_h` section; and the ball's 16 bytes made from a
+//! fit ([`GpuBall::new`]). [`StoredBall`] gathers a ball's parts as the CPU reads them
+//! (`CacheFile::balls`, step.rs); the shaders read the same words (`ball_state`, `ball_h` in
 //! shaders/mls.wgsl).
 
-use crate::error::{Error, Result};
-use crate::layout::{BallState, CubicWords, GpuBall, unhalves};
-use crate::names;
-use crate::reader::CacheFile;
+use crate::layout::{BALL_COEFFS, BallState, CubicWords, GpuBall, MAX_SPHERES, halves, unhalves};
 
 /// Balls per word of `ball_states`.
 pub const BALLS_PER_STATE_WORD: usize = 8;
@@ -134,67 +132,62 @@ impl StoredBall {
     }
 }
 
-impl CacheFile {
-    /// Checks that `ball_states` holds a place for every point, and `ball_h` too where h is
-    /// per point (and is absent otherwise), from the section table alone.
-    pub fn check_ball_words(&self) -> Result<()> {
-        let header = self.header();
-        let n = header.points;
-        let check = |name: &str, per_word: u64, wanted: bool| -> std::result::Result<(), String> {
-            match self.section(name) {
-                None if wanted => Err(format!("section '{name}' is missing")),
-                Some(_) if !wanted => Err(format!(
-                    "section '{name}' is present where h is the step's one value"
-                )),
-                Some(e) if e.count != n.div_ceil(per_word) => Err(format!(
-                    "section '{name}' holds {} words for {n} points ({per_word} to a word)",
-                    e.count
-                )),
-                _ => Ok(()),
-            }
-        };
-        check(names::BALL_STATES, BALLS_PER_STATE_WORD as u64, true)
-            .and_then(|()| check(names::BALL_H, 2, header.mls.per_point_h))
-            .map_err(|problem| Error::Invalid {
-                path: self.path().to_path_buf(),
-                problem,
-            })
+impl GpuBall {
+    /// Whether the ball is a candidate (fitted, full or degraded): it has a normal.
+    pub fn is_candidate(&self) -> bool {
+        self.normal & 0xffff != crate::octahedral::NO_NORMAL & 0xffff
     }
 
-    /// Every ball with its state bits and h, gathered from `balls`, `ball_states` and the
-    /// header's h or `ball_h`; an error where a section is missing or of the wrong length.
-    pub fn balls(&self) -> Result<Vec<StoredBall>> {
-        self.check_ball_words()?;
-        let header = self.header();
-        let balls: Vec<GpuBall> = self.decode(names::BALLS)?;
-        if balls.len() as u64 != header.points {
-            return Err(Error::Invalid {
-                path: self.path().to_path_buf(),
-                problem: format!("{} balls for {} points", balls.len(), header.points),
-            });
+    /// A ball from its parts, its state bits, and a cubic's other coefficients: the normal
+    /// encoded (none for a droplet member), the coefficients rounded to half floats; `None`
+    /// where a coefficient is not finite or beyond a half float's range, a fitted ball's
+    /// normal is not a direction (the caller stores the ball unfitted), or the sphere index
+    /// or degree does not fit.
+    pub fn new(
+        normal: [f64; 3],
+        coeffs: [f32; 10],
+        degree: u8,
+        kind: BallState,
+        sphere: u32,
+    ) -> Option<(GpuBall, BallBits, CubicWords)> {
+        if sphere >= MAX_SPHERES || degree > 3 {
+            return None;
         }
-        let states: Vec<u32> = self.decode(names::BALL_STATES)?;
-        let per_point: Option<Vec<u32>> = header
-            .mls
-            .per_point_h
-            .then(|| self.decode(names::BALL_H))
-            .transpose()?;
-        let global = header.smoothing_length as f32;
-        Ok(balls
-            .into_iter()
-            .enumerate()
-            .map(|(i, ball)| StoredBall {
-                ball,
-                bits: BallBits::of(&states, i),
-                h: per_point.as_deref().map_or(global, |w| h_of(w, i)),
-            })
-            .collect())
+        let used = if degree == 3 { 10 } else { BALL_COEFFS };
+        let mut c = [0.0f32; 10];
+        c[..used].copy_from_slice(&coeffs[..used]);
+        let word = |k: usize| halves(c[2 * k], c[2 * k + 1]);
+        let (normal, coeffs, cubic) = match kind {
+            BallState::Droplet => (crate::octahedral::NO_NORMAL, [sphere, 0, 0], [0, 0]),
+            BallState::Unfitted => return None,
+            BallState::Full | BallState::Degraded => {
+                let normal = crate::octahedral::encode(normal);
+                if normal == crate::octahedral::NO_NORMAL {
+                    return None;
+                }
+                let coeffs = [word(0)?, word(1)?, word(2)?];
+                (normal, coeffs, [word(3)?, word(4)?])
+            }
+        };
+        let ball = GpuBall { normal, coeffs };
+        Some((ball, BallBits::new(kind, degree), cubic))
+    }
+
+    /// A ball that is never a candidate: no support plane or fit, or one that could not be
+    /// stored. It has no normal.
+    pub fn unfitted() -> (GpuBall, BallBits) {
+        let ball = GpuBall {
+            normal: crate::octahedral::NO_NORMAL,
+            coeffs: [0; 3],
+        };
+        (ball, BallBits::new(BallState::Unfitted, 0))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::layout::MIN_NORMAL_HALF;
 
     #[test]
     fn states_and_h_round_trip_through_their_words() {
@@ -222,5 +215,78 @@ mod tests {
         assert_eq!(pack_h(&[0.1]), None, "0.1 is no half float");
         assert_eq!(pack_h(&[1e-6]), None, "subnormal");
         assert_eq!(pack_h(&[0.0]), None);
+    }
+
+    #[test]
+    fn balls_keep_their_state_and_the_nearest_stored_coefficients() {
+        let c: [f32; 10] = [0.1, -2.5e-3, 3.0, -7.25, 1e-6, 40.0, 0.5, -0.25, 1e3, 2e-5];
+        let half = |x: f32| half::f16::from_f32(x).to_f32();
+        let h = half(0.02);
+        let stored =
+            |(ball, bits, _): (GpuBall, BallBits, CubicWords)| StoredBall { ball, bits, h };
+        let made = GpuBall::new([0.0, 0.6, 0.8], c, 2, BallState::Degraded, 0).unwrap();
+        let extra = made.2;
+        let quadratic = stored(made);
+        assert_eq!(size_of::<GpuBall>(), 16);
+        assert_eq!(
+            (quadratic.kind(), quadratic.degree()),
+            (BallState::Degraded, 2)
+        );
+        assert_eq!(quadratic.sphere(), None);
+        assert_eq!(extra, [0, 0], "a quadratic has no cubic words");
+        let got = quadratic.coeffs(extra);
+        for k in 0..6 {
+            // The nearest half float: within half a unit of its 11 bits; below the smallest
+            // normal one, zero.
+            let want = if c[k].abs() < 6.1e-5 { 0.0 } else { half(c[k]) };
+            assert_eq!(got[k], want, "{k}");
+            assert!(
+                want == 0.0 || (got[k] - c[k]).abs() <= c[k].abs() * 2f32.powi(-11),
+                "{k}"
+            );
+        }
+        assert_eq!(&got[6..], &[0.0; 4], "a quadratic stores six");
+        // What the verifier requires: no subnormal half float (c[4] = 1e-6 became zero).
+        assert!(got.iter().all(|g| *g == 0.0 || g.abs() >= MIN_NORMAL_HALF));
+        assert_eq!(got[4], 0.0);
+        let made = GpuBall::new([0.0, 0.0, -1.0], c, 3, BallState::Full, 0).unwrap();
+        let extra = made.2;
+        let cubic = stored(made);
+        assert_eq!((cubic.kind(), cubic.degree()), (BallState::Full, 3));
+        for (k, (&g, &x)) in cubic.coeffs(extra).iter().zip(&c).enumerate() {
+            let want = if x.abs() < 6.1e-5 { 0.0 } else { half(x) };
+            assert_eq!(g, want, "{k}");
+        }
+        let n = cubic.normal();
+        assert!(n[2] < -0.999_999 && n[0].abs() < 1e-6, "{n:?}");
+        // A droplet member names its sphere where its polynomial would be.
+        let made =
+            GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Droplet, MAX_SPHERES - 1).unwrap();
+        let extra = made.2;
+        let member = stored(made);
+        assert_eq!(
+            (member.kind(), member.sphere(), extra),
+            (BallState::Droplet, Some(MAX_SPHERES - 1), [0, 0])
+        );
+        assert_eq!(member.coeffs(extra), [0.0; 10]);
+        let (ball, bits) = GpuBall::unfitted();
+        assert_eq!(stored((ball, bits, [0; 2])).kind(), BallState::Unfitted);
+        // Candidates, and only they, have a normal; a fit without one is not stored.
+        assert!(quadratic.ball.is_candidate() && cubic.ball.is_candidate());
+        assert!(!member.ball.is_candidate() && !ball.is_candidate());
+        assert!(GpuBall::new([0.0; 3], c, 2, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Unfitted, 0).is_none());
+        // What a half float cannot hold is refused (the bake stores the ball unfitted), in
+        // the ball's six or a cubic's other four; so is a NaN.
+        let mut big = c;
+        big[3] = 1e6;
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_none());
+        let mut big = c;
+        big[8] = 1e6;
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 3, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_some());
+        big[0] = f32::NAN;
+        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_none());
+        assert!(GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Droplet, MAX_SPHERES).is_none());
     }
 }

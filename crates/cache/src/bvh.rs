@@ -3,8 +3,6 @@
 
 use slosh_mls::BallIndex;
 
-use crate::bvh_grid::{BvhGrid, GpuBvhNode};
-
 /// A BVH2 node with its box in f32, as the bake builds it and as the CPU walks it once
 /// decoded from the cache's grid ([`crate::BvhGrid`]). `count == 0`: inner node, children at
 /// `first` and `first + 1`. `count > 0`: leaf over items `first .. first + count` (balls, then
@@ -23,30 +21,6 @@ pub struct BvhNode {
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
     pub nodes: Vec<BvhNode>,
-}
-
-impl Bvh {
-    /// The tree as the cache stores it: a grid over the root's box and every node on it
-    /// (boxes rounded outwards); `None` where a node cannot be stored.
-    pub fn stored(&self) -> Option<(BvhGrid, Vec<GpuBvhNode>)> {
-        let grid = self
-            .nodes
-            .first()
-            .map_or_else(BvhGrid::default, |root| BvhGrid::covering(root.lo, root.hi));
-        let nodes = self
-            .nodes
-            .iter()
-            .map(|n| grid.encode(n))
-            .collect::<Option<Vec<_>>>()?;
-        Some((grid, nodes))
-    }
-
-    /// The tree the stored `nodes` on `grid` stand for.
-    pub fn from_stored(grid: &BvhGrid, nodes: &[GpuBvhNode]) -> Bvh {
-        Bvh {
-            nodes: nodes.iter().map(|n| grid.decode(n)).collect(),
-        }
-    }
 }
 
 /// The most items one leaf's range spans (format 6): the trace walk packs a leaf's count in

@@ -11,7 +11,7 @@
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
-use crate::bvh::{BvhNode, MAX_LEAF_RANGE};
+use crate::bvh::{Bvh, BvhNode, MAX_LEAF_RANGE};
 
 /// The largest grid coordinate.
 const GRID_MAX: u32 = u16::MAX as u32;
@@ -152,6 +152,30 @@ impl BvhGrid {
             count: node.count(),
             hi: std::array::from_fn(|a| self.at(a, q[a + 3])),
             first: node.first(),
+        }
+    }
+}
+
+impl Bvh {
+    /// The tree as the cache stores it: a grid over the root's box and every node on it
+    /// (boxes rounded outwards); `None` where a node cannot be stored.
+    pub fn stored(&self) -> Option<(BvhGrid, Vec<GpuBvhNode>)> {
+        let grid = self
+            .nodes
+            .first()
+            .map_or_else(BvhGrid::default, |root| BvhGrid::covering(root.lo, root.hi));
+        let nodes = self
+            .nodes
+            .iter()
+            .map(|n| grid.encode(n))
+            .collect::<Option<Vec<_>>>()?;
+        Some((grid, nodes))
+    }
+
+    /// The tree the stored `nodes` on `grid` stand for.
+    pub fn from_stored(grid: &BvhGrid, nodes: &[GpuBvhNode]) -> Bvh {
+        Bvh {
+            nodes: nodes.iter().map(|n| grid.decode(n)).collect(),
         }
     }
 }

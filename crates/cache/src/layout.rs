@@ -3,8 +3,6 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::ball_state::BallBits;
-
 /// `struct Point { position: vec3<f32>, radii: u32 }` (format 7): a point, and its radius of
 /// trust (low half) and its neighbour list's reach (high half) as half floats, each the
 /// smallest normal half float at or above the value the bake computed. Both are bounds (a
@@ -102,7 +100,7 @@ pub enum BallState {
 }
 
 /// Coefficients a ball holds itself: a polynomial of degree ≤ 2.
-const BALL_COEFFS: usize = 6;
+pub(crate) const BALL_COEFFS: usize = 6;
 
 /// The smallest normal half float, 2^-14: no stored coefficient lies closer to zero, but zero.
 pub const MIN_NORMAL_HALF: f32 = 1.0 / 16384.0;
@@ -111,7 +109,7 @@ pub const MIN_NORMAL_HALF: f32 = 1.0 / 16384.0;
 /// is not finite or beyond a half float's range. A value below the smallest normal half float
 /// (6.1e-5) is stored as a zero of its sign: the shaders' `unpack2x16float` may flush
 /// subnormals, and then decodes what the CPU does, bit for bit.
-fn halves(a: f32, b: f32) -> Option<u32> {
+pub(crate) fn halves(a: f32, b: f32) -> Option<u32> {
     let half = |x: f32| {
         let h = half::f16::from_f32(x);
         h.is_finite().then(|| {
@@ -132,58 +130,6 @@ pub(crate) fn unhalves(w: u32) -> [f32; 2] {
 
 /// Droplet spheres a cache can hold (the BVH's item ids and the trace's links take 28 bits).
 pub const MAX_SPHERES: u32 = 1 << 28;
-
-impl GpuBall {
-    /// Whether the ball is a candidate (fitted, full or degraded): it has a normal.
-    pub fn is_candidate(&self) -> bool {
-        self.normal & 0xffff != crate::octahedral::NO_NORMAL & 0xffff
-    }
-
-    /// A ball from its parts, its state bits, and a cubic's other coefficients: the normal
-    /// encoded (none for a droplet member), the coefficients rounded to half floats; `None`
-    /// where a coefficient is not finite or beyond a half float's range, a fitted ball's
-    /// normal is not a direction (the caller stores the ball unfitted), or the sphere index
-    /// or degree does not fit.
-    pub fn new(
-        normal: [f64; 3],
-        coeffs: [f32; 10],
-        degree: u8,
-        kind: BallState,
-        sphere: u32,
-    ) -> Option<(GpuBall, BallBits, CubicWords)> {
-        if sphere >= MAX_SPHERES || degree > 3 {
-            return None;
-        }
-        let used = if degree == 3 { 10 } else { BALL_COEFFS };
-        let mut c = [0.0f32; 10];
-        c[..used].copy_from_slice(&coeffs[..used]);
-        let word = |k: usize| halves(c[2 * k], c[2 * k + 1]);
-        let (normal, coeffs, cubic) = match kind {
-            BallState::Droplet => (crate::octahedral::NO_NORMAL, [sphere, 0, 0], [0, 0]),
-            BallState::Unfitted => return None,
-            BallState::Full | BallState::Degraded => {
-                let normal = crate::octahedral::encode(normal);
-                if normal == crate::octahedral::NO_NORMAL {
-                    return None;
-                }
-                let coeffs = [word(0)?, word(1)?, word(2)?];
-                (normal, coeffs, [word(3)?, word(4)?])
-            }
-        };
-        let ball = GpuBall { normal, coeffs };
-        Some((ball, BallBits::new(kind, degree), cubic))
-    }
-
-    /// A ball that is never a candidate: no support plane or fit, or one that could not be
-    /// stored. It has no normal.
-    pub fn unfitted() -> (GpuBall, BallBits) {
-        let ball = GpuBall {
-            normal: crate::octahedral::NO_NORMAL,
-            coeffs: [0; 3],
-        };
-        (ball, BallBits::new(BallState::Unfitted, 0))
-    }
-}
 
 /// Element types a section can hold, by the name the header records.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -272,79 +218,5 @@ mod tests {
             assert!(GpuPoint::new([0.0; 3], bad, 0.1).is_none(), "{bad}");
             assert!(GpuPoint::new([0.0; 3], 0.1, bad).is_none(), "{bad}");
         }
-    }
-
-    #[test]
-    fn balls_keep_their_state_and_the_nearest_stored_coefficients() {
-        use crate::ball_state::StoredBall;
-        let c: [f32; 10] = [0.1, -2.5e-3, 3.0, -7.25, 1e-6, 40.0, 0.5, -0.25, 1e3, 2e-5];
-        let half = |x: f32| half::f16::from_f32(x).to_f32();
-        let h = half(0.02);
-        let stored =
-            |(ball, bits, _): (GpuBall, BallBits, CubicWords)| StoredBall { ball, bits, h };
-        let made = GpuBall::new([0.0, 0.6, 0.8], c, 2, BallState::Degraded, 0).unwrap();
-        let extra = made.2;
-        let quadratic = stored(made);
-        assert_eq!(size_of::<GpuBall>(), 16);
-        assert_eq!(
-            (quadratic.kind(), quadratic.degree()),
-            (BallState::Degraded, 2)
-        );
-        assert_eq!(quadratic.sphere(), None);
-        assert_eq!(extra, [0, 0], "a quadratic has no cubic words");
-        let got = quadratic.coeffs(extra);
-        for k in 0..6 {
-            // The nearest half float: within half a unit of its 11 bits; below the smallest
-            // normal one, zero.
-            let want = if c[k].abs() < 6.1e-5 { 0.0 } else { half(c[k]) };
-            assert_eq!(got[k], want, "{k}");
-            assert!(
-                want == 0.0 || (got[k] - c[k]).abs() <= c[k].abs() * 2f32.powi(-11),
-                "{k}"
-            );
-        }
-        assert_eq!(&got[6..], &[0.0; 4], "a quadratic stores six");
-        // What the verifier requires: no subnormal half float (c[4] = 1e-6 became zero).
-        assert!(got.iter().all(|g| *g == 0.0 || g.abs() >= MIN_NORMAL_HALF));
-        assert_eq!(got[4], 0.0);
-        let made = GpuBall::new([0.0, 0.0, -1.0], c, 3, BallState::Full, 0).unwrap();
-        let extra = made.2;
-        let cubic = stored(made);
-        assert_eq!((cubic.kind(), cubic.degree()), (BallState::Full, 3));
-        for (k, (&g, &x)) in cubic.coeffs(extra).iter().zip(&c).enumerate() {
-            let want = if x.abs() < 6.1e-5 { 0.0 } else { half(x) };
-            assert_eq!(g, want, "{k}");
-        }
-        let n = cubic.normal();
-        assert!(n[2] < -0.999_999 && n[0].abs() < 1e-6, "{n:?}");
-        // A droplet member names its sphere where its polynomial would be.
-        let made =
-            GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Droplet, MAX_SPHERES - 1).unwrap();
-        let extra = made.2;
-        let member = stored(made);
-        assert_eq!(
-            (member.kind(), member.sphere(), extra),
-            (BallState::Droplet, Some(MAX_SPHERES - 1), [0, 0])
-        );
-        assert_eq!(member.coeffs(extra), [0.0; 10]);
-        let (ball, bits) = GpuBall::unfitted();
-        assert_eq!(stored((ball, bits, [0; 2])).kind(), BallState::Unfitted);
-        // Candidates, and only they, have a normal; a fit without one is not stored.
-        assert!(quadratic.ball.is_candidate() && cubic.ball.is_candidate());
-        assert!(!member.ball.is_candidate() && !ball.is_candidate());
-        assert!(GpuBall::new([0.0; 3], c, 2, BallState::Full, 0).is_none());
-        assert!(GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Unfitted, 0).is_none());
-        // What a half float cannot hold is refused (the bake stores the ball unfitted), in
-        // the ball's six or a cubic's other four; so is a NaN.
-        let mut big = c;
-        big[3] = 1e6;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_none());
-        let mut big = c;
-        big[8] = 1e6;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 3, BallState::Full, 0).is_none());
-        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_some());
-        big[0] = f32::NAN;
-        assert!(GpuBall::new([0.0, 0.0, 1.0], big, 2, BallState::Full, 0).is_none());
-        assert!(GpuBall::new([0.0, 0.0, 1.0], c, 2, BallState::Droplet, MAX_SPHERES).is_none());
     }
 }

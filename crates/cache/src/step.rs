@@ -6,10 +6,11 @@ use slosh_mls::{
     SurfaceParams, SurfaceParts, TraceHit, V3,
 };
 
+use crate::ball_state::{BALLS_PER_STATE_WORD, BallBits, StoredBall, h_of};
 use crate::bvh::Bvh;
 use crate::error::{Error, Result};
 use crate::format::{MlsSettings, Transform};
-use crate::layout::{BallState, CubicWords, GpuPoint, GpuSphere};
+use crate::layout::{BallState, CubicWords, GpuBall, GpuPoint, GpuSphere};
 use crate::names;
 use crate::reader::CacheFile;
 use crate::{candidates, octahedral};
@@ -286,5 +287,63 @@ impl LoadedStep {
             .into_iter()
             .map(|h| h.map(|h| self.to_world(h)))
             .collect()
+    }
+}
+
+impl CacheFile {
+    /// Checks that `ball_states` holds a place for every point, and `ball_h` too where h is
+    /// per point (and is absent otherwise), from the section table alone.
+    pub fn check_ball_words(&self) -> Result<()> {
+        let header = self.header();
+        let n = header.points;
+        let check = |name: &str, per_word: u64, wanted: bool| -> std::result::Result<(), String> {
+            match self.section(name) {
+                None if wanted => Err(format!("section '{name}' is missing")),
+                Some(_) if !wanted => Err(format!(
+                    "section '{name}' is present where h is the step's one value"
+                )),
+                Some(e) if e.count != n.div_ceil(per_word) => Err(format!(
+                    "section '{name}' holds {} words for {n} points ({per_word} to a word)",
+                    e.count
+                )),
+                _ => Ok(()),
+            }
+        };
+        check(names::BALL_STATES, BALLS_PER_STATE_WORD as u64, true)
+            .and_then(|()| check(names::BALL_H, 2, header.mls.per_point_h))
+            .map_err(|problem| Error::Invalid {
+                path: self.path().to_path_buf(),
+                problem,
+            })
+    }
+
+    /// Every ball with its state bits and h, gathered from `balls`, `ball_states` and the
+    /// header's h or `ball_h`; an error where a section is missing or of the wrong length.
+    pub fn balls(&self) -> Result<Vec<StoredBall>> {
+        self.check_ball_words()?;
+        let header = self.header();
+        let balls: Vec<GpuBall> = self.decode(names::BALLS)?;
+        if balls.len() as u64 != header.points {
+            return Err(Error::Invalid {
+                path: self.path().to_path_buf(),
+                problem: format!("{} balls for {} points", balls.len(), header.points),
+            });
+        }
+        let states: Vec<u32> = self.decode(names::BALL_STATES)?;
+        let per_point: Option<Vec<u32>> = header
+            .mls
+            .per_point_h
+            .then(|| self.decode(names::BALL_H))
+            .transpose()?;
+        let global = header.smoothing_length as f32;
+        Ok(balls
+            .into_iter()
+            .enumerate()
+            .map(|(i, ball)| StoredBall {
+                ball,
+                bits: BallBits::of(&states, i),
+                h: per_point.as_deref().map_or(global, |w| h_of(w, i)),
+            })
+            .collect())
     }
 }
