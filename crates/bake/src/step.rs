@@ -119,7 +119,7 @@ fn gpu_sections(
             surface.spheres.len()
         )));
     }
-    let stored: Vec<(GpuBall, BallBits, CubicWords)> = (0..n)
+    let made: Vec<(GpuBall, BallBits, CubicWords)> = (0..n)
         .into_par_iter()
         .map(|i| {
             let b = &surface.balls[i];
@@ -137,9 +137,9 @@ fn gpu_sections(
             })
         })
         .collect();
-    let balls: Vec<GpuBall> = stored.iter().map(|s| s.0).collect();
-    let bits: Vec<BallBits> = stored.iter().map(|s| s.1).collect();
-    let cubic: Vec<CubicWords> = stored.iter().map(|s| s.2).collect();
+    let balls: Vec<GpuBall> = made.iter().map(|m| m.0).collect();
+    let bits: Vec<BallBits> = made.iter().map(|m| m.1).collect();
+    let cubic: Vec<CubicWords> = made.iter().map(|m| m.2).collect();
     // h is at half precision already (`slosh_mls::half_precision`), so exact in f32: per
     // point in `ball_h`, or the header's one value, which every ball then has.
     let per_point_h = if params.mls.per_point_h {

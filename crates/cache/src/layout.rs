@@ -63,7 +63,7 @@ fn half_at_or_above(x: f64) -> Option<half::f16> {
 /// member) has no normal ([`crate::octahedral::NO_NORMAL`]) and every candidate has one, so
 /// the trace walk tells them apart by the ball alone; a droplet member's first coefficient
 /// word holds its sphere's index (it has no polynomial to draw). What the ball is and the degree
-/// fitted are four bits of the `ball_states` section ([`BallBits`]), h the header's (or the
+/// fitted are four bits of the `ball_states` section ([`crate::BallBits`]), h the header's (or the
 /// `ball_h` section's, where h is per point), and a cubic's other four coefficients are in
 /// the `ball_cubic` section ([`CubicWords`]); [`crate::StoredBall`] gathers them.
 #[repr(C)]
@@ -86,12 +86,12 @@ pub struct GpuSphere {
     pub radius: f32,
 }
 
-/// What a ball is, in the low two bits of its [`BallBits`].
+/// What a ball is, in the low two bits of its [`crate::BallBits`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BallState {
     /// Fitted at the requested degree.
     Full = 0,
-    /// Fitted at a lower degree ([`BallBits::degree`]).
+    /// Fitted at a lower degree ([`crate::BallBits::degree`]).
     Degraded = 1,
     /// No support plane or fit: never a candidate.
     Unfitted = 2,

@@ -487,13 +487,13 @@ impl CacheFile {
             })
     }
 
-    /// Decodes a whole section into a new vector of `T`.
     /// The BVH, its boxes decoded from the header's grid.
     pub fn bvh(&self) -> Result<Bvh> {
         let nodes: Vec<GpuBvhNode> = self.decode(crate::names::BVH_NODES)?;
         Ok(Bvh::from_stored(&self.header().bvh_grid, &nodes))
     }
 
+    /// Decodes a whole section into a new vector of `T`.
     pub fn decode<T: Pod>(&self, name: &str) -> Result<Vec<T>> {
         let entry = self.required(name)?;
         let element = Element::from_name(&entry.element).map(Element::size);

@@ -190,8 +190,8 @@ impl CacheFile {
                 return Ok(());
             };
             let used = n % per_word;
-            let last: Vec<u32> = self.decode(&entry.name).map_err(decode_err)?;
-            match last.last() {
+            let words: Vec<u32> = self.decode(&entry.name).map_err(decode_err)?;
+            match words.last() {
                 Some(&w) if used > 0 && w >> (bits * used) != 0 => Err(format!(
                     "section '{name}' sets bits past its last ball ({w:#010x})"
                 )),
