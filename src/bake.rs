@@ -108,6 +108,9 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     {
         say!("{why}");
     }
+    if !cfg.quiet {
+        say!("neighbours found on: {}", cfg.options.search.describe());
+    }
     let bar = if cfg.quiet {
         ProgressBar::hidden()
     } else {

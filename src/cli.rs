@@ -38,6 +38,13 @@ pub enum Command {
     Bench(BenchCommand),
 }
 
+/// Where `slosh bake` finds neighbours.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BakeDevice {
+    Cpu,
+    Gpu,
+}
+
 #[derive(Debug, Args)]
 pub struct PlayArgs {
     /// A cache directory written by `slosh bake`, or an EnSight .case file: its steps are
@@ -489,6 +496,14 @@ pub struct BakeArgs {
     pub shard: Option<String>,
     #[command(flatten)]
     pub settings: BakeSettings,
+    /// Where each step's neighbours (kNN, radii, neighbour lists) are found: the CPU's k-d
+    /// tree, or a GPU through Vulkan (equal where no distances tie; the other stages stay on
+    /// the CPU for now).
+    #[arg(long, value_enum, default_value_t = BakeDevice::Cpu)]
+    pub device: BakeDevice,
+    /// With --device gpu: the adapter whose name contains this (default: the best one).
+    #[arg(long)]
+    pub adapter: Option<String>,
     /// Rebuild manifest.json from the step files in the directory, bake nothing.
     #[arg(long)]
     pub manifest_only: bool,

@@ -217,6 +217,23 @@ fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {
     Ok(slosh_bake::Shard { index, count })
 }
 
+/// The neighbour search `--device` asks for.
+fn neighbour_search(
+    device: crate::cli::BakeDevice,
+    adapter: Option<&str>,
+) -> Result<std::sync::Arc<dyn slosh_mls::NeighbourSearch>> {
+    Ok(match device {
+        crate::cli::BakeDevice::Cpu => slosh_bake::cpu_search(),
+        crate::cli::BakeDevice::Gpu => {
+            let gpu = slosh_render::Gpu::new(adapter).context("--device gpu")?;
+            std::sync::Arc::new(
+                slosh_gpubake::GpuSearch::new(std::sync::Arc::new(gpu))
+                    .context("--device gpu: the neighbour search passes")?,
+            )
+        }
+    })
+}
+
 impl BakeConfig {
     pub fn from_args(a: &crate::cli::BakeArgs) -> Result<BakeConfig> {
         use slosh_bake::{BakeParams, NormalSource, SurfaceSelect};
@@ -408,6 +425,7 @@ impl BakeConfig {
                     .transpose()?
                     .unwrap_or(slosh_bake::Shard::WHOLE),
                 params,
+                search: neighbour_search(a.device, a.adapter.as_deref())?,
             },
             quiet: a.quiet,
             jobs_chosen,

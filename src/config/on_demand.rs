@@ -41,6 +41,8 @@ pub fn open(
         jobs: None,
         shard: None,
         settings,
+        device: crate::cli::BakeDevice::Cpu,
+        adapter: None,
         manifest_only: false,
         quiet: true,
     };

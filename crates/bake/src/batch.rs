@@ -14,7 +14,7 @@ use slosh_fileio::FileBytes;
 
 use crate::params::BakeParams;
 use crate::select::StepInput;
-use crate::step::bake_step;
+use crate::step::bake_step_with;
 
 /// Where steps come from: an EnSight case, or a single point-cloud file.
 pub trait StepSource: Sync {
@@ -85,6 +85,13 @@ pub struct BatchOptions {
     pub threads: usize,
     pub shard: Shard,
     pub params: BakeParams,
+    /// Where each step's neighbours are found: the CPU's k-d tree ([`cpu_search`]) or a GPU.
+    pub search: std::sync::Arc<dyn slosh_mls::NeighbourSearch>,
+}
+
+/// The reference neighbour search, on the CPU.
+pub fn cpu_search() -> std::sync::Arc<dyn slosh_mls::NeighbourSearch> {
+    std::sync::Arc::new(slosh_mls::KdSearch)
 }
 
 #[derive(Debug, Clone)]
@@ -190,7 +197,7 @@ pub(crate) fn bake_one(
     let read_seconds = start.elapsed().as_secs_f64();
     let mut input = input;
     input.identity = identity;
-    let baked = match bake_step(&input, &opts.params) {
+    let baked = match bake_step_with(&input, &opts.params, opts.search.as_ref()) {
         Ok(b) => b,
         // The report names the step; the error's own "step N:" would say it twice.
         Err(e) => return StepOutcome::Failed(e.problem()),

@@ -13,8 +13,8 @@ mod select;
 mod step;
 
 pub use batch::{
-    BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, files_identity, is_current,
-    plan, run_batch, series_key,
+    BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, cpu_search, files_identity,
+    is_current, plan, run_batch, series_key,
 };
 pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
@@ -27,4 +27,6 @@ pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
 };
 pub use slosh_mls::morton_order;
-pub use step::{BakeError, BakedStep, bake_step, bake_step_parts};
+pub use step::{
+    BakeError, BakedStep, bake_step, bake_step_parts, bake_step_parts_with, bake_step_with,
+};

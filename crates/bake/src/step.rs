@@ -8,7 +8,10 @@ use slosh_cache::{
     names, octahedral, pack_h, stored_radius,
 };
 use slosh_ensight::FieldValues;
-use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
+use slosh_mls::{
+    BallFit, BesideFits, FitStatus, KdSearch, NeighbourSearch, Sphere, StageClock, SurfaceError,
+    SurfaceParts,
+};
 
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::select::{StepInput, estimate_surface_normals};
@@ -323,7 +326,16 @@ fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
 }
 
 pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
-    bake_step_parts(input, params).map(|(baked, _)| baked)
+    bake_step_with(input, params, &KdSearch)
+}
+
+/// [`bake_step`], its neighbours found by `search` (the GPU's, say).
+pub fn bake_step_with(
+    input: &StepInput,
+    params: &BakeParams,
+    search: &dyn NeighbourSearch,
+) -> Result<BakedStep, BakeError> {
+    bake_step_parts_with(input, params, search).map(|(baked, _)| baked)
 }
 
 /// [`bake_step`] with the parts the bake computed, in f64, before the cache's layout stored
@@ -332,6 +344,15 @@ pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, Ba
 pub fn bake_step_parts(
     input: &StepInput,
     params: &BakeParams,
+) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
+    bake_step_parts_with(input, params, &KdSearch)
+}
+
+/// [`bake_step_parts`], its neighbours found by `search`.
+pub fn bake_step_parts_with(
+    input: &StepInput,
+    params: &BakeParams,
+    search: &dyn NeighbourSearch,
 ) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
     let mut clock = StageClock::start();
     let step = input.index;
@@ -485,9 +506,14 @@ pub fn bake_step_parts(
                 }
             });
         };
-        let (surface, build_laps) =
-            SurfaceParts::<f64>::build_with(&local, normals.as_deref(), &params.mls, start_bvh)
-                .map_err(|source| BakeError::Surface { step, source })?;
+        let (surface, build_laps) = SurfaceParts::<f64>::build_with(
+            &local,
+            normals.as_deref(),
+            &params.mls,
+            search,
+            start_bvh,
+        )
+        .map_err(|source| BakeError::Surface { step, source })?;
         // Sections, in the GPU layouts (the BVH's are added once it is built).
         let sections_start = std::time::Instant::now();
         let (sections, fields, kinds) = gpu_sections(&surface, input, &source_index, params)?;

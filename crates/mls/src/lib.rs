@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 mod clusters;
+mod error;
 mod fit;
 mod frame;
 mod geometry;
@@ -20,6 +21,7 @@ mod orient;
 mod poly;
 mod real;
 mod roots;
+mod search;
 mod spray;
 mod support;
 mod surface;
@@ -36,13 +38,14 @@ pub use intersect::{
     Ball, BallHit, HitStatus, InitialHit, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
 };
-pub use lists::RunUnions;
+pub use lists::{NeighbourLists, RunUnions};
 pub use neighbours::Neighbours;
-pub use order::morton_order;
+pub use order::{MortonGrid, morton_keys, morton_order};
 pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};
+pub use search::{KdSearch, ListRequest, NeighbourSearch, PointIndex};
 pub use spray::Sphere;
 pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,

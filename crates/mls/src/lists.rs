@@ -24,7 +24,8 @@ const RUNS_PER_BLOCK: usize = 32;
 /// Every point's neighbour list (CSR), the reach each list records, how many lists the cap
 /// cut, the union of each run's lists where the runs were consecutive indices, and the links
 /// asked for (per run).
-pub(crate) struct NeighbourLists {
+#[derive(Debug)]
+pub struct NeighbourLists {
     pub lists: Neighbours,
     pub reach: Vec<f64>,
     pub capped: usize,
@@ -72,7 +73,7 @@ pub(crate) const LIST_BLOCK: usize = RUN * RUNS_PER_BLOCK;
 /// kiddo's squared Euclidean distance, summed in its order, so that a list is the set its
 /// `within` query would return.
 #[inline(always)]
-fn distance2(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(crate) fn distance2(a: [f64; 3], b: [f64; 3]) -> f64 {
     let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
     d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }
@@ -404,19 +405,7 @@ mod tests {
     /// whose runs are consecutive indices.
     #[test]
     fn lists_equal_point_by_point_queries() {
-        let mut lattice: Vec<[f64; 3]> = Vec::new();
-        for x in 0..12 {
-            for y in 0..12 {
-                for z in 0..6 {
-                    lattice.push([x as f64, y as f64, 0.5 * z as f64]);
-                }
-            }
-        }
-        lattice.extend_from_within(..40);
-        // A fixed shuffle: multiplication by a prime that does not divide the count (904).
-        let n = lattice.len();
-        assert_ne!(n % 7919, 0);
-        let shuffled: Vec<[f64; 3]> = (0..n).map(|i| lattice[i * 7919 % n]).collect();
+        let shuffled = slosh_scenes::tied_lattice(12, 12, 6, 40);
         let mut scattered: Vec<[f64; 3]> = Vec::new();
         let mut s = 12345u64;
         let mut rand = || {

@@ -5,18 +5,19 @@
 
 use std::num::NonZero;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
+pub use crate::error::SurfaceError;
 use crate::fit::FitStatus;
 use crate::geometry::bounds;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit_with};
-use crate::lists::{LIST_RUN, NeighbourLists, RunUnions, neighbour_lists};
+use crate::lists::{LIST_RUN, NeighbourLists, RunUnions, distance2};
 use crate::neighbours::Neighbours;
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
+use crate::search::{KdSearch, ListRequest, NeighbourSearch};
 use crate::spray::{Sphere, droplets};
 use crate::support::{DataNormals, NormalsMode};
 use crate::timing::StageClock;
@@ -61,20 +62,6 @@ impl Default for SurfaceParams {
             offset: 0.0,
         }
     }
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum SurfaceError {
-    #[error("point {index} has a non-finite coordinate {value:?}")]
-    NonFinite { index: usize, value: [f64; 3] },
-    #[error("a surface needs at least 2 points, got {0}")]
-    TooFew(usize),
-    #[error("k must be at least 1")]
-    BadK,
-    #[error("spatial index: {0}")]
-    Index(String),
-    #[error("inconsistent surface parts: {0}")]
-    Parts(String),
 }
 
 /// Per-ball state of the initial fit.
@@ -178,18 +165,19 @@ impl<T: Real> SurfaceParts<T> {
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
     ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
-        Self::build_with(points, normals, params, |_| {})
+        Self::build_with(points, normals, params, &KdSearch, |_| {})
     }
 
     /// [`SurfaceParts::build`], running `beside` on the points, radii and spray as soon as
     /// the droplets are found, at the same time as the initial fits: work that needs those but
     /// not the fits (a bake's BVH) takes the cores the fits leave idle instead of waiting for
-    /// them.
+    /// them. The neighbours are found by `search`.
     #[allow(clippy::type_complexity)]
     pub fn build_with(
         points: &[[f64; 3]],
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
+        search: &dyn NeighbourSearch,
         beside: impl FnOnce(BesideFits<'_, T>) + Send,
     ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
         if points.len() < 2 {
@@ -221,8 +209,7 @@ impl<T: Real> SurfaceParts<T> {
         let mut unit_normals: Option<Vec<Option<[f64; 3]>>> =
             normals.map(|ns| ns.par_iter().map(|n| unit(*n)).collect());
 
-        let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&rel)
-            .map_err(|e| SurfaceError::Index(format!("{e:?}")))?;
+        let index = search.index(&rel)?;
         let k = params.k.min(n - 1);
         // One query serves the radii (the k-th) and, with normals, the orientation check.
         let orient_with = if unit_normals.is_some() {
@@ -231,21 +218,19 @@ impl<T: Real> SurfaceParts<T> {
             0
         };
         let k_query = NonZero::new(k.max(orient_with) + 1).ok_or(SurfaceError::BadK)?;
-        let queried: Vec<(f64, f64, Around)> = rel
-            .par_iter()
+        let nearest_ids = index.nearest(k_query)?;
+        let queried: Vec<(f64, f64, Around)> = nearest_ids
+            .par_chunks(k_query.get())
             .enumerate()
-            .map(|(i, p)| {
-                let nn = tree
-                    .query(p)
-                    .nearest_n::<SquaredEuclidean<f64>>(k_query)
-                    .execute();
-                let dist = |i: usize| nn.get(i).map_or(0.0, |r| r.distance.sqrt());
+            .map(|(i, nn)| {
+                // Distances in f64 whichever search found the points.
+                let dist = |slot: usize| distance2(rel[i], rel[nn[slot] as usize]).sqrt();
                 let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
-                let others = nn.iter().map(|r| r.item).filter(|&j| j as usize != i);
+                let others = nn.iter().copied().filter(|&j| j as usize != i);
                 for (slot, j) in around.iter_mut().zip(others.take(orient_with)) {
                     *slot = j;
                 }
-                (dist(k.min(nn.len().saturating_sub(1))), dist(1), around)
+                (dist(k), dist(1), around)
             })
             .collect();
         let mut radii: Vec<f64> = queried.par_iter().map(|q| q.0).collect();
@@ -298,15 +283,14 @@ impl<T: Real> SurfaceParts<T> {
             capped,
             run_unions,
             links,
-        } = neighbour_lists(
-            &tree,
-            &rel,
-            &reach_wanted,
-            cap.get(),
-            unit_normals.as_deref(),
+        } = index.lists(ListRequest {
+            reach: &reach_wanted,
+            cap: cap.get(),
+            normals: unit_normals.as_deref(),
             // The links that join spray into components, found with the lists.
-            (params.droplet_below > 1).then_some(&|i: usize| ball_h(i).powi(2)),
-        );
+            link_distance2: (params.droplet_below > 1).then_some(&|i: usize| ball_h(i).powi(2)),
+        })?;
+        drop(index);
         clock.lap("neighbour lists");
 
         // Spray first, from the lists alone and on every core: the fits do not need it, but the

@@ -29,10 +29,11 @@ pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};
 pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, WidenSettings, status};
 pub use output::{write_frame_png, write_npy, write_rgb_png};
+pub use pass::checked_pipeline;
 pub use staging::StagingPool;
 pub use tracer::{
     FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, RowSet, ShadeMode, TraceParams, Tracer,
-    read_buffer, settings,
+    read_buffer, read_storage, settings,
 };
 pub use upload::{
     GpuStep, HostField, HostStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, StepBuffers,

@@ -11,7 +11,7 @@ use crate::shaders::RangedArray;
 use crate::upload::EMPTY_BINDING;
 
 /// The pipeline of `source`'s `entry` under `layout`, validation errors caught.
-fn checked_pipeline(
+pub fn checked_pipeline(
     gpu: &Gpu,
     layout: &wgpu::PipelineLayout,
     label: &str,

@@ -6,19 +6,8 @@ use slosh_render::shaders::{
     TRACE_STACK_SIZES, expand_wgsl, mls_wgsl, present_wgsl, shade_wgsl, trace_wgsl, widen_wgsl,
 };
 
-/// Validates with the one capability the passes need beyond the baseline: `unpack2x16float`
-/// (the balls' half floats), which `Gpu::from_parts` requires of the adapter.
-fn validate(name: &str, source: &str) -> naga::Module {
-    let module = naga::front::wgsl::parse_str(source)
-        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32,
-    )
-    .validate(&module)
-    .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
-    module
-}
+use slosh_testkit::check_layout;
+use slosh_testkit::wgsl::validate;
 
 /// A binding limit as lavapipe's (128 MiB) and the smallest `Gpu::limit_bindings` takes.
 const LIMITS: [u64; 2] = [128 << 20, slosh_render::MIN_BINDING_LIMIT];
@@ -299,36 +288,6 @@ fn gpu_hits_agree_with_the_cpu_f64_oracle() {
         failures.is_empty(),
         "below the agreement bounds: {failures:?}"
     );
-}
-
-/// (offset, size) of each member of the WGSL struct `name`, and the struct's size.
-fn wgsl_layout(module: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32) {
-    let ty = module
-        .types
-        .iter()
-        .find(|(_, t)| t.name.as_deref() == Some(name))
-        .unwrap_or_else(|| panic!("no struct {name}"))
-        .1;
-    let naga::TypeInner::Struct { members, span } = &ty.inner else {
-        panic!("{name} is not a struct")
-    };
-    (
-        members
-            .iter()
-            .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
-            .collect(),
-        *span,
-    )
-}
-
-macro_rules! check_layout {
-    ($module:expr, $wgsl:literal, $rust:ty, [$($field:ident),*]) => {{
-        let (members, span) = wgsl_layout($module, $wgsl);
-        assert_eq!(span as usize, size_of::<$rust>(), "size of {}", $wgsl);
-        let rust: Vec<(String, u32)> =
-            vec![$((stringify!($field).to_string(), std::mem::offset_of!($rust, $field) as u32)),*];
-        assert_eq!(members, rust, "member offsets of {}", $wgsl);
-    }};
 }
 
 #[test]

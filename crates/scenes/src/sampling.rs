@@ -65,3 +65,27 @@ pub fn ellipsoid_area(r: DVec3) -> f64 {
     let (a, b, c) = (r.x.powf(p), r.y.powf(p), r.z.powf(p));
     4.0 * PI * ((a * b + a * c + b * c) / 3.0).powf(1.0 / p)
 }
+
+/// A lattice whose distances tie many times over (so a neighbour cap cuts through ties, and
+/// the tie-breaking rule decides): `nx × ny × nz` points 1 apart in x and y and ½ in z, the
+/// first `duplicates` of them twice, in a fixed shuffled order (multiplication by a prime
+/// that does not divide the count).
+pub fn tied_lattice(nx: usize, ny: usize, nz: usize, duplicates: usize) -> Vec<[f64; 3]> {
+    const STRIDE: usize = 7919;
+    let mut lattice: Vec<[f64; 3]> = Vec::with_capacity(nx * ny * nz + duplicates);
+    for x in 0..nx {
+        for y in 0..ny {
+            for z in 0..nz {
+                lattice.push([x as f64, y as f64, 0.5 * z as f64]);
+            }
+        }
+    }
+    lattice.extend_from_within(..duplicates.min(lattice.len()));
+    let n = lattice.len();
+    assert_ne!(
+        n % STRIDE,
+        0,
+        "the shuffle needs a count {STRIDE} does not divide"
+    );
+    (0..n).map(|i| lattice[i * STRIDE % n]).collect()
+}

@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 mod exact;
+pub mod wgsl;
 
 pub use exact::bake_exact_and_stored;
 

@@ -461,6 +461,7 @@ fn scaling_and_series(
             threads: cores,
             shard: Shard::WHOLE,
             params: params.clone(),
+            search: slosh_bake::cpu_search(),
         };
         let t = Instant::now();
         let report = run_batch(&source, &opts, &|_| {})?;

@@ -70,6 +70,7 @@ fn on_demand(case: &Path, cache: &Path) -> Result<OnDemand> {
         threads: slosh_bake::cores(),
         shard: Shard::WHOLE,
         params,
+        search: slosh_bake::cpu_search(),
     };
     Ok(OnDemand::open(Box::new(source), opts)?)
 }

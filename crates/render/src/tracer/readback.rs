@@ -13,6 +13,16 @@ pub fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result
     read(gpu, buffer)
 }
 
+/// The first `size` bytes of a `COPY_SRC` buffer, copied out once the work submitted before
+/// it has run (waits).
+pub fn read_storage<T: bytemuck::Pod>(
+    gpu: &Gpu,
+    source: &wgpu::Buffer,
+    size: u64,
+) -> Result<Vec<T>> {
+    read(gpu, &staged(gpu, source, 0, size))
+}
+
 /// Maps a MAP_READ buffer and copies its contents out.
 pub(super) fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
     let slice = buffer.slice(..);

@@ -1,0 +1,144 @@
+//! Buffers, bind groups and dispatches the search passes share: storage from host slices, a
+//! uniform block, a two-dimensional dispatch for any count, and buffers read back.
+
+use slosh_render::Gpu;
+use wgpu::util::DeviceExt;
+
+use crate::layout::{SearchParams, WORKGROUP};
+
+/// A GPU failure, as the build reports it.
+pub(crate) fn gpu_error(what: impl std::fmt::Display) -> slosh_mls::SurfaceError {
+    slosh_mls::SurfaceError::Index(format!("GPU neighbour search: {what}"))
+}
+
+/// A read-only storage buffer holding `data` (one zero element where it is empty: a binding
+/// cannot be empty).
+pub(crate) fn storage<T: bytemuck::Pod>(gpu: &Gpu, label: &str, data: &[T]) -> wgpu::Buffer {
+    let zero = [0u8; 16];
+    let bytes: &[u8] = if data.is_empty() {
+        &zero
+    } else {
+        bytemuck::cast_slice(data)
+    };
+    gpu.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        })
+}
+
+/// A storage buffer of `bytes` (at least 16) that a pass writes and the host reads back.
+pub(crate) fn output(gpu: &Gpu, label: &str, bytes: u64) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16).next_multiple_of(4),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+pub(crate) fn uniform(gpu: &Gpu, params: &SearchParams) -> wgpu::Buffer {
+    gpu.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("search params"),
+            contents: bytemuck::bytes_of(params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+}
+
+/// Workgroups along x and y for `count` threads, and the threads per row
+/// (`SearchParams::row_threads`).
+pub(crate) fn groups(gpu: &Gpu, count: u32) -> (u32, u32, u32) {
+    let groups = count.div_ceil(WORKGROUP).max(1);
+    let max = gpu
+        .device
+        .limits()
+        .max_compute_workgroups_per_dimension
+        .max(1);
+    let x = groups.min(max);
+    (x, groups.div_ceil(x), x * WORKGROUP)
+}
+
+/// Records one dispatch of `pipeline` over `bind_group`.
+pub(crate) fn record(
+    encoder: &mut wgpu::CommandEncoder,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    (x, y): (u32, u32),
+) {
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some("neighbour search"),
+        timestamp_writes: None,
+    });
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, bind_group, &[]);
+    pass.dispatch_workgroups(x, y, 1);
+}
+
+/// `bytes` of `source` copied out, once the work submitted before has run.
+pub(crate) fn read_back<T: bytemuck::Pod>(
+    gpu: &Gpu,
+    source: &wgpu::Buffer,
+    bytes: u64,
+) -> Result<Vec<T>, slosh_mls::SurfaceError> {
+    if bytes == 0 {
+        return Ok(Vec::new());
+    }
+    slosh_render::read_storage(gpu, source, bytes).map_err(gpu_error)
+}
+
+/// A bind group of `entries` (binding, buffer) under `layout`.
+pub(crate) fn bind(
+    gpu: &Gpu,
+    layout: &wgpu::BindGroupLayout,
+    entries: &[(u32, &wgpu::Buffer)],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = entries
+        .iter()
+        .map(|&(binding, buffer)| wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        })
+        .collect();
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("neighbour search"),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// A layout of a uniform block at 0 and storage buffers at `storage` (binding, writable).
+pub(crate) fn layout(gpu: &Gpu, label: &str, storage: &[(u32, bool)]) -> wgpu::BindGroupLayout {
+    let mut entries = vec![wgpu::BindGroupLayoutEntry {
+        binding: 0,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }];
+    entries.extend(
+        storage
+            .iter()
+            .map(|&(binding, writable)| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage {
+                        read_only: !writable,
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }),
+    );
+    gpu.device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &entries,
+        })
+}

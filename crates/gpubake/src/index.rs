@@ -1,0 +1,85 @@
+//! One point set on the GPU: in Morton order, as two f32s a coordinate, with its order.
+
+use crate::cells::SortedPoints;
+use crate::dispatch::{bind, groups, record, uniform};
+use crate::layout::SearchParams;
+use crate::passes::GpuSearch;
+
+/// One dispatch of a search pass over a range of the sorted points: what it is given beyond
+/// the points and the grid.
+pub(crate) struct Dispatch<'b> {
+    pub pipeline: &'b wgpu::ComputePipeline,
+    pub layout: &'b wgpu::BindGroupLayout,
+    pub level: u32,
+    pub cell_starts: &'b wgpu::Buffer,
+    pub first: usize,
+    pub count: usize,
+    /// `SearchParams::wanted`.
+    pub wanted: usize,
+    pub flags: u32,
+    pub out_base: u32,
+    /// The pass's own buffers, by binding.
+    pub buffers: &'b [(u32, &'b wgpu::Buffer)],
+}
+
+/// One point set on the GPU.
+pub(crate) struct GpuIndex<'a> {
+    pub search: &'a GpuSearch,
+    pub sorted: SortedPoints,
+    pub positions: wgpu::Buffer,
+    pub residuals: wgpu::Buffer,
+    pub original: wgpu::Buffer,
+    /// Added to every reach when the shaders pick cells: far above the f32 rounding of a
+    /// cell's bounds.
+    pub margin: f64,
+}
+
+impl GpuIndex<'_> {
+    /// The grid's low corner and cells per unit length at `level` (`SearchParams::lo`).
+    pub(crate) fn lo(&self, level: u32) -> [f32; 4] {
+        let lo = self.sorted.grid.lo;
+        [
+            lo[0] as f32,
+            lo[1] as f32,
+            lo[2] as f32,
+            self.sorted.cells_per_unit(level) as f32,
+        ]
+    }
+
+    /// Records and submits `dispatch`.
+    pub(crate) fn submit(&self, dispatch: Dispatch<'_>) {
+        let gpu = self.search.gpu();
+        let (x, y, row_threads) = groups(gpu, dispatch.count as u32);
+        let params = uniform(
+            gpu,
+            &SearchParams {
+                lo: self.lo(dispatch.level),
+                count: dispatch.count as u32,
+                first: dispatch.first as u32,
+                side: 1 << dispatch.level,
+                wanted: dispatch.wanted as u32,
+                flags: dispatch.flags,
+                out_base: dispatch.out_base,
+                row_threads,
+                margin: self.margin as f32,
+            },
+        );
+        let grid = [
+            (0, &params),
+            (1, &self.positions),
+            (2, &self.original),
+            (3, dispatch.cell_starts),
+            (10, &self.residuals),
+        ];
+        let entries: Vec<(u32, &wgpu::Buffer)> =
+            grid.iter().chain(dispatch.buffers).copied().collect();
+        let group = bind(gpu, dispatch.layout, &entries);
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("neighbour search"),
+            });
+        record(&mut encoder, dispatch.pipeline, &group, (x, y));
+        gpu.queue.submit([encoder.finish()]);
+    }
+}

@@ -1,0 +1,50 @@
+//! The uniform block the search passes share, mirrored in `shaders/neighbour_grid.wgsl`, and
+//! the WGSL modules they are built from.
+
+use bytemuck::{Pod, Zeroable};
+
+/// The most nearest points one query returns (a private array in `shaders/nearest.wgsl`, whose
+/// constant this is).
+pub const NEAREST_MAX: usize = 32;
+
+/// Threads per workgroup of every search pass (`@workgroup_size(64)`).
+pub(crate) const WORKGROUP: u32 = 64;
+
+/// `SearchParams` in `shaders/neighbour_grid.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct SearchParams {
+    /// xyz: the grid's low corner; w: cells per unit length.
+    pub lo: [f32; 4],
+    pub count: u32,
+    pub first: u32,
+    pub side: u32,
+    pub wanted: u32,
+    pub flags: u32,
+    pub out_base: u32,
+    pub row_threads: u32,
+    pub margin: f32,
+}
+
+/// `SearchParams::flags`: the points have data normals.
+pub(crate) const FLAG_NORMALS: u32 = 1;
+/// `SearchParams::flags`: links are wanted.
+pub(crate) const FLAG_LINKS: u32 = 2;
+
+/// Where the lists pass marks a link (`LINK_BIT` in `shaders/lists.wgsl`).
+pub(crate) const LINK_BIT: u32 = 0x8000_0000;
+
+const GRID_WGSL: &str = include_str!("../../../shaders/neighbour_grid.wgsl");
+
+/// The nearest-points module: entry point `nearest`.
+pub fn nearest_source() -> String {
+    format!(
+        "const NEAREST_MAX: u32 = {NEAREST_MAX}u;\n{GRID_WGSL}{}",
+        include_str!("../../../shaders/nearest.wgsl")
+    )
+}
+
+/// The lists module: entry points `cut_lists` and `write_lists`.
+pub fn lists_source() -> String {
+    format!("{GRID_WGSL}{}", include_str!("../../../shaders/lists.wgsl"))
+}

@@ -1,0 +1,18 @@
+//! The bake's stages on the GPU, in wgpu compute over a device someone else made
+//! ([`slosh_render::Gpu`]). Each stage implements a `slosh_mls` interface whose CPU form is
+//! the reference, and returns what it returns where no two distances tie
+//! (`docs/algorithm.md`, "Neighbour search"): the nearest points of every point and every
+//! point's neighbour list ([`GpuSearch`], a [`slosh_mls::NeighbourSearch`]), on a grid of
+//! Morton cells (`shaders/neighbour_grid.wgsl`, `nearest.wgsl`, `lists.wgsl`).
+
+mod cells;
+mod dispatch;
+mod index;
+mod layout;
+mod lists;
+mod nearest;
+mod passes;
+mod search;
+
+pub use layout::{NEAREST_MAX, SearchParams, lists_source, nearest_source};
+pub use passes::GpuSearch;

@@ -1,0 +1,214 @@
+//! Every point's neighbour list on the GPU (`shaders/lists.wgsl`): where the cap cuts each
+//! list and how many it keeps (one pass over all points), the lists' offsets (a prefix sum
+//! here), then the lists themselves, written and read back in batches of bounded size.
+
+use rayon::prelude::*;
+use slosh_mls::{ListRequest, NeighbourLists, Neighbours, SurfaceError};
+
+use crate::dispatch::{gpu_error, output, read_back, storage};
+use crate::index::{Dispatch, GpuIndex};
+use crate::layout::{FLAG_LINKS, FLAG_NORMALS, LINK_BIT};
+
+/// (point, neighbour) within the link distance.
+type Link = (u32, u32);
+
+/// Points per piece of the lists' assembly (a task, and a piece of the links).
+const POINTS_PER_PIECE: usize = 4096;
+
+/// A reach the shaders' f32 square root rounded down can still hold: the CPU's lists are
+/// measured in f64, and a cut list's reach must hold its farthest member (`lists.rs` in
+/// slosh-mls) whichever measured it. Far above f32's 2⁻²⁴.
+const CUT_REACH_SLACK: f64 = 1.0 / (1u64 << 18) as f64;
+
+pub(crate) fn lists(
+    index: &GpuIndex<'_>,
+    request: ListRequest<'_>,
+) -> Result<NeighbourLists, SurfaceError> {
+    let sorted = &index.sorted;
+    let search = index.search;
+    let gpu = search.gpu();
+    let n = sorted.len();
+    let order = &sorted.order;
+    let cap = request.cap.max(1);
+    if request.reach.len() != n {
+        return Err(gpu_error(format!(
+            "{} reaches for {n} points",
+            request.reach.len()
+        )));
+    }
+    let reach: Vec<f32> = order
+        .par_iter()
+        .map(|&i| request.reach[i as usize] as f32)
+        .collect();
+    let mut flags = 0;
+    let normals: Vec<[f32; 4]> = match request.normals {
+        Some(ns) => {
+            flags |= FLAG_NORMALS;
+            order
+                .par_iter()
+                .map(|&i| {
+                    let n = ns[i as usize].unwrap_or([0.0; 3]);
+                    [n[0] as f32, n[1] as f32, n[2] as f32, 0.0]
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    let link2: Vec<f32> = match request.link_distance2 {
+        Some(f) => {
+            flags |= FLAG_LINKS;
+            order.par_iter().map(|&i| f(i as usize) as f32).collect()
+        }
+        None => Vec::new(),
+    };
+    // Cells about half the typical reach wide: a query visits some 5³ cells.
+    let median = {
+        let mut r = reach.clone();
+        let mid = r.len() / 2;
+        *r.select_nth_unstable_by(mid, f32::total_cmp).1
+    };
+    let level = sorted.level_for_size(0.5 * f64::from(median), sorted.max_level(gpu.max_binding()));
+    let starts = storage(gpu, "cell starts", &sorted.cell_starts(level));
+    let reach_buffer = storage(gpu, "reach", &reach);
+    let normals_buffer = storage(gpu, "normals", &normals);
+    let link_buffer = storage(gpu, "link distances", &link2);
+    let cut_bytes = n as u64 * 16;
+    if cut_bytes > gpu.max_binding() {
+        return Err(gpu_error(format!(
+            "{n} points' cuts take {cut_bytes} bytes, more than one binding holds"
+        )));
+    }
+    let cut = output(gpu, "list cuts", cut_bytes);
+    let pass = |pipeline: &wgpu::ComputePipeline,
+                first: usize,
+                count: usize,
+                out_base: u32,
+                list_start: &wgpu::Buffer,
+                lists_out: &wgpu::Buffer| {
+        index.submit(Dispatch {
+            pipeline,
+            layout: &search.lists_layout,
+            level,
+            cell_starts: &starts,
+            first,
+            count,
+            wanted: cap,
+            flags,
+            out_base,
+            buffers: &[
+                (4, &reach_buffer),
+                (5, &normals_buffer),
+                (6, &link_buffer),
+                (7, &cut),
+                (8, list_start),
+                (9, lists_out),
+            ],
+        });
+    };
+    // The cut pass reads no offsets and writes no lists: two buffers of their own, since one
+    // buffer may not be bound read-only and writable at once.
+    let (no_starts, no_lists) = (output(gpu, "no offsets", 16), output(gpu, "no lists", 16));
+    pass(&search.cut, 0, n, 0, &no_starts, &no_lists);
+    let cuts: Vec<[u32; 4]> = read_back(gpu, &cut, cut_bytes)?;
+
+    // Offsets in sorted order.
+    let mut start = vec![0u64; n + 1];
+    for t in 0..n {
+        start[t + 1] = start[t] + u64::from(cuts[t][2]);
+    }
+    let total = start[n];
+    if total > u64::from(u32::MAX) {
+        return Err(gpu_error(format!(
+            "{total} neighbours in all; lists hold at most {} (32-bit offsets)",
+            u32::MAX
+        )));
+    }
+    let start: Vec<u32> = start.iter().map(|&s| s as u32).collect();
+    let start_buffer = storage(gpu, "list starts", &start[..n]);
+    // Batches of consecutive points whose lists fit one output.
+    let limit_ids = (search.output_limit() / 4).max(cap as u64);
+    let mut words: Vec<u32> = Vec::with_capacity(total as usize);
+    let mut first = 0;
+    while first < n {
+        let mut last = first + 1;
+        while last < n && u64::from(start[last + 1] - start[first]) <= limit_ids {
+            last += 1;
+        }
+        let count = u64::from(start[last] - start[first]);
+        if count > 0 {
+            let lists_out = output(gpu, "lists", count * 4);
+            pass(
+                &search.write,
+                first,
+                last - first,
+                start[first],
+                &start_buffer,
+                &lists_out,
+            );
+            words.extend(read_back::<u32>(gpu, &lists_out, count * 4)?);
+        }
+        first = last;
+    }
+
+    // Ids and links, piece by piece, in sorted order.
+    let pieces: Vec<(Vec<u32>, Vec<Link>)> = (0..n.div_ceil(POINTS_PER_PIECE))
+        .into_par_iter()
+        .map(|p| {
+            let points = p * POINTS_PER_PIECE..((p + 1) * POINTS_PER_PIECE).min(n);
+            let slots = start[points.start] as usize..start[points.end] as usize;
+            let ids: Vec<u32> = words[slots].iter().map(|&w| w & !LINK_BIT).collect();
+            let mut links = Vec::new();
+            for t in points {
+                for &w in &words[start[t] as usize..start[t + 1] as usize] {
+                    if w & LINK_BIT != 0 {
+                        links.push((order[t], w & !LINK_BIT));
+                    }
+                }
+            }
+            (ids, links)
+        })
+        .collect();
+    drop(words);
+    let mut reach_out = vec![0.0f64; n];
+    let mut capped = 0;
+    for (t, c) in cuts.iter().enumerate() {
+        let i = order[t] as usize;
+        reach_out[i] = if c[3] != 0 {
+            capped += 1;
+            (f64::from(f32::from_bits(c[0])) * (1.0 + CUT_REACH_SLACK))
+                .sqrt()
+                .next_up()
+        } else {
+            request.reach[i]
+        };
+    }
+    let (id_pieces, links): (Vec<Vec<u32>>, Vec<Vec<Link>>) = pieces.into_iter().unzip();
+    let lists = if sorted.identity {
+        Neighbours::from_csr(start, id_pieces.concat())
+    } else {
+        // Back to the caller's order.
+        let sorted_ids = id_pieces.concat();
+        let mut by_point = vec![0u32; n + 1];
+        for (t, &i) in order.iter().enumerate() {
+            by_point[i as usize + 1] = start[t + 1] - start[t];
+        }
+        for i in 0..n {
+            by_point[i + 1] += by_point[i];
+        }
+        let mut ids = vec![0u32; sorted_ids.len()];
+        for (t, &i) in order.iter().enumerate() {
+            let from = &sorted_ids[start[t] as usize..start[t + 1] as usize];
+            let at = by_point[i as usize] as usize;
+            ids[at..at + from.len()].copy_from_slice(from);
+        }
+        Neighbours::from_csr(by_point, ids)
+    }
+    .ok_or_else(|| gpu_error("the lists read back do not match their counts"))?;
+    Ok(NeighbourLists {
+        lists,
+        reach: reach_out,
+        capped,
+        run_unions: None,
+        links,
+    })
+}

@@ -1,0 +1,56 @@
+//! The GPU's neighbour search as the build asks for it: the points uploaded once per step,
+//! in Morton order, then the nearest-points and lists passes over grids of Morton cells.
+
+use std::num::NonZero;
+
+use slosh_mls::{ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
+
+use crate::cells::SortedPoints;
+use crate::dispatch::{gpu_error, storage};
+use crate::index::GpuIndex;
+use crate::passes::GpuSearch;
+
+impl NeighbourSearch for GpuSearch {
+    fn index<'a>(
+        &'a self,
+        points: &'a [[f64; 3]],
+    ) -> Result<Box<dyn PointIndex + 'a>, SurfaceError> {
+        let n = points.len();
+        let bytes = n as u64 * 16;
+        if bytes > self.gpu.max_binding() || n >= (1 << 31) {
+            return Err(gpu_error(format!(
+                "{n} points take {bytes} bytes, more than one binding of this adapter holds \
+                 ({} bytes); bake with --device cpu",
+                self.gpu.max_binding()
+            )));
+        }
+        let sorted = SortedPoints::new(points);
+        let gpu = &self.gpu;
+        let positions = storage(gpu, "search positions", &sorted.high);
+        let residuals = storage(gpu, "search residuals", &sorted.low);
+        let original = storage(gpu, "search order", &sorted.order);
+        let margin = 1e-5 * sorted.extent();
+        Ok(Box::new(GpuIndex {
+            search: self,
+            sorted,
+            positions,
+            residuals,
+            original,
+            margin,
+        }))
+    }
+
+    fn describe(&self) -> String {
+        format!("gpu ({})", self.gpu.describe())
+    }
+}
+
+impl PointIndex for GpuIndex<'_> {
+    fn nearest(&self, count: NonZero<usize>) -> Result<Vec<u32>, SurfaceError> {
+        crate::nearest::nearest(self, count.get())
+    }
+
+    fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError> {
+        crate::lists::lists(self, request)
+    }
+}

@@ -1,0 +1,151 @@
+#![allow(clippy::unwrap_used)]
+//! A step baked with the GPU's neighbours against the same step baked on the CPU: the same
+//! spray components and orientation flips, and the same picture (hit/miss on ≥ 99.9 % of
+//! pixels, |Δt| p99 ≤ 1e-3 spacings at 3 iterations, by the CPU tracer), on every generated
+//! scene, the hard cases, and the SPH fixture (a pysplishsplash dam break at three times).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use slosh_bake::{
+    BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step_parts, bake_step_parts_with,
+    read_point_cloud,
+};
+use slosh_cache::{CacheFile, LoadedStep, encode_step};
+use slosh_fileio::FileBytes;
+use slosh_gpubake::GpuSearch;
+use slosh_mls::Params;
+use slosh_render::Gpu;
+use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
+use slosh_testkit::{adapter, framing_camera, gpu_or_skip, scene_step};
+
+/// The issue's bounds: pixels that hit in one picture and miss in the other, and the p99 of
+/// |Δt| over pixels both hit, in particle spacings.
+const MOST_SWITCHED: f64 = 1e-3;
+const MOST_MOVED_P99: f64 = 1e-3;
+const SIZE: u32 = 160;
+
+fn bake(
+    input: &StepInput,
+    params: &BakeParams,
+    search: Option<&GpuSearch>,
+    name: &str,
+) -> (slosh_mls::SurfaceParts<f64>, LoadedStep) {
+    let (baked, parts) = match search {
+        Some(search) => bake_step_parts_with(input, params, search),
+        None => bake_step_parts(input, params),
+    }
+    .unwrap_or_else(|e| panic!("{name}: {e}"));
+    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
+    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new(name), bytes)).unwrap();
+    file.verify()
+        .unwrap_or_else(|e| panic!("{name}: the verifier rejects it: {e}"));
+    (parts, LoadedStep::load(&file).unwrap())
+}
+
+/// Hit/miss switches and the p99 of |Δt| in spacings.
+fn compare(name: &str, input: &StepInput, params: &BakeParams, search: &GpuSearch) {
+    let (cpu_parts, cpu) = bake(input, params, None, name);
+    let (gpu_parts, gpu) = bake(input, params, Some(search), name);
+    assert_eq!(
+        cpu_parts.spheres.len(),
+        gpu_parts.spheres.len(),
+        "{name}: droplet count"
+    );
+    for (a, b) in cpu_parts.spheres.iter().zip(&gpu_parts.spheres) {
+        assert_eq!(a.centre, b.centre, "{name}: a droplet moved");
+        assert_eq!(a.radius, b.radius, "{name}: a droplet's radius");
+    }
+    assert_eq!(
+        cpu_parts.orientation, gpu_parts.orientation,
+        "{name}: orientation flips"
+    );
+    assert_eq!(cpu_parts.h, gpu_parts.h, "{name}: h");
+    let camera = framing_camera(&input.positions, SIZE);
+    let params = Params::<f32> {
+        degree: params.mls.degree,
+        iterations: 3,
+        epsilon: 1e-4,
+        normals: params.mls.normals,
+        h_factor: 1.0,
+    };
+    let (a, b) = (cpu.render(&camera, &params), gpu.render(&camera, &params));
+    let spacing = cpu_parts.spacing * cpu.transform.scale;
+    let mut moved: Vec<f64> = Vec::new();
+    let mut switched = 0usize;
+    for (a, b) in a.iter().zip(&b) {
+        match (a, b) {
+            (Some(a), Some(b)) => moved.push((a.t - b.t).abs() / spacing),
+            (None, None) => {}
+            _ => switched += 1,
+        }
+    }
+    assert!(
+        moved.len() > a.len() / 20,
+        "{name}: too few hits to compare"
+    );
+    moved.sort_by(f64::total_cmp);
+    let p99 = moved[(moved.len() - 1) * 99 / 100];
+    let switched_share = switched as f64 / a.len() as f64;
+    eprintln!(
+        "{name}: {} points, {} droplets, {} flipped; {switched} of {} pixels switch, |Δt| p99 \
+         {p99:.2e} max {:.2e} spacings",
+        gpu_parts.len(),
+        gpu_parts.spheres.len(),
+        gpu_parts.orientation.flipped_points,
+        a.len(),
+        moved[moved.len() - 1]
+    );
+    assert!(
+        switched_share <= MOST_SWITCHED,
+        "{name}: {switched} of {} pixels switch between hit and miss",
+        a.len()
+    );
+    assert!(p99 <= MOST_MOVED_P99, "{name}: |Δt| p99 {p99} spacings");
+}
+
+#[test]
+fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
+    let Some(gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
+        return;
+    };
+    let search = GpuSearch::new(Arc::new(gpu)).unwrap();
+    let with_normals = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    let hard = HardCases {
+        noise: 0.1,
+        duplicates: 0.02,
+        flip_normals: 0.05,
+        bad_normals: 0.02,
+        isolated: true,
+        ..HardCases::default()
+    };
+    let mut scenes: Vec<(String, SceneSpec)> = SceneKind::ALL
+        .iter()
+        .map(|&kind| (kind.name().to_string(), SceneSpec::new(kind, 6000, 3)))
+        .collect();
+    for kind in [SceneKind::Sphere, SceneKind::Droplets] {
+        let mut spec = SceneSpec::new(kind, 6000, 5);
+        spec.hard = hard.clone();
+        scenes.push((format!("{}, hard", kind.name()), spec));
+    }
+    for (name, spec) in scenes {
+        let scene = Scene::new(spec).unwrap();
+        let input = scene_step(&scene, 1, &name);
+        compare(&name, &input, &with_normals, &search);
+    }
+    // The SPH fixture: volume particles, surface and normals estimated.
+    let sph = BakeParams::new(SurfaceSelect::Estimate, NormalSource::Estimate);
+    for time in ["0.4", "0.6", "1"] {
+        let path = format!(
+            "{}/../../tests/data/sph/coarse-t{time}/particles.ply",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let cloud = read_point_cloud(Path::new(&path)).unwrap();
+        let input = StepInput {
+            source: path.clone(),
+            positions: cloud.positions,
+            ..StepInput::default()
+        };
+        compare(&format!("dam break t = {time}"), &input, &sph, &search);
+    }
+}

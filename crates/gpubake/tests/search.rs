@@ -1,0 +1,268 @@
+#![allow(clippy::unwrap_used)]
+//! The GPU's neighbour search against the CPU's k-d tree (the reference), on lavapipe here and
+//! any adapter elsewhere: the same nearest points and the same lists, but where two distances
+//! tie within f32's resolution of them (`docs/algorithm.md`, "Neighbour search").
+
+use std::num::NonZero;
+use std::sync::Arc;
+
+use slosh_gpubake::GpuSearch;
+use slosh_mls::{KdSearch, ListRequest, NeighbourLists, NeighbourSearch, morton_order};
+use slosh_render::Gpu;
+use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
+use slosh_testkit::{adapter, gpu_or_skip};
+
+/// Two squared distances within this relative difference tie: the GPU measures in f32 (from
+/// positions split into two f32s each, so to about 2⁻²³ of the distance itself), the CPU in
+/// f64.
+const TIE: f64 = 1e-6;
+
+fn d2(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum()
+}
+
+fn near(a: f64, b: f64) -> bool {
+    (a - b).abs() <= TIE * a.abs().max(b.abs())
+}
+
+fn gpu_search() -> Option<GpuSearch> {
+    let gpu = gpu_or_skip(Gpu::new(adapter().as_deref()))?;
+    Some(GpuSearch::new(Arc::new(gpu)).expect("the search passes compile"))
+}
+
+/// A point set, its reaches, data normals (some opposing, some missing) and link distance.
+struct Case {
+    name: String,
+    points: Vec<[f64; 3]>,
+    reach: Vec<f64>,
+    normals: Vec<Option<[f64; 3]>>,
+    link2: f64,
+    cap: usize,
+}
+
+fn scene_case(kind: SceneKind, hard: HardCases, shuffle: bool) -> Case {
+    let mut spec = SceneSpec::new(kind, 3000, 7);
+    spec.hard = hard;
+    let scene = Scene::new(spec).unwrap();
+    let (mut points, mut normals) = scene.particles(0).surface_arrays();
+    // The bake's order (then the search needs no sort), or a fixed shuffle of it.
+    let order = morton_order(&points);
+    points = order.iter().map(|&i| points[i as usize]).collect();
+    normals = order.iter().map(|&i| normals[i as usize]).collect();
+    let n = points.len();
+    if shuffle {
+        assert_ne!(n % 7919, 0);
+        points = (0..n).map(|i| points[i * 7919 % n]).collect();
+        normals = (0..n).map(|i| normals[i * 7919 % n]).collect();
+    }
+    let spacing = scene.spacing();
+    Case {
+        name: format!("{}{}", kind.name(), if shuffle { ", shuffled" } else { "" }),
+        reach: (0..n)
+            // Some lists within the cap, most cut.
+            .map(|i| spacing * (1.5 + (i % 5) as f64))
+            .collect(),
+        normals: (0..n)
+            .map(|i| match i % 11 {
+                0 => None,
+                3 => Some(normals[i].map(|c| -c)),
+                _ => Some(normals[i]),
+            })
+            .collect(),
+        points,
+        link2: (1.5 * spacing).powi(2),
+        cap: 48,
+    }
+}
+
+/// A lattice: every distance tied many times, so the cap cuts through ties (broken by index),
+/// with duplicates; shuffled.
+fn lattice_case() -> Case {
+    let points = slosh_scenes::tied_lattice(14, 14, 6, 40);
+    let n = points.len();
+    Case {
+        name: "lattice".into(),
+        reach: (0..n).map(|i| 2.2 * (1.0 + (i % 5) as f64 * 0.1)).collect(),
+        normals: (0..n)
+            .map(|i| match i % 11 {
+                0 => None,
+                3 => Some([0.0, 0.0, -1.0]),
+                _ => Some([0.0, 0.0, 1.0]),
+            })
+            .collect(),
+        points,
+        link2: 1.1f64.powi(2),
+        cap: 40,
+    }
+}
+
+/// Where the lists of point i differ, each point in only one of them ties: its distance with
+/// the reach, with the CPU's cut (where the cap cut), or its normal is perpendicular.
+fn differences_tie(case: &Case, i: usize, cpu: &NeighbourLists, gpu: &NeighbourLists) -> usize {
+    let (a, b) = (cpu.lists.of(i), gpu.lists.of(i));
+    let p = case.points[i];
+    let cut2 = cpu.reach[i].powi(2);
+    let mut differing = 0;
+    for &j in a
+        .iter()
+        .filter(|j| b.binary_search(j).is_err())
+        .chain(b.iter().filter(|j| a.binary_search(j).is_err()))
+    {
+        differing += 1;
+        let d = d2(p, case.points[j as usize]);
+        let perpendicular = match (case.normals[i], case.normals[j as usize]) {
+            (Some(u), Some(v)) => (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]).abs() < TIE,
+            _ => false,
+        };
+        assert!(
+            near(d, case.reach[i].powi(2)) || near(d, cut2) || perpendicular,
+            "{}: point {i}'s lists differ at {j} (d² {d}, reach² {}, cut² {cut2})",
+            case.name,
+            case.reach[i].powi(2)
+        );
+    }
+    differing
+}
+
+#[test]
+fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
+    let Some(search) = gpu_search() else { return };
+    let mut cases: Vec<Case> = SceneKind::ALL
+        .iter()
+        .map(|&kind| scene_case(kind, HardCases::default(), false))
+        .collect();
+    let hard = HardCases {
+        noise: 0.1,
+        duplicates: 0.02,
+        flip_normals: 0.05,
+        isolated: true,
+        density_jump: 10.0,
+        ..HardCases::default()
+    };
+    cases.push(scene_case(SceneKind::Sphere, hard.clone(), false));
+    cases.push(scene_case(SceneKind::Wave, hard, true));
+    cases.push(lattice_case());
+    let (mut some_capped, mut some_uncapped) = (false, false);
+    for case in &cases {
+        let n = case.points.len();
+        let link2 = |_: usize| case.link2;
+        let request = ListRequest {
+            reach: &case.reach,
+            cap: case.cap,
+            normals: Some(&case.normals),
+            link_distance2: Some(&link2),
+        };
+        let cpu_index = KdSearch.index(&case.points).unwrap();
+        let gpu_index = search.index(&case.points).unwrap();
+
+        // The nearest 9: the same distances in f64, the same points but where they tie.
+        let count = NonZero::new(9).unwrap();
+        let (cpu_near, gpu_near) = (
+            cpu_index.nearest(count).unwrap(),
+            gpu_index.nearest(count).unwrap(),
+        );
+        assert_eq!(gpu_near.len(), n * 9, "{}", case.name);
+        for i in 0..n {
+            let dist = |ids: &[u32], slot: usize| {
+                d2(case.points[i], case.points[ids[i * 9 + slot] as usize])
+            };
+            for slot in 0..9 {
+                let (c, g) = (dist(&cpu_near, slot), dist(&gpu_near, slot));
+                assert!(
+                    near(c, g) || c.max(g) < 1e-300,
+                    "{}: point {i}'s nearest {slot}: d² {c} (CPU) against {g} (GPU)",
+                    case.name
+                );
+            }
+        }
+
+        let (cpu, gpu) = (
+            cpu_index.lists(request).unwrap(),
+            gpu_index.lists(request).unwrap(),
+        );
+        let entries: usize = (0..n).map(|i| cpu.lists.of(i).len()).sum();
+        let differing: usize = (0..n).map(|i| differences_tie(case, i, &cpu, &gpu)).sum();
+        // Ties within 1e-6 are rare in generated data (exact ties, as in the lattice, are
+        // broken alike).
+        assert!(
+            differing * 1000 <= entries,
+            "{}: {differing} of {entries} entries differ",
+            case.name
+        );
+        assert!(entries > n * 5, "{}: lists too short to test", case.name);
+        for i in 0..n {
+            let (c, g) = (cpu.reach[i], gpu.reach[i]);
+            assert!(
+                g >= c * (1.0 - TIE) && g <= c * (1.0 + 1e-5),
+                "{}: point {i}'s reach {g} (GPU) against {c} (CPU)",
+                case.name
+            );
+            // A cut list's reach holds every member, measured in f64.
+            for &j in gpu.lists.of(i) {
+                assert!(d2(case.points[i], case.points[j as usize]) <= g * g);
+            }
+        }
+        some_capped |= cpu.capped > n / 10;
+        assert!(
+            cpu.capped.abs_diff(gpu.capped) <= differing,
+            "{}",
+            case.name
+        );
+        // Links: the same pairs, but where a list differs or a pair ties with the link
+        // distance.
+        let links = |l: &NeighbourLists| {
+            let mut all: Vec<(u32, u32)> = l.links.concat();
+            all.sort_unstable();
+            all.dedup();
+            all
+        };
+        let (cpu_links, gpu_links) = (links(&cpu), links(&gpu));
+        assert!(!cpu_links.is_empty(), "{}: no links to test", case.name);
+        for (a, b) in [(&cpu_links, &gpu_links), (&gpu_links, &cpu_links)] {
+            for &(i, j) in a.iter().filter(|l| b.binary_search(l).is_err()) {
+                let (i, j) = (i as usize, j as usize);
+                let d = d2(case.points[i], case.points[j]);
+                let lists_differ = cpu.lists.of(i) != gpu.lists.of(i);
+                assert!(
+                    lists_differ || near(d, case.link2),
+                    "{}: link ({i}, {j}) found by one search only (d² {d})",
+                    case.name
+                );
+            }
+        }
+        eprintln!(
+            "{}: {n} points, {entries} entries, {differing} differ at ties, {} capped",
+            case.name, cpu.capped
+        );
+        some_uncapped |= cpu.capped < n / 2;
+    }
+    assert!(
+        some_capped && some_uncapped,
+        "the cap must cut some lists, not all"
+    );
+}
+
+#[test]
+fn the_search_params_mirror_the_wgsl_layout() {
+    use slosh_gpubake::{SearchParams, lists_source, nearest_source};
+    use slosh_testkit::check_layout;
+    for (name, source) in [("nearest", nearest_source()), ("lists", lists_source())] {
+        let module = slosh_testkit::wgsl::validate(name, &source);
+        check_layout!(
+            &module,
+            "SearchParams",
+            SearchParams,
+            [
+                lo,
+                count,
+                first,
+                side,
+                wanted,
+                flags,
+                out_base,
+                row_threads,
+                margin
+            ]
+        );
+    }
+}

@@ -1,0 +1,15 @@
+//! Why a surface cannot be built from the points given.
+
+#[derive(Debug, thiserror::Error)]
+pub enum SurfaceError {
+    #[error("point {index} has a non-finite coordinate {value:?}")]
+    NonFinite { index: usize, value: [f64; 3] },
+    #[error("a surface needs at least 2 points, got {0}")]
+    TooFew(usize),
+    #[error("k must be at least 1")]
+    BadK,
+    #[error("spatial index: {0}")]
+    Index(String),
+    #[error("inconsistent surface parts: {0}")]
+    Parts(String),
+}

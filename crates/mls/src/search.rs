@@ -1,0 +1,120 @@
+//! Where a build finds each point's nearest points and its neighbour lists: a kiddo k-d tree
+//! on the CPU (the reference), or any other implementation that returns the same sets where
+//! no two distances tie (`docs/algorithm.md`, "Neighbour search"), such as the GPU's
+//! (`slosh-gpubake`).
+
+use std::num::NonZero;
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+
+use crate::error::SurfaceError;
+use crate::lists::{NeighbourLists, neighbour_lists};
+
+/// What a neighbour list keeps beyond the reach and the cap: its links and the normals that
+/// oppose.
+#[derive(Clone, Copy)]
+pub struct ListRequest<'a> {
+    /// How far each point's list reaches (ρ_i + support·h_i).
+    pub reach: &'a [f64],
+    /// At most this many neighbours per point, the nearest by (d², index).
+    pub cap: usize,
+    /// Unit data normals: a neighbour whose normal opposes the point's is left out.
+    pub normals: Option<&'a [Option<[f64; 3]>]>,
+    /// The squared link distance of each point, where links (pairs within it) are wanted.
+    pub link_distance2: Option<&'a (dyn Fn(usize) -> f64 + Sync)>,
+}
+
+impl std::fmt::Debug for ListRequest<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ListRequest")
+            .field("points", &self.reach.len())
+            .field("cap", &self.cap)
+            .field("normals", &self.normals.is_some())
+            .field("links", &self.link_distance2.is_some())
+            .finish()
+    }
+}
+
+/// A neighbour search over one point set, made by [`NeighbourSearch::index`].
+pub trait PointIndex {
+    /// For every point, its `count` nearest points (itself among them), nearest first: point
+    /// i's are `[i·count, (i + 1)·count)`. `count` is at most the number of points.
+    fn nearest(&self, count: NonZero<usize>) -> Result<Vec<u32>, SurfaceError>;
+
+    /// Every point's neighbour list (`lists.rs`: the nearest ≤ cap within reach, ties at the
+    /// cut by index, minus opposing normals, in index order), the reach each records, and the
+    /// links asked for.
+    fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError>;
+}
+
+/// A way to search point sets for neighbours, shared by the steps a bake has in flight.
+pub trait NeighbourSearch: Send + Sync + std::fmt::Debug {
+    /// An index over `points` (local coordinates, all finite, at least two).
+    fn index<'a>(
+        &'a self,
+        points: &'a [[f64; 3]],
+    ) -> Result<Box<dyn PointIndex + 'a>, SurfaceError>;
+
+    /// What it runs on, for reports.
+    fn describe(&self) -> String;
+}
+
+/// The reference search: a kiddo k-d tree, queried on the calling thread's rayon pool.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct KdSearch;
+
+struct KdIndex<'a> {
+    tree: ImmutableKdTree<f64, 3>,
+    points: &'a [[f64; 3]],
+}
+
+impl NeighbourSearch for KdSearch {
+    fn index<'a>(
+        &'a self,
+        points: &'a [[f64; 3]],
+    ) -> Result<Box<dyn PointIndex + 'a>, SurfaceError> {
+        let tree = ImmutableKdTree::new_from_slice(points)
+            .map_err(|e| SurfaceError::Index(format!("{e:?}")))?;
+        Ok(Box::new(KdIndex { tree, points }))
+    }
+
+    fn describe(&self) -> String {
+        "cpu (k-d tree)".into()
+    }
+}
+
+impl PointIndex for KdIndex<'_> {
+    fn nearest(&self, count: NonZero<usize>) -> Result<Vec<u32>, SurfaceError> {
+        let lists: Vec<Vec<u32>> = self
+            .points
+            .par_iter()
+            .map(|p| {
+                let nn = self
+                    .tree
+                    .query(p)
+                    .nearest_n::<SquaredEuclidean<f64>>(count)
+                    .execute();
+                nn.iter().map(|r| r.item).collect()
+            })
+            .collect();
+        if let Some(i) = lists.iter().position(|l| l.len() != count.get()) {
+            return Err(SurfaceError::Index(format!(
+                "point {i}: {} nearest points found where {count} were asked for",
+                lists[i].len()
+            )));
+        }
+        Ok(lists.concat())
+    }
+
+    fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError> {
+        Ok(neighbour_lists(
+            &self.tree,
+            self.points,
+            request.reach,
+            request.cap,
+            request.normals,
+            request.link_distance2,
+        ))
+    }
+}
