@@ -2,10 +2,13 @@
 // (docs/algorithm.md): the nearest `cap` within reach, by (d², index), minus neighbours whose
 // normal opposes the point's, in index order. Follows neighbour_grid.wgsl.
 //
-// `cut` finds where the cap cuts each list, by radix selection over the squared distances'
-// bits (then over the indices, where the cut falls among equal distances), walking the
-// point's cells once per digit, and counts what the list keeps; `write` walks them once more
-// and writes the list where the counts' prefix sum says, then sorts it.
+// `cut_lists` finds where the cap cuts each list and counts what the list keeps: one walk over
+// the point's cells counts the candidates within reach in 32 bins of d²/reach² (and those
+// whose normal opposes), a second gathers the bin the cut falls in and sorts it by
+// (d², index). Where that bin holds more than BIN_MOST (exact ties: lattices, duplicates),
+// radix selection over the squared distances' bits (then over the indices) finds the cut,
+// a walk per four bits. `write_lists` walks the cells once more and writes the list where
+// the counts' prefix sum says, then sorts it.
 
 // Sorted order, like the positions.
 @group(0) @binding(4) var<storage, read> reach: array<f32>;
@@ -24,11 +27,16 @@
 const LINK_BIT: u32 = 0x80000000u;
 const ALL: u32 = 0xffffffffu;
 
-const COUNT_WITHIN: u32 = 0u;
+const BIN_COUNT: u32 = 0u;
 const DISTANCE_DIGIT: u32 = 1u;
 const INDEX_DIGIT: u32 = 2u;
 const COUNT_KEPT: u32 = 3u;
 const WRITE: u32 = 4u;
+const BIN_GATHER: u32 = 5u;
+
+const BINS: u32 = 32u;
+// The most entries of the cut's bin sorted in private memory.
+const BIN_MOST: u32 = 64u;
 
 var<private> centre: vec3<f32>;
 var<private> centre_low: vec3<f32>;
@@ -44,6 +52,23 @@ var<private> select_mask: u32;
 var<private> select_shift: u32;
 var<private> counted: u32;
 var<private> out_at: u32;
+var<private> bins: array<u32, BINS>;
+var<private> opposed_bins: array<u32, BINS>;
+var<private> bin_scale: f32;
+var<private> cut_bin: u32;
+var<private> gathered: u32;
+var<private> gathered_key: array<u32, BIN_MOST>;
+// The index, with LINK_BIT where the normal opposes.
+var<private> gathered_id: array<u32, BIN_MOST>;
+
+fn opposes(j: u32) -> bool {
+    return (params.flags & 1u) != 0u && dot(own_normal, normals[j].xyz) < 0.0;
+}
+
+// Monotone in d², so every bin's keys lie above the bins' before it.
+fn bin_of(d2: f32) -> u32 {
+    return min(u32(d2 * bin_scale), BINS - 1u);
+}
 
 fn visit(mode: u32, j: u32) {
     let d = difference(centre, centre_low, j);
@@ -55,8 +80,20 @@ fn visit(mode: u32, j: u32) {
     let key = bitcast<u32>(d2);
     let id = original[j];
     switch mode {
-        case COUNT_WITHIN: {
+        case BIN_COUNT: {
             counted += 1u;
+            let b = bin_of(d2);
+            bins[b] += 1u;
+            if opposes(j) {
+                opposed_bins[b] += 1u;
+            }
+        }
+        case BIN_GATHER: {
+            if bin_of(d2) == cut_bin && gathered < BIN_MOST {
+                gathered_key[gathered] = key;
+                gathered_id[gathered] = id | select(0u, LINK_BIT, opposes(j));
+                gathered += 1u;
+            }
         }
         case DISTANCE_DIGIT: {
             if (key & select_mask) == select_prefix {
@@ -72,7 +109,7 @@ fn visit(mode: u32, j: u32) {
             if key > cut_key || (key == cut_key && id > cut_id) {
                 return;
             }
-            if (params.flags & 1u) != 0u && dot(own_normal, normals[j].xyz) < 0.0 {
+            if opposes(j) {
                 return;
             }
             if mode == COUNT_KEPT {
@@ -94,16 +131,66 @@ fn walk(mode: u32) {
     let r = sqrt(reach2) + params.margin;
     let lo = cell_of(centre - vec3<f32>(r));
     let hi = cell_of(centre + vec3<f32>(r));
+    if mode == WRITE && (params.flags & 4u) != 0u {
+        walk_in_order(vec3<u32>(lo), vec3<u32>(hi));
+        return;
+    }
     for (var z = lo.z; z <= hi.z; z += 1) {
         for (var y = lo.y; y <= hi.y; y += 1) {
             for (var x = lo.x; x <= hi.x; x += 1) {
-                let code = cell_code(x, y, z);
-                let end = cell_start[code + 1u];
-                for (var j = cell_start[code]; j < end; j += 1u) {
-                    visit(mode, j);
-                }
+                visit_cell(mode, cell_code(x, y, z));
             }
         }
+    }
+}
+
+// Writes the lists of the cells in [lo, hi] in Morton order: depth first through the octree
+// of cells, children in code order, skipping every node outside the box. The points then come
+// in sorted order, which is index order where the caller's points came in Morton order (the
+// bake's): the list needs no sort. Slower than the plain loop where order does not matter.
+fn walk_in_order(lo: vec3<u32>, hi: vec3<u32>) {
+    let level = countTrailingZeros(params.side);
+    if level == 0u {
+        visit_cell(WRITE, 0u);
+        return;
+    }
+    // At depth d: the node's coordinates at level d, and the next of its children to try.
+    var node: array<vec3<u32>, 11>;
+    var next_child: array<u32, 11>;
+    node[0] = vec3<u32>(0u);
+    next_child[0] = 0u;
+    var depth = 0u;
+    loop {
+        if next_child[depth] == 8u {
+            if depth == 0u {
+                break;
+            }
+            depth -= 1u;
+            continue;
+        }
+        let c = next_child[depth];
+        next_child[depth] = c + 1u;
+        let child = node[depth] * 2u + vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u);
+        let shift = level - (depth + 1u);
+        let first = child << vec3<u32>(shift);
+        let last = first + vec3<u32>((1u << shift) - 1u);
+        if any(last < lo) || any(first > hi) {
+            continue;
+        }
+        if shift == 0u {
+            visit_cell(WRITE, cell_code(i32(child.x), i32(child.y), i32(child.z)));
+            continue;
+        }
+        depth += 1u;
+        node[depth] = child;
+        next_child[depth] = 0u;
+    }
+}
+
+fn visit_cell(mode: u32, code: u32) {
+    let end = cell_start[code + 1u];
+    for (var j = cell_start[code]; j < end; j += 1u) {
+        visit(mode, j);
     }
 }
 
@@ -118,7 +205,7 @@ struct Selected {
 
 // The need-th smallest distance bits (DISTANCE_DIGIT) or index among the cut's distance
 // (INDEX_DIGIT), four bits a walk, from the top.
-fn select(mode: u32, need_first: u32) -> Selected {
+fn select_value(mode: u32, need_first: u32) -> Selected {
     var need = need_first;
     select_prefix = 0u;
     select_mask = 0u;
@@ -158,6 +245,40 @@ fn begin(t: u32) {
     }
 }
 
+// The cut within bin `cut_bin` (at most BIN_MOST entries): its `need`-th entry by (d², index),
+// and how many of the first `need` oppose.
+fn cut_in_bin(need: u32) -> u32 {
+    gathered = 0u;
+    walk(BIN_GATHER);
+    for (var i = 1u; i < gathered; i += 1u) {
+        let key = gathered_key[i];
+        let id = gathered_id[i];
+        var at = i;
+        loop {
+            if at == 0u {
+                break;
+            }
+            let kb = gathered_key[at - 1u];
+            let ib = gathered_id[at - 1u] & ~LINK_BIT;
+            if !(key < kb || (key == kb && (id & ~LINK_BIT) < ib)) {
+                break;
+            }
+            gathered_key[at] = kb;
+            gathered_id[at] = gathered_id[at - 1u];
+            at -= 1u;
+        }
+        gathered_key[at] = key;
+        gathered_id[at] = id;
+    }
+    cut_key = gathered_key[need - 1u];
+    cut_id = gathered_id[need - 1u] & ~LINK_BIT;
+    var opposed = 0u;
+    for (var i = 0u; i < need; i += 1u) {
+        opposed += select(0u, 1u, (gathered_id[i] & LINK_BIT) != 0u);
+    }
+    return opposed;
+}
+
 @compute @workgroup_size(64)
 fn cut_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k = thread_index(gid);
@@ -169,19 +290,50 @@ fn cut_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     cut_key = ALL;
     cut_id = ALL;
     counted = 0u;
-    walk(COUNT_WITHIN);
+    for (var b = 0u; b < BINS; b += 1u) {
+        bins[b] = 0u;
+        opposed_bins[b] = 0u;
+    }
+    bin_scale = select(0.0, f32(BINS) / reach2, reach2 > 0.0);
+    walk(BIN_COUNT);
     let cap = params.wanted;
     let capped = counted >= cap;
-    if capped {
-        let by_distance = select(DISTANCE_DIGIT, cap);
-        cut_key = by_distance.value;
-        if by_distance.equal > by_distance.take {
-            cut_id = select(INDEX_DIGIT, by_distance.take).value;
+    var kept = 0u;
+    if !capped {
+        var opposed = 0u;
+        for (var b = 0u; b < BINS; b += 1u) {
+            opposed += opposed_bins[b];
+        }
+        kept = counted - opposed;
+    } else {
+        var below = 0u;
+        var opposed_below = 0u;
+        var b = 0u;
+        loop {
+            if below + bins[b] >= cap || b == BINS - 1u {
+                break;
+            }
+            below += bins[b];
+            opposed_below += opposed_bins[b];
+            b += 1u;
+        }
+        let need = cap - below;
+        if bins[b] <= BIN_MOST {
+            cut_bin = b;
+            let opposed_in = cut_in_bin(need);
+            kept = below - opposed_below + need - opposed_in;
+        } else {
+            let by_distance = select_value(DISTANCE_DIGIT, cap);
+            cut_key = by_distance.value;
+            if by_distance.equal > by_distance.take {
+                cut_id = select_value(INDEX_DIGIT, by_distance.take).value;
+            }
+            counted = 0u;
+            walk(COUNT_KEPT);
+            kept = counted;
         }
     }
-    counted = 0u;
-    walk(COUNT_KEPT);
-    cut[t] = vec4<u32>(cut_key, cut_id, counted, u32(capped));
+    cut[t] = vec4<u32>(cut_key, cut_id, kept, u32(capped));
 }
 
 @compute @workgroup_size(64)
@@ -197,7 +349,11 @@ fn write_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     let first = list_start[t] - params.out_base;
     out_at = first;
     walk(WRITE);
-    // Index order (lists hold up to the cap: an insertion sort in place).
+    // Index order: as walked where the points came sorted, else an insertion sort in place
+    // (lists hold up to the cap).
+    if (params.flags & 4u) != 0u {
+        return;
+    }
     for (var i = first + 1u; i < out_at; i += 1u) {
         let word = lists_out[i];
         var at = i;

@@ -14,7 +14,7 @@ struct SearchParams {
     side: u32,
     // nearest: how many per point; lists: the cap.
     wanted: u32,
-    // 1: data normals, 2: links.
+    // 1: data normals, 2: links, 4: the caller's points came in Morton order.
     flags: u32,
     // The first output slot of this dispatch (lists).
     out_base: u32,

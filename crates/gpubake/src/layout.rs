@@ -30,6 +30,9 @@ pub struct SearchParams {
 pub(crate) const FLAG_NORMALS: u32 = 1;
 /// `SearchParams::flags`: links are wanted.
 pub(crate) const FLAG_LINKS: u32 = 2;
+/// `SearchParams::flags`: the caller's points came in Morton order, so a walk meets them in
+/// index order.
+pub(crate) const FLAG_SORTED: u32 = 4;
 
 /// Where the lists pass marks a link (`LINK_BIT` in `shaders/lists.wgsl`).
 pub(crate) const LINK_BIT: u32 = 0x8000_0000;

@@ -7,7 +7,7 @@ use slosh_mls::{ListRequest, NeighbourLists, Neighbours, SurfaceError};
 
 use crate::dispatch::{gpu_error, output, read_back, storage};
 use crate::index::{Dispatch, GpuIndex};
-use crate::layout::{FLAG_LINKS, FLAG_NORMALS, LINK_BIT};
+use crate::layout::{FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, LINK_BIT};
 
 /// (point, neighbour) within the link distance.
 type Link = (u32, u32);
@@ -40,7 +40,7 @@ pub(crate) fn lists(
         .par_iter()
         .map(|&i| request.reach[i as usize] as f32)
         .collect();
-    let mut flags = 0;
+    let mut flags = if sorted.identity { FLAG_SORTED } else { 0 };
     let normals: Vec<[f32; 4]> = match request.normals {
         Some(ns) => {
             flags |= FLAG_NORMALS;
@@ -175,8 +175,11 @@ pub(crate) fn lists(
         let i = order[t] as usize;
         reach_out[i] = if c[3] != 0 {
             capped += 1;
+            // Rounded up as the CPU's (twice, from its slack), so that equal cuts give equal
+            // reaches where the slack vanishes (a pile of coincident points).
             (f64::from(f32::from_bits(c[0])) * (1.0 + CUT_REACH_SLACK))
                 .sqrt()
+                .next_up()
                 .next_up()
         } else {
             request.reach[i]

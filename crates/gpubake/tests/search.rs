@@ -76,9 +76,12 @@ fn scene_case(kind: SceneKind, hard: HardCases, shuffle: bool) -> Case {
 }
 
 /// A lattice: every distance tied many times, so the cap cuts through ties (broken by index),
-/// with duplicates; shuffled.
+/// with duplicates, and a pile of 150 copies of one point (more ties at the cut than the
+/// shader sorts in private memory: its radix selection decides); shuffled.
 fn lattice_case() -> Case {
-    let points = slosh_scenes::tied_lattice(14, 14, 6, 40);
+    let mut points = slosh_scenes::tied_lattice(14, 14, 6, 40);
+    let pile = points[77];
+    points.extend(std::iter::repeat_n(pile, 150));
     let n = points.len();
     Case {
         name: "lattice".into(),
