@@ -16,8 +16,9 @@
 @group(0) @binding(5) var<storage, read> normals: array<vec4<f32>>;
 // Squared link distances (one element without links).
 @group(0) @binding(6) var<storage, read> link2: array<f32>;
-// Per point of the set: the cut's distance bits and index (all ones: nothing cut), how many
-// the list keeps, and whether the cap cut it (at or above the cap within reach).
+// Per point of the set: the cut's distance bits and the index of the point it falls on (all
+// ones: nothing cut), how many the list keeps, and whether the cap cut it (at or above the cap
+// within reach).
 @group(0) @binding(7) var<storage, read_write> cut: array<vec4<u32>>;
 // Per point of the set: where its list begins among all lists (write only).
 @group(0) @binding(8) var<storage, read> list_start: array<u32>;
@@ -325,9 +326,9 @@ fn cut_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
         } else {
             let by_distance = select_value(DISTANCE_DIGIT, cap);
             cut_key = by_distance.value;
-            if by_distance.equal > by_distance.take {
-                cut_id = select_value(INDEX_DIGIT, by_distance.take).value;
-            }
+            // The index too where no other shares the distance: the host measures the cut
+            // point's distance in f64.
+            cut_id = select_value(INDEX_DIGIT, by_distance.take).value;
             counted = 0u;
             walk(COUNT_KEPT);
             kept = counted;

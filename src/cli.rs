@@ -277,6 +277,13 @@ pub struct BakeBenchArgs {
     /// (0 skips it).
     #[arg(long, default_value_t = 8)]
     pub series: usize,
+    /// Leave out the bakes with the GPU's neighbour search (by default each size is also
+    /// baked so, where an adapter opens).
+    #[arg(long)]
+    pub no_gpu: bool,
+    /// The adapter for the GPU column: the first whose name contains this.
+    #[arg(long)]
+    pub adapter: Option<String>,
 }
 
 #[derive(Debug, Args)]

@@ -32,6 +32,17 @@ pub fn bake(a: &BakeBenchArgs) -> bake::Settings {
         points: a.points.clone(),
         threads: a.threads.clone(),
         series: a.series,
+        gpu: if a.no_gpu {
+            Err("--no-gpu".into())
+        } else {
+            slosh_render::Gpu::new(a.adapter.as_deref())
+                .map_err(|e| e.to_string())
+                .and_then(|gpu| {
+                    slosh_gpubake::GpuSearch::new(std::sync::Arc::new(gpu))
+                        .map_err(|e| e.to_string())
+                })
+                .map(std::sync::Arc::new)
+        },
     }
 }
 

@@ -25,6 +25,8 @@ pub(crate) struct Dispatch<'b> {
 /// One point set on the GPU.
 pub(crate) struct GpuIndex<'a> {
     pub search: &'a GpuSearch,
+    /// The caller's points, in f64.
+    pub points: &'a [[f64; 3]],
     pub sorted: SortedPoints,
     pub positions: wgpu::Buffer,
     pub residuals: wgpu::Buffer,

@@ -3,7 +3,7 @@
 //! here), then the lists themselves, written and read back in batches of bounded size.
 
 use rayon::prelude::*;
-use slosh_mls::{ListRequest, NeighbourLists, Neighbours, SurfaceError};
+use slosh_mls::{ListRequest, NeighbourLists, Neighbours, SurfaceError, distance2};
 
 use crate::dispatch::{gpu_error, output, read_back, storage};
 use crate::index::{Dispatch, GpuIndex};
@@ -14,11 +14,6 @@ type Link = (u32, u32);
 
 /// Points per piece of the lists' assembly (a task, and a piece of the links).
 const POINTS_PER_PIECE: usize = 4096;
-
-/// A reach the shaders' f32 square root rounded down can still hold: the CPU's lists are
-/// measured in f64, and a cut list's reach must hold its farthest member (`lists.rs` in
-/// slosh-mls) whichever measured it. Far above f32's 2⁻²⁴.
-const CUT_REACH_SLACK: f64 = 1.0 / (1u64 << 18) as f64;
 
 pub(crate) fn lists(
     index: &GpuIndex<'_>,
@@ -169,22 +164,36 @@ pub(crate) fn lists(
         })
         .collect();
     drop(words);
-    let mut reach_out = vec![0.0f64; n];
-    let mut capped = 0;
-    for (t, c) in cuts.iter().enumerate() {
-        let i = order[t] as usize;
-        reach_out[i] = if c[3] != 0 {
-            capped += 1;
-            // Rounded up as the CPU's (twice, from its slack), so that equal cuts give equal
-            // reaches where the slack vanishes (a pile of coincident points).
-            (f64::from(f32::from_bits(c[0])) * (1.0 + CUT_REACH_SLACK))
-                .sqrt()
-                .next_up()
-                .next_up()
-        } else {
-            request.reach[i]
-        };
-    }
+    // A cut list reaches as far as its farthest point in f64 (`lists.rs` in slosh-mls): the
+    // point the cut fell on, which the list keeps unless its normal opposes, and every
+    // member (which could only lie farther where two distances tie within f32).
+    let points = index.points;
+    let reach_out: Vec<f64> = {
+        let mut by_sorted: Vec<f64> = (0..n)
+            .into_par_iter()
+            .map(|t| {
+                let (c, i) = (cuts[t], order[t] as usize);
+                if c[3] == 0 {
+                    return request.reach[i];
+                }
+                let members = &pieces[t / POINTS_PER_PIECE].0;
+                let base = start[t / POINTS_PER_PIECE * POINTS_PER_PIECE] as usize;
+                let list = &members[start[t] as usize - base..start[t + 1] as usize - base];
+                let far = list
+                    .iter()
+                    .chain(std::iter::once(&c[1]))
+                    .map(|&j| distance2(points[i], points[j as usize]))
+                    .fold(0.0, f64::max);
+                far.sqrt().next_up().next_up()
+            })
+            .collect();
+        let mut reach = vec![0.0f64; n];
+        for (t, &i) in order.iter().enumerate() {
+            reach[i as usize] = std::mem::take(&mut by_sorted[t]);
+        }
+        reach
+    };
+    let capped = cuts.iter().filter(|c| c[3] != 0).count();
     let (id_pieces, links): (Vec<Vec<u32>>, Vec<Vec<Link>>) = pieces.into_iter().unzip();
     let lists = if sorted.identity {
         Neighbours::from_csr(start, id_pieces.concat())

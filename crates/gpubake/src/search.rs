@@ -32,6 +32,7 @@ impl NeighbourSearch for GpuSearch {
         let margin = 1e-5 * sorted.extent();
         Ok(Box::new(GpuIndex {
             search: self,
+            points,
             sorted,
             positions,
             residuals,

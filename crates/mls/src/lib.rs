@@ -38,7 +38,7 @@ pub use intersect::{
     Ball, BallHit, HitStatus, InitialHit, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
 };
-pub use lists::{NeighbourLists, RunUnions};
+pub use lists::{NeighbourLists, RunUnions, distance2};
 pub use neighbours::Neighbours;
 pub use order::{MortonGrid, morton_keys, morton_order};
 pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};

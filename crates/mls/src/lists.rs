@@ -73,7 +73,7 @@ pub(crate) const LIST_BLOCK: usize = RUN * RUNS_PER_BLOCK;
 /// kiddo's squared Euclidean distance, summed in its order, so that a list is the set its
 /// `within` query would return.
 #[inline(always)]
-pub(crate) fn distance2(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub fn distance2(a: [f64; 3], b: [f64; 3]) -> f64 {
     let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
     d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }

@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use slosh_bake::{
     BakeParams, BakedStep, BatchOptions, NormalSource, Shard, StepInput, StepSource, SurfaceSelect,
-    bake_step, run_batch,
+    bake_step_with, run_batch,
 };
 use slosh_cache::{CacheFile, Compression, Encoding, LoadedStep, encode_bytes, encode_step};
 use slosh_fileio::FileBytes;
@@ -20,7 +20,7 @@ use crate::stats::median;
 mod report;
 
 pub use report::{
-    BakeReport, EncodingRow, LoadRow, PeerRow, ScalingRow, SeriesRow, SizeRow, StageRow,
+    BakeReport, EncodingRow, GpuBakeRow, LoadRow, PeerRow, ScalingRow, SeriesRow, SizeRow, StageRow,
 };
 
 /// What `slosh bench bake` measures and where it writes.
@@ -38,6 +38,9 @@ pub struct Settings {
     pub threads: Vec<usize>,
     /// Steps per series in the end-to-end rows.
     pub series: usize,
+    /// The GPU neighbour search each size is also baked with (alternating with the CPU's),
+    /// or why there is none.
+    pub gpu: Result<std::sync::Arc<slosh_gpubake::GpuSearch>, String>,
 }
 
 /// The thesis's table 4.7 (sloshing tank, 50 neighbours, quadratic): nearest neighbours,
@@ -159,16 +162,21 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         let mut bares = Vec::new();
         let mut encoded = Vec::new();
         let mut last_baked = None;
-        // Baseline and bake alternate, so that both see the same machine load.
+        let mut gpu_runs: Vec<TimedStep> = Vec::new();
+        // Baseline and bake (and the bake with the GPU's neighbours) alternate, so that all
+        // see the same machine load.
         for _ in 0..runs {
             bares.push(time(1, || {
                 Surface::<f64>::build(&inp.positions, inp.normals.as_deref(), &bare_params)
             }));
-            let step = bake_and_encode(&inp, &params)?;
+            let step = bake_and_encode(&inp, &params, &slosh_mls::KdSearch)?;
             totals.push(step.seconds);
             stage_runs.push(step.stages);
             encoded = step.encoded;
             last_baked = Some(step.baked);
+            if let Ok(search) = &args.gpu {
+                gpu_runs.push(bake_and_encode(&inp, &params, search.as_ref())?);
+            }
         }
         let Some(baked) = last_baked else {
             unreachable!("at least one run per size")
@@ -185,10 +193,32 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         one_step.push((n, total));
         let bare = median(bares);
         let peer = splashsurf_seconds(&inp.positions, 0.5 * spacing, runs)?;
+        let gpu_stage = |name: &str| {
+            median(
+                gpu_runs
+                    .iter()
+                    .map(|r| {
+                        r.stages
+                            .iter()
+                            .filter(|(n, _)| n == name)
+                            .map(|(_, v)| v)
+                            .sum()
+                    })
+                    .collect(),
+            )
+        };
+        let gpu = (!gpu_runs.is_empty()).then(|| GpuBakeRow {
+            total: median(gpu_runs.iter().map(|r| r.seconds).collect()),
+            nearest: gpu_stage("kd-tree and radii (kNN)"),
+            lists: gpu_stage("neighbour lists"),
+            cpu_nearest: stage("kd-tree and radii (kNN)"),
+            cpu_lists: stage("neighbour lists"),
+        });
         peer_rows.push(PeerRow {
             points: n,
             total,
             peer,
+            gpu,
         });
         stage_rows.push(StageRow {
             points: n,
@@ -345,9 +375,13 @@ struct TimedStep {
     stages: Vec<(String, f64)>,
 }
 
-fn bake_and_encode(input: &StepInput, params: &BakeParams) -> Result<TimedStep> {
+fn bake_and_encode(
+    input: &StepInput,
+    params: &BakeParams,
+    search: &dyn slosh_mls::NeighbourSearch,
+) -> Result<TimedStep> {
     let t = Instant::now();
-    let baked = bake_step(input, params)?;
+    let baked = bake_step_with(input, params, search)?;
     let t_enc = Instant::now();
     let encoded = encode_step(baked.header.clone(), &baked.sections, params.compression)?;
     let mut stages = baked.header.stats.stage_seconds.clone();
@@ -407,7 +441,7 @@ fn scaling_and_series(
             let mut totals = Vec::new();
             let mut stage_runs = Vec::new();
             for _ in 0..runs {
-                let step = pool.install(|| bake_and_encode(&inp, params))?;
+                let step = pool.install(|| bake_and_encode(&inp, params, &slosh_mls::KdSearch))?;
                 totals.push(step.seconds);
                 stage_runs.push(step.stages);
             }

@@ -24,6 +24,20 @@ pub struct PeerRow {
     pub points: usize,
     pub total: f64,
     pub peer: Option<(f64, u64)>,
+    /// The same step baked with the GPU's neighbour search, where an adapter opened.
+    pub gpu: Option<GpuBakeRow>,
+}
+
+/// A bake with the GPU's neighbour search beside the CPU's (seconds, medians of the same
+/// alternating runs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GpuBakeRow {
+    pub total: f64,
+    /// kNN and radii, neighbour lists: on the GPU, then in the CPU bake of the same runs.
+    pub nearest: f64,
+    pub lists: f64,
+    pub cpu_nearest: f64,
+    pub cpu_lists: f64,
 }
 
 /// One size's stored bytes: the file, and each section's stored and raw bytes.
@@ -96,6 +110,49 @@ pub struct BakeReport {
     pub encodings: Vec<EncodingRow>,
     pub scaling: Vec<ScalingRow>,
     pub series: Vec<SeriesRow>,
+}
+
+impl BakeReport {
+    /// The table of bakes with the GPU's neighbour search, or why it was not measured.
+    fn gpu_markdown(&self) -> String {
+        let mut md = String::from("\n## With the GPU's neighbour search\n\n");
+        let adapter = match &self.settings.gpu {
+            Ok(search) => search.gpu().describe(),
+            Err(why) => {
+                let _ = writeln!(md, "Not measured: {why}.");
+                return md;
+            }
+        };
+        let _ = writeln!(
+            md,
+            "`slosh bake --device gpu`: the kNN, radii and neighbour lists on {adapter} \
+             (`crates/gpubake`), everything else on the CPU's {} threads; each run alternates \
+             with the CPU bake above. splashsurf as above.\n\n\
+             | points | CPU bake | GPU-neighbour bake | speed-up | kNN + radii CPU / GPU | \
+             neighbour lists CPU / GPU | against splashsurf |\n|---|---|---|---|---|---|---|",
+            self.threads
+        );
+        let ms = |s: f64| format!("{:.1} ms", s * 1e3);
+        for r in &self.peers {
+            let Some(g) = &r.gpu else { continue };
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.2}× | {} / {} | {} / {} | {} |",
+                r.points,
+                ms(r.total),
+                ms(g.total),
+                r.total / g.total,
+                ms(g.cpu_nearest),
+                ms(g.nearest),
+                ms(g.cpu_lists),
+                ms(g.lists),
+                r.peer
+                    .map_or("—".into(), |(s, _)| format!("{:.1}× faster", s / g.total)),
+            );
+        }
+        md.push('\n');
+        md
+    }
 }
 
 impl Report for BakeReport {
@@ -185,6 +242,7 @@ impl Report for BakeReport {
              step's particles into a viewable surface. Medians as above; the peer runs in its own process after slosh.\n\n\
              | points | slosh bake | slosh points/s | splashsurf | splashsurf points/s | slosh faster by |\n|---|---|---|---|---|---|\n{peer_rows}"
         );
+        md += &self.gpu_markdown();
         md += &self.scaling_markdown();
         md += &self.series_markdown();
         let mut size_rows = String::new();
