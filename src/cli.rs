@@ -192,6 +192,9 @@ pub struct ScrubBenchArgs {
     /// as the player needs it (sequential playback and jumps to steps not baked yet).
     #[arg(long)]
     pub raw_case: bool,
+    /// With --raw-case: find the steps' neighbours on the engine's GPU (`bake --device gpu`).
+    #[arg(long)]
+    pub raw_case_gpu: bool,
 }
 
 #[derive(Debug, Args)]
@@ -440,9 +443,15 @@ pub struct FitSettings {
     pub surface_offset: Option<f64>,
 }
 
-/// Which particles and variables a bake reads, and how it stores them.
+/// Which particles and variables a bake reads, how it stores them, and where it finds their
+/// neighbours.
 #[derive(Debug, Clone, Args)]
 pub struct SelectSettings {
+    /// Where each step's neighbours (kNN, radii, neighbour lists) are found: the CPU's k-d
+    /// tree, or a GPU through Vulkan (the same lists where no distances tie; the other
+    /// stages stay on the CPU for now).
+    #[arg(long, value_enum, default_value_t = BakeDevice::Cpu)]
+    pub device: BakeDevice,
     /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable
     /// `surface` if the case has one, else all).
     #[arg(long)]
@@ -503,11 +512,6 @@ pub struct BakeArgs {
     pub shard: Option<String>,
     #[command(flatten)]
     pub settings: BakeSettings,
-    /// Where each step's neighbours (kNN, radii, neighbour lists) are found: the CPU's k-d
-    /// tree, or a GPU through Vulkan (equal where no distances tie; the other stages stay on
-    /// the CPU for now).
-    #[arg(long, value_enum, default_value_t = BakeDevice::Cpu)]
-    pub device: BakeDevice,
     /// With --device gpu: the adapter whose name contains this (default: the best one).
     #[arg(long)]
     pub adapter: Option<String>,

@@ -27,6 +27,7 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<PathB
         args.cache.as_deref(),
         &settings,
         args.field.as_deref(),
+        args.adapter.as_deref(),
     )?;
     let mut failed = Vec::new();
     for &step in steps {

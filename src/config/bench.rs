@@ -115,5 +115,6 @@ pub fn scrub(a: &ScrubBenchArgs) -> Result<scrub::Settings> {
         cold: a.cold,
         raw: a.raw,
         raw_case: a.raw_case,
+        raw_case_gpu: a.raw_case_gpu,
     })
 }

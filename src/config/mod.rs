@@ -425,7 +425,7 @@ impl BakeConfig {
                     .transpose()?
                     .unwrap_or(slosh_bake::Shard::WHOLE),
                 params,
-                search: neighbour_search(a.device, a.adapter.as_deref())?,
+                search: neighbour_search(a.settings.select.device, a.adapter.as_deref())?,
             },
             quiet: a.quiet,
             jobs_chosen,

@@ -19,13 +19,14 @@ pub fn default_cache(case: &Path) -> PathBuf {
 }
 
 /// The case at `case`, held for baking into `cache` (default [`default_cache`]) with
-/// `settings` and the `shown` field (the one frames are coloured by is baked with them);
-/// refused where the directory holds another series or another bake holds it.
+/// `settings` and the `shown` field (the one frames are coloured by is baked with them), on
+/// the adapter named `adapter` where the settings bake on the GPU; refused where the directory holds another series or another bake holds it.
 pub fn open(
     case: &Path,
     cache: Option<&Path>,
     settings: &BakeSettings,
     shown: Option<&str>,
+    adapter: Option<&str>,
 ) -> Result<OnDemand> {
     let out = cache.map_or_else(|| default_cache(case), Path::to_path_buf);
     let mut settings = settings.clone();
@@ -41,8 +42,7 @@ pub fn open(
         jobs: None,
         shard: None,
         settings,
-        device: crate::cli::BakeDevice::Cpu,
-        adapter: None,
+        adapter: adapter.map(str::to_string),
         manifest_only: false,
         quiet: true,
     };

@@ -37,6 +37,7 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
             args.cache.as_deref(),
             &args.bake,
             args.field.as_deref(),
+            args.adapter.as_deref(),
         )?;
         (bake.dir().to_path_buf(), Some(std::sync::Arc::new(bake)))
     } else {

@@ -58,6 +58,8 @@ pub struct Settings {
     pub raw: bool,
     /// Also each size as a raw EnSight case, baked as the engine plays it.
     pub raw_case: bool,
+    /// The raw case's steps baked with the GPU's neighbour search, on the engine's device.
+    pub raw_case_gpu: bool,
 }
 
 /// Percentiles of a sample, in the sample's unit.

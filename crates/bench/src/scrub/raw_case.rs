@@ -21,6 +21,8 @@ use crate::stats::{Spread, median, spread};
 /// What a raw case measured.
 #[derive(Debug, Clone)]
 pub struct RawCaseReport {
+    /// Where the steps' neighbours were found.
+    pub bake_device: String,
     pub points: usize,
     pub steps: usize,
     /// EnSight bytes of one step (geometry and normals).
@@ -53,8 +55,13 @@ fn ensure_case(dir: &Path, points: usize, steps: usize) -> Result<std::path::Pat
     Ok(case)
 }
 
-/// The case, to be baked into `cache` (emptied first) as the engine asks.
-fn on_demand(case: &Path, cache: &Path) -> Result<OnDemand> {
+/// The case, to be baked into `cache` (emptied first) as the engine asks, its neighbours
+/// found by `search`.
+fn on_demand(
+    case: &Path,
+    cache: &Path,
+    search: &Arc<dyn slosh_mls::NeighbourSearch>,
+) -> Result<OnDemand> {
     let _ = std::fs::remove_dir_all(cache);
     let params = series_params();
     let source = EnsightSource::new(
@@ -70,7 +77,7 @@ fn on_demand(case: &Path, cache: &Path) -> Result<OnDemand> {
         threads: slosh_bake::cores(),
         shard: Shard::WHOLE,
         params,
-        search: slosh_bake::cpu_search(),
+        search: search.clone(),
     };
     Ok(OnDemand::open(Box::new(source), opts)?)
 }
@@ -83,6 +90,12 @@ pub fn measure(
     args: &Settings,
 ) -> Result<RawCaseReport> {
     let steps = args.steps;
+    // The engine's own device bakes too, where the GPU's neighbour search is asked for.
+    let search: Arc<dyn slosh_mls::NeighbourSearch> = if args.raw_case_gpu {
+        Arc::new(slosh_gpubake::GpuSearch::new(gpu.clone())?)
+    } else {
+        slosh_bake::cpu_search()
+    };
     let dir = root.join(format!("case-{points}-{steps}"));
     let case = ensure_case(&dir.join("case"), points, steps)?;
     let cache = dir.join("cache");
@@ -94,7 +107,7 @@ pub fn measure(
     // One step alone: read, then read and bake (into a directory of its own each time).
     let (mut read_ms, mut bake_ms) = (Vec::new(), Vec::new());
     for _ in 0..3 {
-        let bake = on_demand(&case, &cache)?;
+        let bake = on_demand(&case, &cache, &search)?;
         let source = EnsightSource::new(
             slosh_ensight::Case::open(&case)?,
             &case,
@@ -136,8 +149,11 @@ pub fn measure(
             .map(|_| t.elapsed().as_secs_f64() * 1e3)
     };
     // Sequential playback from an empty cache.
-    let mut engine =
-        Engine::open_baking(gpu.clone(), Arc::new(on_demand(&case, &cache)?), options())?;
+    let mut engine = Engine::open_baking(
+        gpu.clone(),
+        Arc::new(on_demand(&case, &cache, &search)?),
+        options(),
+    )?;
     show(&mut engine, &mut request, 0)?;
     let mut sequential = Vec::new();
     let start = Instant::now();
@@ -147,8 +163,11 @@ pub fn measure(
     let sequential_steps_per_s = (steps - 1) as f64 / start.elapsed().as_secs_f64();
     drop(engine);
     // Jumps to steps not baked yet, from an empty cache again.
-    let mut engine =
-        Engine::open_baking(gpu.clone(), Arc::new(on_demand(&case, &cache)?), options())?;
+    let mut engine = Engine::open_baking(
+        gpu.clone(),
+        Arc::new(on_demand(&case, &cache, &search)?),
+        options(),
+    )?;
     show(&mut engine, &mut request, 0)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let mut jumps = Vec::new();
@@ -164,6 +183,7 @@ pub fn measure(
         jumps.push(show(&mut engine, &mut request, target)?);
     }
     Ok(RawCaseReport {
+        bake_device: search.describe(),
         points,
         steps,
         case_step_bytes,

@@ -217,18 +217,19 @@ impl Report for ScrubReport {
         if !self.raw_cases.is_empty() {
             let _ = writeln!(
                 md,
-                "## Raw EnSight, baked as played\n\nThe same sphere written as an EnSight 6 binary case with its normals, played by the engine with no bake first (`slosh play CASE.case`): each step is baked, on the CPU, by the loader that first needs it, into an emptied cache directory. Sequential: playback from step 0 with nothing baked; jumps: to steps not baked yet. *One step*: reading it from the case, and reading and baking it into its file, alone on all cores (medians of 3).\n"
+                "## Raw EnSight, baked as played\n\nThe same sphere written as an EnSight 6 binary case with its normals, played by the engine with no bake first (`slosh play CASE.case`): each step is baked by the loader that first needs it (its neighbours found where the table says: `--raw-case-gpu` puts them on the engine's GPU), into an emptied cache directory. Sequential: playback from step 0 with nothing baked; jumps: to steps not baked yet. *One step*: reading it from the case, and reading and baking it into its file, alone on all cores (medians of 3).\n"
             );
             let _ = writeln!(
                 md,
-                "| case | EnSight MB per step | sequential steps/s | sequential p50 / p99 ms | jump p50 / p99 / max ms | one step: read ms | read and bake ms |\n|---|---|---|---|---|---|---|"
+                "| case | neighbours on | EnSight MB per step | sequential steps/s | sequential p50 / p99 ms | jump p50 / p99 / max ms | one step: read ms | read and bake ms |\n|---|---|---|---|---|---|---|---|"
             );
             for r in &self.raw_cases {
                 let _ = writeln!(
                     md,
-                    "| {} points, {} steps | {:.1} | {:.2} | {:.0} / {:.0} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} |",
+                    "| {} points, {} steps | {} | {:.1} | {:.2} | {:.0} / {:.0} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} |",
                     r.points,
                     r.steps,
+                    r.bake_device,
                     r.case_step_bytes as f64 / 1e6,
                     r.sequential_steps_per_s,
                     r.sequential.p50,
