@@ -217,19 +217,22 @@ fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {
     Ok(slosh_bake::Shard { index, count })
 }
 
-/// The neighbour search `--device` asks for.
+/// The neighbour search `--device` asks for, its fits for `degree` compiled.
 fn neighbour_search(
     device: crate::cli::BakeDevice,
     adapter: Option<&str>,
+    degree: u8,
 ) -> Result<std::sync::Arc<dyn slosh_mls::NeighbourSearch>> {
     Ok(match device {
         crate::cli::BakeDevice::Cpu => slosh_bake::cpu_search(),
         crate::cli::BakeDevice::Gpu => {
             let gpu = slosh_render::Gpu::new(adapter).context("--device gpu")?;
-            std::sync::Arc::new(
-                slosh_gpubake::GpuSearch::new(std::sync::Arc::new(gpu))
-                    .context("--device gpu: the neighbour search passes")?,
-            )
+            let search = slosh_gpubake::GpuSearch::new(std::sync::Arc::new(gpu))
+                .context("--device gpu: the neighbour search passes")?;
+            search
+                .compile_fits(degree)
+                .context("--device gpu: the initial fits")?;
+            std::sync::Arc::new(search)
         }
     })
 }
@@ -425,7 +428,11 @@ impl BakeConfig {
                     .transpose()?
                     .unwrap_or(slosh_bake::Shard::WHOLE),
                 params,
-                search: neighbour_search(a.settings.select.device, a.adapter.as_deref())?,
+                search: neighbour_search(
+                    a.settings.select.device,
+                    a.adapter.as_deref(),
+                    a.settings.fit.degree,
+                )?,
             },
             quiet: a.quiet,
             jobs_chosen,

@@ -4,7 +4,7 @@
 use slosh_render::Gpu;
 use wgpu::util::DeviceExt;
 
-use crate::layout::{SearchParams, WORKGROUP};
+use crate::layout::WORKGROUP;
 
 /// A GPU failure, as the build reports it.
 pub(crate) fn gpu_error(what: impl std::fmt::Display) -> slosh_mls::SurfaceError {
@@ -38,7 +38,7 @@ pub(crate) fn output(gpu: &Gpu, label: &str, bytes: u64) -> wgpu::Buffer {
     })
 }
 
-pub(crate) fn uniform(gpu: &Gpu, params: &SearchParams) -> wgpu::Buffer {
+pub(crate) fn uniform<T: bytemuck::Pod>(gpu: &Gpu, params: &T) -> wgpu::Buffer {
     gpu.device
         .create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("search params"),

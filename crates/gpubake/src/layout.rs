@@ -26,6 +26,21 @@ pub struct SearchParams {
     pub margin: f32,
 }
 
+/// `Settings` in `shaders/bake_fit.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct FitSettings {
+    pub count: u32,
+    pub first: u32,
+    pub row_threads: u32,
+    pub list_base: u32,
+    pub has_normals: u32,
+    /// 0: the weighted mean of the data normals; 1: the covariance.
+    pub normals_mode: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
 /// `SearchParams::flags`: the points have data normals.
 pub(crate) const FLAG_NORMALS: u32 = 1;
 /// `SearchParams::flags`: links are wanted.
@@ -50,4 +65,13 @@ pub fn nearest_source() -> String {
 /// The lists module: entry points `cut_lists` and `write_lists`.
 pub fn lists_source() -> String {
     format!("{GRID_WGSL}{}", include_str!("../../../shaders/lists.wgsl"))
+}
+
+/// The initial-fits module: entry point `initial_fits`, the tracer's fit maths after it.
+pub fn fits_source() -> String {
+    format!(
+        "{}{}",
+        include_str!("../../../shaders/bake_fit.wgsl"),
+        slosh_render::shaders::FIT_WGSL
+    )
 }

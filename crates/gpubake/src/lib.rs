@@ -3,10 +3,13 @@
 //! the reference, and returns what it returns where no two distances tie
 //! (`docs/algorithm.md`, "Neighbour search"): the nearest points of every point and every
 //! point's neighbour list ([`GpuSearch`], a [`slosh_mls::NeighbourSearch`]), on a grid of
-//! Morton cells (`shaders/neighbour_grid.wgsl`, `nearest.wgsl`, `lists.wgsl`).
+//! Morton cells (`shaders/neighbour_grid.wgsl`, `nearest.wgsl`, `lists.wgsl`), and the initial
+//! fits over those lists while they are on the GPU (`shaders/bake_fit.wgsl` over the tracer's
+//! `fit.wgsl`), equal to the CPU's f64 fits within f32.
 
 mod cells;
 mod dispatch;
+mod fits;
 mod index;
 mod layout;
 mod lists;
@@ -14,5 +17,7 @@ mod nearest;
 mod passes;
 mod search;
 
-pub use layout::{NEAREST_MAX, SearchParams, lists_source, nearest_source};
+pub use layout::{
+    FitSettings, NEAREST_MAX, SearchParams, fits_source, lists_source, nearest_source,
+};
 pub use passes::GpuSearch;

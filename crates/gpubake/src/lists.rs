@@ -3,7 +3,7 @@
 //! here), then the lists themselves, written and read back in batches of bounded size.
 
 use rayon::prelude::*;
-use slosh_mls::{ListRequest, NeighbourLists, Neighbours, SurfaceError, distance2};
+use slosh_mls::{InitialFit, ListRequest, NeighbourLists, Neighbours, SurfaceError, distance2};
 
 use crate::dispatch::{gpu_error, output, read_back, storage};
 use crate::index::{Dispatch, GpuIndex};
@@ -119,19 +119,30 @@ pub(crate) fn lists(
         )));
     }
     let start: Vec<u32> = start.iter().map(|&s| s as u32).collect();
-    let start_buffer = storage(gpu, "list starts", &start[..n]);
+    let start_buffer = storage(gpu, "list starts", &start);
+    let fit_inputs = request
+        .fits
+        .map(|f| crate::fits::prepare(index, f, request.normals.is_some()))
+        .transpose()?;
+    let mut sorted_fits: Vec<Option<InitialFit>> = Vec::new();
+    let mut fit_seconds = 0.0;
     // Batches of consecutive points whose lists fit one output.
     let limit_ids = (search.output_limit() / 4).max(cap as u64);
+    // A batch's fits take 64 bytes a point.
+    let limit_points = (search.output_limit() / 64).max(1) as usize;
     let mut words: Vec<u32> = Vec::with_capacity(total as usize);
     let mut first = 0;
     while first < n {
         let mut last = first + 1;
-        while last < n && u64::from(start[last + 1] - start[first]) <= limit_ids {
+        while last < n
+            && last - first < limit_points
+            && u64::from(start[last + 1] - start[first]) <= limit_ids
+        {
             last += 1;
         }
         let count = u64::from(start[last] - start[first]);
+        let lists_out = output(gpu, "lists", count * 4);
         if count > 0 {
-            let lists_out = output(gpu, "lists", count * 4);
             pass(
                 &search.write,
                 first,
@@ -140,8 +151,27 @@ pub(crate) fn lists(
                 &start_buffer,
                 &lists_out,
             );
-            words.extend(read_back::<u32>(gpu, &lists_out, count * 4)?);
         }
+        // Fitted where the lists are, before they are read back.
+        if let Some(inputs) = &fit_inputs {
+            // The lists done first, so that the fits' time is their own.
+            gpu.wait().map_err(gpu_error)?;
+            let fitting = std::time::Instant::now();
+            sorted_fits.extend(crate::fits::fit_batch(
+                index,
+                inputs,
+                crate::fits::BatchLists {
+                    normals: &normals_buffer,
+                    list_start: &start_buffer,
+                    lists: &lists_out,
+                    first,
+                    count: last - first,
+                    list_base: start[first],
+                },
+            )?);
+            fit_seconds += fitting.elapsed().as_secs_f64();
+        }
+        words.extend(read_back::<u32>(gpu, &lists_out, count * 4)?);
         first = last;
     }
 
@@ -216,11 +246,21 @@ pub(crate) fn lists(
         Neighbours::from_csr(by_point, ids)
     }
     .ok_or_else(|| gpu_error("the lists read back do not match their counts"))?;
+    // Fits in the caller's order.
+    let fits = fit_inputs.map(|_| {
+        let mut fits = vec![None; n];
+        for (t, f) in sorted_fits.into_iter().enumerate() {
+            fits[order[t] as usize] = f;
+        }
+        fits
+    });
     Ok(NeighbourLists {
         lists,
         reach: reach_out,
         capped,
         run_unions: None,
         links,
+        fits,
+        fit_seconds,
     })
 }

@@ -1,11 +1,11 @@
 //! The search passes, compiled once for a device and shared by every step in flight.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use slosh_render::Gpu;
 
 use crate::dispatch::layout;
-use crate::layout::{lists_source, nearest_source};
+use crate::layout::{fits_source, lists_source, nearest_source};
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
 /// larger outputs go in several dispatches, so that a 4M-point step's lists (about 2 GB)
@@ -21,6 +21,10 @@ pub struct GpuSearch {
     pub(crate) lists_layout: wgpu::BindGroupLayout,
     pub(crate) cut: wgpu::ComputePipeline,
     pub(crate) write: wgpu::ComputePipeline,
+    pub(crate) fits_layout: wgpu::BindGroupLayout,
+    fits_pipeline_layout: wgpu::PipelineLayout,
+    /// The initial fits' pipeline per degree (1–3), built on first use.
+    fits: [OnceLock<wgpu::ComputePipeline>; 3],
 }
 
 /// Bindings every pass reads: positions, original indices, cell starts, residuals.
@@ -58,6 +62,21 @@ impl GpuSearch {
                     immediate_size: 0,
                 })
         };
+        let fits_layout = layout(
+            &gpu,
+            "initial fits",
+            &[
+                (1, false),
+                (2, false),
+                (3, false),
+                (4, false),
+                (5, false),
+                (6, false),
+                (7, false),
+                (8, true),
+            ],
+        );
+        let fits_pipeline_layout = pipeline_layout(&fits_layout);
         let nearest_pipeline_layout = pipeline_layout(&nearest_layout);
         let lists_pipeline_layout = pipeline_layout(&lists_layout);
         let nearest = slosh_render::checked_pipeline(
@@ -66,6 +85,7 @@ impl GpuSearch {
             "nearest",
             nearest_source(),
             "nearest",
+            &[],
         )?;
         let cut = slosh_render::checked_pipeline(
             &gpu,
@@ -73,6 +93,7 @@ impl GpuSearch {
             "cut_lists",
             lists_source(),
             "cut_lists",
+            &[],
         )?;
         let write = slosh_render::checked_pipeline(
             &gpu,
@@ -80,6 +101,7 @@ impl GpuSearch {
             "write_lists",
             lists_source(),
             "write_lists",
+            &[],
         )?;
         Ok(GpuSearch {
             gpu,
@@ -88,7 +110,37 @@ impl GpuSearch {
             lists_layout,
             cut,
             write,
+            fits_layout,
+            fits_pipeline_layout,
+            fits: Default::default(),
         })
+    }
+
+    /// Compiles the initial fits for `degree` now rather than in the first step's bake (a
+    /// software adapter takes a second).
+    pub fn compile_fits(&self, degree: u8) -> Result<(), slosh_render::Error> {
+        self.fits_pipeline(degree).map(|_| ())
+    }
+
+    /// The initial fits' pipeline for `degree` (1–3).
+    pub(crate) fn fits_pipeline(
+        &self,
+        degree: u8,
+    ) -> Result<&wgpu::ComputePipeline, slosh_render::Error> {
+        let degree = degree.clamp(1, 3);
+        let slot = &self.fits[usize::from(degree) - 1];
+        if let Some(pipeline) = slot.get() {
+            return Ok(pipeline);
+        }
+        let pipeline = slosh_render::checked_pipeline(
+            &self.gpu,
+            &self.fits_pipeline_layout,
+            "initial_fits",
+            fits_source(),
+            "initial_fits",
+            &[("FIT_DEGREE", f64::from(degree))],
+        )?;
+        Ok(slot.get_or_init(|| pipeline))
     }
 
     pub fn gpu(&self) -> &Gpu {

@@ -154,6 +154,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
             cap: case.cap,
             normals: Some(&case.normals),
             link_distance2: Some(&link2),
+            fits: None,
         };
         let cpu_index = KdSearch.index(&case.points).unwrap();
         let gpu_index = search.index(&case.points).unwrap();
@@ -267,4 +268,26 @@ fn the_search_params_mirror_the_wgsl_layout() {
             ]
         );
     }
+}
+
+#[test]
+fn the_fit_settings_mirror_the_wgsl_layout() {
+    use slosh_gpubake::{FitSettings, fits_source};
+    use slosh_testkit::check_layout;
+    let module = slosh_testkit::wgsl::validate("initial fits", &fits_source());
+    check_layout!(
+        &module,
+        "Settings",
+        FitSettings,
+        [
+            count,
+            first,
+            row_threads,
+            list_base,
+            has_normals,
+            normals_mode,
+            _pad0,
+            _pad1
+        ]
+    );
 }

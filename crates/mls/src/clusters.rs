@@ -6,9 +6,9 @@
 
 use rayon::prelude::*;
 
-use crate::lists::{LIST_RUN, RunUnions};
 use crate::neighbours::Neighbours;
 use crate::real::{Real, V3};
+use crate::runs::{LIST_RUN, RunUnions};
 
 /// Union of the lists of each run of `size` consecutive points: CSR offsets (one per cluster
 /// plus one) and sorted candidate indices.

@@ -10,6 +10,7 @@
 mod clusters;
 mod error;
 mod fit;
+mod found;
 mod frame;
 mod geometry;
 mod grid;
@@ -21,6 +22,7 @@ mod orient;
 mod poly;
 mod real;
 mod roots;
+mod runs;
 mod search;
 mod spray;
 mod support;
@@ -31,6 +33,7 @@ mod up;
 
 pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
+pub use found::{InitialFit, NeighbourLists};
 pub use frame::LocalFrame;
 pub use geometry::{bounds, dominant_axis};
 pub use grid::BallIndex;
@@ -38,14 +41,15 @@ pub use intersect::{
     Ball, BallHit, HitStatus, InitialHit, Params, Ray, initial_fit, initial_hit, intersect_ball,
     ray_ball, refine,
 };
-pub use lists::{NeighbourLists, RunUnions, distance2};
+pub use lists::distance2;
 pub use neighbours::Neighbours;
 pub use order::{MortonGrid, morton_keys, morton_order};
 pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};
-pub use search::{KdSearch, ListRequest, NeighbourSearch, PointIndex};
+pub use runs::RunUnions;
+pub use search::{FitRequest, KdSearch, ListRequest, NeighbourSearch, PointIndex};
 pub use spray::Sphere;
 pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,

@@ -9,66 +9,9 @@
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
+use crate::found::NeighbourLists;
 use crate::neighbours::Neighbours;
-
-/// Points per query. Larger runs query farther beyond each member's reach, smaller ones query
-/// more often; 16 measured fastest of 8, 16 and 32 on a 100k-point sphere (2 cores).
-const RUN: usize = 16;
-
-/// Runs per parallel task. A task's lists go into one buffer: with one buffer per run, the
-/// tens of thousands of small allocations that a 1M-point step keeps alive grew the
-/// allocator's per-thread heaps piece by piece, and 16 threads spent more time in the kernel
-/// than in the runs.
-const RUNS_PER_BLOCK: usize = 32;
-
-/// Every point's neighbour list (CSR), the reach each list records, how many lists the cap
-/// cut, the union of each run's lists where the runs were consecutive indices, and the links
-/// asked for (per run).
-#[derive(Debug)]
-pub struct NeighbourLists {
-    pub lists: Neighbours,
-    pub reach: Vec<f64>,
-    pub capped: usize,
-    pub run_unions: Option<RunUnions>,
-    /// (i, j) for every j ≠ i in i's list within the link distance of i, in no useful order
-    /// (a pair may come both ways), in pieces.
-    pub links: Vec<Vec<(u32, u32)>>,
-}
-
-/// The union of the lists of each run of [`RUN`] consecutive points (each in index order):
-/// what the lists stage finds anyway, and from which the clusters of any multiple of [`RUN`]
-/// points merge their candidate lists without reading every point's list again. Kept as the
-/// lists stage's blocks made them (CSR per block of runs).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct RunUnions {
-    runs: usize,
-    blocks: Vec<(Vec<u32>, Vec<u32>)>,
-}
-
-impl RunUnions {
-    /// How many runs.
-    pub fn len(&self) -> usize {
-        self.runs
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.runs == 0
-    }
-
-    /// Run r's union, in index order.
-    pub fn union(&self, r: usize) -> &[u32] {
-        let (start, ids) = &self.blocks[r / RUNS_PER_BLOCK];
-        let k = r % RUNS_PER_BLOCK;
-        &ids[start[k] as usize..start[k + 1] as usize]
-    }
-}
-
-/// Points per run of the lists stage (and per union in [`RunUnions`]).
-pub(crate) const LIST_RUN: usize = RUN;
-
-/// Points per block of the lists stage: one parallel task, one buffer of lists (a piece of
-/// [`Neighbours`] where the points came in spatial order) and one piece of links.
-pub(crate) const LIST_BLOCK: usize = RUN * RUNS_PER_BLOCK;
+use crate::runs::{LIST_BLOCK, RUN, RUNS_PER_BLOCK, RunUnions};
 
 /// kiddo's squared Euclidean distance, summed in its order, so that a list is the set its
 /// `within` query would return.
@@ -357,6 +300,8 @@ pub(crate) fn neighbour_lists(
         capped,
         run_unions,
         links,
+        fits: None,
+        fit_seconds: 0.0,
     }
 }
 

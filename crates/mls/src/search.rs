@@ -9,10 +9,31 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
 use crate::error::SurfaceError;
-use crate::lists::{NeighbourLists, neighbour_lists};
+use crate::found::NeighbourLists;
+use crate::lists::neighbour_lists;
+use crate::support::NormalsMode;
+
+/// The initial fits a search may compute with the lists, where the lists already sit where it
+/// computes (the GPU's): at each point, over its list, as `intersect::initial_fit_with`.
+#[derive(Clone, Copy)]
+pub struct FitRequest<'a> {
+    /// Each point's smoothing length.
+    pub h: &'a (dyn Fn(usize) -> f64 + Sync),
+    pub degree: u8,
+    pub normals: NormalsMode,
+}
+
+impl std::fmt::Debug for FitRequest<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FitRequest")
+            .field("degree", &self.degree)
+            .field("normals", &self.normals)
+            .finish()
+    }
+}
 
 /// What a neighbour list keeps beyond the reach and the cap: its links and the normals that
-/// oppose.
+/// oppose; and the initial fits, where the search can make them.
 #[derive(Clone, Copy)]
 pub struct ListRequest<'a> {
     /// How far each point's list reaches (ρ_i + support·h_i).
@@ -23,6 +44,9 @@ pub struct ListRequest<'a> {
     pub normals: Option<&'a [Option<[f64; 3]>]>,
     /// The squared link distance of each point, where links (pairs within it) are wanted.
     pub link_distance2: Option<&'a (dyn Fn(usize) -> f64 + Sync)>,
+    /// The initial fits, which a search makes only where it can make them beside the lists
+    /// (then `NeighbourLists::fits`); the build fits the rest itself.
+    pub fits: Option<FitRequest<'a>>,
 }
 
 impl std::fmt::Debug for ListRequest<'_> {
@@ -32,6 +56,7 @@ impl std::fmt::Debug for ListRequest<'_> {
             .field("cap", &self.cap)
             .field("normals", &self.normals.is_some())
             .field("links", &self.link_distance2.is_some())
+            .field("fits", &self.fits.map(|f| f.degree))
             .finish()
     }
 }

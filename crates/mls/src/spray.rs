@@ -3,8 +3,8 @@
 
 use rayon::prelude::*;
 
-use crate::lists::LIST_BLOCK;
 use crate::real::{Real, V3};
+use crate::runs::LIST_BLOCK;
 
 /// A component whose points lie farther apart on average than this many dense spacings is
 /// spray, whatever its size.

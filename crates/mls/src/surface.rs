@@ -9,15 +9,17 @@ use rayon::prelude::*;
 
 pub use crate::error::SurfaceError;
 use crate::fit::FitStatus;
+use crate::found::NeighbourLists;
 use crate::geometry::bounds;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit_with};
-use crate::lists::{LIST_RUN, NeighbourLists, RunUnions, distance2};
+use crate::lists::distance2;
 use crate::neighbours::Neighbours;
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
-use crate::search::{KdSearch, ListRequest, NeighbourSearch};
+use crate::runs::{LIST_RUN, RunUnions};
+use crate::search::{FitRequest, KdSearch, ListRequest, NeighbourSearch};
 use crate::spray::{Sphere, droplets};
 use crate::support::{DataNormals, NormalsMode};
 use crate::timing::StageClock;
@@ -283,15 +285,27 @@ impl<T: Real> SurfaceParts<T> {
             capped,
             run_unions,
             links,
+            fits: searched_fits,
+            fit_seconds: searched_fit_seconds,
         } = index.lists(ListRequest {
             reach: &reach_wanted,
             cap: cap.get(),
             normals: unit_normals.as_deref(),
             // The links that join spray into components, found with the lists.
             link_distance2: (params.droplet_below > 1).then_some(&|i: usize| ball_h(i).powi(2)),
+            // Fitted beside the lists where the search can (the GPU's), else below.
+            fits: Some(FitRequest {
+                h: &ball_h,
+                degree: params.degree,
+                normals: params.normals,
+            }),
         })?;
         drop(index);
         clock.lap("neighbour lists");
+        // Fits made beside the lists count as fits.
+        if let Some(lap) = clock.laps.last_mut() {
+            lap.1 = (lap.1 - searched_fit_seconds).max(0.0);
+        }
 
         // Spray first, from the lists alone and on every core: the fits do not need it, but the
         // work beside them does, and beside the fits it would get too few cores to keep up.
@@ -321,6 +335,44 @@ impl<T: Real> SurfaceParts<T> {
             h_factor: T::one(),
         };
         let initial_fits = || -> (Vec<Ball<T>>, Vec<BallFit>) {
+            let ball = |i: usize, normal, poly| Ball {
+                centre: pts[i],
+                radius: T::c(radii[i]),
+                h: T::c(ball_h(i)),
+                normal,
+                poly,
+            };
+            let unfitted = |i: usize| {
+                (
+                    ball(i, V3::new(T::zero(), T::zero(), T::one()), Poly::zero(0)),
+                    BallFit::None,
+                )
+            };
+            if let Some(fits) = &searched_fits {
+                // The search's fits (in f32), as the balls hold them.
+                return (0..n)
+                    .into_par_iter()
+                    .map(|i| match fits[i] {
+                        Some(f) => {
+                            let [x, y, z] = f.normal.map(|c| T::c(f64::from(c)));
+                            let poly = Poly {
+                                degree: f.poly.degree,
+                                c: f.poly.c.map(|c| T::c(f64::from(c))),
+                            };
+                            let status = if f.degraded {
+                                FitStatus::Degraded {
+                                    requested: params.degree,
+                                    used: f.poly.degree,
+                                }
+                            } else {
+                                FitStatus::Full
+                            };
+                            (ball(i, V3::new(x, y, z), poly), BallFit::Fitted(status))
+                        }
+                        None => unfitted(i),
+                    })
+                    .unzip();
+            }
             // Each normal normalised once here, not once for every list it is in.
             let unit_nrm: Option<Vec<V3<T>>> = nrm.as_ref().map(|ns| {
                 ns.par_iter()
@@ -337,13 +389,6 @@ impl<T: Real> SurfaceParts<T> {
                         // Without data normals the plane faces away from the set's centre.
                         let toward = centre * T::c(2.0);
                         let hi = T::c(ball_h(i));
-                        let ball = |normal, poly| Ball {
-                            centre,
-                            radius: T::c(radii[i]),
-                            h: hi,
-                            normal,
-                            poly,
-                        };
                         match initial_fit_with(
                             centre,
                             np,
@@ -353,11 +398,10 @@ impl<T: Real> SurfaceParts<T> {
                             toward,
                             weights,
                         ) {
-                            Some((normal, f)) => (ball(normal, f.poly), BallFit::Fitted(f.status)),
-                            None => (
-                                ball(V3::new(T::zero(), T::zero(), T::one()), Poly::zero(0)),
-                                BallFit::None,
-                            ),
+                            Some((normal, f)) => {
+                                (ball(i, normal, f.poly), BallFit::Fitted(f.status))
+                            }
+                            None => unfitted(i),
                         }
                     },
                 )
@@ -369,7 +413,11 @@ impl<T: Real> SurfaceParts<T> {
             || {
                 // From before the conversions above, which only the fits wait for.
                 let (balls, fits) = initial_fits();
-                (balls, fits, fits_start.elapsed().as_secs_f64())
+                (
+                    balls,
+                    fits,
+                    fits_start.elapsed().as_secs_f64() + searched_fit_seconds,
+                )
             },
             || {
                 beside(BesideFits {

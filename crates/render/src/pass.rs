@@ -10,13 +10,15 @@ use crate::error::{Error, Result};
 use crate::shaders::RangedArray;
 use crate::upload::EMPTY_BINDING;
 
-/// The pipeline of `source`'s `entry` under `layout`, validation errors caught.
+/// The pipeline of `source`'s `entry` under `layout`, its override `constants` set,
+/// validation errors caught.
 pub fn checked_pipeline(
     gpu: &Gpu,
     layout: &wgpu::PipelineLayout,
     label: &str,
     source: String,
     entry: &str,
+    constants: &[(&str, f64)],
 ) -> Result<wgpu::ComputePipeline> {
     let device = &gpu.device;
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -29,7 +31,10 @@ pub fn checked_pipeline(
         layout: Some(layout),
         module: &module,
         entry_point: Some(entry),
-        compilation_options: wgpu::PipelineCompilationOptions::default(),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants,
+            ..Default::default()
+        },
         cache: None,
     });
     match pollster::block_on(scope.pop()) {
@@ -144,8 +149,14 @@ impl StepPass {
             return Ok(pipeline);
         }
         let source = (self.source)(self.limit, split);
-        let pipeline =
-            checked_pipeline(gpu, &self.layouts.pipeline, self.label, source, self.label)?;
+        let pipeline = checked_pipeline(
+            gpu,
+            &self.layouts.pipeline,
+            self.label,
+            source,
+            self.label,
+            &[],
+        )?;
         Ok(slot.get_or_init(|| pipeline))
     }
 }

@@ -16,8 +16,14 @@ pub const STEP_WGSL: &str = include_str!("../../../shaders/step.wgsl");
 /// reads it.
 pub const WIDE_WGSL: &str = include_str!("../../../shaders/wide.wgsl");
 
-/// The shared MLS maths alone.
-pub const MLS_WGSL: &str = include_str!("../../../shaders/mls.wgsl");
+/// The shared MLS maths alone: the step's side and the fit.
+pub const MLS_WGSL: &str = concat!(
+    include_str!("../../../shaders/mls.wgsl"),
+    include_str!("../../../shaders/fit.wgsl")
+);
+
+/// The MLS fit over an abstract neighbourhood (the bake's initial fits include it too).
+pub const FIT_WGSL: &str = include_str!("../../../shaders/fit.wgsl");
 
 /// The neighbour-mask pass, entry point `expand`, run by the tracer before a step's first
 /// refined frame (masks.rs).
@@ -27,18 +33,20 @@ pub const EXPAND_WGSL: &str = include_str!("../../../shaders/expand.wgsl");
 /// whose tree it does not hold (widen.rs).
 pub const WIDEN_WGSL: &str = include_str!("../../../shaders/widen.wgsl");
 
-/// The trace pass and the water pass, which traces secondary rays: mls.wgsl + trace.wgsl +
-/// light.wgsl + water.wgsl, entry points `trace_initial`, `trace_refined` and `water`.
+/// The trace pass and the water pass, which traces secondary rays: mls.wgsl + fit.wgsl +
+/// trace.wgsl + light.wgsl + water.wgsl, entry points `trace_initial`, `trace_refined` and `water`.
 pub const TRACE_WGSL: &str = concat!(
     include_str!("../../../shaders/mls.wgsl"),
+    include_str!("../../../shaders/fit.wgsl"),
     include_str!("../../../shaders/trace.wgsl"),
     include_str!("../../../shaders/light.wgsl"),
     include_str!("../../../shaders/water.wgsl")
 );
 
-/// The shade pass: mls.wgsl + light.wgsl + shade.wgsl, entry point `shade`.
+/// The shade pass: mls.wgsl + fit.wgsl + light.wgsl + shade.wgsl, entry point `shade`.
 pub const SHADE_WGSL: &str = concat!(
     include_str!("../../../shaders/mls.wgsl"),
+    include_str!("../../../shaders/fit.wgsl"),
     include_str!("../../../shaders/light.wgsl"),
     include_str!("../../../shaders/shade.wgsl")
 );

@@ -211,8 +211,10 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             total: median(gpu_runs.iter().map(|r| r.seconds).collect()),
             nearest: gpu_stage("kd-tree and radii (kNN)"),
             lists: gpu_stage("neighbour lists"),
+            fits: gpu_stage("initial fits"),
             cpu_nearest: stage("kd-tree and radii (kNN)"),
             cpu_lists: stage("neighbour lists"),
+            cpu_fits: stage("initial fits"),
         });
         peer_rows.push(PeerRow {
             points: n,

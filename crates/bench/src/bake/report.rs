@@ -33,11 +33,14 @@ pub struct PeerRow {
 #[derive(Debug, Clone, PartialEq)]
 pub struct GpuBakeRow {
     pub total: f64,
-    /// kNN and radii, neighbour lists: on the GPU, then in the CPU bake of the same runs.
+    /// kNN and radii, neighbour lists, initial fits: on the GPU, then in the CPU bake of the
+    /// same runs.
     pub nearest: f64,
     pub lists: f64,
+    pub fits: f64,
     pub cpu_nearest: f64,
     pub cpu_lists: f64,
+    pub cpu_fits: f64,
 }
 
 /// One size's stored bytes: the file, and each section's stored and raw bytes.
@@ -113,9 +116,9 @@ pub struct BakeReport {
 }
 
 impl BakeReport {
-    /// The table of bakes with the GPU's neighbour search, or why it was not measured.
+    /// The table of bakes with the GPU's stages, or why it was not measured.
     fn gpu_markdown(&self) -> String {
-        let mut md = String::from("\n## With the GPU's neighbour search\n\n");
+        let mut md = String::from("\n## With the GPU's stages (`--device gpu`)\n\n");
         let adapter = match &self.settings.gpu {
             Ok(search) => search.gpu().describe(),
             Err(why) => {
@@ -125,11 +128,13 @@ impl BakeReport {
         };
         let _ = writeln!(
             md,
-            "`slosh bake --device gpu`: the kNN, radii and neighbour lists on {adapter} \
-             (`crates/gpubake`), everything else on the CPU's {} threads; each run alternates \
-             with the CPU bake above. splashsurf as above.\n\n\
-             | points | CPU bake | GPU-neighbour bake | speed-up | kNN + radii CPU / GPU | \
-             neighbour lists CPU / GPU | against splashsurf |\n|---|---|---|---|---|---|---|",
+            "`slosh bake --device gpu`: the kNN, radii, neighbour lists and initial fits on \
+             {adapter} (`crates/gpubake`; each stage's time includes its transfers), everything \
+             else on the CPU's {} threads; each run alternates with the CPU bake above. \
+             splashsurf as above.\n\n\
+             | points | CPU bake | GPU bake | speed-up | kNN + radii CPU / GPU | \
+             neighbour lists CPU / GPU | initial fits CPU / GPU | against splashsurf |\n\
+             |---|---|---|---|---|---|---|---|",
             self.threads
         );
         let ms = |s: f64| format!("{:.1} ms", s * 1e3);
@@ -137,7 +142,7 @@ impl BakeReport {
             let Some(g) = &r.gpu else { continue };
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.2}× | {} / {} | {} / {} | {} |",
+                "| {} | {} | {} | {:.2}× | {} / {} | {} / {} | {} / {} | {} |",
                 r.points,
                 ms(r.total),
                 ms(g.total),
@@ -146,6 +151,8 @@ impl BakeReport {
                 ms(g.nearest),
                 ms(g.cpu_lists),
                 ms(g.lists),
+                ms(g.cpu_fits),
+                ms(g.fits),
                 r.peer
                     .map_or("—".into(), |(s, _)| format!("{:.1}× faster", s / g.total)),
             );
