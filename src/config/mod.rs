@@ -248,6 +248,16 @@ impl BakeConfig {
         if !(1..=3).contains(&a.settings.fit.degree) {
             bail!("--degree {}: expected 1, 2 or 3", a.settings.fit.degree);
         }
+        if a.settings.select.device == crate::cli::BakeDevice::Gpu
+            && a.settings.fit.k >= slosh_gpubake::NEAREST_MAX
+        {
+            bail!(
+                "--k {}: the GPU's nearest-point search finds at most {} neighbours a point; \
+                 use --device cpu for a larger k",
+                a.settings.fit.k,
+                slosh_gpubake::NEAREST_MAX - 1
+            );
+        }
         if a.settings.fit.k == 0 {
             bail!("--k must be at least 1");
         }

@@ -83,6 +83,30 @@ fn absurd_job_counts_are_refused() {
     }
 }
 
+/// A k the GPU's nearest-point search cannot hold is refused before anything is baked (or a
+/// GPU opened), naming the flag and the way out.
+#[test]
+fn a_k_beyond_the_gpu_search_is_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(
+        &dir.path().join("case"),
+        &["sphere", "--points", "500", "--steps", "1"],
+    );
+    let case = dir.path().join("case/sphere.case");
+    let cache = dir.path().join("cache");
+    let (ok, _, err) = bake_case(&case, &cache, &["--device", "gpu", "--k", "40"]);
+    assert!(!ok, "--k 40 on the GPU was accepted");
+    assert!(
+        err.contains("--k 40") && err.contains("--device cpu"),
+        "{err}"
+    );
+    assert!(
+        !cache.exists(),
+        "the refused bake wrote {}",
+        cache.display()
+    );
+}
+
 /// Without `--jobs`, the bake says how many steps it bakes at once and why: from the cores
 /// and the memory the first step needs.
 #[test]
