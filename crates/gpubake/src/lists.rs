@@ -12,8 +12,9 @@ use crate::layout::{FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, LINK_BIT};
 /// (point, neighbour) within the link distance.
 type Link = (u32, u32);
 
-/// Points per piece of the lists' assembly (a task, and a piece of the links).
-const POINTS_PER_PIECE: usize = 4096;
+/// Points per piece of the lists' assembly (a task, and a piece of the links): the CPU lists
+/// stage's blocks, whose links the spray joins piece by piece in parallel.
+const POINTS_PER_PIECE: usize = slosh_mls::LIST_BLOCK;
 
 pub(crate) fn lists(
     index: &GpuIndex<'_>,

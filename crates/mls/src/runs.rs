@@ -43,5 +43,7 @@ impl RunUnions {
 pub(crate) const LIST_RUN: usize = RUN;
 
 /// Points per block of the lists stage: one parallel task, one buffer of lists (a piece of
-/// [`Neighbours`] where the points came in spatial order) and one piece of links.
-pub(crate) const LIST_BLOCK: usize = RUN * RUNS_PER_BLOCK;
+/// [`Neighbours`](crate::Neighbours) where the points came in spatial order) and one piece
+/// of links. A search that gives its links in pieces of this many consecutive points lets the
+/// spray's union-find join each piece's own links in parallel.
+pub const LIST_BLOCK: usize = RUN * RUNS_PER_BLOCK;
