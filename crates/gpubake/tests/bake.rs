@@ -2,7 +2,7 @@
 //! A step baked with the GPU's neighbours against the same step baked on the CPU: the same
 //! spray components and orientation flips, and the same picture (hit/miss on ≥ 99.9 % of
 //! pixels, |Δt| p99 ≤ 1e-3 spacings at 3 iterations, by the CPU tracer), on every generated
-//! scene, the hard cases, and the SPH fixture (a pysplishsplash dam break at three times).
+//! scene, the hard cases, and pysplishsplash dam breaks at two resolutions.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -168,11 +168,18 @@ fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
         let input = scene_step(&scene, 1, &name);
         compare(&name, &input, &with_normals, &search);
     }
-    // The SPH fixture: volume particles, surface and normals estimated.
+    // The SPH fixtures: volume particles, surface and normals estimated; SPlisHSPlasH's dam
+    // break at two particle radii (0.025 at three times, 0.0175 at 0.4 s:
+    // `scripts/sph_reference.py`).
     let sph = BakeParams::new(SurfaceSelect::Estimate, NormalSource::Estimate);
-    for time in ["0.4", "0.6", "1"] {
+    for (resolution, time) in [
+        ("sph/coarse-t", "0.4"),
+        ("sph/coarse-t", "0.6"),
+        ("sph/coarse-t", "1"),
+        ("sph-fine/t", "0.4"),
+    ] {
         let path = format!(
-            "{}/../../tests/data/sph/coarse-t{time}/particles.ply",
+            "{}/../../tests/data/{resolution}{time}/particles.ply",
             env!("CARGO_MANIFEST_DIR")
         );
         let cloud = read_point_cloud(Path::new(&path)).unwrap();
@@ -181,6 +188,7 @@ fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
             positions: cloud.positions,
             ..StepInput::default()
         };
-        compare(&format!("dam break t = {time}"), &input, &sph, &search);
+        let name = format!("dam break {resolution}{time}");
+        compare(&name, &input, &sph, &search);
     }
 }
