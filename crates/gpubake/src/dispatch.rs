@@ -11,6 +11,27 @@ pub(crate) fn gpu_error(what: impl std::fmt::Display) -> slosh_mls::SurfaceError
     slosh_mls::SurfaceError::Index(format!("GPU neighbour search: {what}"))
 }
 
+/// `work` with the device's validation and out-of-memory errors caught (on this thread: wgpu's
+/// error scopes are thread-local) and returned as the step's error, where wgpu would
+/// otherwise panic on them: a step the GPU cannot hold fails, and the batch goes on.
+pub(crate) fn guarded<T>(
+    gpu: &Gpu,
+    work: impl FnOnce() -> Result<T, slosh_mls::SurfaceError>,
+) -> Result<T, slosh_mls::SurfaceError> {
+    let memory = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let out = work();
+    let invalid = pollster::block_on(validation.pop());
+    let out_of_memory = pollster::block_on(memory.pop());
+    match (out_of_memory, invalid) {
+        (Some(e), _) => Err(gpu_error(format!(
+            "out of GPU memory ({e}); bake with fewer --jobs or --device cpu"
+        ))),
+        (None, Some(e)) => Err(gpu_error(e)),
+        (None, None) => out,
+    }
+}
+
 /// A read-only storage buffer holding `data` (one zero element where it is empty: a binding
 /// cannot be empty).
 pub(crate) fn storage<T: bytemuck::Pod>(gpu: &Gpu, label: &str, data: &[T]) -> wgpu::Buffer {

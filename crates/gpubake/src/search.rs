@@ -6,7 +6,7 @@ use std::num::NonZero;
 use slosh_mls::{ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
 
 use crate::cells::SortedPoints;
-use crate::dispatch::{gpu_error, storage};
+use crate::dispatch::{gpu_error, guarded, storage};
 use crate::index::GpuIndex;
 use crate::passes::GpuSearch;
 
@@ -26,19 +26,26 @@ impl NeighbourSearch for GpuSearch {
         }
         let sorted = SortedPoints::new(points);
         let gpu = &self.gpu;
-        let positions = storage(gpu, "search positions", &sorted.high);
-        let residuals = storage(gpu, "search residuals", &sorted.low);
-        let original = storage(gpu, "search order", &sorted.order);
-        let margin = 1e-5 * sorted.extent();
-        Ok(Box::new(GpuIndex {
-            search: self,
-            points,
-            sorted,
-            positions,
-            residuals,
-            original,
-            margin,
-        }))
+        guarded(gpu, || {
+            let positions = storage(gpu, "search positions", &sorted.high);
+            let residuals = storage(gpu, "search residuals", &sorted.low);
+            let original = storage(gpu, "search order", &sorted.order);
+            Ok((positions, residuals, original))
+        })
+        .map(
+            |(positions, residuals, original)| -> Box<dyn PointIndex + 'a> {
+                let margin = 1e-5 * sorted.extent();
+                Box::new(GpuIndex {
+                    search: self,
+                    points,
+                    sorted,
+                    positions,
+                    residuals,
+                    original,
+                    margin,
+                })
+            },
+        )
     }
 
     fn describe(&self) -> String {
@@ -48,10 +55,12 @@ impl NeighbourSearch for GpuSearch {
 
 impl PointIndex for GpuIndex<'_> {
     fn nearest(&self, count: NonZero<usize>) -> Result<Vec<u32>, SurfaceError> {
-        crate::nearest::nearest(self, count.get())
+        guarded(self.search.gpu(), || {
+            crate::nearest::nearest(self, count.get())
+        })
     }
 
     fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError> {
-        crate::lists::lists(self, request)
+        guarded(self.search.gpu(), || crate::lists::lists(self, request))
     }
 }

@@ -291,3 +291,68 @@ fn the_fit_settings_mirror_the_wgsl_layout() {
         ]
     );
 }
+
+/// Outputs larger than a binding go in batches: with bindings of 64 KiB, a 4000-point sphere's
+/// nearest points, lists and fits take many dispatches each, and give what one dispatch gives
+/// (lists equal to the k-d tree's; fits equal to an unlimited device's). A set whose positions
+/// exceed one binding is refused with the way out, not a panic.
+#[test]
+fn batches_of_bounded_output_give_what_one_dispatch_gives() {
+    let Some(mut gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
+        return;
+    };
+    gpu.limit_bindings(1 << 16);
+    let small = GpuSearch::new(Arc::new(gpu)).unwrap();
+    let whole = gpu_search().unwrap();
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 4000, 11)).unwrap();
+    let (points, normals) = scene.particles(0).surface_arrays();
+    let order = morton_order(&points);
+    let points: Vec<[f64; 3]> = order.iter().map(|&i| points[i as usize]).collect();
+    let normals: Vec<Option<[f64; 3]>> = order.iter().map(|&i| Some(normals[i as usize])).collect();
+    let n = points.len();
+    assert!(n * 16 <= 1 << 16, "the positions must fit one binding here");
+    let reach = vec![4.0 * scene.spacing(); n];
+    let h = 1.5 * scene.spacing();
+    let ball_h = |_: usize| h;
+    let request = ListRequest {
+        reach: &reach,
+        cap: 40,
+        normals: Some(&normals),
+        link_distance2: None,
+        fits: Some(slosh_mls::FitRequest {
+            h: &ball_h,
+            degree: 2,
+            normals: slosh_mls::NormalsMode::Mean,
+        }),
+    };
+    let cpu = KdSearch.index(&points).unwrap().lists(request).unwrap();
+    let (small_index, whole_index) = (small.index(&points).unwrap(), whole.index(&points).unwrap());
+    let (batched, once) = (
+        small_index.lists(request).unwrap(),
+        whole_index.lists(request).unwrap(),
+    );
+    let entries: usize = (0..n).map(|i| cpu.lists.of(i).len()).sum();
+    assert!(
+        entries * 4 > 4 << 16,
+        "the lists must need several batches ({entries} ids)"
+    );
+    for i in 0..n {
+        assert_eq!(batched.lists.of(i), cpu.lists.of(i), "point {i}");
+    }
+    assert_eq!(batched.reach, cpu.reach);
+    assert_eq!(batched.fits, once.fits);
+    assert!(batched.fits.as_ref().unwrap().iter().all(Option::is_some));
+    let count = NonZero::new(9).unwrap();
+    assert_eq!(
+        small_index.nearest(count).unwrap(),
+        whole_index.nearest(count).unwrap()
+    );
+    // Twice the points: their positions no longer fit one binding.
+    let doubled: Vec<[f64; 3]> = points
+        .iter()
+        .chain(points.iter())
+        .map(|p| [p[0] * 1.5, p[1], p[2]])
+        .collect();
+    let refused = small.index(&doubled).err().expect("refused").to_string();
+    assert!(refused.contains("--device cpu"), "{refused}");
+}
