@@ -176,25 +176,34 @@ pub(crate) fn lists(
         first = last;
     }
 
-    // Ids and links, piece by piece, in sorted order.
-    let pieces: Vec<(Vec<u32>, Vec<Link>)> = (0..n.div_ceil(POINTS_PER_PIECE))
-        .into_par_iter()
-        .map(|p| {
-            let points = p * POINTS_PER_PIECE..((p + 1) * POINTS_PER_PIECE).min(n);
-            let slots = start[points.start] as usize..start[points.end] as usize;
-            let ids: Vec<u32> = words[slots].iter().map(|&w| w & !LINK_BIT).collect();
-            let mut links = Vec::new();
-            for t in points {
-                for &w in &words[start[t] as usize..start[t + 1] as usize] {
-                    if w & LINK_BIT != 0 {
-                        links.push((order[t], w & !LINK_BIT));
+    // Links out and their marks cleared, in place, piece by piece (in sorted order).
+    let links: Vec<Vec<Link>> = {
+        let mut slices: Vec<(std::ops::Range<usize>, &mut [u32])> =
+            Vec::with_capacity(n.div_ceil(POINTS_PER_PIECE));
+        let mut rest = words.as_mut_slice();
+        for first in (0..n).step_by(POINTS_PER_PIECE) {
+            let last = (first + POINTS_PER_PIECE).min(n);
+            let (piece, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
+            slices.push((first..last, piece));
+            rest = tail;
+        }
+        slices
+            .into_par_iter()
+            .map(|(points, piece)| {
+                let base = start[points.start] as usize;
+                let mut links = Vec::new();
+                for t in points {
+                    for w in &mut piece[start[t] as usize - base..start[t + 1] as usize - base] {
+                        if *w & LINK_BIT != 0 {
+                            *w &= !LINK_BIT;
+                            links.push((order[t], *w));
+                        }
                     }
                 }
-            }
-            (ids, links)
-        })
-        .collect();
-    drop(words);
+                links
+            })
+            .collect()
+    };
     // A cut list reaches as far as its farthest point in f64 (`lists.rs` in slosh-mls): the
     // point the cut fell on, which the list keeps unless its normal opposes, and every
     // member (which could only lie farther where two distances tie within f32).
@@ -207,9 +216,7 @@ pub(crate) fn lists(
                 if c[3] == 0 {
                     return request.reach[i];
                 }
-                let members = &pieces[t / POINTS_PER_PIECE].0;
-                let base = start[t / POINTS_PER_PIECE * POINTS_PER_PIECE] as usize;
-                let list = &members[start[t] as usize - base..start[t + 1] as usize - base];
+                let list = &words[start[t] as usize..start[t + 1] as usize];
                 let far = list
                     .iter()
                     .chain(std::iter::once(&c[1]))
@@ -225,12 +232,11 @@ pub(crate) fn lists(
         reach
     };
     let capped = cuts.iter().filter(|c| c[3] != 0).count();
-    let (id_pieces, links): (Vec<Vec<u32>>, Vec<Vec<Link>>) = pieces.into_iter().unzip();
     let lists = if sorted.identity {
-        Neighbours::from_csr(start, id_pieces.concat())
+        Neighbours::from_csr(start, words)
     } else {
         // Back to the caller's order.
-        let sorted_ids = id_pieces.concat();
+        let sorted_ids = words;
         let mut by_point = vec![0u32; n + 1];
         for (t, &i) in order.iter().enumerate() {
             by_point[i as usize + 1] = start[t + 1] - start[t];
