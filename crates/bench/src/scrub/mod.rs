@@ -82,11 +82,16 @@ fn ensure_series(
         compression,
         ..series_params()
     };
+    let record = params.record();
+    // Reused only when baked by this bake into this cache format: a series left by an older
+    // slosh is baked again, not refused step by step.
     if let Ok(m) = Manifest::read(dir)
         && m.steps.len() == steps
         && m.steps.iter().all(|s| s.points == points as u64)
         && m.bake.get("scrub_distinct").and_then(|v| v.as_u64()) == Some(distinct as u64)
-        && m.bake.get("compression") == params.record().get("compression")
+        && ["compression", "revision", "cache_major"]
+            .iter()
+            .all(|&k| m.bake.get(k) == record.get(k))
     {
         say!("  reusing the series in {}", dir.display());
         return Ok(());
