@@ -81,20 +81,61 @@ pub(crate) fn groups(gpu: &Gpu, count: u32) -> (u32, u32, u32) {
     (x, groups.div_ceil(x), x * WORKGROUP)
 }
 
-/// Records one dispatch of `pipeline` over `bind_group`.
+/// A pass's start and end timestamps, where the device can write them.
+pub(crate) struct Stamps {
+    set: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+}
+
+impl Stamps {
+    pub(crate) fn new(gpu: &Gpu) -> Option<Stamps> {
+        gpu.timestamps.then(|| Stamps {
+            set: gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("search pass times"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            }),
+            resolved: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("search pass times"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+        })
+    }
+
+    /// The pass's GPU seconds, once it has run (waits).
+    pub(crate) fn seconds(&self, gpu: &Gpu) -> Result<f64, slosh_mls::SurfaceError> {
+        let ticks: Vec<u64> = read_back(gpu, &self.resolved, 16)?;
+        let period_ns = f64::from(gpu.queue.get_timestamp_period());
+        Ok(ticks[1].saturating_sub(ticks[0]) as f64 * period_ns * 1e-9)
+    }
+}
+
+/// Records one dispatch of `pipeline` over `bind_group`, timed into `stamps` where given.
 pub(crate) fn record(
     encoder: &mut wgpu::CommandEncoder,
     pipeline: &wgpu::ComputePipeline,
     bind_group: &wgpu::BindGroup,
     (x, y): (u32, u32),
+    stamps: Option<&Stamps>,
 ) {
-    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-        label: Some("neighbour search"),
-        timestamp_writes: None,
-    });
-    pass.set_pipeline(pipeline);
-    pass.set_bind_group(0, bind_group, &[]);
-    pass.dispatch_workgroups(x, y, 1);
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("neighbour search"),
+            timestamp_writes: stamps.map(|s| wgpu::ComputePassTimestampWrites {
+                query_set: &s.set,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: Some(1),
+            }),
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+    if let Some(s) = stamps {
+        encoder.resolve_query_set(&s.set, 0..2, &s.resolved, 0);
+    }
 }
 
 /// `bytes` of `source` copied out, once the work submitted before has run.

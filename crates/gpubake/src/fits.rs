@@ -4,7 +4,9 @@
 use rayon::prelude::*;
 use slosh_mls::{FitRequest, InitialFit, NormalsMode, Poly, SurfaceError};
 
-use crate::dispatch::{bind, gpu_error, groups, output, read_back, record, storage, uniform};
+use crate::dispatch::{
+    Stamps, bind, gpu_error, groups, output, read_back, record, storage, uniform,
+};
 use crate::index::GpuIndex;
 use crate::layout::FitSettings;
 
@@ -105,8 +107,18 @@ pub(crate) fn fit_batch(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("initial fits"),
         });
-    record(&mut encoder, inputs.pipeline, &group, (x, y));
+    let stamps = Stamps::new(gpu);
+    record(
+        &mut encoder,
+        inputs.pipeline,
+        &group,
+        (x, y),
+        stamps.as_ref(),
+    );
     gpu.queue.submit([encoder.finish()]);
+    if let Some(stamps) = stamps {
+        index.search.add_gpu_seconds(stamps.seconds(gpu)?);
+    }
     let raw: Vec<[f32; 4]> = read_back(gpu, &out, bytes)?;
     Ok(raw
         .par_chunks(VEC4_PER_FIT)

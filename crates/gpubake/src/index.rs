@@ -1,7 +1,9 @@
 //! One point set on the GPU: in Morton order, as two f32s a coordinate, with its order.
 
 use crate::cells::SortedPoints;
-use crate::dispatch::{bind, groups, record, uniform};
+use slosh_mls::SurfaceError;
+
+use crate::dispatch::{Stamps, bind, groups, record, uniform};
 use crate::layout::SearchParams;
 use crate::passes::GpuSearch;
 
@@ -48,8 +50,9 @@ impl GpuIndex<'_> {
         ]
     }
 
-    /// Records and submits `dispatch`.
-    pub(crate) fn submit(&self, dispatch: Dispatch<'_>) {
+    /// Records and submits `dispatch`; where the device has timestamps, waits for it and adds
+    /// its GPU time to the search's.
+    pub(crate) fn submit(&self, dispatch: Dispatch<'_>) -> Result<(), SurfaceError> {
         let gpu = self.search.gpu();
         let (x, y, row_threads) = groups(gpu, dispatch.count as u32);
         let params = uniform(
@@ -81,7 +84,18 @@ impl GpuIndex<'_> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("neighbour search"),
             });
-        record(&mut encoder, dispatch.pipeline, &group, (x, y));
+        let stamps = Stamps::new(gpu);
+        record(
+            &mut encoder,
+            dispatch.pipeline,
+            &group,
+            (x, y),
+            stamps.as_ref(),
+        );
         gpu.queue.submit([encoder.finish()]);
+        if let Some(stamps) = stamps {
+            self.search.add_gpu_seconds(stamps.seconds(gpu)?);
+        }
+        Ok(())
     }
 }

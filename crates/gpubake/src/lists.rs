@@ -99,12 +99,12 @@ pub(crate) fn lists(
                 (8, list_start),
                 (9, lists_out),
             ],
-        });
+        })
     };
     // The cut pass reads no offsets and writes no lists: two buffers of their own, since one
     // buffer may not be bound read-only and writable at once.
     let (no_starts, no_lists) = (output(gpu, "no offsets", 16), output(gpu, "no lists", 16));
-    pass(&search.cut, 0, n, 0, &no_starts, &no_lists);
+    pass(&search.cut, 0, n, 0, &no_starts, &no_lists)?;
     let cuts: Vec<[u32; 4]> = read_back(gpu, &cut, cut_bytes)?;
 
     // Offsets in sorted order.
@@ -151,7 +151,7 @@ pub(crate) fn lists(
                 start[first],
                 &start_buffer,
                 &lists_out,
-            );
+            )?;
         }
         // Fitted where the lists are, before they are read back.
         if let Some(inputs) = &fit_inputs {

@@ -41,7 +41,7 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
             flags: 0,
             out_base: 0,
             buffers: &[(4, &out)],
-        });
+        })?;
         sorted_ids.extend(read_back::<u32>(gpu, &out, bytes)?);
     }
     if sorted.identity {

@@ -1,5 +1,6 @@
 //! The search passes, compiled once for a device and shared by every step in flight.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use slosh_render::Gpu;
@@ -25,6 +26,8 @@ pub struct GpuSearch {
     fits_pipeline_layout: wgpu::PipelineLayout,
     /// The initial fits' pipeline per degree (1–3), built on first use.
     fits: [OnceLock<wgpu::ComputePipeline>; 3],
+    /// GPU nanoseconds of every pass run so far (where the device has timestamps).
+    gpu_nanos: AtomicU64,
 }
 
 /// Bindings every pass reads: positions, original indices, cell starts, residuals.
@@ -113,7 +116,22 @@ impl GpuSearch {
             fits_layout,
             fits_pipeline_layout,
             fits: Default::default(),
+            gpu_nanos: AtomicU64::new(0),
         })
+    }
+
+    /// GPU seconds of every pass this search has run (timestamp queries, not wall time:
+    /// transfers and the host's work are not in it), or `None` where the device has no
+    /// timestamps. Read before and after a bake for that bake's GPU time.
+    pub fn gpu_seconds(&self) -> Option<f64> {
+        self.gpu
+            .timestamps
+            .then(|| self.gpu_nanos.load(Ordering::Relaxed) as f64 * 1e-9)
+    }
+
+    pub(crate) fn add_gpu_seconds(&self, seconds: f64) {
+        self.gpu_nanos
+            .fetch_add((seconds * 1e9).round() as u64, Ordering::Relaxed);
     }
 
     /// Compiles the initial fits for `degree` now rather than in the first step's bake (a

@@ -326,6 +326,7 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
         }),
     };
     let cpu = KdSearch.index(&points).unwrap().lists(request).unwrap();
+    let before = whole.gpu_seconds();
     let (small_index, whole_index) = (small.index(&points).unwrap(), whole.index(&points).unwrap());
     let (batched, once) = (
         small_index.lists(request).unwrap(),
@@ -341,6 +342,10 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
     }
     assert_eq!(batched.reach, cpu.reach);
     assert_eq!(batched.fits, once.fits);
+    // The passes' GPU time is counted, where the device writes timestamps.
+    if let (Some(a), Some(b)) = (before, whole.gpu_seconds()) {
+        assert!(b > a, "no GPU time counted ({a} then {b} s)");
+    }
     assert!(batched.fits.as_ref().unwrap().iter().all(Option::is_some));
     let count = NonZero::new(9).unwrap();
     assert_eq!(

@@ -163,6 +163,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         let mut encoded = Vec::new();
         let mut last_baked = None;
         let mut gpu_runs: Vec<TimedStep> = Vec::new();
+        let mut gpu_times: Vec<f64> = Vec::new();
         // Baseline and bake (and the bake with the GPU's neighbours) alternate, so that all
         // see the same machine load.
         for _ in 0..runs {
@@ -175,7 +176,11 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             encoded = step.encoded;
             last_baked = Some(step.baked);
             if let Ok(search) = &args.gpu {
+                let before = search.gpu_seconds();
                 gpu_runs.push(bake_and_encode(&inp, &params, search.as_ref())?);
+                if let (Some(a), Some(b)) = (before, search.gpu_seconds()) {
+                    gpu_times.push(b - a);
+                }
             }
         }
         let Some(baked) = last_baked else {
@@ -209,6 +214,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         };
         let gpu = (!gpu_runs.is_empty()).then(|| GpuBakeRow {
             total: median(gpu_runs.iter().map(|r| r.seconds).collect()),
+            gpu_time: (!gpu_times.is_empty()).then(|| median(gpu_times.clone())),
             nearest: gpu_stage("kd-tree and radii (kNN)"),
             lists: gpu_stage("neighbour lists"),
             fits: gpu_stage("initial fits"),

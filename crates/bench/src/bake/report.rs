@@ -33,6 +33,9 @@ pub struct PeerRow {
 #[derive(Debug, Clone, PartialEq)]
 pub struct GpuBakeRow {
     pub total: f64,
+    /// The GPU's own time in the bake (timestamp queries of its passes), where the device
+    /// has timestamps.
+    pub gpu_time: Option<f64>,
     /// kNN and radii, neighbour lists, initial fits: on the GPU, then in the CPU bake of the
     /// same runs.
     pub nearest: f64,
@@ -132,9 +135,11 @@ impl BakeReport {
              {adapter} (`crates/gpubake`; each stage's time includes its transfers), everything \
              else on the CPU's {} threads; each run alternates with the CPU bake above. \
              splashsurf as above.\n\n\
-             | points | CPU bake | GPU bake | speed-up | kNN + radii CPU / GPU | \
+             *GPU time* is the passes' own (timestamp queries), which the stages' wall times \
+             include with their transfers and host work.\n\n\
+             | points | CPU bake | GPU bake | speed-up | GPU time | kNN + radii CPU / GPU | \
              neighbour lists CPU / GPU | initial fits CPU / GPU | against splashsurf |\n\
-             |---|---|---|---|---|---|---|---|",
+             |---|---|---|---|---|---|---|---|---|",
             self.threads
         );
         let ms = |s: f64| format!("{:.1} ms", s * 1e3);
@@ -142,11 +147,12 @@ impl BakeReport {
             let Some(g) = &r.gpu else { continue };
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.2}× | {} / {} | {} / {} | {} / {} | {} |",
+                "| {} | {} | {} | {:.2}× | {} | {} / {} | {} / {} | {} / {} | {} |",
                 r.points,
                 ms(r.total),
                 ms(g.total),
                 r.total / g.total,
+                g.gpu_time.map_or("no timestamps".into(), ms),
                 ms(g.cpu_nearest),
                 ms(g.nearest),
                 ms(g.cpu_lists),
