@@ -1,9 +1,16 @@
 // The nearest points of every point (crates/gpubake/src/nearest.rs): shells of cells around
-// the point's own, until no unvisited cell can hold a nearer point. Follows neighbour_grid.wgsl.
+// the point's own, until no unvisited cell can hold a nearer point, or `shells` of them: a
+// point that needs more (an outlier far from the rest) is marked and searched again on a
+// coarser grid, so that no thread walks a whole sparse grid. Follows neighbour_grid.wgsl.
 // NEAREST_MAX is prepended from Rust.
 
-// The caller's indices of each point's nearest, nearest first, for the dispatch's points.
+// The caller's indices of each point's nearest, nearest first, for the dispatch's points;
+// UNFINISHED first where the shells ran out.
 @group(0) @binding(4) var<storage, read_write> nearest_out: array<u32>;
+// With flag 8, the sorted positions of the dispatch's points (else first + k).
+@group(0) @binding(5) var<storage, read> todo: array<u32>;
+
+const UNFINISHED: u32 = 0xffffffffu;
 
 // (d², id) ordered by distance, then index.
 fn before(d2: f32, id: u32, other_d2: f32, other_id: u32) -> bool {
@@ -16,7 +23,10 @@ fn nearest(@builtin(global_invocation_id) gid: vec3<u32>) {
     if k >= params.count {
         return;
     }
-    let t = params.first + k;
+    var t = params.first + k;
+    if (params.flags & 8u) != 0u {
+        t = todo[k];
+    }
     let p = positions[t].xyz;
     let p_low = residuals[t].xyz;
     let wanted = params.wanted;
@@ -26,7 +36,9 @@ fn nearest(@builtin(global_invocation_id) gid: vec3<u32>) {
     let c = cell_of(p);
     let side = i32(params.side);
     let cell_size = 1.0 / params.lo.w;
-    for (var s = 0; s <= side; s += 1) {
+    let last_shell = min(side, i32(params.shells));
+    var finished = false;
+    for (var s = 0; s <= last_shell; s += 1) {
         for (var dz = -s; dz <= s; dz += 1) {
             let z = c.z + dz;
             if z < 0 || z >= side {
@@ -73,13 +85,19 @@ fn nearest(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
         }
-        // Every unvisited cell lies at least s cells beyond the point's own.
+        // Every unvisited cell lies at least s cells beyond the point's own; past the grid's
+        // side there is none.
         let clear = f32(s) * cell_size - params.margin;
-        if found == wanted && clear > 0.0 && best_d2[wanted - 1u] <= clear * clear {
+        if found == wanted && ((clear > 0.0 && best_d2[wanted - 1u] <= clear * clear) || s >= side) {
+            finished = true;
             break;
         }
     }
     let base = k * wanted;
+    if !finished {
+        nearest_out[base] = UNFINISHED;
+        return;
+    }
     for (var i = 0u; i < wanted; i += 1u) {
         nearest_out[base + i] = best_id[i];
     }

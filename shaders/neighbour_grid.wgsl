@@ -22,6 +22,11 @@ struct SearchParams {
     row_threads: u32,
     // Added to every reach when picking cells.
     margin: f32,
+    // nearest: the most shells of cells a point searches before it is left to a coarser grid.
+    shells: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: SearchParams;

@@ -20,6 +20,8 @@ pub(crate) struct Dispatch<'b> {
     pub wanted: usize,
     pub flags: u32,
     pub out_base: u32,
+    /// `SearchParams::shells` (the nearest-points pass).
+    pub shells: u32,
     /// The pass's own buffers, by binding.
     pub buffers: &'b [(u32, &'b wgpu::Buffer)],
 }
@@ -67,6 +69,10 @@ impl GpuIndex<'_> {
                 out_base: dispatch.out_base,
                 row_threads,
                 margin: self.margin as f32,
+                shells: dispatch.shells,
+                _pad0: 0,
+                _pad1: 0,
+                _pad2: 0,
             },
         );
         let grid = [

@@ -24,6 +24,10 @@ pub struct SearchParams {
     pub out_base: u32,
     pub row_threads: u32,
     pub margin: f32,
+    pub shells: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// `Settings` in `shaders/bake_fit.wgsl`.
@@ -48,6 +52,11 @@ pub(crate) const FLAG_LINKS: u32 = 2;
 /// `SearchParams::flags`: the caller's points came in Morton order, so a walk meets them in
 /// index order.
 pub(crate) const FLAG_SORTED: u32 = 4;
+/// `SearchParams::flags`: the dispatch's points are the `todo` list's (the nearest-points pass).
+pub(crate) const FLAG_TODO: u32 = 8;
+
+/// Where the nearest-points pass gave up (`UNFINISHED` in `shaders/nearest.wgsl`).
+pub(crate) const UNFINISHED: u32 = u32::MAX;
 
 /// Where the lists pass marks a link (`LINK_BIT` in `shaders/lists.wgsl`).
 pub(crate) const LINK_BIT: u32 = 0x8000_0000;

@@ -91,6 +91,7 @@ pub(crate) fn lists(
             wanted: cap,
             flags,
             out_base,
+            shells: 0,
             buffers: &[
                 (4, &reach_buffer),
                 (5, &normals_buffer),

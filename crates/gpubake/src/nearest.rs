@@ -6,10 +6,14 @@ use slosh_mls::SurfaceError;
 
 use crate::dispatch::{gpu_error, output, read_back, storage};
 use crate::index::{Dispatch, GpuIndex};
-use crate::layout::NEAREST_MAX;
+use crate::layout::{FLAG_TODO, NEAREST_MAX, UNFINISHED};
 
 /// Points per occupied cell the nearest-points grid aims at.
 const POINTS_PER_CELL: f64 = 4.0;
+
+/// Shells of cells a point searches on one grid: its nearest 17 lie within one or two where
+/// occupied cells hold a few points; an outlier goes on to a coarser grid.
+const SHELLS: u32 = 3;
 
 pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, SurfaceError> {
     if count > NEAREST_MAX {
@@ -21,28 +25,60 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
     let sorted = &index.sorted;
     let gpu = index.search.gpu();
     let n = sorted.len();
-    let level = sorted.level_for_occupancy(POINTS_PER_CELL, sorted.max_level(gpu.max_binding()));
-    let starts = storage(gpu, "cell starts", &sorted.cell_starts(level));
     let per_point = (count * 4) as u64;
     let per_batch = (index.search.output_limit() / per_point).max(1) as usize;
-    let mut sorted_ids: Vec<u32> = Vec::with_capacity(n * count);
-    for first in (0..n).step_by(per_batch) {
-        let len = per_batch.min(n - first);
-        let bytes = len as u64 * per_point;
-        let out = output(gpu, "nearest points", bytes);
-        index.submit(Dispatch {
-            pipeline: &index.search.nearest,
-            layout: &index.search.nearest_layout,
-            level,
-            cell_starts: &starts,
-            first,
-            count: len,
-            wanted: count,
-            flags: 0,
-            out_base: 0,
-            buffers: &[(4, &out)],
-        })?;
-        sorted_ids.extend(read_back::<u32>(gpu, &out, bytes)?);
+    let mut level =
+        sorted.level_for_occupancy(POINTS_PER_CELL, sorted.max_level(gpu.max_binding()));
+    let mut sorted_ids: Vec<u32> = vec![UNFINISHED; n * count];
+    // Every point first; then those the shells did not satisfy (outliers far from the rest),
+    // on grids of cells four times wider, until a grid of two cells a side visits them all.
+    let mut todo: Option<Vec<u32>> = None;
+    loop {
+        let starts = storage(gpu, "cell starts", &sorted.cell_starts(level));
+        let points = todo.as_ref().map_or(n, Vec::len);
+        let mut unfinished: Vec<u32> = Vec::new();
+        for first in (0..points).step_by(per_batch) {
+            let len = per_batch.min(points - first);
+            let bytes = len as u64 * per_point;
+            let out = output(gpu, "nearest points", bytes);
+            let todo_buffer = match &todo {
+                Some(t) => storage(gpu, "nearest todo", &t[first..first + len]),
+                None => output(gpu, "no todo", 16),
+            };
+            index.submit(Dispatch {
+                pipeline: &index.search.nearest,
+                layout: &index.search.nearest_layout,
+                level,
+                cell_starts: &starts,
+                first: if todo.is_some() { 0 } else { first },
+                count: len,
+                wanted: count,
+                flags: if todo.is_some() { FLAG_TODO } else { 0 },
+                out_base: 0,
+                shells: SHELLS,
+                buffers: &[(4, &out), (5, &todo_buffer)],
+            })?;
+            let found: Vec<u32> = read_back(gpu, &out, bytes)?;
+            for (k, ids) in found.chunks(count).enumerate() {
+                let t = todo.as_ref().map_or(first + k, |t| t[first + k] as usize);
+                if ids[0] == UNFINISHED {
+                    unfinished.push(t as u32);
+                } else {
+                    sorted_ids[t * count..][..count].copy_from_slice(ids);
+                }
+            }
+        }
+        if unfinished.is_empty() {
+            break;
+        }
+        if level == 1 {
+            return Err(gpu_error(format!(
+                "{} points found fewer than {count} nearest points on a grid of two cells a side",
+                unfinished.len()
+            )));
+        }
+        level = level.saturating_sub(2).max(1);
+        todo = Some(unfinished);
     }
     if sorted.identity {
         return Ok(sorted_ids);

@@ -39,7 +39,7 @@ impl GpuSearch {
         let nearest_layout = layout(
             &gpu,
             "nearest points",
-            &[GRID_BINDINGS.as_slice(), &[(4, true)]].concat(),
+            &[GRID_BINDINGS.as_slice(), &[(4, true), (5, false)]].concat(),
         );
         let lists_layout = layout(
             &gpu,

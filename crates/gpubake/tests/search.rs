@@ -264,7 +264,11 @@ fn the_search_params_mirror_the_wgsl_layout() {
                 flags,
                 out_base,
                 row_threads,
-                margin
+                margin,
+                shells,
+                _pad0,
+                _pad1,
+                _pad2
             ]
         );
     }
