@@ -346,6 +346,38 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
     }
     assert_eq!(batched.reach, cpu.reach);
     assert_eq!(batched.fits, once.fits);
+    // The same points shuffled (the path for points not in Morton order): each point's fit
+    // as before, but for the order its neighbours are summed in.
+    assert_ne!(n % 7919, 0);
+    let shuffle = |i: usize| i * 7919 % n;
+    let shuffled: Vec<[f64; 3]> = (0..n).map(|i| points[shuffle(i)]).collect();
+    let shuffled_normals: Vec<Option<[f64; 3]>> = (0..n).map(|i| normals[shuffle(i)]).collect();
+    let shuffled_reach: Vec<f64> = (0..n).map(|i| reach[shuffle(i)]).collect();
+    let shuffled_fits = whole
+        .index(&shuffled)
+        .unwrap()
+        .lists(ListRequest {
+            reach: &shuffled_reach,
+            normals: Some(&shuffled_normals),
+            ..request
+        })
+        .unwrap()
+        .fits
+        .unwrap();
+    let fits = once.fits.as_ref().unwrap();
+    for (i, f) in shuffled_fits.iter().enumerate() {
+        let (a, b) = (f.unwrap(), fits[shuffle(i)].unwrap());
+        let apart = (0..3)
+            .map(|k| (a.normal[k] - b.normal[k]).abs())
+            .fold(0.0, f32::max);
+        assert!(
+            apart < 1e-5,
+            "point {i}: normals {:?} and {:?}",
+            a.normal,
+            b.normal
+        );
+        assert_eq!(a.poly.degree, b.poly.degree, "point {i}");
+    }
     // The passes' GPU time is counted, where the device writes timestamps.
     if let (Some(a), Some(b)) = (before, whole.gpu_seconds()) {
         assert!(b > a, "no GPU time counted ({a} then {b} s)");
