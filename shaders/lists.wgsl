@@ -18,15 +18,21 @@
 @group(0) @binding(6) var<storage, read> link2: array<f32>;
 // Per point of the set: the cut's distance bits and the index of the point it falls on (all
 // ones: nothing cut), how many the list keeps, and whether the cap cut it (at or above the cap
-// within reach).
+// within reach) in bit 0 with the grid's level above it (DEFERRED: not yet cut).
 @group(0) @binding(7) var<storage, read_write> cut: array<vec4<u32>>;
 // Per point of the set: where its list begins among all lists (write only).
 @group(0) @binding(8) var<storage, read> list_start: array<u32>;
 // The dispatch's lists, from slot `out_base`: each id, with LINK_BIT where it is a link.
 @group(0) @binding(9) var<storage, read_write> lists_out: array<u32>;
+// With flag 8, the sorted positions of the dispatch's points (else first + k).
+@group(0) @binding(11) var<storage, read> todo: array<u32>;
 
 const LINK_BIT: u32 = 0x80000000u;
 const ALL: u32 = 0xffffffffu;
+// cut[t].w of a point whose reach spans more cells than MOST_CELLS: left to a coarser grid, so
+// that no thread walks a whole sparse grid (an isolated particle's reach with h per point).
+const DEFERRED: u32 = 0xffffffffu;
+const MOST_CELLS: u32 = 4096u;
 
 const BIN_COUNT: u32 = 0u;
 const DISTANCE_DIGIT: u32 = 1u;
@@ -232,6 +238,14 @@ fn select_value(mode: u32, need_first: u32) -> Selected {
     return Selected(select_prefix, need, equal);
 }
 
+// The sorted position of the dispatch's k-th point.
+fn point_of(k: u32) -> u32 {
+    if (params.flags & 8u) != 0u {
+        return todo[k];
+    }
+    return params.first + k;
+}
+
 fn begin(t: u32) {
     centre = positions[t].xyz;
     centre_low = residuals[t].xyz;
@@ -286,8 +300,15 @@ fn cut_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     if k >= params.count {
         return;
     }
-    let t = params.first + k;
+    let t = point_of(k);
     begin(t);
+    let level = countTrailingZeros(params.side);
+    let r = sqrt(reach2) + params.margin;
+    let box = cell_of(centre + vec3<f32>(r)) - cell_of(centre - vec3<f32>(r)) + vec3<i32>(1);
+    if u32(box.x) * u32(box.y) * u32(box.z) > MOST_CELLS && level > 1u {
+        cut[t] = vec4<u32>(ALL, ALL, 0u, DEFERRED);
+        return;
+    }
     cut_key = ALL;
     cut_id = ALL;
     counted = 0u;
@@ -334,7 +355,7 @@ fn cut_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
             kept = counted;
         }
     }
-    cut[t] = vec4<u32>(cut_key, cut_id, kept, u32(capped));
+    cut[t] = vec4<u32>(cut_key, cut_id, kept, u32(capped) | (level << 1u));
 }
 
 @compute @workgroup_size(64)
@@ -343,7 +364,11 @@ fn write_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     if k >= params.count {
         return;
     }
-    let t = params.first + k;
+    let t = point_of(k);
+    // Points cut on another grid are written by that grid's dispatch.
+    if (cut[t].w >> 1u) != countTrailingZeros(params.side) {
+        return;
+    }
     begin(t);
     cut_key = cut[t].x;
     cut_id = cut[t].y;

@@ -55,6 +55,10 @@ pub(crate) const FLAG_SORTED: u32 = 4;
 /// `SearchParams::flags`: the dispatch's points are the `todo` list's (the nearest-points pass).
 pub(crate) const FLAG_TODO: u32 = 8;
 
+/// `cut[t].w` of a point the lists pass left to a coarser grid (`DEFERRED` in
+/// `shaders/lists.wgsl`).
+pub(crate) const DEFERRED: u32 = u32::MAX;
+
 /// Where the nearest-points pass gave up (`UNFINISHED` in `shaders/nearest.wgsl`).
 pub(crate) const UNFINISHED: u32 = u32::MAX;
 

@@ -7,10 +7,13 @@ use slosh_mls::{InitialFit, ListRequest, NeighbourLists, Neighbours, SurfaceErro
 
 use crate::dispatch::{gpu_error, output, read_back, storage};
 use crate::index::{Dispatch, GpuIndex};
-use crate::layout::{FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, LINK_BIT};
+use crate::layout::{DEFERRED, FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, FLAG_TODO, LINK_BIT};
 
 /// (point, neighbour) within the link distance.
 type Link = (u32, u32);
+
+/// The most points of one dispatch over a list of points.
+const MAX_TODO: usize = 1 << 20;
 
 /// Points per piece of the lists' assembly (a task, and a piece of the links): the CPU lists
 /// stage's blocks, whose links the spray joins piece by piece in parallel.
@@ -75,38 +78,84 @@ pub(crate) fn lists(
         )));
     }
     let cut = output(gpu, "list cuts", cut_bytes);
-    let pass = |pipeline: &wgpu::ComputePipeline,
-                first: usize,
-                count: usize,
-                out_base: u32,
-                list_start: &wgpu::Buffer,
-                lists_out: &wgpu::Buffer| {
+    // One dispatch of the cut or the write pass: points first.. (or `todo`'s) on the grid of
+    // `level`.
+    struct Pass<'p> {
+        pipeline: &'p wgpu::ComputePipeline,
+        level: u32,
+        starts: &'p wgpu::Buffer,
+        first: usize,
+        count: usize,
+        todo: Option<&'p [u32]>,
+        out_base: u32,
+        list_start: &'p wgpu::Buffer,
+        lists_out: &'p wgpu::Buffer,
+    }
+    let pass = |p: Pass<'_>| {
+        let todo = match p.todo {
+            Some(t) => storage(gpu, "lists todo", t),
+            None => output(gpu, "no todo", 16),
+        };
         index.submit(Dispatch {
-            pipeline,
+            pipeline: p.pipeline,
             layout: &search.lists_layout,
-            level,
-            cell_starts: &starts,
-            first,
-            count,
+            level: p.level,
+            cell_starts: p.starts,
+            first: p.first,
+            count: p.count,
             wanted: cap,
-            flags,
-            out_base,
+            flags: flags | if p.todo.is_some() { FLAG_TODO } else { 0 },
+            out_base: p.out_base,
             shells: 0,
             buffers: &[
                 (4, &reach_buffer),
                 (5, &normals_buffer),
                 (6, &link_buffer),
                 (7, &cut),
-                (8, list_start),
-                (9, lists_out),
+                (8, p.list_start),
+                (9, p.lists_out),
+                (11, &todo),
             ],
         })
     };
     // The cut pass reads no offsets and writes no lists: two buffers of their own, since one
     // buffer may not be bound read-only and writable at once.
     let (no_starts, no_lists) = (output(gpu, "no offsets", 16), output(gpu, "no lists", 16));
-    pass(&search.cut, 0, n, 0, &no_starts, &no_lists)?;
-    let cuts: Vec<[u32; 4]> = read_back(gpu, &cut, cut_bytes)?;
+    let cut_pass = |level: u32, starts: &wgpu::Buffer, todo: Option<&[u32]>| {
+        pass(Pass {
+            pipeline: &search.cut,
+            level,
+            starts,
+            first: 0,
+            count: todo.map_or(n, <[u32]>::len),
+            todo,
+            out_base: 0,
+            list_start: &no_starts,
+            lists_out: &no_lists,
+        })
+    };
+    cut_pass(level, &starts, None)?;
+    let mut cuts: Vec<[u32; 4]> = read_back(gpu, &cut, cut_bytes)?;
+    // Points whose reach spans too many cells (DEFERRED), cut again on grids four times
+    // coarser until none is left: each grid's level, cell table and points.
+    let mut coarser: Vec<(u32, wgpu::Buffer, Vec<u32>)> = Vec::new();
+    let mut deferred: Vec<u32> = (0..n as u32)
+        .filter(|&t| cuts[t as usize][3] == DEFERRED)
+        .collect();
+    let mut coarse_level = level;
+    while !deferred.is_empty() {
+        coarse_level = coarse_level.saturating_sub(2).max(1);
+        let coarse_starts = storage(gpu, "cell starts", &sorted.cell_starts(coarse_level));
+        for todo in deferred.chunks(MAX_TODO) {
+            cut_pass(coarse_level, &coarse_starts, Some(todo))?;
+        }
+        cuts = read_back(gpu, &cut, cut_bytes)?;
+        let (still, done): (Vec<u32>, Vec<u32>) = deferred
+            .iter()
+            .partition(|&&t| cuts[t as usize][3] == DEFERRED);
+        coarser.push((coarse_level, coarse_starts, done));
+        deferred = still;
+    }
 
     // Offsets in sorted order.
     let mut start = vec![0u64; n + 1];
@@ -145,14 +194,29 @@ pub(crate) fn lists(
         let count = u64::from(start[last] - start[first]);
         let lists_out = output(gpu, "lists", count * 4);
         if count > 0 {
-            pass(
-                &search.write,
-                first,
-                last - first,
-                start[first],
-                &start_buffer,
-                &lists_out,
-            )?;
+            let out_base = start[first];
+            let write = |level, starts, first, count, todo| {
+                pass(Pass {
+                    pipeline: &search.write,
+                    level,
+                    starts,
+                    first,
+                    count,
+                    todo,
+                    out_base,
+                    list_start: &start_buffer,
+                    lists_out: &lists_out,
+                })
+            };
+            write(level, &starts, first, last - first, None)?;
+            // The batch's points cut on coarser grids, each on its own.
+            for (coarse_level, coarse_starts, points) in &coarser {
+                let lo = points.partition_point(|&t| (t as usize) < first);
+                let hi = points.partition_point(|&t| (t as usize) < last);
+                for todo in points[lo..hi].chunks(MAX_TODO) {
+                    write(*coarse_level, coarse_starts, 0, todo.len(), Some(todo))?;
+                }
+            }
         }
         // Fitted where the lists are, before they are read back.
         if let Some(inputs) = &fit_inputs {
@@ -214,7 +278,7 @@ pub(crate) fn lists(
             .into_par_iter()
             .map(|t| {
                 let (c, i) = (cuts[t], order[t] as usize);
-                if c[3] == 0 {
+                if c[3] & 1 == 0 {
                     return request.reach[i];
                 }
                 let list = &words[start[t] as usize..start[t + 1] as usize];
@@ -232,7 +296,7 @@ pub(crate) fn lists(
         }
         reach
     };
-    let capped = cuts.iter().filter(|c| c[3] != 0).count();
+    let capped = cuts.iter().filter(|c| c[3] & 1 != 0).count();
     let lists = if sorted.identity {
         Neighbours::from_csr(start, words)
     } else {

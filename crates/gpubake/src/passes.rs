@@ -53,6 +53,7 @@ impl GpuSearch {
                     (7, true),
                     (8, false),
                     (9, true),
+                    (11, false),
                 ],
             ]
             .concat(),

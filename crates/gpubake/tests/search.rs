@@ -40,8 +40,8 @@ struct Case {
     cap: usize,
 }
 
-fn scene_case(kind: SceneKind, hard: HardCases, shuffle: bool) -> Case {
-    let mut spec = SceneSpec::new(kind, 3000, 7);
+fn scene_case(kind: SceneKind, points: usize, hard: HardCases, shuffle: bool) -> Case {
+    let mut spec = SceneSpec::new(kind, points, 7);
     spec.hard = hard;
     let scene = Scene::new(spec).unwrap();
     let (mut points, mut normals) = scene.particles(0).surface_arrays();
@@ -132,7 +132,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
     let Some(search) = gpu_search() else { return };
     let mut cases: Vec<Case> = SceneKind::ALL
         .iter()
-        .map(|&kind| scene_case(kind, HardCases::default(), false))
+        .map(|&kind| scene_case(kind, 3000, HardCases::default(), false))
         .collect();
     let hard = HardCases {
         noise: 0.1,
@@ -142,8 +142,28 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
         density_jump: 10.0,
         ..HardCases::default()
     };
-    cases.push(scene_case(SceneKind::Sphere, hard.clone(), false));
-    cases.push(scene_case(SceneKind::Wave, hard, true));
+    cases.push(scene_case(SceneKind::Sphere, 3000, hard.clone(), false));
+    // An isolated particle whose reach spans the whole set (h per point makes an isolated
+    // particle's reach that wide): its cells are cut on coarser grids.
+    let mut wide = scene_case(
+        SceneKind::Sphere,
+        12000,
+        HardCases {
+            isolated: true,
+            ..HardCases::default()
+        },
+        false,
+    );
+    let (lo, hi) = slosh_mls::bounds(&wide.points);
+    let diagonal = d2(lo, hi).sqrt();
+    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+    let far = (0..wide.points.len())
+        .max_by(|&a, &b| d2(wide.points[a], centre).total_cmp(&d2(wide.points[b], centre)))
+        .unwrap();
+    wide.reach[far] = 1.01 * diagonal;
+    wide.name = "sphere, isolated, reach over all".into();
+    cases.push(wide);
+    cases.push(scene_case(SceneKind::Wave, 3000, hard, true));
     cases.push(lattice_case());
     let (mut some_capped, mut some_uncapped) = (false, false);
     for case in &cases {
