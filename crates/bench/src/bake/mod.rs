@@ -149,6 +149,8 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     // Each size's step alone on every core, for the series table.
     let mut one_step: Vec<(usize, f64)> = Vec::new();
+    // The same with the GPU's stages, where they ran.
+    let mut gpu_one_step: Vec<(usize, f64)> = Vec::new();
     for &n in &sizes {
         let (inp, spacing) = input(n);
         let runs = if n >= 1_000_000 { 1 } else { args.runs };
@@ -222,6 +224,9 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             cpu_lists: stage("neighbour lists"),
             cpu_fits: stage("initial fits"),
         });
+        if let Some(g) = &gpu {
+            gpu_one_step.push((n, g.total));
+        }
         peer_rows.push(PeerRow {
             points: n,
             total,
@@ -303,7 +308,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             encodings_step = Some(baked);
         }
     }
-    let (scaling, series) = scaling_and_series(args, &sizes, &params, &one_step)?;
+    let (scaling, series) = scaling_and_series(args, &sizes, &params, [&one_step, &gpu_one_step])?;
 
     // Encodings measured on the 100k (or largest) step's sections.
     let Some(baked) = encodings_step else {
@@ -436,7 +441,7 @@ fn scaling_and_series(
     args: &Settings,
     sizes: &[usize],
     params: &BakeParams,
-    one_step: &[(usize, f64)],
+    [cpu_one_step, gpu_one_step]: [&[(usize, f64)]; 2],
 ) -> Result<(Vec<ScalingRow>, Vec<SeriesRow>)> {
     let cores = slosh_bake::cores();
     let mut scaling = Vec::new();
@@ -485,41 +490,57 @@ fn scaling_and_series(
     if args.series == 0 {
         return Ok((scaling, series));
     }
+    // The CPU bake, then (where an adapter opened) the bake with the GPU's stages.
+    let mut searches: Vec<(
+        &'static str,
+        std::sync::Arc<dyn slosh_mls::NeighbourSearch>,
+        _,
+    )> = vec![("cpu", slosh_bake::cpu_search(), cpu_one_step)];
+    if let Ok(search) = &args.gpu {
+        searches.push(("gpu", search.clone(), gpu_one_step));
+    }
     for &n in sizes {
-        let Some(&(_, alone)) = one_step.iter().find(|(m, _)| *m == n) else {
-            continue;
-        };
-        let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, n, 1))?;
-        let source = SceneSteps {
-            scene,
-            steps: args.series,
-        };
-        let (jobs, _) = slosh_bake::default_jobs(cores, slosh_bake::available_memory(), Some(n));
-        let dir = tempfile::tempdir()?;
-        let opts = BatchOptions {
-            out: dir.path().to_path_buf(),
-            steps: None,
-            jobs,
-            threads: cores,
-            shard: Shard::WHOLE,
-            params: params.clone(),
-            search: slosh_bake::cpu_search(),
-        };
-        let t = Instant::now();
-        let report = run_batch(&source, &opts, &|_| {})?;
-        let wall = t.elapsed().as_secs_f64();
-        if !report.failed.is_empty() {
-            anyhow::bail!("the series bake failed: {:?}", report.failed);
+        for (device, search, one_step) in &searches {
+            let Some(&(_, alone)) = one_step.iter().find(|(m, _)| *m == n) else {
+                continue;
+            };
+            let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, n, 1))?;
+            let source = SceneSteps {
+                scene,
+                steps: args.series,
+            };
+            let (jobs, _) =
+                slosh_bake::default_jobs(cores, slosh_bake::available_memory(), Some(n));
+            let dir = tempfile::tempdir()?;
+            let opts = BatchOptions {
+                out: dir.path().to_path_buf(),
+                steps: None,
+                jobs,
+                threads: cores,
+                shard: Shard::WHOLE,
+                params: params.clone(),
+                search: search.clone(),
+            };
+            let t = Instant::now();
+            let report = run_batch(&source, &opts, &|_| {})?;
+            let wall = t.elapsed().as_secs_f64();
+            if !report.failed.is_empty() {
+                anyhow::bail!("the {device} series bake failed: {:?}", report.failed);
+            }
+            let per = wall / args.series as f64;
+            series.push(SeriesRow {
+                device,
+                points: n,
+                jobs,
+                wall,
+                per_step: per,
+                one_step: alone,
+            });
+            eprintln!(
+                "{n} points, series of {} ({device}): {per:.3} s per step",
+                args.series
+            );
         }
-        let per = wall / args.series as f64;
-        series.push(SeriesRow {
-            points: n,
-            jobs,
-            wall,
-            per_step: per,
-            one_step: alone,
-        });
-        eprintln!("{n} points, series of {}: {per:.3} s per step", args.series);
     }
     Ok((scaling, series))
 }

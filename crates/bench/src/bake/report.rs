@@ -93,6 +93,8 @@ pub struct ScalingRow {
 /// One size's series through the batch driver, beside one step alone (seconds).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SeriesRow {
+    /// Where the neighbours and fits were found: "cpu", or "gpu" (`--device gpu`).
+    pub device: &'static str,
     pub points: usize,
     pub jobs: usize,
     pub wall: f64,
@@ -370,22 +372,26 @@ impl BakeReport {
              as `slosh bake` runs it (generated in memory instead of read; compressed, verified and written \
              to a temporary directory), with the `--jobs` it would choose here, on all {} cores. \
              *One step* is the same size's step alone on all cores, from the first table (baked and encoded, \
-             not verified or written).\n\n| points | jobs | wall | per step | points/s | one step | per step / one step |\n|---|---|---|---|---|---|---|",
+             not verified or written); the *gpu* rows bake with the GPU's stages (`--device gpu`), their one \
+             step from the GPU table.\n\n| points | device | jobs | wall | per step | steps/s | points/s | one step | per step / one step |\n|---|---|---|---|---|---|---|---|---|",
             self.settings.series, self.cores
         );
         for r in &self.series {
             let _ = writeln!(
                 series,
-                "| {} | {} | {:.2} s | {:.1} ms | {:.0}k | {:.1} ms | {:.2}× |",
+                "| {} | {} | {} | {:.2} s | {:.1} ms | {:.1} | {:.0}k | {:.1} ms | {:.2}× |",
                 r.points,
+                r.device,
                 r.jobs,
                 r.wall,
                 r.per_step * 1e3,
+                1.0 / r.per_step,
                 r.points as f64 / r.per_step / 1e3,
                 r.one_step * 1e3,
                 r.per_step / r.one_step
             );
         }
+        series.push('\n');
         series
     }
 }
