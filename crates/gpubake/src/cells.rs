@@ -60,6 +60,27 @@ impl SortedPoints {
         self.order.len()
     }
 
+    /// The sorted position of each caller's index (the inverse of `order`).
+    pub fn rank(&self) -> Vec<u32> {
+        let mut rank = vec![0u32; self.len()];
+        for (t, &i) in self.order.iter().enumerate() {
+            rank[i as usize] = t as u32;
+        }
+        rank
+    }
+
+    /// Per-point values in sorted order, back in the caller's order.
+    pub fn unsort<T: Copy + Default>(&self, sorted: Vec<T>) -> Vec<T> {
+        if self.identity {
+            return sorted;
+        }
+        let mut out = vec![T::default(); sorted.len()];
+        for (t, &i) in self.order.iter().enumerate() {
+            out[i as usize] = sorted[t];
+        }
+        out
+    }
+
     /// The side of the cube the codes quantise.
     pub fn extent(&self) -> f64 {
         if self.grid.scale > 0.0 {

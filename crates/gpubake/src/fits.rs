@@ -4,9 +4,7 @@
 use rayon::prelude::*;
 use slosh_mls::{FitRequest, InitialFit, NormalsMode, Poly, SurfaceError};
 
-use crate::dispatch::{
-    Stamps, bind, gpu_error, groups, output, read_back, record, storage, uniform,
-};
+use crate::dispatch::{bind, gpu_error, groups, output, read_back, storage, uniform};
 use crate::index::GpuIndex;
 use crate::layout::FitSettings;
 
@@ -34,17 +32,13 @@ pub(crate) fn prepare<'a>(
         .par_iter()
         .map(|&i| (request.h)(i as usize) as f32)
         .collect();
-    let mut rank = vec![0u32; order.len()];
-    for (t, &i) in order.iter().enumerate() {
-        rank[i as usize] = t as u32;
-    }
     Ok(FitInputs {
         pipeline: index
             .search
             .fits_pipeline(request.degree)
             .map_err(gpu_error)?,
         smoothing: storage(gpu, "smoothing lengths", &smoothing),
-        rank: storage(gpu, "ranks", &rank),
+        rank: storage(gpu, "ranks", &index.sorted.rank()),
         has_normals,
         normals_mode: match request.normals {
             NormalsMode::Mean => 0,
@@ -102,23 +96,7 @@ pub(crate) fn fit_batch(
             (8, &out),
         ],
     );
-    let mut encoder = gpu
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("initial fits"),
-        });
-    let stamps = Stamps::new(gpu);
-    record(
-        &mut encoder,
-        inputs.pipeline,
-        &group,
-        (x, y),
-        stamps.as_ref(),
-    );
-    gpu.queue.submit([encoder.finish()]);
-    if let Some(stamps) = stamps {
-        index.search.add_gpu_seconds(stamps.seconds(gpu)?);
-    }
+    index.search.run(inputs.pipeline, &group, (x, y))?;
     let raw: Vec<[f32; 4]> = read_back(gpu, &out, bytes)?;
     Ok(raw
         .par_chunks(VEC4_PER_FIT)

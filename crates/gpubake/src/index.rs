@@ -3,7 +3,7 @@
 use crate::cells::SortedPoints;
 use slosh_mls::SurfaceError;
 
-use crate::dispatch::{Stamps, bind, groups, record, uniform};
+use crate::dispatch::{bind, groups, uniform};
 use crate::layout::SearchParams;
 use crate::passes::GpuSearch;
 
@@ -52,8 +52,7 @@ impl GpuIndex<'_> {
         ]
     }
 
-    /// Records and submits `dispatch`; where the device has timestamps, waits for it and adds
-    /// its GPU time to the search's.
+    /// Records and submits `dispatch` ([`GpuSearch::run`]).
     pub(crate) fn submit(&self, dispatch: Dispatch<'_>) -> Result<(), SurfaceError> {
         let gpu = self.search.gpu();
         let (x, y, row_threads) = groups(gpu, dispatch.count as u32);
@@ -85,23 +84,7 @@ impl GpuIndex<'_> {
         let entries: Vec<(u32, &wgpu::Buffer)> =
             grid.iter().chain(dispatch.buffers).copied().collect();
         let group = bind(gpu, dispatch.layout, &entries);
-        let mut encoder = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("neighbour search"),
-            });
-        let stamps = Stamps::new(gpu);
-        record(
-            &mut encoder,
-            dispatch.pipeline,
-            &group,
-            (x, y),
-            stamps.as_ref(),
-        );
-        gpu.queue.submit([encoder.finish()]);
-        if let Some(stamps) = stamps {
-            self.search.add_gpu_seconds(stamps.seconds(gpu)?);
-        }
+        self.search.run(dispatch.pipeline, &group, (x, y))?;
         Ok(())
     }
 }

@@ -274,7 +274,7 @@ pub(crate) fn lists(
     // member (which could only lie farther where two distances tie within f32).
     let points = index.points;
     let reach_out: Vec<f64> = {
-        let mut by_sorted: Vec<f64> = (0..n)
+        let by_sorted: Vec<f64> = (0..n)
             .into_par_iter()
             .map(|t| {
                 let (c, i) = (cuts[t], order[t] as usize);
@@ -290,11 +290,7 @@ pub(crate) fn lists(
                 far.sqrt().next_up().next_up()
             })
             .collect();
-        let mut reach = vec![0.0f64; n];
-        for (t, &i) in order.iter().enumerate() {
-            reach[i as usize] = std::mem::take(&mut by_sorted[t]);
-        }
-        reach
+        sorted.unsort(by_sorted)
     };
     let capped = cuts.iter().filter(|c| c[3] & 1 != 0).count();
     let lists = if sorted.identity {
@@ -319,13 +315,7 @@ pub(crate) fn lists(
     }
     .ok_or_else(|| gpu_error("the lists read back do not match their counts"))?;
     // Fits in the caller's order.
-    let fits = fit_inputs.map(|_| {
-        let mut fits = vec![None; n];
-        for (t, f) in sorted_fits.into_iter().enumerate() {
-            fits[order[t] as usize] = f;
-        }
-        fits
-    });
+    let fits = fit_inputs.map(|_| sorted.unsort(sorted_fits));
     Ok(NeighbourLists {
         lists,
         reach: reach_out,

@@ -84,11 +84,8 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
         return Ok(sorted_ids);
     }
     // Point i's at [i·count, (i + 1)·count): sorted position t holds point order[t]'s.
-    let mut rank = vec![0u32; n];
-    for (t, &i) in sorted.order.iter().enumerate() {
-        rank[i as usize] = t as u32;
-    }
-    Ok(rank
+    Ok(sorted
+        .rank()
         .par_iter()
         .flat_map_iter(|&t| sorted_ids[t as usize * count..][..count].iter().copied())
         .collect())

@@ -5,7 +5,7 @@ use std::sync::{Arc, OnceLock};
 
 use slosh_render::Gpu;
 
-use crate::dispatch::layout;
+use crate::dispatch::{Stamps, layout, record};
 use crate::layout::{fits_source, lists_source, nearest_source};
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
@@ -130,9 +130,29 @@ impl GpuSearch {
             .then(|| self.gpu_nanos.load(Ordering::Relaxed) as f64 * 1e-9)
     }
 
-    pub(crate) fn add_gpu_seconds(&self, seconds: f64) {
-        self.gpu_nanos
-            .fetch_add((seconds * 1e9).round() as u64, Ordering::Relaxed);
+    /// Records one dispatch of `pipeline` over `group` and submits it; where the device has
+    /// timestamps, waits for it and adds its GPU time to [`GpuSearch::gpu_seconds`].
+    pub(crate) fn run(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        group: &wgpu::BindGroup,
+        groups: (u32, u32),
+    ) -> Result<(), slosh_mls::SurfaceError> {
+        let gpu = &self.gpu;
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("bake pass"),
+            });
+        let stamps = Stamps::new(gpu);
+        record(&mut encoder, pipeline, group, groups, stamps.as_ref());
+        gpu.queue.submit([encoder.finish()]);
+        if let Some(stamps) = stamps {
+            let seconds = stamps.seconds(gpu)?;
+            self.gpu_nanos
+                .fetch_add((seconds * 1e9).round() as u64, Ordering::Relaxed);
+        }
+        Ok(())
     }
 
     /// Compiles the initial fits for `degree` now rather than in the first step's bake (a
