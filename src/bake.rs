@@ -109,7 +109,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         say!("{why}");
     }
     if !cfg.quiet {
-        say!("neighbours found on: {}", cfg.options.search.describe());
+        say!("stages: {}", cfg.options.stages.describe());
     }
     let bar = if cfg.quiet {
         ProgressBar::hidden()

@@ -38,7 +38,7 @@ pub fn bake(a: &BakeBenchArgs) -> bake::Settings {
             slosh_render::Gpu::new(a.adapter.as_deref())
                 .map_err(|e| e.to_string())
                 .and_then(|gpu| {
-                    let search = slosh_gpubake::GpuSearch::new(std::sync::Arc::new(gpu))
+                    let search = slosh_gpubake::GpuStages::new(std::sync::Arc::new(gpu))
                         .map_err(|e| e.to_string())?;
                     // The bench bakes quadratic fits; compiled before anything is timed.
                     search.compile_fits(2).map_err(|e| e.to_string())?;

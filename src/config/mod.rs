@@ -217,22 +217,22 @@ fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {
     Ok(slosh_bake::Shard { index, count })
 }
 
-/// The neighbour search `--device` asks for, its fits for `degree` compiled.
-fn neighbour_search(
+/// The bake's stages where `--device` asks for them, the GPU's fits for `degree` compiled.
+fn bake_stages(
     device: crate::cli::BakeDevice,
     adapter: Option<&str>,
     degree: u8,
-) -> Result<std::sync::Arc<dyn slosh_mls::NeighbourSearch>> {
+) -> Result<slosh_bake::Stages> {
     Ok(match device {
-        crate::cli::BakeDevice::Cpu => slosh_bake::cpu_search(),
+        crate::cli::BakeDevice::Cpu => slosh_bake::Stages::cpu(),
         crate::cli::BakeDevice::Gpu => {
             let gpu = slosh_render::Gpu::new(adapter).context("--device gpu")?;
-            let search = slosh_gpubake::GpuSearch::new(std::sync::Arc::new(gpu))
-                .context("--device gpu: the neighbour search passes")?;
-            search
+            let stages = slosh_gpubake::GpuStages::new(std::sync::Arc::new(gpu))
+                .context("--device gpu: the bake's passes")?;
+            stages
                 .compile_fits(degree)
                 .context("--device gpu: the initial fits")?;
-            std::sync::Arc::new(search)
+            std::sync::Arc::new(stages).stages()
         }
     })
 }
@@ -438,7 +438,7 @@ impl BakeConfig {
                     .transpose()?
                     .unwrap_or(slosh_bake::Shard::WHOLE),
                 params,
-                search: neighbour_search(
+                stages: bake_stages(
                     a.settings.select.device,
                     a.adapter.as_deref(),
                     a.settings.fit.degree,

@@ -625,11 +625,12 @@ fn a_case_renders_after_its_steps_are_baked_beside_it() {
     );
 }
 
-/// `--device gpu` finds the neighbours and fits the balls on the GPU: every section but the
-/// balls' is the CPU bake's, byte for byte, where no distances tie (none do in this seeded
-/// scene: the lists are then equal, `docs/algorithm.md`); the balls hold f32 fits rounded to
-/// half floats where the CPU's are f64 ones (crates/gpubake/tests/bake.rs compares them and
-/// the pictures); every file verifies.
+/// `--device gpu` finds the neighbours, fits the balls and links the BVH on the GPU: every
+/// section but the balls' and the BVH's is the CPU bake's, byte for byte, where no distances
+/// tie (none do in this seeded scene: the lists are then equal, `docs/algorithm.md`); the
+/// balls hold f32 fits rounded to half floats where the CPU's are f64 ones
+/// (crates/gpubake/tests/bake.rs compares them and the pictures); the BVH has the CPU's
+/// leaves under other inner nodes (crates/gpubake/tests/tree.rs); every file verifies.
 #[test]
 fn a_gpu_bake_writes_the_cpu_bakes_sections() {
     let dir = tempfile::tempdir().unwrap();
@@ -650,7 +651,8 @@ fn a_gpu_bake_writes_the_cpu_bakes_sections() {
         return;
     }
     assert!(ok, "GPU bake failed: {err}");
-    assert!(out.contains("neighbours found on: gpu"), "{out}");
+    assert!(out.contains("stages: neighbours on gpu"), "{out}");
+    assert!(out.contains("tree on gpu"), "{out}");
     let (ok, out, err) = slosh(&["inspect", gpu.to_str().unwrap(), "--verify"]);
     assert!(ok, "{out}{err}");
     assert_eq!(out.matches("verified").count(), 3, "{out}");
@@ -663,7 +665,9 @@ fn a_gpu_bake_writes_the_cpu_bakes_sections() {
                 f.header()
                     .sections
                     .iter()
-                    .filter(|s| !s.name.starts_with("ball"))
+                    .filter(|s| {
+                        !s.name.starts_with("ball") && s.name != slosh_cache::names::BVH_NODES
+                    })
                     .map(|s| (s.name.clone(), s.xxh3.clone()))
                     .collect(),
             );
@@ -671,6 +675,24 @@ fn a_gpu_bake_writes_the_cpu_bakes_sections() {
         steps
     };
     let (a, b) = (not_balls(&cpu), not_balls(&gpu));
-    assert!(a[0].len() >= 6, "{a:?}");
+    assert!(a[0].len() >= 5, "{a:?}");
     assert_eq!(a, b);
+    let leaves = |dir: &Path, i: usize| {
+        let f = slosh_cache::CacheFile::open(&dir.join(slosh_cache::step_file_name(i))).unwrap();
+        let mut leaves: Vec<String> = (f.bvh().unwrap().nodes.iter())
+            .filter(|n| n.count > 0)
+            .map(|n| format!("{n:?}"))
+            .collect();
+        leaves.sort_unstable();
+        leaves
+    };
+    for i in 0..3 {
+        let cpu_leaves = leaves(&cpu, i);
+        assert!(
+            cpu_leaves.len() > 100,
+            "step {i}: {} leaves",
+            cpu_leaves.len()
+        );
+        assert_eq!(cpu_leaves, leaves(&gpu, i), "step {i}: the BVH's leaves");
+    }
 }

@@ -85,13 +85,9 @@ pub struct BatchOptions {
     pub threads: usize,
     pub shard: Shard,
     pub params: BakeParams,
-    /// Where each step's neighbours are found: the CPU's k-d tree ([`cpu_search`]) or a GPU.
-    pub search: std::sync::Arc<dyn slosh_mls::NeighbourSearch>,
-}
-
-/// The reference neighbour search, on the CPU.
-pub fn cpu_search() -> std::sync::Arc<dyn slosh_mls::NeighbourSearch> {
-    std::sync::Arc::new(slosh_mls::KdSearch)
+    /// Where each step's neighbours and tree are found: the CPU ([`crate::Stages::cpu`]) or
+    /// a GPU.
+    pub stages: crate::Stages,
 }
 
 #[derive(Debug, Clone)]
@@ -197,7 +193,7 @@ pub(crate) fn bake_one(
     let read_seconds = start.elapsed().as_secs_f64();
     let mut input = input;
     input.identity = identity;
-    let baked = match bake_step_with(&input, &opts.params, opts.search.as_ref()) {
+    let baked = match bake_step_with(&input, &opts.params, &opts.stages) {
         Ok(b) => b,
         // The report names the step; the error's own "step N:" would say it twice.
         Err(e) => return StepOutcome::Failed(e.problem()),

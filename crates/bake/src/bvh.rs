@@ -1,10 +1,12 @@
 //! Step 8 of the bake: a BVH2 over the candidates' boxes, its leaves ranges of consecutive
 //! items. Candidates in index (Morton) order are grouped into leaves of up to
-//! [`MAX_LEAF_ITEMS`] that lie close together and span at most [`MAX_LEAF_RANGE`] items;
-//! obvhs builds the tree over the groups' boxes (PLOC pairing each cluster among its nearest
-//! neighbours in Morton order, then reinsertion, one group per leaf), rewritten into the
-//! cache's node layout: children adjacent, root first, boxes rounded outward to f32. A leaf
-//! names its items as a range, so the cache holds no item list (format 6).
+//! [`MAX_LEAF_ITEMS`] that lie close together and span at most [`MAX_LEAF_RANGE`] items
+//! ([`leaves`], boxes rounded outward to f32); a [`TreeBuild`] links the leaves into the
+//! cache's node layout: children adjacent, root first. The reference, [`PlocTree`], is
+//! obvhs's (PLOC pairing each cluster among its nearest neighbours in Morton order, then
+//! reinsertion, one group per leaf); a GPU may build another tree over the same leaves
+//! (`slosh-gpubake`). A leaf names its items as a range, so the cache holds no item list
+//! (format 6).
 
 use std::time::Duration;
 
@@ -76,22 +78,58 @@ fn groups(items: &[(u32, [f64; 3], f64)]) -> Vec<Group> {
     out
 }
 
-/// Builds the BVH over `items`: (item id, centre, radius) spheres in local coordinates, ids
-/// ascending.
-pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
+/// The leaves of the BVH over `items` ((item id, centre, radius) spheres in local
+/// coordinates, ids ascending): each a range of items and its box, rounded outward to f32.
+pub fn leaves(items: &[(u32, [f64; 3], f64)]) -> Vec<BvhNode> {
     debug_assert!(items.windows(2).all(|w| w[0].0 < w[1].0));
-    if items.is_empty() {
+    groups(items)
+        .par_iter()
+        .map(|g| BvhNode {
+            lo: g.lo.map(down),
+            count: g.last - g.first + 1,
+            hi: g.hi.map(up),
+            first: g.first,
+        })
+        .collect()
+}
+
+/// What links a step's leaves into its BVH: the CPU's [`PlocTree`], or a GPU's.
+pub trait TreeBuild: Send + Sync + std::fmt::Debug {
+    /// The tree over `leaves` (from [`leaves`]), in the cache's layout: root first, an inner
+    /// node's children adjacent, every leaf once, every inner box the union of its
+    /// children's. An error is the step's (a device that fails).
+    fn build(&self, leaves: &[BvhNode]) -> Result<Bvh, String>;
+
+    /// What it runs on, for reports.
+    fn describe(&self) -> String;
+}
+
+/// The reference tree: obvhs's PLOC on the CPU.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PlocTree;
+
+impl TreeBuild for PlocTree {
+    fn build(&self, leaves: &[BvhNode]) -> Result<Bvh, String> {
+        Ok(ploc(leaves))
+    }
+
+    fn describe(&self) -> String {
+        "cpu (obvhs PLOC)".into()
+    }
+}
+
+/// The BVH over `items` by the reference tree.
+pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
+    ploc(&leaves(items))
+}
+
+fn ploc(leaves: &[BvhNode]) -> Bvh {
+    if leaves.is_empty() {
         return Bvh::default();
     }
-    let groups = groups(items);
-    let boxes: Vec<Aabb> = groups
+    let boxes: Vec<Aabb> = leaves
         .par_iter()
-        .map(|g| {
-            Aabb::new(
-                Vec3A::new(down(g.lo[0]), down(g.lo[1]), down(g.lo[2])),
-                Vec3A::new(up(g.hi[0]), up(g.hi[1]), up(g.hi[2])),
-            )
-        })
+        .map(|leaf| Aabb::new(Vec3A::from(leaf.lo), Vec3A::from(leaf.hi)))
         .collect();
     // obvhs's fast preset, but PLOC searching one neighbour either side at every depth (its
     // fast path) instead of a wider search near the root: balls of about one size tiling a
@@ -127,9 +165,7 @@ pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
         };
         if node.is_leaf() {
             debug_assert_eq!(node.prim_count, 1);
-            let g = &groups[built.primitive_indices[node.first_index as usize] as usize];
-            out.first = g.first;
-            out.count = g.last - g.first + 1;
+            out = leaves[built.primitive_indices[node.first_index as usize] as usize];
         } else {
             out.first = nodes.len() as u32;
             let child = node.first_index as usize;

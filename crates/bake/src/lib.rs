@@ -10,13 +10,14 @@ mod on_demand;
 mod params;
 mod point_cloud;
 mod select;
+mod stages;
 mod step;
 
 pub use batch::{
-    BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, cpu_search, files_identity,
-    is_current, plan, run_batch, series_key,
+    BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, files_identity, is_current,
+    plan, run_batch, series_key,
 };
-pub use bvh::{MAX_LEAF_ITEMS, build as build_bvh};
+pub use bvh::{MAX_LEAF_ITEMS, PlocTree, TreeBuild, build as build_bvh, leaves as bvh_leaves};
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
 pub use ensight_source::{EnsightSource, canonical_label};
 pub use jobs::{available_memory, cores, default_jobs};
@@ -27,6 +28,7 @@ pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
 };
 pub use slosh_mls::morton_order;
+pub use stages::Stages;
 pub use step::{
     BakeError, BakedStep, bake_step, bake_step_parts, bake_step_parts_with, bake_step_with,
 };

@@ -8,13 +8,11 @@ use slosh_cache::{
     names, octahedral, pack_h, stored_radius,
 };
 use slosh_ensight::FieldValues;
-use slosh_mls::{
-    BallFit, BesideFits, FitStatus, KdSearch, NeighbourSearch, Sphere, StageClock, SurfaceError,
-    SurfaceParts,
-};
+use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
 
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::select::{StepInput, estimate_surface_normals};
+use crate::stages::Stages;
 
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
@@ -26,6 +24,8 @@ pub enum BakeError {
         #[source]
         source: SurfaceError,
     },
+    #[error("step {step}: the BVH: {problem}")]
+    Tree { step: usize, problem: String },
 }
 
 impl BakeError {
@@ -34,6 +34,7 @@ impl BakeError {
         match self {
             BakeError::Input { problem, .. } => problem.clone(),
             BakeError::Surface { source, .. } => source.to_string(),
+            BakeError::Tree { problem, .. } => format!("the BVH: {problem}"),
         }
     }
 }
@@ -326,16 +327,16 @@ fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
 }
 
 pub fn bake_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
-    bake_step_with(input, params, &KdSearch)
+    bake_step_with(input, params, &Stages::cpu())
 }
 
-/// [`bake_step`], its neighbours found by `search` (the GPU's, say).
+/// [`bake_step`], its parallel stages run by `stages` (the GPU's, say).
 pub fn bake_step_with(
     input: &StepInput,
     params: &BakeParams,
-    search: &dyn NeighbourSearch,
+    stages: &Stages,
 ) -> Result<BakedStep, BakeError> {
-    bake_step_parts_with(input, params, search).map(|(baked, _)| baked)
+    bake_step_parts_with(input, params, stages).map(|(baked, _)| baked)
 }
 
 /// [`bake_step`] with the parts the bake computed, in f64, before the cache's layout stored
@@ -345,14 +346,14 @@ pub fn bake_step_parts(
     input: &StepInput,
     params: &BakeParams,
 ) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
-    bake_step_parts_with(input, params, &KdSearch)
+    bake_step_parts_with(input, params, &Stages::cpu())
 }
 
-/// [`bake_step_parts`], its neighbours found by `search`.
+/// [`bake_step_parts`], its parallel stages run by `stages`.
 pub fn bake_step_parts_with(
     input: &StepInput,
     params: &BakeParams,
-    search: &dyn NeighbourSearch,
+    stages: &Stages,
 ) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
     let mut clock = StageClock::start();
     let step = input.index;
@@ -484,7 +485,9 @@ pub fn bake_step_parts_with(
     // fits and the sections' arrays: obvhs leaves cores idle that they take. It is built
     // before the fits are known, on the guess that every ball outside the spray gets one; the
     // rare step where some ball has none builds it again.
-    let speculative: std::sync::Mutex<Option<(slosh_cache::Bvh, f64)>> = Default::default();
+    type Built = (Result<slosh_cache::Bvh, String>, f64);
+    let speculative: std::sync::Mutex<Option<Built>> = Default::default();
+    let tree = stages.tree.as_ref();
     let built = rayon::scope(|scope| {
         let start_bvh = |beside: BesideFits<'_, f64>| {
             let start = std::time::Instant::now();
@@ -500,7 +503,7 @@ pub fn bake_step_parts_with(
             );
             let slot = &speculative;
             scope.spawn(move |_| {
-                let bvh = crate::bvh::build(&items);
+                let bvh = tree.build(&crate::bvh::leaves(&items));
                 if let Ok(mut slot) = slot.lock() {
                     *slot = Some((bvh, start.elapsed().as_secs_f64()));
                 }
@@ -510,7 +513,7 @@ pub fn bake_step_parts_with(
             &local,
             normals.as_deref(),
             &params.mls,
-            search,
+            stages.search.as_ref(),
             start_bvh,
         )
         .map_err(|source| BakeError::Surface { step, source })?;
@@ -544,9 +547,13 @@ pub fn bake_step_parts_with(
                 &surface.radii,
                 &surface.spheres,
             );
-            (crate::bvh::build(&items), start.elapsed().as_secs_f64())
+            (
+                tree.build(&crate::bvh::leaves(&items)),
+                start.elapsed().as_secs_f64(),
+            )
         }
     };
+    let bvh = bvh.map_err(|problem| BakeError::Tree { step, problem })?;
     // Boxes the grid cannot hold come from coordinates beyond f32's range, which the
     // recentring rules out; refused rather than stored wrong.
     let (bvh_grid, stored_nodes) = bvh.stored().ok_or_else(|| {

@@ -520,7 +520,7 @@ fn options(dir: &Path, shard: Shard) -> BatchOptions {
         threads: 2,
         shard,
         params: params(),
-        search: cpu_search(),
+        stages: Stages::cpu(),
     }
 }
 
@@ -840,7 +840,7 @@ fn two_holders_of_a_case_bake_a_step_once() {
             threads: 1,
             shard: Shard::WHOLE,
             params,
-            search: cpu_search(),
+            stages: Stages::cpu(),
         };
         OnDemand::open(Box::new(source), opts).unwrap()
     };

@@ -12,22 +12,23 @@ pub(crate) fn gpu_error(what: impl std::fmt::Display) -> slosh_mls::SurfaceError
 }
 
 /// `work` with the device's validation and out-of-memory errors caught (on this thread: wgpu's
-/// error scopes are thread-local) and returned as the step's error, where wgpu would
-/// otherwise panic on them: a step the GPU cannot hold fails, and the batch goes on.
-pub(crate) fn guarded<T>(
+/// error scopes are thread-local) and returned through `fault` as the step's error, where wgpu
+/// would otherwise panic on them: a step the GPU cannot hold fails, and the batch goes on.
+pub(crate) fn guarded<T, E>(
     gpu: &Gpu,
-    work: impl FnOnce() -> Result<T, slosh_mls::SurfaceError>,
-) -> Result<T, slosh_mls::SurfaceError> {
+    work: impl FnOnce() -> Result<T, E>,
+    fault: impl FnOnce(String) -> E,
+) -> Result<T, E> {
     let memory = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let validation = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
     let out = work();
     let invalid = pollster::block_on(validation.pop());
     let out_of_memory = pollster::block_on(memory.pop());
     match (out_of_memory, invalid) {
-        (Some(e), _) => Err(gpu_error(format!(
+        (Some(e), _) => Err(fault(format!(
             "out of GPU memory ({e}); bake with fewer --jobs or --device cpu"
         ))),
-        (None, Some(e)) => Err(gpu_error(e)),
+        (None, Some(e)) => Err(fault(e.to_string())),
         (None, None) => out,
     }
 }
@@ -112,26 +113,28 @@ impl Stamps {
     }
 }
 
-/// Records one dispatch of `pipeline` over `bind_group`, timed into `stamps` where given.
+/// Records `dispatches` (pipeline, workgroups) of one bind group in one compute pass (wgpu
+/// orders each after the one before), timed into `stamps` where given.
 pub(crate) fn record(
     encoder: &mut wgpu::CommandEncoder,
-    pipeline: &wgpu::ComputePipeline,
+    dispatches: &[(&wgpu::ComputePipeline, (u32, u32))],
     bind_group: &wgpu::BindGroup,
-    (x, y): (u32, u32),
     stamps: Option<&Stamps>,
 ) {
     {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("neighbour search"),
+            label: Some("bake stage"),
             timestamp_writes: stamps.map(|s| wgpu::ComputePassTimestampWrites {
                 query_set: &s.set,
                 beginning_of_pass_write_index: Some(0),
                 end_of_pass_write_index: Some(1),
             }),
         });
-        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, bind_group, &[]);
-        pass.dispatch_workgroups(x, y, 1);
+        for &(pipeline, (x, y)) in dispatches {
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(x, y, 1);
+        }
     }
     if let Some(s) = stamps {
         encoder.resolve_query_set(&s.set, 0..2, &s.resolved, 0);

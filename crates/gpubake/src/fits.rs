@@ -96,7 +96,7 @@ pub(crate) fn fit_batch(
             (8, &out),
         ],
     );
-    index.search.run(inputs.pipeline, &group, (x, y))?;
+    index.search.run(&[(inputs.pipeline, (x, y))], &group)?;
     let raw: Vec<[f32; 4]> = read_back(gpu, &out, bytes)?;
     Ok(raw
         .par_chunks(VEC4_PER_FIT)

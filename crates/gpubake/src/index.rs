@@ -5,7 +5,7 @@ use slosh_mls::SurfaceError;
 
 use crate::dispatch::{bind, groups, uniform};
 use crate::layout::SearchParams;
-use crate::passes::GpuSearch;
+use crate::passes::GpuStages;
 
 /// One dispatch of a search pass over a range of the sorted points: what it is given beyond
 /// the points and the grid.
@@ -28,7 +28,7 @@ pub(crate) struct Dispatch<'b> {
 
 /// One point set on the GPU.
 pub(crate) struct GpuIndex<'a> {
-    pub search: &'a GpuSearch,
+    pub search: &'a GpuStages,
     /// The caller's points, in f64.
     pub points: &'a [[f64; 3]],
     pub sorted: SortedPoints,
@@ -52,7 +52,7 @@ impl GpuIndex<'_> {
         ]
     }
 
-    /// Records and submits `dispatch` ([`GpuSearch::run`]).
+    /// Records and submits `dispatch` ([`GpuStages::run`]).
     pub(crate) fn submit(&self, dispatch: Dispatch<'_>) -> Result<(), SurfaceError> {
         let gpu = self.search.gpu();
         let (x, y, row_threads) = groups(gpu, dispatch.count as u32);
@@ -84,7 +84,7 @@ impl GpuIndex<'_> {
         let entries: Vec<(u32, &wgpu::Buffer)> =
             grid.iter().chain(dispatch.buffers).copied().collect();
         let group = bind(gpu, dispatch.layout, &entries);
-        self.search.run(dispatch.pipeline, &group, (x, y))?;
+        self.search.run(&[(dispatch.pipeline, (x, y))], &group)?;
         Ok(())
     }
 }

@@ -45,6 +45,30 @@ pub struct FitSettings {
     pub _pad1: u32,
 }
 
+/// `TreeParams` in `shaders/bvh_build.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TreeParams {
+    pub leaves: u32,
+    pub row_threads: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// `TreeNode` in `shaders/bvh_build.wgsl`: a `slosh_cache::BvhNode` as the GPU reads it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TreeNode {
+    pub lo: [f32; 3],
+    pub count: u32,
+    pub hi: [f32; 3],
+    pub first: u32,
+}
+
+/// `MAX_DEPTH` in `shaders/bvh_build.wgsl`: the deepest inner node a build's depth pass
+/// measures (64 bits of key and 32 of index bound any chain).
+pub(crate) const TREE_MAX_DEPTH: u32 = 96;
+
 /// `SearchParams::flags`: the points have data normals.
 pub(crate) const FLAG_NORMALS: u32 = 1;
 /// `SearchParams::flags`: links are wanted.
@@ -78,6 +102,15 @@ pub fn nearest_source() -> String {
 /// The lists module: entry points `cut_lists` and `write_lists`.
 pub fn lists_source() -> String {
     format!("{GRID_WGSL}{}", include_str!("../../../shaders/lists.wgsl"))
+}
+
+/// The BVH build's module: entry points `link_nodes`, `measure_depths`, `fit_boxes`,
+/// `next_depth`.
+pub fn tree_source() -> String {
+    format!(
+        "const MAX_DEPTH: u32 = {TREE_MAX_DEPTH}u;\n{}",
+        include_str!("../../../shaders/bvh_build.wgsl")
+    )
 }
 
 /// The initial-fits module: entry point `initial_fits`, the tracer's fit maths after it.

@@ -2,10 +2,12 @@
 //! ([`slosh_render::Gpu`]). Each stage implements a `slosh_mls` interface whose CPU form is
 //! the reference, and returns what it returns where no two distances tie
 //! (`docs/algorithm.md`, "Neighbour search"): the nearest points of every point and every
-//! point's neighbour list ([`GpuSearch`], a [`slosh_mls::NeighbourSearch`]), on a grid of
+//! point's neighbour list ([`GpuStages`], a [`slosh_mls::NeighbourSearch`]), on a grid of
 //! Morton cells (`shaders/neighbour_grid.wgsl`, `nearest.wgsl`, `lists.wgsl`), and the initial
 //! fits over those lists while they are on the GPU (`shaders/bake_fit.wgsl` over the tracer's
-//! `fit.wgsl`), equal to the CPU's f64 fits within f32.
+//! `fit.wgsl`), equal to the CPU's f64 fits within f32; and the BVH's tree over the CPU's
+//! leaves ([`slosh_bake::TreeBuild`]: a linear BVH, `shaders/bvh_build.wgsl`). [`GpuStages::stages`]
+//! hands both to a bake.
 
 mod cells;
 mod dispatch;
@@ -16,8 +18,10 @@ mod lists;
 mod nearest;
 mod passes;
 mod search;
+mod tree;
 
 pub use layout::{
-    FitSettings, NEAREST_MAX, SearchParams, fits_source, lists_source, nearest_source,
+    FitSettings, NEAREST_MAX, SearchParams, TreeNode, TreeParams, fits_source, lists_source,
+    nearest_source, tree_source,
 };
-pub use passes::GpuSearch;
+pub use passes::GpuStages;

@@ -6,16 +6,17 @@ use std::sync::{Arc, OnceLock};
 use slosh_render::Gpu;
 
 use crate::dispatch::{Stamps, layout, record};
-use crate::layout::{fits_source, lists_source, nearest_source};
+use crate::layout::{fits_source, lists_source, nearest_source, tree_source};
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
 /// larger outputs go in several dispatches, so that a 4M-point step's lists (about 2 GB)
 /// never sit on the GPU whole.
 pub(crate) const OUTPUT_BATCH_BYTES: u64 = 256 << 20;
 
-/// A [`NeighbourSearch`] on a GPU: the passes built once, shared by every step in flight.
+/// The bake's stages on a GPU: a [`slosh_mls::NeighbourSearch`] (with the initial fits) and a
+/// [`slosh_bake::TreeBuild`], their passes built once and shared by every step in flight.
 #[derive(Debug)]
-pub struct GpuSearch {
+pub struct GpuStages {
     pub(crate) gpu: Arc<Gpu>,
     pub(crate) nearest_layout: wgpu::BindGroupLayout,
     pub(crate) nearest: wgpu::ComputePipeline,
@@ -26,6 +27,12 @@ pub struct GpuSearch {
     fits_pipeline_layout: wgpu::PipelineLayout,
     /// The initial fits' pipeline per degree (1–3), built on first use.
     fits: [OnceLock<wgpu::ComputePipeline>; 3],
+    pub(crate) tree_layout: wgpu::BindGroupLayout,
+    /// `shaders/bvh_build.wgsl`'s entry points, in the order a build runs them.
+    pub(crate) link_nodes: wgpu::ComputePipeline,
+    pub(crate) measure_depths: wgpu::ComputePipeline,
+    pub(crate) fit_boxes: wgpu::ComputePipeline,
+    pub(crate) next_depth: wgpu::ComputePipeline,
     /// GPU nanoseconds of every pass run so far (where the device has timestamps).
     gpu_nanos: AtomicU64,
 }
@@ -33,9 +40,9 @@ pub struct GpuSearch {
 /// Bindings every pass reads: positions, original indices, cell starts, residuals.
 const GRID_BINDINGS: [(u32, bool); 4] = [(1, false), (2, false), (3, false), (10, false)];
 
-impl GpuSearch {
+impl GpuStages {
     /// The passes, compiled for `gpu`; an error where the adapter refuses them.
-    pub fn new(gpu: Arc<Gpu>) -> Result<GpuSearch, slosh_render::Error> {
+    pub fn new(gpu: Arc<Gpu>) -> Result<GpuStages, slosh_render::Error> {
         let nearest_layout = layout(
             &gpu,
             "nearest points",
@@ -107,7 +114,34 @@ impl GpuSearch {
             "write_lists",
             &[],
         )?;
-        Ok(GpuSearch {
+        let tree_layout = layout(
+            &gpu,
+            "bvh build",
+            &[
+                (1, false),
+                (2, false),
+                (3, true),
+                (4, true),
+                (5, true),
+                (6, true),
+            ],
+        );
+        let tree_pipeline_layout = pipeline_layout(&tree_layout);
+        let tree_entry = |entry: &str| {
+            slosh_render::checked_pipeline(
+                &gpu,
+                &tree_pipeline_layout,
+                entry,
+                tree_source(),
+                entry,
+                &[],
+            )
+        };
+        let link_nodes = tree_entry("link_nodes")?;
+        let measure_depths = tree_entry("measure_depths")?;
+        let fit_boxes = tree_entry("fit_boxes")?;
+        let next_depth = tree_entry("next_depth")?;
+        Ok(GpuStages {
             gpu,
             nearest_layout,
             nearest,
@@ -117,6 +151,11 @@ impl GpuSearch {
             fits_layout,
             fits_pipeline_layout,
             fits: Default::default(),
+            tree_layout,
+            link_nodes,
+            measure_depths,
+            fit_boxes,
+            next_depth,
             gpu_nanos: AtomicU64::new(0),
         })
     }
@@ -130,13 +169,12 @@ impl GpuSearch {
             .then(|| self.gpu_nanos.load(Ordering::Relaxed) as f64 * 1e-9)
     }
 
-    /// Records one dispatch of `pipeline` over `group` and submits it; where the device has
-    /// timestamps, waits for it and adds its GPU time to [`GpuSearch::gpu_seconds`].
+    /// Records `dispatches` over `group` in one pass and submits them; where the device has
+    /// timestamps, waits for them and adds their GPU time to [`GpuStages::gpu_seconds`].
     pub(crate) fn run(
         &self,
-        pipeline: &wgpu::ComputePipeline,
+        dispatches: &[(&wgpu::ComputePipeline, (u32, u32))],
         group: &wgpu::BindGroup,
-        groups: (u32, u32),
     ) -> Result<(), slosh_mls::SurfaceError> {
         let gpu = &self.gpu;
         let mut encoder = gpu
@@ -145,7 +183,7 @@ impl GpuSearch {
                 label: Some("bake pass"),
             });
         let stamps = Stamps::new(gpu);
-        record(&mut encoder, pipeline, group, groups, stamps.as_ref());
+        record(&mut encoder, dispatches, group, stamps.as_ref());
         gpu.queue.submit([encoder.finish()]);
         if let Some(stamps) = stamps {
             let seconds = stamps.seconds(gpu)?;

@@ -8,9 +8,9 @@ use slosh_mls::{ListRequest, NeighbourLists, NeighbourSearch, PointIndex, Surfac
 use crate::cells::SortedPoints;
 use crate::dispatch::{gpu_error, guarded, storage};
 use crate::index::GpuIndex;
-use crate::passes::GpuSearch;
+use crate::passes::GpuStages;
 
-impl NeighbourSearch for GpuSearch {
+impl NeighbourSearch for GpuStages {
     fn index<'a>(
         &'a self,
         points: &'a [[f64; 3]],
@@ -26,12 +26,16 @@ impl NeighbourSearch for GpuSearch {
         }
         let sorted = SortedPoints::new(points);
         let gpu = &self.gpu;
-        guarded(gpu, || {
-            let positions = storage(gpu, "search positions", &sorted.high);
-            let residuals = storage(gpu, "search residuals", &sorted.low);
-            let original = storage(gpu, "search order", &sorted.order);
-            Ok((positions, residuals, original))
-        })
+        guarded(
+            gpu,
+            || {
+                let positions = storage(gpu, "search positions", &sorted.high);
+                let residuals = storage(gpu, "search residuals", &sorted.low);
+                let original = storage(gpu, "search order", &sorted.order);
+                Ok((positions, residuals, original))
+            },
+            gpu_error,
+        )
         .map(
             |(positions, residuals, original)| -> Box<dyn PointIndex + 'a> {
                 let margin = 1e-5 * sorted.extent();
@@ -55,12 +59,18 @@ impl NeighbourSearch for GpuSearch {
 
 impl PointIndex for GpuIndex<'_> {
     fn nearest(&self, count: NonZero<usize>) -> Result<Vec<u32>, SurfaceError> {
-        guarded(self.search.gpu(), || {
-            crate::nearest::nearest(self, count.get())
-        })
+        guarded(
+            self.search.gpu(),
+            || crate::nearest::nearest(self, count.get()),
+            gpu_error,
+        )
     }
 
     fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError> {
-        guarded(self.search.gpu(), || crate::lists::lists(self, request))
+        guarded(
+            self.search.gpu(),
+            || crate::lists::lists(self, request),
+            gpu_error,
+        )
     }
 }

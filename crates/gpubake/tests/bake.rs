@@ -8,12 +8,12 @@ use std::path::Path;
 use std::sync::Arc;
 
 use slosh_bake::{
-    BakeParams, NormalSource, StepInput, SurfaceSelect, bake_step_parts, bake_step_parts_with,
-    read_point_cloud,
+    BakeParams, NormalSource, Stages, StepInput, SurfaceSelect, bake_step_parts,
+    bake_step_parts_with, read_point_cloud,
 };
 use slosh_cache::{CacheFile, LoadedStep, encode_step};
 use slosh_fileio::FileBytes;
-use slosh_gpubake::GpuSearch;
+use slosh_gpubake::GpuStages;
 use slosh_mls::Params;
 use slosh_render::Gpu;
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
@@ -28,11 +28,11 @@ const SIZE: u32 = 160;
 fn bake(
     input: &StepInput,
     params: &BakeParams,
-    search: Option<&GpuSearch>,
+    stages: Option<&Stages>,
     name: &str,
 ) -> (slosh_mls::SurfaceParts<f64>, LoadedStep) {
-    let (baked, parts) = match search {
-        Some(search) => bake_step_parts_with(input, params, search),
+    let (baked, parts) = match stages {
+        Some(stages) => bake_step_parts_with(input, params, stages),
         None => bake_step_parts(input, params),
     }
     .unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -44,9 +44,9 @@ fn bake(
 }
 
 /// Hit/miss switches and the p99 of |Δt| in spacings.
-fn compare(name: &str, input: &StepInput, params: &BakeParams, search: &GpuSearch) {
+fn compare(name: &str, input: &StepInput, params: &BakeParams, stages: &Stages) {
     let (cpu_parts, cpu) = bake(input, params, None, name);
-    let (gpu_parts, gpu) = bake(input, params, Some(search), name);
+    let (gpu_parts, gpu) = bake(input, params, Some(stages), name);
     assert_eq!(
         cpu_parts.spheres.len(),
         gpu_parts.spheres.len(),
@@ -144,7 +144,7 @@ fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
     let Some(gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
         return;
     };
-    let search = GpuSearch::new(Arc::new(gpu)).unwrap();
+    let stages = Arc::new(GpuStages::new(Arc::new(gpu)).unwrap()).stages();
     let with_normals = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     let hard = HardCases {
         noise: 0.1,
@@ -166,7 +166,7 @@ fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
     for (name, spec) in scenes {
         let scene = Scene::new(spec).unwrap();
         let input = scene_step(&scene, 1, &name);
-        compare(&name, &input, &with_normals, &search);
+        compare(&name, &input, &with_normals, &stages);
     }
     // The SPH fixtures: volume particles, surface and normals estimated; SPlisHSPlasH's dam
     // break at two particle radii (0.025 at three times, 0.0175 at 0.4 s:
@@ -189,6 +189,6 @@ fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
             ..StepInput::default()
         };
         let name = format!("dam break {resolution}{time}");
-        compare(&name, &input, &sph, &search);
+        compare(&name, &input, &sph, &stages);
     }
 }

@@ -6,7 +6,7 @@
 use std::num::NonZero;
 use std::sync::Arc;
 
-use slosh_gpubake::GpuSearch;
+use slosh_gpubake::GpuStages;
 use slosh_mls::{KdSearch, ListRequest, NeighbourLists, NeighbourSearch, morton_order};
 use slosh_render::Gpu;
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
@@ -25,9 +25,9 @@ fn near(a: f64, b: f64) -> bool {
     (a - b).abs() <= TIE * a.abs().max(b.abs())
 }
 
-fn gpu_search() -> Option<GpuSearch> {
+fn gpu_search() -> Option<GpuStages> {
     let gpu = gpu_or_skip(Gpu::new(adapter().as_deref()))?;
-    Some(GpuSearch::new(Arc::new(gpu)).expect("the search passes compile"))
+    Some(GpuStages::new(Arc::new(gpu)).expect("the search passes compile"))
 }
 
 /// A point set, its reaches, data normals (some opposing, some missing) and link distance.
@@ -326,7 +326,7 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
         return;
     };
     gpu.limit_bindings(1 << 16);
-    let small = GpuSearch::new(Arc::new(gpu)).unwrap();
+    let small = GpuStages::new(Arc::new(gpu)).unwrap();
     let whole = gpu_search().unwrap();
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 4000, 11)).unwrap();
     let (points, normals) = scene.particles(0).surface_arrays();

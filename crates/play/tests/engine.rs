@@ -512,7 +512,7 @@ fn on_demand(case: &Path, cache: &Path) -> slosh_bake::OnDemand {
         threads: 1,
         shard: slosh_bake::Shard::WHOLE,
         params,
-        search: slosh_bake::cpu_search(),
+        stages: slosh_bake::Stages::cpu(),
     };
     slosh_bake::OnDemand::open(Box::new(source), opts).unwrap()
 }
@@ -567,7 +567,7 @@ fn a_raw_case_is_baked_as_it_plays_and_stays_baked() {
         threads: 1,
         shard: slosh_bake::Shard::WHOLE,
         params: BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into())),
-        search: slosh_bake::cpu_search(),
+        stages: slosh_bake::Stages::cpu(),
     };
     let report = slosh_bake::run_batch(&source, &opts, &|_| {}).unwrap();
     assert_eq!(report.baked, 1);

@@ -38,9 +38,9 @@ pub struct Settings {
     pub threads: Vec<usize>,
     /// Steps per series in the end-to-end rows.
     pub series: usize,
-    /// The GPU neighbour search each size is also baked with (alternating with the CPU's),
-    /// or why there is none.
-    pub gpu: Result<std::sync::Arc<slosh_gpubake::GpuSearch>, String>,
+    /// The GPU's stages each size is also baked with (alternating with the CPU's), or why
+    /// there are none.
+    pub gpu: Result<std::sync::Arc<slosh_gpubake::GpuStages>, String>,
 }
 
 /// The thesis's table 4.7 (sloshing tank, 50 neighbours, quadratic): nearest neighbours,
@@ -172,15 +172,15 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             bares.push(time(1, || {
                 Surface::<f64>::build(&inp.positions, inp.normals.as_deref(), &bare_params)
             }));
-            let step = bake_and_encode(&inp, &params, &slosh_mls::KdSearch)?;
+            let step = bake_and_encode(&inp, &params, &slosh_bake::Stages::cpu())?;
             totals.push(step.seconds);
             stage_runs.push(step.stages);
             encoded = step.encoded;
             last_baked = Some(step.baked);
-            if let Ok(search) = &args.gpu {
-                let before = search.gpu_seconds();
-                gpu_runs.push(bake_and_encode(&inp, &params, search.as_ref())?);
-                if let (Some(a), Some(b)) = (before, search.gpu_seconds()) {
+            if let Ok(gpu) = &args.gpu {
+                let before = gpu.gpu_seconds();
+                gpu_runs.push(bake_and_encode(&inp, &params, &gpu.clone().stages())?);
+                if let (Some(a), Some(b)) = (before, gpu.gpu_seconds()) {
                     gpu_times.push(b - a);
                 }
             }
@@ -391,10 +391,10 @@ struct TimedStep {
 fn bake_and_encode(
     input: &StepInput,
     params: &BakeParams,
-    search: &dyn slosh_mls::NeighbourSearch,
+    stages: &slosh_bake::Stages,
 ) -> Result<TimedStep> {
     let t = Instant::now();
-    let baked = bake_step_with(input, params, search)?;
+    let baked = bake_step_with(input, params, stages)?;
     let t_enc = Instant::now();
     let encoded = encode_step(baked.header.clone(), &baked.sections, params.compression)?;
     let mut stages = baked.header.stats.stage_seconds.clone();
@@ -454,7 +454,8 @@ fn scaling_and_series(
             let mut totals = Vec::new();
             let mut stage_runs = Vec::new();
             for _ in 0..runs {
-                let step = pool.install(|| bake_and_encode(&inp, params, &slosh_mls::KdSearch))?;
+                let step =
+                    pool.install(|| bake_and_encode(&inp, params, &slosh_bake::Stages::cpu()))?;
                 totals.push(step.seconds);
                 stage_runs.push(step.stages);
             }
@@ -491,16 +492,13 @@ fn scaling_and_series(
         return Ok((scaling, series));
     }
     // The CPU bake, then (where an adapter opened) the bake with the GPU's stages.
-    let mut searches: Vec<(
-        &'static str,
-        std::sync::Arc<dyn slosh_mls::NeighbourSearch>,
-        _,
-    )> = vec![("cpu", slosh_bake::cpu_search(), cpu_one_step)];
-    if let Ok(search) = &args.gpu {
-        searches.push(("gpu", search.clone(), gpu_one_step));
+    let mut devices: Vec<(&'static str, slosh_bake::Stages, _)> =
+        vec![("cpu", slosh_bake::Stages::cpu(), cpu_one_step)];
+    if let Ok(gpu) = &args.gpu {
+        devices.push(("gpu", gpu.clone().stages(), gpu_one_step));
     }
     for &n in sizes {
-        for (device, search, one_step) in &searches {
+        for (device, stages, one_step) in &devices {
             let Some(&(_, alone)) = one_step.iter().find(|(m, _)| *m == n) else {
                 continue;
             };
@@ -519,7 +517,7 @@ fn scaling_and_series(
                 threads: cores,
                 shard: Shard::WHOLE,
                 params: params.clone(),
-                search: search.clone(),
+                stages: stages.clone(),
             };
             let t = Instant::now();
             let report = run_batch(&source, &opts, &|_| {})?;

@@ -55,13 +55,9 @@ fn ensure_case(dir: &Path, points: usize, steps: usize) -> Result<std::path::Pat
     Ok(case)
 }
 
-/// The case, to be baked into `cache` (emptied first) as the engine asks, its neighbours
-/// found by `search`.
-fn on_demand(
-    case: &Path,
-    cache: &Path,
-    search: &Arc<dyn slosh_mls::NeighbourSearch>,
-) -> Result<OnDemand> {
+/// The case, to be baked into `cache` (emptied first) as the engine asks, its stages run by
+/// `stages`.
+fn on_demand(case: &Path, cache: &Path, stages: &slosh_bake::Stages) -> Result<OnDemand> {
     let _ = std::fs::remove_dir_all(cache);
     let params = series_params();
     let source = EnsightSource::new(
@@ -77,7 +73,7 @@ fn on_demand(
         threads: slosh_bake::cores(),
         shard: Shard::WHOLE,
         params,
-        search: search.clone(),
+        stages: stages.clone(),
     };
     Ok(OnDemand::open(Box::new(source), opts)?)
 }
@@ -90,11 +86,11 @@ pub fn measure(
     args: &Settings,
 ) -> Result<RawCaseReport> {
     let steps = args.steps;
-    // The engine's own device bakes too, where the GPU's neighbour search is asked for.
-    let search: Arc<dyn slosh_mls::NeighbourSearch> = if args.raw_case_gpu {
-        Arc::new(slosh_gpubake::GpuSearch::new(gpu.clone())?)
+    // The engine's own device bakes too, where the GPU's stages are asked for.
+    let stages = if args.raw_case_gpu {
+        Arc::new(slosh_gpubake::GpuStages::new(gpu.clone())?).stages()
     } else {
-        slosh_bake::cpu_search()
+        slosh_bake::Stages::cpu()
     };
     let dir = root.join(format!("case-{points}-{steps}"));
     let case = ensure_case(&dir.join("case"), points, steps)?;
@@ -107,7 +103,7 @@ pub fn measure(
     // One step alone: read, then read and bake (into a directory of its own each time).
     let (mut read_ms, mut bake_ms) = (Vec::new(), Vec::new());
     for _ in 0..3 {
-        let bake = on_demand(&case, &cache, &search)?;
+        let bake = on_demand(&case, &cache, &stages)?;
         let source = EnsightSource::new(
             slosh_ensight::Case::open(&case)?,
             &case,
@@ -151,7 +147,7 @@ pub fn measure(
     // Sequential playback from an empty cache.
     let mut engine = Engine::open_baking(
         gpu.clone(),
-        Arc::new(on_demand(&case, &cache, &search)?),
+        Arc::new(on_demand(&case, &cache, &stages)?),
         options(),
     )?;
     show(&mut engine, &mut request, 0)?;
@@ -165,7 +161,7 @@ pub fn measure(
     // Jumps to steps not baked yet, from an empty cache again.
     let mut engine = Engine::open_baking(
         gpu.clone(),
-        Arc::new(on_demand(&case, &cache, &search)?),
+        Arc::new(on_demand(&case, &cache, &stages)?),
         options(),
     )?;
     show(&mut engine, &mut request, 0)?;
@@ -183,7 +179,7 @@ pub fn measure(
         jumps.push(show(&mut engine, &mut request, target)?);
     }
     Ok(RawCaseReport {
-        bake_device: search.describe(),
+        bake_device: stages.describe(),
         points,
         steps,
         case_step_bytes,

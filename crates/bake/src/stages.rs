@@ -1,0 +1,42 @@
+//! Where a bake's data-parallel stages run: the neighbour search (with the initial fits, where
+//! it makes them) and the BVH's tree, each the CPU's reference or a GPU's
+//! (`slosh-gpubake`), shared by every step in flight.
+
+use std::sync::Arc;
+
+use slosh_mls::{KdSearch, NeighbourSearch};
+
+use crate::bvh::{PlocTree, TreeBuild};
+
+#[derive(Debug, Clone)]
+pub struct Stages {
+    /// Finds each step's nearest points and neighbour lists.
+    pub search: Arc<dyn NeighbourSearch>,
+    /// Links each step's BVH leaves into a tree.
+    pub tree: Arc<dyn TreeBuild>,
+}
+
+impl Stages {
+    /// The reference stages, on the CPU: a k-d tree and obvhs's PLOC.
+    pub fn cpu() -> Stages {
+        Stages {
+            search: Arc::new(KdSearch),
+            tree: Arc::new(PlocTree),
+        }
+    }
+
+    /// Where they run, for reports: "neighbours on …, tree on …".
+    pub fn describe(&self) -> String {
+        format!(
+            "neighbours on {}, tree on {}",
+            self.search.describe(),
+            self.tree.describe()
+        )
+    }
+}
+
+impl Default for Stages {
+    fn default() -> Stages {
+        Stages::cpu()
+    }
+}

@@ -1,0 +1,161 @@
+//! The BVH's tree on the GPU (`shaders/bvh_build.wgsl`): the leaves the CPU grouped, sorted
+//! by the Morton codes of their boxes' centres, linked as a linear BVH straight into the
+//! cache's layout, then its boxes fitted from the deepest inner nodes up, one dispatch a
+//! depth. The leaves are the CPU bake's; only the inner nodes differ from obvhs's PLOC.
+
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use slosh_bake::{PlocTree, Stages, TreeBuild};
+use slosh_cache::{Bvh, BvhNode};
+use slosh_mls::{MortonGrid, morton_keys};
+
+use crate::dispatch::{bind, groups, guarded, output, read_back, storage, uniform};
+use crate::layout::{TREE_MAX_DEPTH, TreeNode, TreeParams};
+use crate::passes::GpuStages;
+
+/// Bytes of one node.
+const NODE_BYTES: u64 = size_of::<TreeNode>() as u64;
+
+impl GpuStages {
+    /// This device's stages as a bake takes them: its neighbour search and its tree.
+    pub fn stages(self: Arc<Self>) -> Stages {
+        Stages {
+            search: self.clone(),
+            tree: self,
+        }
+    }
+
+    /// The linear BVH over `leaves` (at least two) on the GPU, and its depth.
+    fn linear_bvh(&self, leaves: &[BvhNode]) -> Result<(Vec<BvhNode>, u32), String> {
+        let m = leaves.len();
+        let node_bytes = (2 * m as u64 - 1) * NODE_BYTES;
+        if node_bytes > self.gpu.max_binding() || m >= 1 << 30 {
+            return Err(format!(
+                "{m} leaves take {node_bytes} bytes of nodes, more than one binding of this \
+                 adapter holds ({} bytes); bake with --device cpu",
+                self.gpu.max_binding()
+            ));
+        }
+        let centres: Vec<[f64; 3]> = leaves
+            .par_iter()
+            .map(|l| std::array::from_fn(|a| 0.5 * (f64::from(l.lo[a]) + f64::from(l.hi[a]))))
+            .collect();
+        let mut keyed = morton_keys(&MortonGrid::new(&centres), &centres);
+        keyed.par_sort_unstable();
+        let keys: Vec<[u32; 2]> = keyed
+            .par_iter()
+            .map(|&(code, _)| [(code >> 32) as u32, code as u32])
+            .collect();
+        let sorted: Vec<TreeNode> = keyed
+            .par_iter()
+            .map(|&(_, i)| {
+                let l = leaves[i as usize];
+                TreeNode {
+                    lo: l.lo,
+                    count: l.count,
+                    hi: l.hi,
+                    first: l.first,
+                }
+            })
+            .collect();
+        let gpu = &self.gpu;
+        let fault = |e: slosh_mls::SurfaceError| e.to_string();
+        let (x, y, row_threads) = groups(gpu, m as u32 - 1);
+        let params = uniform(
+            gpu,
+            &TreeParams {
+                leaves: m as u32,
+                row_threads,
+                _pad0: 0,
+                _pad1: 0,
+            },
+        );
+        let keys = storage(gpu, "bvh keys", &keys);
+        let sorted = storage(gpu, "bvh leaves", &sorted);
+        let nodes = output(gpu, "bvh nodes", node_bytes);
+        let parents = output(gpu, "bvh parents", (2 * m as u64 - 1) * 4);
+        let inner = output(gpu, "bvh inner nodes", (m as u64 - 1) * 8);
+        let state = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("bvh depths"),
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = bind(
+            gpu,
+            &self.tree_layout,
+            &[
+                (0, &params),
+                (1, &keys),
+                (2, &sorted),
+                (3, &nodes),
+                (4, &parents),
+                (5, &inner),
+                (6, &state),
+            ],
+        );
+        self.run(
+            &[(&self.link_nodes, (x, y)), (&self.measure_depths, (x, y))],
+            &group,
+        )
+        .map_err(fault)?;
+        let deepest = read_back::<u32>(gpu, &state, 4).map_err(fault)?[0];
+        if deepest >= TREE_MAX_DEPTH {
+            return Err(format!(
+                "an inner node {deepest} deep, where keys of 96 bits allow {TREE_MAX_DEPTH}"
+            ));
+        }
+        // From the deepest inner nodes up: each depth's boxes from the children the dispatch
+        // before fitted.
+        gpu.queue
+            .write_buffer(&state, 4, bytemuck::bytes_of(&deepest));
+        let mut dispatches = Vec::with_capacity(2 * deepest as usize + 1);
+        for depth in (0..=deepest).rev() {
+            dispatches.push((&self.fit_boxes, (x, y)));
+            if depth > 0 {
+                dispatches.push((&self.next_depth, (1, 1)));
+            }
+        }
+        self.run(&dispatches, &group).map_err(fault)?;
+        let nodes: Vec<TreeNode> = read_back(gpu, &nodes, node_bytes).map_err(fault)?;
+        let nodes = nodes
+            .into_par_iter()
+            .map(|n| BvhNode {
+                lo: n.lo,
+                count: n.count,
+                hi: n.hi,
+                first: n.first,
+            })
+            .collect();
+        // Inner levels, then the leaves'.
+        Ok((nodes, deepest + 2))
+    }
+}
+
+impl TreeBuild for GpuStages {
+    fn build(&self, leaves: &[BvhNode]) -> Result<Bvh, String> {
+        if leaves.len() < 2 {
+            return Ok(Bvh {
+                nodes: leaves.to_vec(),
+            });
+        }
+        let (nodes, depth) = guarded(
+            &self.gpu,
+            || self.linear_bvh(leaves),
+            |e| format!("on the GPU: {e}"),
+        )?;
+        // A linear BVH deeper than the tracer's stack (a rare, very uneven set): the CPU's
+        // tree, which pairs by distance, instead of a step the player would refuse.
+        if u64::from(depth) > slosh_render::MAX_BVH_DEPTH {
+            return PlocTree.build(leaves);
+        }
+        Ok(Bvh { nodes })
+    }
+
+    fn describe(&self) -> String {
+        format!("gpu ({}, linear BVH)", self.gpu.describe())
+    }
+}
