@@ -279,3 +279,33 @@ fn empty_steps_are_valid_steps() {
         assert!(n > 200 && n < 48 * 48 * 9 / 10, "step {i}: {n} hit pixels");
     }
 }
+
+/// A pile of particles at one place on the surface (a solver parking particles, or writing a
+/// source's inflow before it moves): PLOC chained the pile's equal leaf boxes one per level,
+/// a tree 388 deep that verified, was written, and that the player then refused. The bake
+/// keeps within the tracer's depth, the verifier holds it to that, and the step renders.
+#[test]
+fn a_pile_of_coincident_particles_on_the_surface_bakes_a_walkable_tree() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("pile.ply");
+    sphere_ply(&ply, 20_000, 1.0);
+    let mut text = std::fs::read_to_string(&ply).unwrap();
+    text = text.replace("element vertex 20000", "element vertex 23000");
+    text += &"0 0 1 0 0 1\n".repeat(3000);
+    std::fs::write(&ply, text).unwrap();
+    let cache = dir.path().join("cache");
+    let (ok, out, err) = bake_case(&ply, &cache, &["--quiet"]);
+    assert!(ok, "{out}{err}");
+    let (ok, out, err) = slosh(&["inspect", cache.join("step-00000.slc").to_str().unwrap()]);
+    assert!(ok, "{out}{err}");
+    let depth: u64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("bvh "))
+        .and_then(|l| l.rsplit("depth ").next())
+        .and_then(|d| d.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no BVH depth in {out}"));
+    assert!(depth <= slosh_cache::MAX_BVH_DEPTH, "depth {depth}");
+    let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);
+    assert!(ok && out.contains("verified"), "{out}{err}");
+    assert!(hit_pixels(&cache, &dir.path().join("aov.npy")) > 500);
+}

@@ -169,6 +169,8 @@ pub fn is_current(path: &Path, key: &SeriesKey, index: usize, identity: Option<&
         key.differences(index, f.header()).is_empty()
             && identity.is_none_or(|id| source.identity.as_deref() == Some(id))
             && f.body_intact()
+            // Deeper trees were written before the bake kept within the tracer's stack.
+            && f.header().stats.bvh_depth <= slosh_cache::MAX_BVH_DEPTH
     })
 }
 

@@ -16,7 +16,7 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::ploc::PlocSearchDistance;
 use rayon::prelude::*;
-use slosh_cache::{Bvh, BvhNode, MAX_LEAF_RANGE};
+use slosh_cache::{Bvh, BvhNode, MAX_BVH_DEPTH, MAX_LEAF_RANGE};
 
 /// Up to this many candidates share a leaf.
 pub const MAX_LEAF_ITEMS: u32 = 8;
@@ -104,13 +104,25 @@ pub trait TreeBuild: Send + Sync + std::fmt::Debug {
     fn describe(&self) -> String;
 }
 
-/// The reference tree: obvhs's PLOC on the CPU.
+/// The reference tree: obvhs's PLOC on the CPU, or where that is deeper than the tracer walks
+/// (PLOC chains leaves whose boxes coincide: a pile of particles on the surface), the linear
+/// BVH, which splits them by position in Morton order.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PlocTree;
 
 impl TreeBuild for PlocTree {
     fn build(&self, leaves: &[BvhNode]) -> Result<Bvh, String> {
-        Ok(ploc(leaves))
+        [ploc, linear]
+            .iter()
+            .map(|build| build(leaves))
+            .find(|bvh| bvh.depth().is_some_and(|d| d as u64 <= MAX_BVH_DEPTH))
+            .ok_or_else(|| {
+                format!(
+                    "{} leaves make a tree deeper than the tracer's {MAX_BVH_DEPTH} levels, \
+                     paired by distance or by Morton code",
+                    leaves.len()
+                )
+            })
     }
 
     fn describe(&self) -> String {
@@ -118,11 +130,133 @@ impl TreeBuild for PlocTree {
     }
 }
 
-/// The BVH over `items` by the reference tree.
+/// The BVH over `items` by obvhs's PLOC.
 pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
     ploc(&leaves(items))
 }
 
+/// The leaves' order in a linear BVH: by the 63-bit Morton code of their boxes' centres (over
+/// the centres' bounds), ties by index. Returns the codes, ascending, and the leaves' indices
+/// in that order.
+pub fn linear_order(leaves: &[BvhNode]) -> (Vec<u64>, Vec<u32>) {
+    let centres: Vec<[f64; 3]> = leaves
+        .par_iter()
+        .map(|l| std::array::from_fn(|a| 0.5 * (f64::from(l.lo[a]) + f64::from(l.hi[a]))))
+        .collect();
+    let mut keyed = slosh_mls::morton_keys(&slosh_mls::MortonGrid::new(&centres), &centres);
+    keyed.par_sort_unstable();
+    keyed.into_par_iter().unzip()
+}
+
+/// The linear BVH over `leaves` (Karras 2012), as `shaders/bvh_build.wgsl` builds it on the
+/// GPU, node for node (`docs/algorithm.md`): the inner node whose split is γ has its children
+/// at slots 2γ + 1 and 2γ + 2.
+pub fn linear(leaves: &[BvhNode]) -> Bvh {
+    let m = leaves.len();
+    if m < 2 {
+        return Bvh {
+            nodes: leaves.to_vec(),
+        };
+    }
+    let (keys, order) = linear_order(leaves);
+    // The common prefix of keys i and j, their indices breaking ties; −1 outside.
+    let delta = |i: i64, j: i64| -> i64 {
+        if j < 0 || j >= m as i64 {
+            return -1;
+        }
+        let (a, b) = (keys[i as usize], keys[j as usize]);
+        if a != b {
+            i64::from((a ^ b).leading_zeros())
+        } else {
+            64 + i64::from(((i as u32) ^ (j as u32)).leading_zeros())
+        }
+    };
+    // Each inner node: its slot and its split, with whether each child is a leaf.
+    let inner: Vec<(usize, usize, bool, bool)> = (0..m as i64 - 1)
+        .into_par_iter()
+        .map(|i| {
+            let d = if delta(i, i + 1) > delta(i, i - 1) {
+                1
+            } else {
+                -1
+            };
+            let shortest = delta(i, i - d);
+            let mut reach = 2;
+            while delta(i, i + reach * d) > shortest {
+                reach *= 2;
+            }
+            let mut length = 0;
+            let mut step = reach / 2;
+            while step >= 1 {
+                if delta(i, i + (length + step) * d) > shortest {
+                    length += step;
+                }
+                step /= 2;
+            }
+            let j = i + length * d;
+            let prefix = delta(i, j);
+            let mut split = 0;
+            let mut divisor = 2;
+            loop {
+                let s = (length + divisor - 1) / divisor;
+                if delta(i, i + (split + s) * d) > prefix {
+                    split += s;
+                }
+                if s <= 1 {
+                    break;
+                }
+                divisor *= 2;
+            }
+            let gamma = i + split * d + d.min(0);
+            let slot = match (i, d) {
+                (0, _) => 0,
+                (_, -1) => 2 * i + 1,
+                _ => 2 * i,
+            };
+            (
+                slot as usize,
+                gamma as usize,
+                i.min(j) == gamma,
+                i.max(j) == gamma + 1,
+            )
+        })
+        .collect();
+    let empty = BvhNode {
+        lo: [0.0; 3],
+        count: 0,
+        hi: [0.0; 3],
+        first: 0,
+    };
+    let mut nodes = vec![empty; 2 * m - 1];
+    for &(slot, gamma, left_leaf, right_leaf) in &inner {
+        nodes[slot].first = 2 * gamma as u32 + 1;
+        if left_leaf {
+            nodes[2 * gamma + 1] = leaves[order[gamma] as usize];
+        }
+        if right_leaf {
+            nodes[2 * gamma + 2] = leaves[order[gamma + 1] as usize];
+        }
+    }
+    // Boxes from the leaves up, children before parents.
+    let mut stack = vec![(0usize, false)];
+    while let Some((slot, children_done)) = stack.pop() {
+        let node = nodes[slot];
+        if node.count > 0 {
+            continue;
+        }
+        let c = node.first as usize;
+        if children_done {
+            let (a, b) = (nodes[c], nodes[c + 1]);
+            nodes[slot].lo = std::array::from_fn(|k| a.lo[k].min(b.lo[k]));
+            nodes[slot].hi = std::array::from_fn(|k| a.hi[k].max(b.hi[k]));
+        } else {
+            stack.extend([(slot, true), (c, false), (c + 1, false)]);
+        }
+    }
+    Bvh { nodes }
+}
+
+/// obvhs's PLOC over `leaves`, rewritten into the cache's layout.
 fn ploc(leaves: &[BvhNode]) -> Bvh {
     if leaves.is_empty() {
         return Bvh::default();
@@ -223,5 +357,22 @@ mod tests {
             let candidate = items.iter().any(|(i, ..)| *i as usize == id);
             assert_eq!(count, usize::from(candidate), "item {id}");
         }
+    }
+
+    #[test]
+    fn a_pile_of_coincident_balls_stays_within_the_tracers_depth() {
+        // PLOC chains equal boxes one per level (63 leaves made a tree 63 deep); the
+        // reference then takes the linear BVH, which splits them by position.
+        let items: Vec<(u32, [f64; 3], f64)> = (0..2000).map(|i| (i, [0.5; 3], 0.01)).collect();
+        let leaves = leaves(&items);
+        assert!(ploc(&leaves).depth().unwrap() as u64 > MAX_BVH_DEPTH);
+        let bvh = PlocTree.build(&leaves).unwrap();
+        let depth = bvh.depth().unwrap();
+        assert!(depth <= 10, "depth {depth}");
+        assert_eq!(bvh.nodes, linear(&leaves).nodes);
+        assert_eq!(
+            bvh.nodes.iter().filter(|n| n.count > 0).count(),
+            leaves.len()
+        );
     }
 }

@@ -17,7 +17,10 @@ pub use batch::{
     BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, files_identity, is_current,
     plan, run_batch, series_key,
 };
-pub use bvh::{MAX_LEAF_ITEMS, PlocTree, TreeBuild, build as build_bvh, leaves as bvh_leaves};
+pub use bvh::{
+    MAX_LEAF_ITEMS, PlocTree, TreeBuild, build as build_bvh, leaves as bvh_leaves,
+    linear as linear_bvh, linear_order,
+};
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
 pub use ensight_source::{EnsightSource, canonical_label};
 pub use jobs::{available_memory, cores, default_jobs};

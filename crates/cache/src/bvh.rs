@@ -27,6 +27,11 @@ pub struct Bvh {
 /// four bits of its stack link.
 pub const MAX_LEAF_RANGE: u32 = 15;
 
+/// The deepest BVH a step may hold: what the trace shader's largest traversal stack (96
+/// entries) holds, the wide tree having 31 levels, each stacking up to three slots. The bake
+/// builds within it and the verifier refuses deeper trees.
+pub const MAX_BVH_DEPTH: u64 = 62;
+
 /// Entry parameter of the ray into the box for t ≥ 0, if it enters at all.
 fn enter(node: &BvhNode, origin: [f64; 3], inv_dir: [f64; 3]) -> Option<f64> {
     let (mut t0, mut t1) = (0.0f64, f64::INFINITY);

@@ -24,7 +24,7 @@ mod verify;
 mod writer;
 
 pub use ball_state::{BALLS_PER_STATE_WORD, BallBits, StoredBall, exact_half, h_of, pack_h};
-pub use bvh::{Bvh, BvhNode, MAX_LEAF_RANGE};
+pub use bvh::{Bvh, BvhNode, MAX_BVH_DEPTH, MAX_LEAF_RANGE};
 pub use bvh_grid::{BvhGrid, GpuBvhNode, LINK_FIRST_BITS};
 /// The section codecs by themselves (for measuring encodings); readers use
 /// [`CacheFile::decode_into`].

@@ -210,8 +210,15 @@ impl CacheFile {
         }
         // Every candidate (fitted ball or sphere) is in exactly one leaf's range; a range may
         // also cover balls that are not candidates, which the walk skips.
-        bvh.depth()
+        let depth = bvh
+            .depth()
             .ok_or("the BVH's child links leave the node array or are not a tree")?;
+        if depth as u64 > crate::MAX_BVH_DEPTH {
+            return Err(format!(
+                "the BVH is {depth} levels deep; the tracer walks at most {}",
+                crate::MAX_BVH_DEPTH
+            ));
+        }
         let grid = header.bvh_grid;
         if !grid.is_valid() {
             return Err(format!(

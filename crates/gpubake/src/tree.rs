@@ -1,14 +1,14 @@
 //! The BVH's tree on the GPU (`shaders/bvh_build.wgsl`): the leaves the CPU grouped, sorted
 //! by the Morton codes of their boxes' centres, linked as a linear BVH straight into the
 //! cache's layout, then its boxes fitted from the deepest inner nodes up, one dispatch a
-//! depth. The leaves are the CPU bake's; only the inner nodes differ from obvhs's PLOC.
+//! depth: node for node `slosh_bake::linear_bvh`, the CPU's form. The leaves are the CPU
+//! bake's; only the inner nodes differ from obvhs's PLOC.
 
 use std::sync::Arc;
 
 use rayon::prelude::*;
-use slosh_bake::{PlocTree, Stages, TreeBuild};
+use slosh_bake::{PlocTree, Stages, TreeBuild, linear_order};
 use slosh_cache::{Bvh, BvhNode};
-use slosh_mls::{MortonGrid, morton_keys};
 
 use crate::dispatch::{bind, groups, guarded, output, read_back, storage, uniform};
 use crate::layout::{TREE_MAX_DEPTH, TreeNode, TreeParams};
@@ -37,19 +37,14 @@ impl GpuStages {
                 self.gpu.max_binding()
             ));
         }
-        let centres: Vec<[f64; 3]> = leaves
+        let (codes, order) = linear_order(leaves);
+        let keys: Vec<[u32; 2]> = codes
             .par_iter()
-            .map(|l| std::array::from_fn(|a| 0.5 * (f64::from(l.lo[a]) + f64::from(l.hi[a]))))
+            .map(|&code| [(code >> 32) as u32, code as u32])
             .collect();
-        let mut keyed = morton_keys(&MortonGrid::new(&centres), &centres);
-        keyed.par_sort_unstable();
-        let keys: Vec<[u32; 2]> = keyed
+        let sorted: Vec<TreeNode> = order
             .par_iter()
-            .map(|&(code, _)| [(code >> 32) as u32, code as u32])
-            .collect();
-        let sorted: Vec<TreeNode> = keyed
-            .par_iter()
-            .map(|&(_, i)| {
+            .map(|&i| {
                 let l = leaves[i as usize];
                 TreeNode {
                     lo: l.lo,
@@ -147,9 +142,9 @@ impl TreeBuild for GpuStages {
             || self.linear_bvh(leaves),
             |e| format!("on the GPU: {e}"),
         )?;
-        // A linear BVH deeper than the tracer's stack (a rare, very uneven set): the CPU's
-        // tree, which pairs by distance, instead of a step the player would refuse.
-        if u64::from(depth) > slosh_render::MAX_BVH_DEPTH {
+        // A linear BVH deeper than the tracer's stack (a rare, very uneven set): PLOC's on the
+        // CPU, which pairs by distance, instead of a step the player would refuse.
+        if u64::from(depth) > slosh_cache::MAX_BVH_DEPTH {
             return PlocTree.build(leaves);
         }
         Ok(Bvh { nodes })

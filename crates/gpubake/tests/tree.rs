@@ -1,5 +1,5 @@
-//! The GPU's BVH tree (a linear BVH over the CPU's leaves) against obvhs's PLOC on the CPU:
-//! the same leaves, every inner box the exact union of its children's, within the tracer's
+//! The GPU's BVH tree (a linear BVH over the CPU's leaves): node for node the CPU's linear
+//! BVH, and against obvhs's PLOC on the CPU: the same leaves, every inner box the exact union of its children's, within the tracer's
 //! depth, and the same nearest sphere for every ray a walk of either tree finds (a brute
 //! force over every item agrees); the expected inner nodes a random ray tests (the sum of
 //! inner boxes' areas over the root's) is reported, and bounded against PLOC's.
@@ -8,7 +8,7 @@
 
 use std::sync::Arc;
 
-use slosh_bake::{PlocTree, TreeBuild, bvh_leaves};
+use slosh_bake::{PlocTree, TreeBuild, bvh_leaves, linear_bvh};
 use slosh_cache::{Bvh, BvhNode};
 use slosh_gpubake::GpuStages;
 use slosh_mls::{BallIndex, morton_order};
@@ -191,6 +191,11 @@ fn the_gpu_tree_finds_what_the_cpu_tree_finds() {
         let gpu = stages
             .build(&leaves)
             .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(
+            gpu.nodes,
+            linear_bvh(&leaves).nodes,
+            "{name}: the GPU's linear BVH is not the CPU's"
+        );
         let cpu_area = check_tree(name, &cpu, &leaves);
         let gpu_area = check_tree(name, &gpu, &leaves);
         // Rays through the set's box from outside, in many directions.
@@ -235,7 +240,6 @@ fn the_gpu_tree_finds_what_the_cpu_tree_finds() {
             gpu.depth().unwrap()
         );
         assert_eq!(differing, 0, "{name}: rays whose nearest sphere differs");
-        // PLOC's may be deeper (the coincident set's chain is 63 deep).
         let depth = gpu.depth().unwrap() as u64;
         assert!(
             depth <= MAX_BVH_DEPTH,

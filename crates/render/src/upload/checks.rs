@@ -4,9 +4,7 @@
 use rayon::prelude::*;
 use slosh_cache::{GpuBvhNode, names};
 
-/// The deepest BVH the trace shader's largest traversal stack (96 entries) holds: the wide
-/// tree has 31 levels, each stacking up to three slots.
-pub const MAX_BVH_DEPTH: u64 = 62;
+pub use slosh_cache::MAX_BVH_DEPTH;
 
 /// The traversal stack packs a node as `first | count << 28` (trace.wgsl: `link`), so a
 /// leaf holds at most this many items, and `first` and an inner node's index (its wide
