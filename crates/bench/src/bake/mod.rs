@@ -51,6 +51,14 @@ const THESIS: [(usize, f64, f64, f64); 3] = [
     (100_000, 2.730, 3.341, 14.176),
 ];
 
+/// The stages `--device gpu` runs on the GPU, as the bake's clock names them.
+const GPU_STAGES: [&str; 4] = [
+    "kd-tree and radii (kNN)",
+    "neighbour lists",
+    "initial fits",
+    "bvh",
+];
+
 /// The sphere step of `points` points, and its mean particle spacing.
 fn input(points: usize) -> (StepInput, f64) {
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))
@@ -217,12 +225,20 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         let gpu = (!gpu_runs.is_empty()).then(|| GpuBakeRow {
             total: median(gpu_runs.iter().map(|r| r.seconds).collect()),
             gpu_time: (!gpu_times.is_empty()).then(|| median(gpu_times.clone())),
-            nearest: gpu_stage("kd-tree and radii (kNN)"),
-            lists: gpu_stage("neighbour lists"),
-            fits: gpu_stage("initial fits"),
-            cpu_nearest: stage("kd-tree and radii (kNN)"),
-            cpu_lists: stage("neighbour lists"),
-            cpu_fits: stage("initial fits"),
+            nearest: gpu_stage(GPU_STAGES[0]),
+            lists: gpu_stage(GPU_STAGES[1]),
+            fits: gpu_stage(GPU_STAGES[2]),
+            bvh: gpu_stage(GPU_STAGES[3]),
+            cpu_nearest: stage(GPU_STAGES[0]),
+            cpu_lists: stage(GPU_STAGES[1]),
+            cpu_fits: stage(GPU_STAGES[2]),
+            cpu_bvh: stage(GPU_STAGES[3]),
+            on_cpu: gpu_runs[0]
+                .stages
+                .iter()
+                .filter(|(name, _)| !GPU_STAGES.contains(&name.as_str()))
+                .map(|(name, _)| (name.clone(), gpu_stage(name)))
+                .collect(),
         });
         if let Some(g) = &gpu {
             gpu_one_step.push((n, g.total));

@@ -36,14 +36,19 @@ pub struct GpuBakeRow {
     /// The GPU's own time in the bake (timestamp queries of its passes), where the device
     /// has timestamps.
     pub gpu_time: Option<f64>,
-    /// kNN and radii, neighbour lists, initial fits: on the GPU, then in the CPU bake of the
-    /// same runs.
+    /// kNN and radii, neighbour lists, initial fits, the BVH: with the GPU's stages, then in
+    /// the CPU bake of the same runs.
     pub nearest: f64,
     pub lists: f64,
     pub fits: f64,
+    /// The BVH (leaves on the CPU, tree on the GPU), beside the fits.
+    pub bvh: f64,
     pub cpu_nearest: f64,
     pub cpu_lists: f64,
     pub cpu_fits: f64,
+    pub cpu_bvh: f64,
+    /// The GPU bake's stages that ran on the CPU, by name, in its order.
+    pub on_cpu: Vec<(String, f64)>,
 }
 
 /// One size's stored bytes: the file, and each section's stored and raw bytes.
@@ -133,23 +138,30 @@ impl BakeReport {
         };
         let _ = writeln!(
             md,
-            "`slosh bake --device gpu`: the kNN, radii, neighbour lists and initial fits on \
-             {adapter} (`crates/gpubake`; each stage's time includes its transfers), everything \
-             else on the CPU's {} threads; each run alternates with the CPU bake above. \
-             splashsurf as above.\n\n\
+            "`slosh bake --device gpu`: the kNN, radii, neighbour lists, initial fits and the \
+             BVH's tree on {adapter} (`crates/gpubake`; each stage's time includes its transfers \
+             and host work, the BVH's its leaves, built on the CPU), everything else on the \
+             CPU's {} threads; each run alternates with the CPU bake above. splashsurf as \
+             above.\n\n\
              *GPU time* is the passes' own (timestamp queries), which the stages' wall times \
-             include with their transfers and host work.\n\n\
+             include with their transfers and host work. The BVH is built beside the initial \
+             fits, so the stages add up to more than the bake.\n\n\
              | points | CPU bake | GPU bake | speed-up | GPU time | kNN + radii CPU / GPU | \
-             neighbour lists CPU / GPU | initial fits CPU / GPU | against splashsurf |\n\
-             |---|---|---|---|---|---|---|---|---|",
+             neighbour lists CPU / GPU | initial fits CPU / GPU | BVH CPU / GPU | against splashsurf |\n\
+             |---|---|---|---|---|---|---|---|---|---|",
             self.threads
         );
         let ms = |s: f64| format!("{:.1} ms", s * 1e3);
+        let rows: Vec<(usize, &GpuBakeRow)> = self
+            .peers
+            .iter()
+            .filter_map(|r| r.gpu.as_ref().map(|g| (r.points, g)))
+            .collect();
         for r in &self.peers {
             let Some(g) = &r.gpu else { continue };
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.2}× | {} | {} / {} | {} / {} | {} / {} | {} |",
+                "| {} | {} | {} | {:.2}× | {} | {} / {} | {} / {} | {} / {} | {} / {} | {} |",
                 r.points,
                 ms(r.total),
                 ms(g.total),
@@ -161,9 +173,34 @@ impl BakeReport {
                 ms(g.lists),
                 ms(g.cpu_fits),
                 ms(g.fits),
+                ms(g.cpu_bvh),
+                ms(g.bvh),
                 r.peer
                     .map_or("—".into(), |(s, _)| format!("{:.1}× faster", s / g.total)),
             );
+        }
+        // The stages the GPU bake still runs on the CPU, as its runs measured them.
+        if let Some((_, first)) = rows.first() {
+            let names: Vec<&str> = first.on_cpu.iter().map(|(n, _)| n.as_str()).collect();
+            let _ = writeln!(
+                md,
+                "\nThe GPU bake's stages still on the CPU (wall time, medians of the same runs):\n\n\
+                 | points | {} |\n|---|{}",
+                names.join(" | "),
+                "---|".repeat(names.len())
+            );
+            for (points, g) in &rows {
+                let cells: Vec<String> = names
+                    .iter()
+                    .map(|name| {
+                        g.on_cpu
+                            .iter()
+                            .find(|(n, _)| n == name)
+                            .map_or("—".into(), |(_, s)| ms(*s))
+                    })
+                    .collect();
+                let _ = writeln!(md, "| {points} | {} |", cells.join(" | "));
+            }
         }
         md.push('\n');
         md
@@ -281,7 +318,7 @@ impl Report for BakeReport {
         }
         let _ = writeln!(
             md,
-            "## Stored bytes per point\n\n| points | total B/pt | per section: stored (raw) B/pt |\n|---|---|---|\n{size_rows}"
+            "\n## Stored bytes per point\n\n| points | total B/pt | per section: stored (raw) B/pt |\n|---|---|---|\n{size_rows}"
         );
         let mut load_rows = String::new();
         for r in &self.loads {
