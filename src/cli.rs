@@ -447,9 +447,10 @@ pub struct FitSettings {
 /// neighbours.
 #[derive(Debug, Clone, Args)]
 pub struct SelectSettings {
-    /// Where each step's neighbours (kNN, radii, neighbour lists) are found: the CPU's k-d
-    /// tree, or a GPU through Vulkan (the same lists where no distances tie; the other
-    /// stages stay on the CPU for now).
+    /// Where each step's data-parallel stages run: the CPU, or a GPU through Vulkan (the
+    /// surface estimate's neighbours, kNN and radii, neighbour lists, initial fits and the
+    /// BVH's tree; the same selection and lists where no distances tie, docs/bake.md; the
+    /// other stages stay on the CPU for now).
     #[arg(long, value_enum, default_value_t = BakeDevice::Cpu)]
     pub device: BakeDevice,
     /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable

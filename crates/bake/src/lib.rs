@@ -29,6 +29,7 @@ pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
 pub use point_cloud::{PointCloud, PointCloudError, read_point_cloud};
 pub use select::{
     ESTIMATE_NEIGHBOURS, ESTIMATE_THRESHOLD, StepInput, estimate_surface, estimate_surface_normals,
+    estimate_surface_normals_with,
 };
 pub use slosh_mls::morton_order;
 pub use stages::Stages;

@@ -3,9 +3,9 @@
 
 use std::num::NonZero;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use slosh_ensight::FieldValues;
+use slosh_mls::{KdSearch, NeighbourSearch, SurfaceError, distance2};
 
 /// One step's particles as read, before selection.
 #[derive(Debug, Clone, Default)]
@@ -49,34 +49,36 @@ pub fn estimate_surface(points: &[[f64; 3]]) -> Vec<bool> {
 /// neighbours, the direction in which the particle indicator (the colour field) falls, as its
 /// negated gradient does. A zero vector where the neighbours surround the particle evenly.
 pub fn estimate_surface_normals(points: &[[f64; 3]]) -> Vec<(bool, [f64; 3])> {
-    let none = || vec![(true, [0.0; 3]); points.len()];
+    estimate_surface_normals_with(points, &KdSearch)
+        .unwrap_or_else(|_| vec![(true, [0.0; 3]); points.len()])
+}
+
+/// [`estimate_surface_normals`], the neighbours found by `search` (the GPU's, say): the same
+/// flags and normals wherever no two distances tie at the last neighbour.
+pub fn estimate_surface_normals_with(
+    points: &[[f64; 3]],
+    search: &dyn NeighbourSearch,
+) -> Result<Vec<(bool, [f64; 3])>, SurfaceError> {
     if points.len() <= ESTIMATE_NEIGHBOURS {
-        return none();
+        return Ok(vec![(true, [0.0; 3]); points.len()]);
     }
-    let tree: ImmutableKdTree<f64, 3> = match ImmutableKdTree::new_from_slice(points) {
-        Ok(t) => t,
-        Err(_) => return none(),
-    };
-    let Some(k) = NonZero::new(ESTIMATE_NEIGHBOURS + 1) else {
-        return none();
-    };
-    points
-        .par_iter()
-        .map(|p| {
-            let nn = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .execute();
-            let others = &nn[1.min(nn.len())..];
-            let m = others.len().max(1) as f64;
+    let k = NonZero::new(ESTIMATE_NEIGHBOURS + 1).ok_or(SurfaceError::BadK)?;
+    let nearest = search.index(points)?.nearest(k)?;
+    Ok(nearest
+        .par_chunks(k.get())
+        .zip(points)
+        .map(|(nn, p)| {
+            // The nearest is the particle itself (or a particle where it is).
+            let others = &nn[1..];
+            let m = others.len() as f64;
             let mut c = [0.0; 3];
             let mut mean_dist = 0.0;
-            for r in others {
-                let q = points[r.item as usize];
+            for &j in others {
+                let q = points[j as usize];
                 for a in 0..3 {
                     c[a] += (q[a] - p[a]) / m;
                 }
-                mean_dist += r.distance.sqrt() / m;
+                mean_dist += distance2(*p, q).sqrt() / m;
             }
             let offset = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
             let one_sided = offset > ESTIMATE_THRESHOLD * mean_dist;
@@ -88,8 +90,8 @@ pub fn estimate_surface_normals(points: &[[f64; 3]]) -> Vec<(bool, [f64; 3])> {
             // neither is outward: no normal (the support plane then comes from the
             // covariance).
             let mut cov = [[0.0f64; 3]; 3];
-            for r in others {
-                let q = points[r.item as usize];
+            for &j in others {
+                let q = points[j as usize];
                 let d: [f64; 3] = std::array::from_fn(|a| q[a] - p[a] - c[a]);
                 for i in 0..3 {
                     for j in 0..3 {
@@ -101,5 +103,5 @@ pub fn estimate_surface_normals(points: &[[f64; 3]]) -> Vec<(bool, [f64; 3])> {
             values.sort_by(f64::total_cmp);
             (values[0] <= ESTIMATE_FLAT * values[1], [0.0; 3])
         })
-        .collect()
+        .collect())
 }

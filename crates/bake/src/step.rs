@@ -11,7 +11,7 @@ use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
 
 use crate::params::{BakeParams, SurfaceSelect};
-use crate::select::{StepInput, estimate_surface_normals};
+use crate::select::{StepInput, estimate_surface_normals_with};
 use crate::stages::Stages;
 
 #[derive(Debug, thiserror::Error)]
@@ -380,8 +380,16 @@ pub fn bake_step_parts_with(
         .filter(|&i| input.positions[i as usize].iter().all(|c| c.is_finite()))
         .collect();
     let dropped_non_finite = n_in - finite.len();
-    // The surface estimate and its normals, from all finite particles, once.
-    let mut estimated: Option<Vec<(bool, [f64; 3])>> = None;
+    // The surface estimate and its normals, from all finite particles, where the selection or
+    // the normals ask for it (else empty).
+    let estimated: Vec<(bool, [f64; 3])> = if matches!(params.surface, SurfaceSelect::Estimate)
+        || matches!(params.normals, crate::params::NormalSource::Estimate)
+    {
+        estimate_surface_normals_with(&permute(&input.positions, &finite), stages.search.as_ref())
+            .map_err(|source| BakeError::Surface { step, source })?
+    } else {
+        Vec::new()
+    };
     let surface_of_finite: Vec<bool> = match &params.surface {
         SurfaceSelect::All => vec![true; finite.len()],
         SurfaceSelect::Variable(name) => {
@@ -397,11 +405,7 @@ pub fn bake_step_parts_with(
             }
             finite.par_iter().map(|&i| flags[i as usize]).collect()
         }
-        SurfaceSelect::Estimate => estimated
-            .get_or_insert_with(|| estimate_surface_normals(&permute(&input.positions, &finite)))
-            .iter()
-            .map(|e| e.0)
-            .collect(),
+        SurfaceSelect::Estimate => estimated.iter().map(|e| e.0).collect(),
     };
     let kept: Vec<u32> = finite
         .iter()
@@ -447,9 +451,7 @@ pub fn bake_step_parts_with(
         crate::params::NormalSource::Estimate => {
             // From all finite particles (the interior shapes the surface's normals), then
             // the kept ones, in the spatial order.
-            let all = estimated.get_or_insert_with(|| {
-                estimate_surface_normals(&permute(&input.positions, &finite))
-            });
+            let all = &estimated;
             // `finite` is ascending, so a source index finds its estimate by search.
             Some(
                 source_index
