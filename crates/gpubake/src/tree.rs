@@ -26,17 +26,16 @@ impl GpuStages {
         }
     }
 
-    /// The linear BVH over `leaves` (at least two) on the GPU, and its depth.
+    /// Whether the nodes of a tree over `leaves` leaves fit one binding of this device.
+    fn holds(&self, leaves: usize) -> bool {
+        (2 * leaves as u64 - 1) * NODE_BYTES <= self.gpu.max_binding() && leaves < 1 << 30
+    }
+
+    /// The linear BVH over `leaves` (at least two, [`GpuStages::holds`]) on the GPU, and its
+    /// depth.
     fn linear_bvh(&self, leaves: &[BvhNode]) -> Result<(Vec<BvhNode>, u32), String> {
         let m = leaves.len();
         let node_bytes = (2 * m as u64 - 1) * NODE_BYTES;
-        if node_bytes > self.gpu.max_binding() || m >= 1 << 30 {
-            return Err(format!(
-                "{m} leaves take {node_bytes} bytes of nodes, more than one binding of this \
-                 adapter holds ({} bytes); bake with --device cpu",
-                self.gpu.max_binding()
-            ));
-        }
         let (codes, order) = linear_order(leaves);
         let keys: Vec<[u32; 2]> = codes
             .par_iter()
@@ -136,6 +135,12 @@ impl TreeBuild for GpuStages {
             return Ok(Bvh {
                 nodes: leaves.to_vec(),
             });
+        }
+        // More leaves than one binding holds nodes for (spray everywhere: a leaf per particle,
+        // 64 bytes of nodes each, where the search needed 16): the CPU's tree, not a failed
+        // step.
+        if !self.holds(leaves.len()) {
+            return PlocTree.build(leaves);
         }
         let (nodes, depth) = guarded(
             &self.gpu,

@@ -299,3 +299,29 @@ fn the_tree_structs_mirror_the_wgsl_layout() {
     );
     check_layout!(&module, "TreeNode", TreeNode, [lo, count, hi, first]);
 }
+
+/// Leaves whose nodes exceed one binding (here 64 KiB: 1024 nodes) are linked on the CPU, not
+/// refused; below it, on the GPU.
+#[test]
+fn a_tree_larger_than_a_binding_is_built_on_the_cpu() {
+    let Some(mut gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
+        return;
+    };
+    gpu.limit_bindings(1 << 16);
+    let small = GpuStages::new(Arc::new(gpu)).unwrap();
+    for (points, by_gpu) in [(500u32, true), (3000, false)] {
+        // A line of balls too far apart to share leaves: a leaf each.
+        let items: Items = (0..points)
+            .map(|i| (i, [f64::from(i) * 10.0, 0.0, 0.0], 1.0))
+            .collect();
+        let leaves = bvh_leaves(&items);
+        assert_eq!(leaves.len(), points as usize);
+        let built = small.build(&leaves).unwrap();
+        let want = if by_gpu {
+            linear_bvh(&leaves)
+        } else {
+            PlocTree.build(&leaves).unwrap()
+        };
+        assert_eq!(built.nodes, want.nodes, "{points} leaves");
+    }
+}
