@@ -309,3 +309,28 @@ fn a_pile_of_coincident_particles_on_the_surface_bakes_a_walkable_tree() {
     assert!(ok && out.contains("verified"), "{out}{err}");
     assert!(hit_pixels(&cache, &dir.path().join("aov.npy")) > 500);
 }
+
+/// Most particles written twice (a solver writing a block of its particles twice): every
+/// step failed ("droplet sphere 0 … has no positive radius"), the dense spacing being the
+/// median nearest distance, 0. It bakes, verifies and renders.
+#[test]
+fn mostly_duplicated_particles_bake() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    crate::util::generate(
+        &run,
+        &[
+            "sphere",
+            "--points",
+            "5000",
+            "--steps",
+            "1",
+            "--duplicates",
+            "0.7",
+        ],
+    );
+    let cache = dir.path().join("cache");
+    let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &["--quiet"]);
+    assert!(ok, "{out}{err}");
+    assert!(hit_pixels(&cache, &dir.path().join("aov.npy")) > 500);
+}

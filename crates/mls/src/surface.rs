@@ -256,7 +256,16 @@ impl<T: Real> SurfaceParts<T> {
         // h from the dense fluid, not the spray: the median radius, which sparse points
         // (large radii) cannot inflate while they are fewer than half.
         let h = half_precision(params.h_scale * quantile(&radii, H_QUANTILE));
-        let dense_spacing = quantile(&nearest, H_QUANTILE);
+        // Where most particles have a twin at their place (a pile, or particles written
+        // twice), the median nearest distance is 0, and every ball and spray sphere sized by
+        // it would be too: the spacing is then the median of the distances that are not.
+        let dense_spacing = match quantile(&nearest, H_QUANTILE) {
+            s if s > 0.0 => s,
+            _ => {
+                let apart: Vec<f64> = nearest.par_iter().copied().filter(|&d| d > 0.0).collect();
+                quantile(&apart, H_QUANTILE)
+            }
+        };
         // A ball is trusted no farther than its data reach: beyond 2h a fit has no weight;
         // and no farther than two dense spacings, since every hit lies in its ball: a sparse
         // point's fit would otherwise stretch a fin out to 2h (3 spacings) from any particle.

@@ -30,6 +30,38 @@ fn noise_of_a_third_spacing_is_smoothed() {
     assert!(st.rms < 0.15, "RMS {} spacings for noise σ = 0.3", st.rms);
 }
 
+/// Most particles written twice (a solver's output with a duplicated block): the median
+/// nearest distance is 0, which sized every ball and spray sphere 0 (every step failed to
+/// bake); the spacing comes from the distances that are not 0, and the surface is the one
+/// the particles sample.
+#[test]
+fn mostly_duplicated_particles_keep_their_spacing() {
+    let mut s = spec(SceneKind::Sphere, 3000);
+    s.hard.duplicates = 0.7;
+    let sc = scene(s);
+    let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
+    assert!(
+        surface.radii.iter().all(|r| *r > 0.0),
+        "a ball without a radius"
+    );
+    assert!(
+        surface.spheres.iter().all(|s| s.radius > 0.0),
+        "a sphere without a radius"
+    );
+    let st = render_stats(
+        &sc,
+        &surface,
+        &framing_camera(&sc, 32),
+        &params(&surface, 2, 4),
+        2.0,
+    );
+    eprintln!("70 % duplicated: {st:?}");
+    assert_eq!(st.non_finite, 0);
+    assert!(st.hits > 150, "{st:?}");
+    assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
+    assert!(st.disagree * 100 <= st.hits, "{st:?}");
+}
+
 #[test]
 fn duplicates_and_density_jumps_stay_accurate() {
     let mut s = spec(SceneKind::Sphere, 4000);
