@@ -11,19 +11,24 @@ fn spec(kind: SceneKind, n: usize) -> SceneSpec {
     SceneSpec::new(kind, n, 5)
 }
 
+/// 32×32 pixels framing the scene, 2 iterations, quadratic fits.
+fn default_render_stats(sc: &slosh_scenes::Scene, surface: &Surface<f64>) -> Stats {
+    render_stats(
+        sc,
+        surface,
+        &framing_camera(sc, 32),
+        &params(surface, 2, 4),
+        2.0,
+    )
+}
+
 #[test]
 fn noise_of_a_third_spacing_is_smoothed() {
     let mut s = spec(SceneKind::Sphere, 3000);
     s.hard.noise = 0.3;
     let sc = scene(s);
     let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
-    let st = render_stats(
-        &sc,
-        &surface,
-        &framing_camera(&sc, 32),
-        &params(&surface, 2, 4),
-        2.0,
-    );
+    let st = default_render_stats(&sc, &surface);
     eprintln!("noise 0.3: {st:?}");
     assert_eq!(st.non_finite, 0);
     // Averaging over the weight's support keeps the error well below the noise.
@@ -48,13 +53,7 @@ fn mostly_duplicated_particles_keep_their_spacing() {
         surface.spheres.iter().all(|s| s.radius > 0.0),
         "a sphere without a radius"
     );
-    let st = render_stats(
-        &sc,
-        &surface,
-        &framing_camera(&sc, 32),
-        &params(&surface, 2, 4),
-        2.0,
-    );
+    let st = default_render_stats(&sc, &surface);
     eprintln!("70 % duplicated: {st:?}");
     assert_eq!(st.non_finite, 0);
     assert!(st.hits > 150, "{st:?}");
