@@ -237,7 +237,8 @@ pub(crate) fn lists(
             )?);
             fit_seconds += fitting.elapsed().as_secs_f64();
         }
-        words.extend(read_back::<u32>(gpu, &lists_out, count * 4)?);
+        slosh_render::read_storage_into(gpu, &lists_out, count * 4, &mut words)
+            .map_err(gpu_error)?;
         first = last;
     }
 

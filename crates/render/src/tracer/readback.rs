@@ -23,8 +23,34 @@ pub fn read_storage<T: bytemuck::Pod>(
     read(gpu, &staged(gpu, source, 0, size))
 }
 
+/// The first `size` bytes of a `COPY_SRC` buffer appended to `out` once the work submitted
+/// before it has run (waits): copied from the mapping straight into `out` by every thread, so
+/// that hundreds of megabytes (a bake's neighbour lists) are neither copied twice nor written,
+/// page by fresh page, by one thread.
+pub fn read_storage_into<T: bytemuck::Pod + Send + Sync>(
+    gpu: &Gpu,
+    source: &wgpu::Buffer,
+    size: u64,
+    out: &mut Vec<T>,
+) -> Result<()> {
+    use rayon::prelude::*;
+    mapped(
+        gpu,
+        &staged(gpu, source, 0, size),
+        |bytes| match bytemuck::try_cast_slice::<u8, T>(bytes) {
+            Ok(values) => out.par_extend(values.par_iter().copied()),
+            Err(_) => out.extend(bytemuck::pod_collect_to_vec::<u8, T>(bytes)),
+        },
+    )
+}
+
 /// Maps a MAP_READ buffer and copies its contents out.
 pub(super) fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
+    mapped(gpu, buffer, |bytes| bytemuck::pod_collect_to_vec(bytes))
+}
+
+/// Maps a MAP_READ buffer, waits, and hands its bytes to `take`.
+fn mapped<R>(gpu: &Gpu, buffer: &wgpu::Buffer, take: impl FnOnce(&[u8]) -> R) -> Result<R> {
     let slice = buffer.slice(..);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -38,7 +64,7 @@ pub(super) fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result
         let view = slice
             .get_mapped_range()
             .map_err(|e| Error::Readback(e.to_string()))?;
-        bytemuck::pod_collect_to_vec(&view)
+        take(&view)
     };
     buffer.unmap();
     Ok(out)
