@@ -193,6 +193,54 @@ fn shards_make_the_caches_of_one_run() {
     assert!(!ok && err.contains("--shard 3/3"), "{err}");
 }
 
+/// Two runs of one bake into one directory at once (a requeued job beside the first, the same
+/// command typed twice) bake each step once between them: a step the other run is baking is
+/// left to it and waited for, then found current. They both baked every step before.
+#[test]
+fn two_runs_of_one_bake_at_once_bake_each_step_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("sphere");
+    generate(&case_dir, &["sphere", "--points", "20000", "--steps", "8"]);
+    let case = case_dir.join("sphere.case");
+    let out = dir.path().join("out");
+    let args = |extra: &'static str| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_slosh"));
+        cmd.args([
+            "bake",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--jobs",
+            extra,
+        ]);
+        cmd.stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // Both started before either waits.
+    let (a, b) = (args("1"), args("2"));
+    let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+    let counts = |o: &std::process::Output| -> (usize, usize) {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text =
+            String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+        let number = |before: &str| -> usize {
+            text.split(before)
+                .next()
+                .and_then(|head| head.split_whitespace().last())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("no count before '{before}' in {text}"))
+        };
+        (number(" steps, kept"), number(" already current"))
+    };
+    let ((baked_a, kept_a), (baked_b, kept_b)) = (counts(&a), counts(&b));
+    assert_eq!(baked_a + baked_b, 8, "{baked_a} and {baked_b} baked");
+    assert_eq!(kept_a + kept_b, 8, "{kept_a} and {kept_b} kept");
+    let (ok, text, err) = slosh(&["inspect", out.to_str().unwrap(), "--verify"]);
+    assert!(ok && text.matches("verified").count() == 8, "{text}{err}");
+}
+
 #[test]
 fn a_killed_bake_leaves_only_valid_caches_and_resumes() {
     let dir = tempfile::tempdir().unwrap();

@@ -12,6 +12,7 @@ use slosh_cache::{
 };
 use slosh_fileio::FileBytes;
 
+use crate::claim::STEP_LOCKS_NAME;
 use crate::params::BakeParams;
 use crate::select::StepInput;
 use crate::step::bake_step_with;
@@ -350,6 +351,10 @@ pub fn run_batch(
     });
     let next = AtomicUsize::new(0);
     let report = Mutex::new(BatchReport::default());
+    // A step another run of this bake is baking now is left to it, and waited for at the end
+    // (then found current, or baked here if that run died).
+    let step_locks = slosh_fileio::RangeLocks::open(&opts.out.join(STEP_LOCKS_NAME))?;
+    let deferred: Mutex<Vec<usize>> = Mutex::new(Vec::new());
     // Plain threads pull steps; each runs its steps on a rayon pool of its own. A rayon thread
     // waiting inside one step could otherwise start another step, and memory would grow with
     // the series; and steps sharing one pool spread every stage over all cores, paying for its
@@ -366,16 +371,43 @@ pub fn run_batch(
                 .build()
                 .ok();
             let (next, report, planned, key) = (&next, &report, &planned, &key);
+            let (step_locks, deferred) = (&step_locks, &deferred);
             scope.spawn(move || {
                 loop {
                     let k = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&(index, _)) = planned.get(k) else {
-                        break;
+                    let (index, wait) = match planned.get(k) {
+                        Some(&(index, _)) => (index, false),
+                        None => {
+                            let left = deferred.lock().unwrap_or_else(|p| p.into_inner()).pop();
+                            match left {
+                                Some(index) => (index, true),
+                                None => break,
+                            }
+                        }
+                    };
+                    let held = if wait {
+                        step_locks.lock(index as u64).map(Some)
+                    } else {
+                        step_locks.try_lock(index as u64)
                     };
                     let bake = || bake_one(source, index, opts, key);
-                    let outcome = match &pool {
-                        Some(pool) => pool.install(bake),
-                        None => bake(),
+                    let outcome = match held {
+                        Ok(None) => {
+                            deferred
+                                .lock()
+                                .unwrap_or_else(|p| p.into_inner())
+                                .push(index);
+                            continue;
+                        }
+                        Err(e) => StepOutcome::Failed(e.to_string()),
+                        Ok(Some(lock)) => {
+                            let outcome = match &pool {
+                                Some(pool) => pool.install(bake),
+                                None => bake(),
+                            };
+                            drop(lock);
+                            outcome
+                        }
                     };
                     {
                         let mut r = report.lock().unwrap_or_else(|p| p.into_inner());

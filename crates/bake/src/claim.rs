@@ -13,6 +13,10 @@ use slosh_fileio::IoError;
 
 /// The lock every bake of the directory holds (shared) for its run; it names their series.
 pub const BAKE_LOCK_NAME: &str = ".bake.lock";
+/// One byte per step index, locked while a bake of the directory bakes that step
+/// ([`slosh_fileio::RangeLocks`]): two runs of one bake (a job array's shards, a requeued job,
+/// the same command twice, players of one case) never bake one step twice at once.
+pub const STEP_LOCKS_NAME: &str = ".bake.steps.lock";
 /// Taken (exclusive) only while a bake joins or starts the hold, so that the check of who
 /// holds the directory and the taking of it are one step.
 const JOIN_LOCK_NAME: &str = ".bake.join.lock";

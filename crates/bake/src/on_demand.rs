@@ -77,23 +77,19 @@ impl OnDemand {
         if !self.steps.iter().any(|(i, _)| *i == index) {
             return StepOutcome::Failed(format!("step {index} is not in the series"));
         }
-        // Players and renders of one case share its directory (the claim lets bakes of one
-        // series in together) and may want one step at once: a lock per step makes the
+        // Players, renders and bakes of one case share its directory (the claim lets bakes of
+        // one series in together) and may want one step at once: the step's lock makes the
         // second wait, then find the first's file current, instead of baking it again and
-        // replacing a file another may already have read or listed in the manifest.
-        let lock_path = self
-            .opts
-            .out
-            .join(format!(".{}.lock", step_file_name(index)));
-        let lock = std::fs::OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(&lock_path)
-            .and_then(|f| f.lock().map(|()| f));
-        let lock = match lock {
+        // replacing a file another may already have read or listed in the manifest. Opened
+        // per call, so that this process's loaders exclude each other too.
+        let path = self.opts.out.join(crate::claim::STEP_LOCKS_NAME);
+        let locks = match slosh_fileio::RangeLocks::open(&path) {
+            Ok(locks) => locks,
+            Err(e) => return StepOutcome::Failed(e.to_string()),
+        };
+        let lock = match locks.lock(index as u64) {
             Ok(lock) => lock,
-            Err(e) => return StepOutcome::Failed(format!("{}: {e}", lock_path.display())),
+            Err(e) => return StepOutcome::Failed(e.to_string()),
         };
         let outcome = bake_one(self.source.as_ref(), index, &self.opts, &self.key);
         drop(lock);

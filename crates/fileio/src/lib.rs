@@ -2,8 +2,11 @@
 //! otherwise), guarded against the file shrinking under the map, writes that either land
 //! completely or not at all, and stdout that a closed pipe or a full disk never panics.
 
+mod range_lock;
 mod sigbus;
 pub mod stdout;
+
+pub use range_lock::{RangeLock, RangeLocks};
 
 use std::fs::{File, OpenOptions};
 use std::io::Write;
