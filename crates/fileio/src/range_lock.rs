@@ -1,7 +1,7 @@
 //! Locks on single bytes of one file, each held by whoever took it (an open file description:
 //! another process, or another opening in this one, is refused) and released by the kernel
-//! when its holder exits however it exits. Linux's open file description locks; elsewhere
-//! every lock is granted, which only loses the exclusion.
+//! when its holder exits however it exits. Linux's open file description locks; elsewhere,
+//! and on file systems without them, every lock is granted, which only loses the exclusion.
 
 use std::fs::File;
 use std::path::Path;
@@ -87,6 +87,11 @@ impl RangeLocks {
             match e.raw_os_error() {
                 Some(libc::EINTR) => continue,
                 Some(libc::EAGAIN | libc::EACCES) if mode == Mode::TryLock => return Ok(false),
+                // A file system without these locks (some network mounts): granted, as on
+                // other systems; only the exclusion is lost, never the work.
+                Some(libc::ENOLCK | libc::EOPNOTSUPP | libc::ENOSYS | libc::EINVAL) => {
+                    return Ok(true);
+                }
                 _ => return Err(IoError::new(&self.path, e)),
             }
         }
