@@ -107,7 +107,8 @@ impl Stamps {
 
     /// The pass's GPU seconds, once it has run (waits).
     pub(crate) fn seconds(&self, gpu: &Gpu) -> Result<f64, slosh_mls::SurfaceError> {
-        let ticks: Vec<u64> = read_back(gpu, &self.resolved, 16)?;
+        let ticks: Vec<u64> =
+            slosh_render::read_storage(gpu, &self.resolved, 16).map_err(gpu_error)?;
         let period_ns = f64::from(gpu.queue.get_timestamp_period());
         Ok(ticks[1].saturating_sub(ticks[0]) as f64 * period_ns * 1e-9)
     }
@@ -139,18 +140,6 @@ pub(crate) fn record(
     if let Some(s) = stamps {
         encoder.resolve_query_set(&s.set, 0..2, &s.resolved, 0);
     }
-}
-
-/// `bytes` of `source` copied out, once the work submitted before has run.
-pub(crate) fn read_back<T: bytemuck::Pod>(
-    gpu: &Gpu,
-    source: &wgpu::Buffer,
-    bytes: u64,
-) -> Result<Vec<T>, slosh_mls::SurfaceError> {
-    if bytes == 0 {
-        return Ok(Vec::new());
-    }
-    slosh_render::read_storage(gpu, source, bytes).map_err(gpu_error)
 }
 
 /// A bind group of `entries` (binding, buffer) under `layout`.

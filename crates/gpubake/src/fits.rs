@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use slosh_mls::{FitRequest, InitialFit, NormalsMode, Poly, SurfaceError};
 
-use crate::dispatch::{bind, gpu_error, groups, output, read_back, storage, uniform};
+use crate::dispatch::{bind, gpu_error, groups, output, storage, uniform};
 use crate::index::GpuIndex;
 use crate::layout::FitSettings;
 
@@ -97,7 +97,7 @@ pub(crate) fn fit_batch(
         ],
     );
     index.search.run(&[(inputs.pipeline, (x, y))], &group)?;
-    let raw: Vec<[f32; 4]> = read_back(gpu, &out, bytes)?;
+    let raw: Vec<[f32; 4]> = index.search.read_back(&out, bytes)?;
     Ok(raw
         .par_chunks(VEC4_PER_FIT)
         .map(|v| {

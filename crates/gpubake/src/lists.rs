@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 use slosh_mls::{InitialFit, ListRequest, NeighbourLists, Neighbours, SurfaceError, distance2};
 
-use crate::dispatch::{gpu_error, output, read_back, storage};
+use crate::dispatch::{gpu_error, output, storage};
 use crate::index::{Dispatch, GpuIndex};
 use crate::layout::{DEFERRED, FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, FLAG_TODO, LINK_BIT};
 
@@ -135,7 +135,7 @@ pub(crate) fn lists(
         })
     };
     cut_pass(level, &starts, None)?;
-    let mut cuts: Vec<[u32; 4]> = read_back(gpu, &cut, cut_bytes)?;
+    let mut cuts: Vec<[u32; 4]> = search.read_back(&cut, cut_bytes)?;
     // Points whose reach spans too many cells (DEFERRED), cut again on grids four times
     // coarser until none is left: each grid's level, cell table and points.
     let mut coarser: Vec<(u32, wgpu::Buffer, Vec<u32>)> = Vec::new();
@@ -149,7 +149,7 @@ pub(crate) fn lists(
         for todo in deferred.chunks(MAX_TODO) {
             cut_pass(coarse_level, &coarse_starts, Some(todo))?;
         }
-        cuts = read_back(gpu, &cut, cut_bytes)?;
+        cuts = search.read_back(&cut, cut_bytes)?;
         let (still, done): (Vec<u32>, Vec<u32>) = deferred
             .iter()
             .partition(|&&t| cuts[t as usize][3] == DEFERRED);
@@ -237,7 +237,9 @@ pub(crate) fn lists(
             )?);
             fit_seconds += fitting.elapsed().as_secs_f64();
         }
-        slosh_render::read_storage_into(gpu, &lists_out, count * 4, &mut words)
+        search
+            .readback
+            .read_into(gpu, &lists_out, count * 4, &mut words)
             .map_err(gpu_error)?;
         first = last;
     }

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use slosh_mls::SurfaceError;
 
-use crate::dispatch::{gpu_error, output, read_back, storage};
+use crate::dispatch::{gpu_error, output, storage};
 use crate::index::{Dispatch, GpuIndex};
 use crate::layout::{FLAG_TODO, NEAREST_MAX, UNFINISHED};
 
@@ -58,7 +58,7 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
                 shells: SHELLS,
                 buffers: &[(4, &out), (5, &todo_buffer)],
             })?;
-            let found: Vec<u32> = read_back(gpu, &out, bytes)?;
+            let found: Vec<u32> = index.search.read_back(&out, bytes)?;
             for (k, ids) in found.chunks(count).enumerate() {
                 let t = todo.as_ref().map_or(first + k, |t| t[first + k] as usize);
                 if ids[0] == UNFINISHED {

@@ -5,7 +5,7 @@ use std::sync::{Arc, OnceLock};
 
 use slosh_render::Gpu;
 
-use crate::dispatch::{Stamps, layout, record};
+use crate::dispatch::{Stamps, gpu_error, layout, record};
 use crate::layout::{fits_source, lists_source, nearest_source, tree_source};
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
@@ -35,7 +35,16 @@ pub struct GpuStages {
     pub(crate) next_depth: wgpu::ComputePipeline,
     /// GPU nanoseconds of every pass run so far (where the device has timestamps).
     gpu_nanos: AtomicU64,
+    /// Buffers the large read-backs (lists, nearest points, fits, nodes) reuse.
+    pub(crate) readback: slosh_render::ReadbackPool,
 }
+
+/// Reads from this size on reuse pooled buffers; smaller ones are cheap to make.
+const POOLED_READ_BYTES: u64 = 1 << 20;
+
+/// Read-back buffers kept for reuse: as many as steps commonly read back at once, each up to
+/// [`OUTPUT_BATCH_BYTES`].
+const READBACK_BUFFERS_KEPT: usize = 3;
 
 /// Bindings every pass reads: positions, original indices, cell starts, residuals.
 const GRID_BINDINGS: [(u32, bool); 4] = [(1, false), (2, false), (3, false), (10, false)];
@@ -157,6 +166,7 @@ impl GpuStages {
             fit_boxes,
             next_depth,
             gpu_nanos: AtomicU64::new(0),
+            readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT),
         })
     }
 
@@ -218,6 +228,24 @@ impl GpuStages {
             &[("FIT_DEGREE", f64::from(degree))],
         )?;
         Ok(slot.get_or_init(|| pipeline))
+    }
+
+    /// `bytes` of `source` copied out, once the work submitted before has run. Reads of a
+    /// megabyte or more go through the pool of read-back buffers.
+    pub(crate) fn read_back<T: bytemuck::Pod>(
+        &self,
+        source: &wgpu::Buffer,
+        bytes: u64,
+    ) -> Result<Vec<T>, slosh_mls::SurfaceError> {
+        if bytes == 0 {
+            return Ok(Vec::new());
+        }
+        if bytes >= POOLED_READ_BYTES {
+            self.readback.read(&self.gpu, source, bytes)
+        } else {
+            slosh_render::read_storage(&self.gpu, source, bytes)
+        }
+        .map_err(gpu_error)
     }
 
     pub fn gpu(&self) -> &Gpu {

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use slosh_bake::{PlocTree, Stages, TreeBuild, linear_order};
 use slosh_cache::{Bvh, BvhNode};
 
-use crate::dispatch::{bind, groups, guarded, output, read_back, storage, uniform};
+use crate::dispatch::{bind, groups, guarded, output, storage, uniform};
 use crate::layout::{TREE_MAX_DEPTH, TreeNode, TreeParams};
 use crate::passes::GpuStages;
 
@@ -96,7 +96,7 @@ impl GpuStages {
             &group,
         )
         .map_err(fault)?;
-        let deepest = read_back::<u32>(gpu, &state, 4).map_err(fault)?[0];
+        let deepest = self.read_back::<u32>(&state, 4).map_err(fault)?[0];
         if deepest >= TREE_MAX_DEPTH {
             return Err(format!(
                 "an inner node {deepest} deep, where keys of 96 bits allow {TREE_MAX_DEPTH}"
@@ -114,7 +114,7 @@ impl GpuStages {
             }
         }
         self.run(&dispatches, &group).map_err(fault)?;
-        let nodes: Vec<TreeNode> = read_back(gpu, &nodes, node_bytes).map_err(fault)?;
+        let nodes: Vec<TreeNode> = self.read_back(&nodes, node_bytes).map_err(fault)?;
         let nodes = nodes
             .into_par_iter()
             .map(|n| BvhNode {

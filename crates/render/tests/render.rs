@@ -1213,3 +1213,36 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
         }
     }
 }
+
+/// Pooled read-backs return what the buffer holds, whatever the size asked (a pooled buffer
+/// larger than the read is only read as far as asked), appended or whole, and keep their
+/// buffers for the next reads up to the pool's size.
+#[test]
+fn pooled_read_backs_return_the_buffers_bytes() {
+    use wgpu::util::DeviceExt;
+    let Some(Device { gpu, .. }) = device() else {
+        return;
+    };
+    let values: Vec<u32> = (0..(1u32 << 20))
+        .map(|i| i.wrapping_mul(2_654_435_761))
+        .collect();
+    let source = gpu
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("read-back source"),
+            contents: bytemuck::cast_slice(&values),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        });
+    let pool = slosh_render::ReadbackPool::new(1);
+    let whole: Vec<u32> = pool.read(gpu, &source, 4 << 20).unwrap();
+    assert_eq!(whole, values);
+    assert_eq!(pool.kept(), 1);
+    // The kept buffer, read part way, twice into one vector.
+    let mut out = vec![7u32];
+    pool.read_into(gpu, &source, 4096, &mut out).unwrap();
+    pool.read_into(gpu, &source, 8, &mut out).unwrap();
+    assert_eq!(out[0], 7);
+    assert_eq!(&out[1..1025], &values[..1024]);
+    assert_eq!(&out[1025..], &values[..2]);
+    assert_eq!(pool.kept(), 1, "one buffer reused, none added");
+}

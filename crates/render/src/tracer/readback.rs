@@ -7,6 +7,7 @@ use super::{Frame, FrameTargets, PassTimes, Tracer};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::{GpuHit, status};
+use crate::staging::Shelf;
 
 /// Maps a `MAP_READ` buffer, waits, and copies its contents out as `T`s.
 pub fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
@@ -23,35 +24,116 @@ pub fn read_storage<T: bytemuck::Pod>(
     read(gpu, &staged(gpu, source, 0, size))
 }
 
-/// The first `size` bytes of a `COPY_SRC` buffer appended to `out` once the work submitted
-/// before it has run (waits): copied from the mapping straight into `out` by every thread, so
-/// that hundreds of megabytes (a bake's neighbour lists) are neither copied twice nor written,
-/// page by fresh page, by one thread.
-pub fn read_storage_into<T: bytemuck::Pod + Send + Sync>(
-    gpu: &Gpu,
-    source: &wgpu::Buffer,
-    size: u64,
-    out: &mut Vec<T>,
-) -> Result<()> {
-    use rayon::prelude::*;
-    mapped(
-        gpu,
-        &staged(gpu, source, 0, size),
-        |bytes| match bytemuck::try_cast_slice::<u8, T>(bytes) {
-            Ok(values) => out.par_extend(values.par_iter().copied()),
-            Err(_) => out.extend(bytemuck::pod_collect_to_vec::<u8, T>(bytes)),
-        },
-    )
+/// Read-back buffers reused across reads: fresh host-visible memory costs a page fault (and a
+/// page cleared) per page on first touch, which a bake's hundreds of megabytes of lists paid
+/// again in every batch of every step. A buffer returns to the pool once its read is done.
+#[derive(Debug, Clone)]
+pub struct ReadbackPool {
+    shelf: Shelf,
+}
+
+/// Read-back buffers are made in multiples of this (or the power of two above a smaller
+/// size), so that reads of similar sizes share them.
+const READBACK_GRANULE: u64 = 16 << 20;
+
+impl ReadbackPool {
+    pub fn new(keep: usize) -> ReadbackPool {
+        ReadbackPool {
+            shelf: Shelf::new(keep),
+        }
+    }
+
+    /// Buffers kept for the next reads.
+    pub fn kept(&self) -> usize {
+        self.shelf.len()
+    }
+
+    /// The first `size` bytes of a `COPY_SRC` buffer, once the work submitted before it has
+    /// run (waits).
+    pub fn read<T: bytemuck::Pod>(
+        &self,
+        gpu: &Gpu,
+        source: &wgpu::Buffer,
+        size: u64,
+    ) -> Result<Vec<T>> {
+        self.with_staged(gpu, source, size, |bytes| {
+            bytemuck::pod_collect_to_vec(bytes)
+        })
+    }
+
+    /// The first `size` bytes of a `COPY_SRC` buffer appended to `out`, once the work
+    /// submitted before it has run (waits): copied from the mapping straight into `out` by
+    /// every thread, so that hundreds of megabytes (a bake's neighbour lists) are neither
+    /// copied twice nor written, page by fresh page, by one thread.
+    pub fn read_into<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        gpu: &Gpu,
+        source: &wgpu::Buffer,
+        size: u64,
+        out: &mut Vec<T>,
+    ) -> Result<()> {
+        use rayon::prelude::*;
+        self.with_staged(gpu, source, size, |bytes| {
+            match bytemuck::try_cast_slice::<u8, T>(bytes) {
+                Ok(values) => out.par_extend(values.par_iter().copied()),
+                Err(_) => out.extend(bytemuck::pod_collect_to_vec::<u8, T>(bytes)),
+            }
+        })
+    }
+
+    /// `size` bytes of `source` copied into a pooled `MAP_READ` buffer, mapped and handed to
+    /// `take`; the buffer goes back to the pool.
+    fn with_staged<R>(
+        &self,
+        gpu: &Gpu,
+        source: &wgpu::Buffer,
+        size: u64,
+        take: impl FnOnce(&[u8]) -> R,
+    ) -> Result<R> {
+        let buffer = self.take(gpu, size);
+        copy_out(gpu, source, 0, &buffer, size);
+        let out = mapped(gpu, &buffer, size, take);
+        if out.is_ok() {
+            self.shelf.put(buffer);
+        }
+        out
+    }
+
+    /// An unmapped `MAP_READ | COPY_DST` buffer of at least `size` bytes: the smallest free
+    /// one that fits, or a new one.
+    fn take(&self, gpu: &Gpu, size: u64) -> wgpu::Buffer {
+        if let Some(buffer) = self.shelf.take(size) {
+            return buffer;
+        }
+        let rounded = if size >= READBACK_GRANULE {
+            size.next_multiple_of(READBACK_GRANULE)
+        } else {
+            size.next_power_of_two().max(wgpu::COPY_BUFFER_ALIGNMENT)
+        };
+        gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback (pooled)"),
+            size: rounded,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
 }
 
 /// Maps a MAP_READ buffer and copies its contents out.
 pub(super) fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
-    mapped(gpu, buffer, |bytes| bytemuck::pod_collect_to_vec(bytes))
+    mapped(gpu, buffer, buffer.size(), |bytes| {
+        bytemuck::pod_collect_to_vec(bytes)
+    })
 }
 
-/// Maps a MAP_READ buffer, waits, and hands its bytes to `take`.
-fn mapped<R>(gpu: &Gpu, buffer: &wgpu::Buffer, take: impl FnOnce(&[u8]) -> R) -> Result<R> {
-    let slice = buffer.slice(..);
+/// Maps the first `size` bytes of a MAP_READ buffer, waits, and hands them to `take`.
+fn mapped<R>(
+    gpu: &Gpu,
+    buffer: &wgpu::Buffer,
+    size: u64,
+    take: impl FnOnce(&[u8]) -> R,
+) -> Result<R> {
+    let slice = buffer.slice(..size);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {
         let _ = tx.send(r);
@@ -78,14 +160,19 @@ fn staged(gpu: &Gpu, source: &wgpu::Buffer, offset: u64, size: u64) -> wgpu::Buf
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
+    copy_out(gpu, source, offset, &staging, size);
+    staging
+}
+
+/// Submits a copy of `size` bytes of `source` from `offset` to the start of `staging`.
+fn copy_out(gpu: &Gpu, source: &wgpu::Buffer, offset: u64, staging: &wgpu::Buffer, size: u64) {
     let mut encoder = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("readback"),
         });
-    encoder.copy_buffer_to_buffer(source, offset, &staging, 0, size);
+    encoder.copy_buffer_to_buffer(source, offset, staging, 0, size);
     gpu.queue.submit([encoder.finish()]);
-    staging
 }
 
 impl Tracer {
