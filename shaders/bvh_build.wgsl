@@ -3,10 +3,11 @@
 // trees") over the leaves sorted by the Morton codes of their boxes' centres, written
 // straight into the cache's node layout, then its boxes from the deepest inner nodes up.
 //
-// Layout: the inner node whose split is γ (its left child ends at leaf γ) has its children
-// at slots 2γ + 1 and 2γ + 2, so children are adjacent and the root is slot 0 without a
-// rewrite. Karras's inner node i ends at i when it is a left child (slot 2i + 1) and starts
-// at i when it is a right child (slot 2i); a leaf takes the slot its parent gives it.
+// Layout: the root is slot 0, and the inner node that comes p-th in preorder among inner
+// nodes has its children at slots 2p + 1 and 2p + 2: children adjacent and after their
+// parent (whose own slot, 2q + 1 or 2q + 2, has q < p). An inner node's preorder index is
+// the first leaf of its range plus the left turns on its path from the root: the inner nodes
+// before it in preorder are its ancestors and those of the subtrees left of its path.
 
 struct TreeParams {
     leaves: u32,
@@ -30,12 +31,15 @@ struct TreeNode {
 @group(0) @binding(2) var<storage, read> leaves: array<TreeNode>;
 // 2·leaves − 1 slots.
 @group(0) @binding(3) var<storage, read_write> nodes: array<TreeNode>;
-// Each slot's parent's slot (the root's unused).
-@group(0) @binding(4) var<storage, read_write> parent: array<u32>;
-// Each inner node's slot and depth (the root's 0), by Karras index.
-@group(0) @binding(5) var<storage, read_write> inner: array<vec2<u32>>;
+// Each inner node (by Karras index): its range's first leaf, its split, and flags (1: the
+// left child is a leaf, 2: the right child is a leaf, 4: it is its parent's left child).
+@group(0) @binding(4) var<storage, read_write> links: array<vec4<u32>>;
+// Each inner node's parent and slot, both written by the parent.
+@group(0) @binding(5) var<storage, read_write> up: array<vec2<u32>>;
+// Each inner node's depth (the root's 0) and preorder index among inner nodes.
+@group(0) @binding(6) var<storage, read_write> inner: array<vec2<u32>>;
 // [0]: the deepest inner node's depth; [1]: the depth whose boxes `fit_boxes` computes.
-@group(0) @binding(6) var<storage, read_write> state: array<atomic<u32>>;
+@group(0) @binding(7) var<storage, read_write> state: array<atomic<u32>>;
 
 // MAX_DEPTH (the longest chain of inner nodes a build can make) is prepended from Rust.
 
@@ -59,8 +63,8 @@ fn delta(i: i32, j: i32) -> i32 {
     return 64 + i32(countLeadingZeros(u32(i) ^ u32(j)));
 }
 
-// One thread per inner node (leaves − 1 of them): its range, its split, its slot, and the
-// links to its children; a child that is a leaf is copied into its slot.
+// One thread per inner node (leaves − 1 of them): its range and its split, and its parent
+// link to the children that are inner nodes.
 @compute @workgroup_size(64)
 fn link_nodes(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t = thread_index(gid);
@@ -100,39 +104,67 @@ fn link_nodes(@builtin(global_invocation_id) gid: vec3<u32>) {
         divisor = divisor * 2;
     }
     let gamma = i + split * d + min(d, 0);
-    var slot = 0u;
-    if i > 0 {
-        slot = select(2u * t, 2u * t + 1u, d < 0);
-    }
-    let left = 2u * u32(gamma) + 1u;
-    nodes[slot].count = 0u;
-    nodes[slot].first = left;
-    parent[left] = slot;
-    parent[left + 1u] = slot;
+    var flags = 0u;
     if min(i, j) == gamma {
-        nodes[left] = leaves[gamma];
+        flags = flags | 1u;
+    } else {
+        up[gamma].x = t;
     }
     if max(i, j) == gamma + 1 {
-        nodes[left + 1u] = leaves[gamma + 1];
+        flags = flags | 2u;
+    } else {
+        up[gamma + 1].x = t;
     }
-    inner[t] = vec2<u32>(slot, 0u);
+    // Karras's node i ends at i when it is a left child.
+    if d < 0 {
+        flags = flags | 4u;
+    }
+    links[t] = vec4<u32>(u32(min(i, j)), u32(gamma), flags, 0u);
 }
 
-// One thread per inner node: its depth, by walking up to the root.
+// One thread per inner node: its depth and its preorder index, by walking up to the root.
 @compute @workgroup_size(64)
 fn measure_depths(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t = thread_index(gid);
     if t + 1u >= params.leaves {
         return;
     }
-    var slot = inner[t].x;
+    var node = t;
     var depth = 0u;
-    while slot != 0u && depth < MAX_DEPTH {
-        slot = parent[slot];
+    var left_turns = 0u;
+    while node != 0u && depth < MAX_DEPTH {
+        left_turns = left_turns + ((links[node].z >> 2u) & 1u);
+        node = up[node].x;
         depth = depth + 1u;
     }
-    inner[t].y = depth;
+    inner[t] = vec2<u32>(depth, links[t].x + left_turns);
     atomicMax(&state[0], depth);
+}
+
+// One thread per inner node: its children into the slots its preorder index gives them.
+@compute @workgroup_size(64)
+fn place_nodes(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let t = thread_index(gid);
+    if t + 1u >= params.leaves {
+        return;
+    }
+    let base = 2u * inner[t].y + 1u;
+    let gamma = links[t].y;
+    let flags = links[t].z;
+    if t == 0u {
+        nodes[0].count = 0u;
+        nodes[0].first = base;
+    }
+    for (var side = 0u; side < 2u; side = side + 1u) {
+        let child = gamma + side;
+        if (flags & (1u << side)) != 0u {
+            nodes[base + side] = leaves[child];
+        } else {
+            nodes[base + side].count = 0u;
+            nodes[base + side].first = 2u * inner[child].y + 1u;
+            up[child].y = base + side;
+        }
+    }
 }
 
 // One thread per inner node: the box of each at the depth `state[1]` names, the union of its
@@ -140,10 +172,13 @@ fn measure_depths(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(64)
 fn fit_boxes(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t = thread_index(gid);
-    if t + 1u >= params.leaves || inner[t].y != atomicLoad(&state[1]) {
+    if t + 1u >= params.leaves || inner[t].x != atomicLoad(&state[1]) {
         return;
     }
-    let slot = inner[t].x;
+    var slot = 0u;
+    if t != 0u {
+        slot = up[t].y;
+    }
     let a = nodes[nodes[slot].first];
     let b = nodes[nodes[slot].first + 1u];
     nodes[slot].lo = min(a.lo, b.lo);

@@ -743,4 +743,17 @@ fn a_gpu_bake_writes_the_cpu_bakes_sections() {
         );
         assert_eq!(cpu_leaves, leaves(&gpu, i), "step {i}: the BVH's leaves");
     }
+    // The GPU tracer takes the GPU-baked tree (its upload checks what the walk needs).
+    let png = dir.path().join("gpu.png");
+    let (ok, out, err) = slosh(&[
+        "render",
+        gpu.to_str().unwrap(),
+        "--step",
+        "1",
+        "--size",
+        "64x64",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}{err}");
 }

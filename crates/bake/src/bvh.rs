@@ -149,8 +149,8 @@ pub fn linear_order(leaves: &[BvhNode]) -> (Vec<u64>, Vec<u32>) {
 }
 
 /// The linear BVH over `leaves` (Karras 2012), as `shaders/bvh_build.wgsl` builds it on the
-/// GPU, node for node (`docs/algorithm.md`): the inner node whose split is γ has its children
-/// at slots 2γ + 1 and 2γ + 2.
+/// GPU, node for node (`docs/algorithm.md`): the inner node p-th in preorder has its children
+/// at slots 2p + 1 and 2p + 2, after it.
 pub fn linear(leaves: &[BvhNode]) -> Bvh {
     let m = leaves.len();
     if m < 2 {
@@ -171,8 +171,9 @@ pub fn linear(leaves: &[BvhNode]) -> Bvh {
             64 + i64::from(((i as u32) ^ (j as u32)).leading_zeros())
         }
     };
-    // Each inner node: its slot and its split, with whether each child is a leaf.
-    let inner: Vec<(usize, usize, bool, bool)> = (0..m as i64 - 1)
+    // Each inner node: its range's first leaf, its split, whether each child is a leaf, and
+    // whether it is its parent's left child.
+    let inner: Vec<(usize, usize, [bool; 2], bool)> = (0..m as i64 - 1)
         .into_par_iter()
         .map(|i| {
             let d = if delta(i, i + 1) > delta(i, i - 1) {
@@ -208,17 +209,33 @@ pub fn linear(leaves: &[BvhNode]) -> Bvh {
                 divisor *= 2;
             }
             let gamma = i + split * d + d.min(0);
-            let slot = match (i, d) {
-                (0, _) => 0,
-                (_, -1) => 2 * i + 1,
-                _ => 2 * i,
-            };
             (
-                slot as usize,
+                i.min(j) as usize,
                 gamma as usize,
-                i.min(j) == gamma,
-                i.max(j) == gamma + 1,
+                [i.min(j) == gamma, i.max(j) == gamma + 1],
+                d < 0,
             )
+        })
+        .collect();
+    // Each inner node's preorder index among inner nodes: its first leaf plus the left turns
+    // on its path from the root. Its children go to slots 2p + 1 and 2p + 2.
+    let mut parent = vec![0usize; m - 1];
+    for (i, &(_, gamma, leaf, _)) in inner.iter().enumerate() {
+        for side in 0..2 {
+            if !leaf[side] {
+                parent[gamma + side] = i;
+            }
+        }
+    }
+    let preorder: Vec<usize> = (0..m - 1)
+        .into_par_iter()
+        .map(|i| {
+            let (mut node, mut left_turns) = (i, 0);
+            while node != 0 {
+                left_turns += usize::from(inner[node].3);
+                node = parent[node];
+            }
+            inner[i].0 + left_turns
         })
         .collect();
     let empty = BvhNode {
@@ -228,13 +245,18 @@ pub fn linear(leaves: &[BvhNode]) -> Bvh {
         first: 0,
     };
     let mut nodes = vec![empty; 2 * m - 1];
-    for &(slot, gamma, left_leaf, right_leaf) in &inner {
-        nodes[slot].first = 2 * gamma as u32 + 1;
-        if left_leaf {
-            nodes[2 * gamma + 1] = leaves[order[gamma] as usize];
-        }
-        if right_leaf {
-            nodes[2 * gamma + 2] = leaves[order[gamma + 1] as usize];
+    nodes[0].first = 2 * preorder[0] as u32 + 1;
+    for (i, &(_, gamma, leaf, _)) in inner.iter().enumerate() {
+        let base = 2 * preorder[i] + 1;
+        for side in 0..2 {
+            nodes[base + side] = if leaf[side] {
+                leaves[order[gamma + side] as usize]
+            } else {
+                BvhNode {
+                    first: 2 * preorder[gamma + side] as u32 + 1,
+                    ..empty
+                }
+            };
         }
     }
     // Boxes from the leaves up, children before parents.

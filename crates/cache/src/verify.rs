@@ -227,13 +227,21 @@ impl CacheFile {
         }
         let items = n + spheres.len();
         let mut seen = vec![false; items];
-        for node in &bvh.nodes {
+        for (k, node) in bvh.nodes.iter().enumerate() {
             if !(node.lo.iter().chain(&node.hi).all(|c| c.is_finite()))
                 || (0..3).any(|a| node.lo[a] > node.hi[a])
             {
                 return Err(format!("a BVH node has an invalid box: {node:?}"));
             }
             if node.count == 0 {
+                // The tracer walks down only (its descent has no loop guard).
+                if node.first as usize <= k {
+                    return Err(format!(
+                        "BVH node {k} has children {} and {}: children must follow their parent",
+                        node.first,
+                        node.first + 1
+                    ));
+                }
                 continue;
             }
             // A leaf is a range of items (at most `MAX_LEAF_RANGE`, which its four bits of

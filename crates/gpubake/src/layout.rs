@@ -104,8 +104,8 @@ pub fn lists_source() -> String {
     format!("{GRID_WGSL}{}", include_str!("../../../shaders/lists.wgsl"))
 }
 
-/// The BVH build's module: entry points `link_nodes`, `measure_depths`, `fit_boxes`,
-/// `next_depth`.
+/// The BVH build's module: entry points `link_nodes`, `measure_depths`, `place_nodes`,
+/// `fit_boxes`, `next_depth`.
 pub fn tree_source() -> String {
     format!(
         "const MAX_DEPTH: u32 = {TREE_MAX_DEPTH}u;\n{}",

@@ -31,6 +31,7 @@ pub struct GpuStages {
     /// `shaders/bvh_build.wgsl`'s entry points, in the order a build runs them.
     pub(crate) link_nodes: wgpu::ComputePipeline,
     pub(crate) measure_depths: wgpu::ComputePipeline,
+    pub(crate) place_nodes: wgpu::ComputePipeline,
     pub(crate) fit_boxes: wgpu::ComputePipeline,
     pub(crate) next_depth: wgpu::ComputePipeline,
     /// GPU nanoseconds of every pass run so far (where the device has timestamps).
@@ -133,6 +134,7 @@ impl GpuStages {
                 (4, true),
                 (5, true),
                 (6, true),
+                (7, true),
             ],
         );
         let tree_pipeline_layout = pipeline_layout(&tree_layout);
@@ -148,6 +150,7 @@ impl GpuStages {
         };
         let link_nodes = tree_entry("link_nodes")?;
         let measure_depths = tree_entry("measure_depths")?;
+        let place_nodes = tree_entry("place_nodes")?;
         let fit_boxes = tree_entry("fit_boxes")?;
         let next_depth = tree_entry("next_depth")?;
         Ok(GpuStages {
@@ -163,6 +166,7 @@ impl GpuStages {
             tree_layout,
             link_nodes,
             measure_depths,
+            place_nodes,
             fit_boxes,
             next_depth,
             gpu_nanos: AtomicU64::new(0),

@@ -1,8 +1,9 @@
 //! The BVH's tree on the GPU (`shaders/bvh_build.wgsl`): the leaves the CPU grouped, sorted
-//! by the Morton codes of their boxes' centres, linked as a linear BVH straight into the
-//! cache's layout, then its boxes fitted from the deepest inner nodes up, one dispatch a
-//! depth: node for node `slosh_bake::linear_bvh`, the CPU's form. The leaves are the CPU
-//! bake's; only the inner nodes differ from obvhs's PLOC.
+//! by the Morton codes of their boxes' centres, linked as a linear BVH, placed in the cache's
+//! layout by each inner node's preorder index (children adjacent and after their parent),
+//! then its boxes fitted from the deepest inner nodes up, one dispatch a depth: node for node
+//! `slosh_bake::linear_bvh`, the CPU's form. The leaves are the CPU bake's; only the inner
+//! nodes differ from obvhs's PLOC.
 
 use std::sync::Arc;
 
@@ -68,8 +69,9 @@ impl GpuStages {
         let keys = storage(gpu, "bvh keys", &keys);
         let sorted = storage(gpu, "bvh leaves", &sorted);
         let nodes = output(gpu, "bvh nodes", node_bytes);
-        let parents = output(gpu, "bvh parents", (2 * m as u64 - 1) * 4);
-        let inner = output(gpu, "bvh inner nodes", (m as u64 - 1) * 8);
+        let links = output(gpu, "bvh links", (m as u64 - 1) * 16);
+        let up = output(gpu, "bvh parents and slots", (m as u64 - 1) * 8);
+        let inner = output(gpu, "bvh depths and preorder", (m as u64 - 1) * 8);
         let state = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("bvh depths"),
             size: 16,
@@ -86,9 +88,10 @@ impl GpuStages {
                 (1, &keys),
                 (2, &sorted),
                 (3, &nodes),
-                (4, &parents),
-                (5, &inner),
-                (6, &state),
+                (4, &links),
+                (5, &up),
+                (6, &inner),
+                (7, &state),
             ],
         );
         self.run(
@@ -102,11 +105,12 @@ impl GpuStages {
                 "an inner node {deepest} deep, where keys of 96 bits allow {TREE_MAX_DEPTH}"
             ));
         }
-        // From the deepest inner nodes up: each depth's boxes from the children the dispatch
-        // before fitted.
+        // The nodes into their slots, then from the deepest inner nodes up: each depth's boxes
+        // from the children the dispatch before fitted.
         gpu.queue
             .write_buffer(&state, 4, bytemuck::bytes_of(&deepest));
-        let mut dispatches = Vec::with_capacity(2 * deepest as usize + 1);
+        let mut dispatches = Vec::with_capacity(2 * deepest as usize + 2);
+        dispatches.push((&self.place_nodes, (x, y)));
         for depth in (0..=deepest).rev() {
             dispatches.push((&self.fit_boxes, (x, y)));
             if depth > 0 {

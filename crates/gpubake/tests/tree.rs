@@ -94,7 +94,7 @@ fn nearest(bvh: &Bvh, items: &Items, origin: [f64; 3], dir: [f64; 3]) -> Option<
     best
 }
 
-/// The tree's structure: root first, children adjacent and in range, every leaf of `leaves`
+/// The tree's structure: root first, children adjacent, in range and after their parent, every leaf of `leaves`
 /// once, inner boxes the exact unions; returns the inner boxes' area over the root's.
 fn check_tree(name: &str, bvh: &Bvh, leaves: &[BvhNode]) -> f64 {
     bvh.depth().unwrap_or_else(|| panic!("{name}: not a tree"));
@@ -115,6 +115,11 @@ fn check_tree(name: &str, bvh: &Bvh, leaves: &[BvhNode]) -> f64 {
             continue;
         }
         inner_area += area(node);
+        // The tracer only walks down.
+        assert!(
+            node.first as usize > k,
+            "{name}: node {k}'s children come before it"
+        );
         let (a, b) = (
             bvh.nodes[node.first as usize],
             bvh.nodes[node.first as usize + 1],
