@@ -27,7 +27,7 @@ impl GpuStages {
         }
     }
 
-    /// Whether the nodes of a tree over `leaves` leaves fit one binding of this device.
+    /// Whether the nodes of a tree over that many leaves fit one binding of this device.
     fn holds(&self, leaves: usize) -> bool {
         (2 * leaves as u64 - 1) * NODE_BYTES <= self.gpu.max_binding() && leaves < 1 << 30
     }
