@@ -48,7 +48,7 @@ pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};
-pub use runs::{LIST_BLOCK, RunUnions};
+pub use runs::{LIST_BLOCK, LIST_RUN, RunUnions};
 pub use search::{FitRequest, KdSearch, ListRequest, NeighbourSearch, PointIndex};
 pub use spray::Sphere;
 pub use support::{

@@ -11,8 +11,8 @@ pub(crate) const RUN: usize = 16;
 /// than in the runs.
 pub(crate) const RUNS_PER_BLOCK: usize = 32;
 
-/// The union of the lists of each run of [`RUN`] consecutive points (each in index order):
-/// what the lists stage finds anyway, and from which the clusters of any multiple of [`RUN`]
+/// The union of the lists of each run of [`LIST_RUN`] consecutive points (each in index order):
+/// what the lists stage finds anyway, and from which the clusters of any multiple of [`LIST_RUN`]
 /// points merge their candidate lists without reading every point's list again. Kept as the
 /// lists stage's blocks made them (CSR per block of runs).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -40,7 +40,7 @@ impl RunUnions {
 }
 
 /// Points per run of the lists stage (and per union in [`RunUnions`]).
-pub(crate) const LIST_RUN: usize = RUN;
+pub const LIST_RUN: usize = RUN;
 
 /// Points per block of the lists stage: one parallel task, one buffer of lists (a piece of
 /// [`Neighbours`](crate::Neighbours) where the points came in spatial order) and one piece

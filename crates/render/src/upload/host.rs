@@ -39,7 +39,7 @@ pub struct StepInfo {
     pub run_words: u32,
     /// Words of neighbour mask of the largest cluster: its candidates over 32.
     pub mask_words: u32,
-    /// Rows of `cluster_size` mask words that hold every cluster's block (see [`mask_row`]).
+    /// Rows of `cluster_size` mask words that hold every cluster's block (see [`mask_row`](crate::mask_row)).
     pub mask_rows: u64,
     pub has_normals: bool,
     /// The degree the balls were fitted at, and "mean" or "covariance".
@@ -163,7 +163,7 @@ enum SectionData {
 /// The host half of an upload: the file checked, the sections it reads decoded (the BVH
 /// nodes, the cluster offsets), its raw sections checksummed in place, the tree checked.
 /// Needs no device. The other compressed sections are checked and decoded in parallel
-/// straight into the staging memory by [`GpuStep::create`].
+/// straight into the staging memory by [`GpuStep::create`](crate::GpuStep::create).
 #[derive(Debug)]
 pub struct HostStep<'a> {
     file: HeldFile<'a>,
@@ -222,7 +222,7 @@ impl<'a> HostStep<'a> {
             .collect()
     }
 
-    /// Every byte the step will hold on the GPU (what [`StepBuffers::bytes`] reports once it
+    /// Every byte the step will hold on the GPU (what [`StepBuffers::bytes`](crate::StepBuffers::bytes) reports once it
     /// is there), known before the upload.
     pub fn gpu_bytes(&self) -> u64 {
         let arrays: u64 = self
