@@ -19,32 +19,6 @@ use slosh_testkit::{adapter, gpu_or_skip};
 /// a neighbour is then the search's choice.
 const TIE: f64 = 1e-6;
 
-/// A block of fluid: a lattice of `side`³ particles, each moved by up to a fifth of the
-/// spacing (a fixed pseudo-random pattern), offset by `offset`.
-fn block(side: usize, offset: f64) -> Vec<[f64; 3]> {
-    let mut points = Vec::with_capacity(side * side * side);
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut jitter = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state % 10_000) as f64 / 10_000.0 * 0.4 - 0.2
-    };
-    for x in 0..side {
-        for y in 0..side {
-            for z in 0..side {
-                let p = [x, y, z].map(|c| c as f64 * 0.01);
-                points.push([
-                    offset + p[0] + 0.01 * jitter(),
-                    p[1] + 0.01 * jitter(),
-                    p[2] + 0.01 * jitter(),
-                ]);
-            }
-        }
-    }
-    points
-}
-
 #[test]
 fn the_surface_estimate_with_gpu_neighbours_is_the_k_d_trees() {
     let Some(gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
@@ -65,7 +39,7 @@ fn the_surface_estimate_with_gpu_neighbours_is_the_k_d_trees() {
                 )
             })
             .collect();
-    let far = block(24, 1e5);
+    let far = slosh_scenes::jittered_block(24, 0.01, [1e5, 0.0, 0.0]);
     let n = far.len();
     assert_ne!(n % 7919, 0);
     sets.push((

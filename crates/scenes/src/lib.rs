@@ -8,7 +8,7 @@ mod truth;
 
 pub use glam::{DMat3, DVec3};
 pub use ray::{Hit, TrueRay};
-pub use sampling::{fibonacci_sphere, fibonacci_torus, tied_lattice};
+pub use sampling::{fibonacci_sphere, fibonacci_torus, jittered_block, tied_lattice};
 pub use scene::{
     DENSITY, Droplet, Extra, GRAVITY, HardCases, Particles, Scene, SceneError, SceneKind, SceneSpec,
 };

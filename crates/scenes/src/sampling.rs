@@ -89,3 +89,30 @@ pub fn tied_lattice(nx: usize, ny: usize, nz: usize, duplicates: usize) -> Vec<[
     );
     (0..n).map(|i| lattice[i * STRIDE % n]).collect()
 }
+
+/// A block of fluid particles: `side³` points `spacing` apart from `corner`, each moved by up
+/// to a fifth of the spacing on every axis (a fixed pseudo-random pattern), so that no
+/// distances tie: what an SPH or FPM solver's particles filling a volume look like.
+pub fn jittered_block(side: usize, spacing: f64, corner: [f64; 3]) -> Vec<[f64; 3]> {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut jitter = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        ((state % 10_000) as f64 / 10_000.0 * 0.4 - 0.2) * spacing
+    };
+    let mut points = Vec::with_capacity(side * side * side);
+    for x in 0..side {
+        for y in 0..side {
+            for z in 0..side {
+                let p = [x, y, z].map(|c| c as f64 * spacing);
+                points.push([
+                    corner[0] + p[0] + jitter(),
+                    corner[1] + p[1] + jitter(),
+                    corner[2] + p[2] + jitter(),
+                ]);
+            }
+        }
+    }
+    points
+}

@@ -18,6 +18,7 @@ use slosh_scenes::{Scene, SceneKind, SceneSpec};
 use crate::stats::median;
 
 mod report;
+mod volume;
 
 pub use report::{
     BakeReport, EncodingRow, GpuBakeRow, LoadRow, PeerRow, ScalingRow, SeriesRow, SizeRow, StageRow,
@@ -365,6 +366,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             });
         }
     }
+    let volume = volume::volume_rows(args, &sizes)?;
     Ok(BakeReport {
         settings: args.clone(),
         threads: rayon::current_num_threads(),
@@ -377,6 +379,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         encodings,
         scaling,
         series,
+        volume,
     })
 }
 

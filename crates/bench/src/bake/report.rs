@@ -123,9 +123,55 @@ pub struct BakeReport {
     pub encodings: Vec<EncodingRow>,
     pub scaling: Vec<ScalingRow>,
     pub series: Vec<SeriesRow>,
+    pub volume: Vec<VolumeRow>,
+}
+
+/// A block of fluid particles baked with `--surface estimate` (seconds, medians of the same
+/// alternating runs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VolumeRow {
+    pub particles: usize,
+    /// Particles the estimate kept on the surface.
+    pub surface: usize,
+    /// The whole bake and its selection (the estimate), on the CPU and with the GPU's stages.
+    pub cpu: (f64, f64),
+    pub gpu: Option<(f64, f64)>,
 }
 
 impl BakeReport {
+    /// The volume rows: particles filling a block, the surface estimated.
+    fn volume_markdown(&self) -> String {
+        let mut md = String::from(
+            "\n## Particles filling a volume (`--surface estimate`)\n\n\
+             A block of fluid particles (a jittered lattice), baked as SPH or FPM output is: \
+             the surface and its normals estimated from every particle's 24 nearest, on the \
+             CPU and with the GPU's stages (which find those neighbours too); medians of the \
+             same alternating runs.\n\n\
+             | particles | on the surface | CPU bake | GPU bake | speed-up | estimate CPU / GPU |\n\
+             |---|---|---|---|---|---|\n",
+        );
+        let ms = |s: f64| format!("{:.1} ms", s * 1e3);
+        for r in &self.volume {
+            let (gpu, speedup, estimate) = match r.gpu {
+                Some((total, select)) => (
+                    ms(total),
+                    format!("{:.2}×", r.cpu.0 / total),
+                    format!("{} / {}", ms(r.cpu.1), ms(select)),
+                ),
+                None => ("—".into(), "—".into(), format!("{} / —", ms(r.cpu.1))),
+            };
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {gpu} | {speedup} | {estimate} |",
+                r.particles,
+                r.surface,
+                ms(r.cpu.0)
+            );
+        }
+        md.push('\n');
+        md
+    }
+
     /// The table of bakes with the GPU's stages, or why it was not measured.
     fn gpu_markdown(&self) -> String {
         let mut md = String::from("\n## With the GPU's stages (`--device gpu`)\n\n");
@@ -295,6 +341,7 @@ impl Report for BakeReport {
              | points | slosh bake | slosh points/s | splashsurf | splashsurf points/s | slosh faster by |\n|---|---|---|---|---|---|\n{peer_rows}"
         );
         md += &self.gpu_markdown();
+        md += &self.volume_markdown();
         md += &self.scaling_markdown();
         md += &self.series_markdown();
         let mut size_rows = String::new();
