@@ -130,11 +130,6 @@ impl TreeBuild for PlocTree {
     }
 }
 
-/// The BVH over `items` by obvhs's PLOC.
-pub fn build(items: &[(u32, [f64; 3], f64)]) -> Bvh {
-    ploc(&leaves(items))
-}
-
 /// The leaves' order in a linear BVH: by the 63-bit Morton code of their boxes' centres (over
 /// the centres' bounds), ties by index. Returns the codes, ascending, and the leaves' indices
 /// in that order.
@@ -354,7 +349,7 @@ mod tests {
             };
             items.push((i, [x, 0.0, 0.0], 1.0));
         }
-        let bvh = build(&items);
+        let bvh = ploc(&leaves(&items));
         let mut seen = vec![0; 40];
         for leaf in bvh.nodes.iter().filter(|n| n.count > 0) {
             assert!(leaf.count <= MAX_LEAF_RANGE);

@@ -18,8 +18,7 @@ pub use batch::{
     plan, run_batch, series_key,
 };
 pub use bvh::{
-    MAX_LEAF_ITEMS, PlocTree, TreeBuild, build as build_bvh, leaves as bvh_leaves,
-    linear as linear_bvh, linear_order,
+    MAX_LEAF_ITEMS, PlocTree, TreeBuild, leaves as bvh_leaves, linear as linear_bvh, linear_order,
 };
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
 pub use ensight_source::{EnsightSource, canonical_label};

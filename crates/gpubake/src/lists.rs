@@ -3,7 +3,9 @@
 //! here), then the lists themselves, written and read back in batches of bounded size.
 
 use rayon::prelude::*;
-use slosh_mls::{InitialFit, ListRequest, NeighbourLists, Neighbours, SurfaceError, distance2};
+use slosh_mls::{
+    InitialFit, ListRequest, NeighbourLists, Neighbours, SurfaceError, csr_pieces, distance2,
+};
 
 use crate::dispatch::{gpu_error, output, storage};
 use crate::index::{Dispatch, GpuIndex};
@@ -245,33 +247,22 @@ pub(crate) fn lists(
     }
 
     // Links out and their marks cleared, in place, piece by piece (in sorted order).
-    let links: Vec<Vec<Link>> = {
-        let mut slices: Vec<(std::ops::Range<usize>, &mut [u32])> =
-            Vec::with_capacity(n.div_ceil(POINTS_PER_PIECE));
-        let mut rest = words.as_mut_slice();
-        for first in (0..n).step_by(POINTS_PER_PIECE) {
-            let last = (first + POINTS_PER_PIECE).min(n);
-            let (piece, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
-            slices.push((first..last, piece));
-            rest = tail;
-        }
-        slices
-            .into_par_iter()
-            .map(|(points, piece)| {
-                let base = start[points.start] as usize;
-                let mut links = Vec::new();
-                for t in points {
-                    for w in &mut piece[start[t] as usize - base..start[t + 1] as usize - base] {
-                        if *w & LINK_BIT != 0 {
-                            *w &= !LINK_BIT;
-                            links.push((order[t], *w));
-                        }
+    let links: Vec<Vec<Link>> = csr_pieces(&start, &mut words, POINTS_PER_PIECE)
+        .into_par_iter()
+        .map(|(points, piece)| {
+            let base = start[points.start] as usize;
+            let mut links = Vec::new();
+            for t in points {
+                for w in &mut piece[start[t] as usize - base..start[t + 1] as usize - base] {
+                    if *w & LINK_BIT != 0 {
+                        *w &= !LINK_BIT;
+                        links.push((order[t], *w));
                     }
                 }
-                links
-            })
-            .collect()
-    };
+            }
+            links
+        })
+        .collect();
     // A cut list reaches as far as its farthest point in f64 (`lists.rs` in slosh-mls): the
     // point the cut fell on, which the list keeps unless its normal opposes, and every
     // member (which could only lie farther where two distances tie within f32).

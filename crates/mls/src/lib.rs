@@ -42,7 +42,7 @@ pub use intersect::{
     ray_ball, refine,
 };
 pub use lists::distance2;
-pub use neighbours::Neighbours;
+pub use neighbours::{Neighbours, csr_pieces};
 pub use order::{MortonGrid, morton_keys, morton_order};
 pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 pub use poly::{Poly, coefficient_count, monomials};

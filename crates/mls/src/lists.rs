@@ -269,24 +269,17 @@ pub(crate) fn neighbour_lists(
         let mut ids: Vec<u32> = Vec::with_capacity(total);
         ids.par_extend(rayon::iter::repeat_n(0, total));
         const POINTS_PER_COPY: usize = 1024;
-        let mut copies: Vec<(std::ops::Range<usize>, &mut [u32])> =
-            Vec::with_capacity(n.div_ceil(POINTS_PER_COPY));
-        let mut rest = ids.as_mut_slice();
-        for first in (0..n).step_by(POINTS_PER_COPY) {
-            let last = (first + POINTS_PER_COPY).min(n);
-            let (piece, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
-            copies.push((first..last, piece));
-            rest = tail;
-        }
-        copies.into_par_iter().for_each(|(points, piece)| {
-            let mut at = 0;
-            for i in points {
-                let (b, from) = (source[i].0 as usize, source[i].1 as usize);
-                let len = (start[i + 1] - start[i]) as usize;
-                piece[at..at + len].copy_from_slice(&pieces[b][from..from + len]);
-                at += len;
-            }
-        });
+        crate::neighbours::csr_pieces(&start, &mut ids, POINTS_PER_COPY)
+            .into_par_iter()
+            .for_each(|(points, piece)| {
+                let mut at = 0;
+                for i in points {
+                    let (b, from) = (source[i].0 as usize, source[i].1 as usize);
+                    let len = (start[i + 1] - start[i]) as usize;
+                    piece[at..at + len].copy_from_slice(&pieces[b][from..from + len]);
+                    at += len;
+                }
+            });
         Neighbours::from_csr(start, ids)
     }
     .expect("the blocks hold exactly the lists their counts say");

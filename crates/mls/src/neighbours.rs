@@ -76,6 +76,26 @@ impl Neighbours {
     }
 }
 
+/// The ids of a CSR index (offsets `start`, ids `ids`) split into the lists of each
+/// `per_piece` consecutive points, with those points, to be worked on in parallel.
+pub fn csr_pieces<'a>(
+    start: &[u32],
+    ids: &'a mut [u32],
+    per_piece: usize,
+) -> Vec<(std::ops::Range<usize>, &'a mut [u32])> {
+    let n = start.len().saturating_sub(1);
+    let per_piece = per_piece.max(1);
+    let mut pieces = Vec::with_capacity(n.div_ceil(per_piece));
+    let mut rest = ids;
+    for first in (0..n).step_by(per_piece) {
+        let last = (first + per_piece).min(n);
+        let (piece, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
+        pieces.push((first..last, piece));
+        rest = tail;
+    }
+    pieces
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
