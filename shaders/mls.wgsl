@@ -24,22 +24,51 @@ fn is_candidate(b: Ball) -> bool {
     return (b.normal & 0xffffu) != 0x8000u;
 }
 
-// The degree ball i was fitted at: the step's one degree where it has no degraded fits
-// (settings.ball_degree ≤ 3), so the walk reads no state, else the ball's state.
-fn ball_degree(i: u32) -> u32 {
-    if settings.ball_degree <= 3u {
-        return settings.ball_degree;
-    }
+// How a pass learns a ball's degree and h: pipeline constants the trace and water passes
+// are built with for the step drawn (crates/render's tracer, BallKnowledge), so that the
+// common step compiles neither fallback into the walk: BALL_DEGREE 0–3 every ball's degree,
+// 4 each ball's state; BALL_H 0 the step's h, 1 each ball's. Any other value (the defaults,
+// for passes that do not set them) decides from the settings at run time.
+override BALL_DEGREE: u32 = 5u;
+override BALL_H: u32 = 2u;
+
+// Ball i's own degree, from its state.
+fn state_degree(i: u32) -> u32 {
     return ball_state(i) >> 2u;
 }
 
-// Ball i's smoothing length: the step's one h, or its own from ball_h (two half floats to a
-// word) where h is per point. Normal half floats (the verifier refuses any other), so every
-// adapter decodes what the CPU does.
+// The degree ball i was fitted at: the step's one degree where it has no degraded fits
+// (settings.ball_degree ≤ 3), so the walk reads no state, else the ball's state.
+fn ball_degree(i: u32) -> u32 {
+    if BALL_DEGREE <= 3u {
+        return BALL_DEGREE;
+    }
+    if BALL_DEGREE == 4u {
+        return state_degree(i);
+    }
+    if settings.ball_degree <= 3u {
+        return settings.ball_degree;
+    }
+    return state_degree(i);
+}
+
+// Ball i's own h, from ball_h (two half floats to a word). Normal half floats (the verifier
+// refuses any other), so every adapter decodes what the CPU does.
+fn own_h(i: u32) -> f32 {
+    let pair = unpack2x16float(ball_h_at(i >> 1u));
+    return select(pair.x, pair.y, (i & 1u) == 1u);
+}
+
+// Ball i's smoothing length: the step's one h, or its own where h is per point.
 fn ball_h(i: u32) -> f32 {
+    if BALL_H == 0u {
+        return settings.h;
+    }
+    if BALL_H == 1u {
+        return own_h(i);
+    }
     if settings.per_point_h != 0u {
-        let pair = unpack2x16float(ball_h_at(i >> 1u));
-        return select(pair.x, pair.y, (i & 1u) == 1u);
+        return own_h(i);
     }
     return settings.h;
 }

@@ -77,13 +77,47 @@ pub struct PassTimes {
 #[derive(Debug)]
 struct TraceVariant {
     module: wgpu::ShaderModule,
-    /// One iteration: the nearest initial hit, a lean kernel.
-    initial: OnceLock<wgpu::ComputePipeline>,
+    /// One iteration: the nearest initial hit, a lean kernel; by [`BallKnowledge`].
+    initial: BallSlots,
     /// More: candidates refined in the order of their initial hits, one pipeline per fit
-    /// degree (1–3, the `FIT_DEGREE` override).
-    refined: [OnceLock<wgpu::ComputePipeline>; 3],
-    /// The water pass (secondary rays), in place of the shade pass.
-    water: OnceLock<wgpu::ComputePipeline>,
+    /// degree (1–3, the `FIT_DEGREE` override), by [`BallKnowledge`].
+    refined: [BallSlots; 3],
+    /// The water pass (secondary rays), in place of the shade pass; by [`BallKnowledge`].
+    water: BallSlots,
+}
+
+/// Pipelines of one entry point, one per way of knowing a ball's degree (`BALL_DEGREE`: the
+/// step's one degree 0–3, or 4: each ball's state) and h (`BALL_H`: 0 the step's, 1 each
+/// ball's), so that the common step (no degraded fit, one h) traces with neither fallback
+/// compiled in (mls.wgsl).
+type BallSlots = [[OnceLock<wgpu::ComputePipeline>; 2]; 5];
+
+/// What a step's frames compile in about its balls: the `BALL_DEGREE` and `BALL_H`
+/// overrides of mls.wgsl.
+#[derive(Debug, Clone, Copy)]
+struct BallKnowledge {
+    degree: u8,
+    per_point_h: bool,
+}
+
+impl BallKnowledge {
+    fn of(step: &GpuStep) -> BallKnowledge {
+        BallKnowledge {
+            degree: step.info.ball_degree.map_or(4, |d| d.min(3)),
+            per_point_h: step.info.per_point_h,
+        }
+    }
+
+    fn slot<'a>(&self, slots: &'a BallSlots) -> &'a OnceLock<wgpu::ComputePipeline> {
+        &slots[usize::from(self.degree)][usize::from(self.per_point_h)]
+    }
+
+    fn constants(&self) -> [(&'static str, f64); 2] {
+        [
+            ("BALL_DEGREE", f64::from(self.degree)),
+            ("BALL_H", f64::from(u8::from(self.per_point_h))),
+        ]
+    }
 }
 
 /// The compiled passes. Trace pipelines are built on first use, for the smallest stack in
@@ -445,9 +479,9 @@ impl Tracer {
         let module = shader_module(gpu, "trace", source, true)?;
         Ok(cell.get_or_init(|| TraceVariant {
             module,
-            initial: OnceLock::new(),
+            initial: Default::default(),
             refined: Default::default(),
-            water: OnceLock::new(),
+            water: Default::default(),
         }))
     }
 
@@ -467,21 +501,25 @@ impl Tracer {
         Ok(slot.get_or_init(|| pipeline))
     }
 
-    /// The trace pipeline: one iteration, or refinement with fits of `degree` (1–3).
+    /// The trace pipeline: one iteration, or refinement with fits of `degree` (1–3), for
+    /// steps whose balls are known as `balls` says.
     fn trace_pipeline<'a>(
         &self,
         gpu: &Gpu,
         variant: &'a TraceVariant,
         iterations: u32,
         degree: u8,
+        balls: BallKnowledge,
     ) -> Result<&'a wgpu::ComputePipeline> {
+        let [d, h] = balls.constants();
         if iterations <= 1 {
-            return self.cached(gpu, variant, &variant.initial, "trace_initial", &[]);
+            let slot = balls.slot(&variant.initial);
+            return self.cached(gpu, variant, slot, "trace_initial", &[d, h]);
         }
         let degree = degree.clamp(1, 3);
-        let slot = &variant.refined[usize::from(degree) - 1];
+        let slot = balls.slot(&variant.refined[usize::from(degree) - 1]);
         let fit = ("FIT_DEGREE", f64::from(degree));
-        self.cached(gpu, variant, slot, "trace_refined", &[fit])
+        self.cached(gpu, variant, slot, "trace_refined", &[fit, d, h])
     }
 
     /// Records the trace, shade and present passes (trace and shade timed where the targets
@@ -601,9 +639,11 @@ impl Tracer {
             .write_buffer(&targets.settings, 0, bytemuck::bytes_of(&uniforms));
         let split = step.split || targets.split;
         let variant = self.variant(gpu, step, split)?;
-        let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree)?;
+        let balls = BallKnowledge::of(step);
+        let trace = self.trace_pipeline(gpu, variant, params.iterations, params.degree, balls)?;
         let shade = if params.mode == ShadeMode::Water {
-            self.cached(gpu, variant, &variant.water, "water", &[])?
+            let slot = balls.slot(&variant.water);
+            self.cached(gpu, variant, slot, "water", &balls.constants())?
         } else {
             self.shade_pipeline(gpu, split)?
         };
