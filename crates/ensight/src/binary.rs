@@ -41,6 +41,8 @@ pub(crate) struct BinCursor<'a> {
     data: &'a [u8],
     pos: usize,
     order: Option<ByteOrder>,
+    /// Whether the byte order was guessed from a value that both orders read as plausible.
+    ambiguous: bool,
 }
 
 impl<'a> BinCursor<'a> {
@@ -50,6 +52,7 @@ impl<'a> BinCursor<'a> {
             data,
             pos: 0,
             order,
+            ambiguous: false,
         }
     }
 
@@ -59,6 +62,7 @@ impl<'a> BinCursor<'a> {
             data,
             pos,
             order,
+            ambiguous: false,
         }
     }
 
@@ -68,6 +72,12 @@ impl<'a> BinCursor<'a> {
 
     pub fn order(&self) -> Option<ByteOrder> {
         self.order
+    }
+
+    /// Whether the byte order was a guess between two plausible readings (the other order
+    /// may be the file's: `reader::with_decoder` then tries it).
+    pub fn order_was_ambiguous(&self) -> bool {
+        self.ambiguous
     }
 
     fn remaining(&self) -> usize {
@@ -132,8 +142,16 @@ impl<'a> BinCursor<'a> {
         let order = match (plausible(le), plausible(be)) {
             (true, false) => ByteOrder::Little,
             (false, true) => ByteOrder::Big,
-            // Both fit (tiny values): the smaller is the true one, a swapped small number is huge.
-            (true, true) if be < le => ByteOrder::Big,
+            // Both fit: usually the smaller is the true one (a swapped small number is huge),
+            // but not always (4 000 000 swapped is 605 440), so the guess is marked.
+            (true, true) => {
+                self.ambiguous = true;
+                if be < le {
+                    ByteOrder::Big
+                } else {
+                    ByteOrder::Little
+                }
+            }
             _ => ByteOrder::Little,
         };
         self.order = Some(order);

@@ -12,7 +12,9 @@ use crate::error::{Error, Location, Result, quote};
 const BEGIN: &[u8] = b"BEGIN TIME STEP";
 
 /// Runs `f` on a decoder over `data`. `header` says the file starts with a `C Binary` record
-/// when binary (geometry and measured files do, variable files do not).
+/// when binary (geometry and measured files do, variable files do not). Where the byte order
+/// is not given and the first count read plausibly either way, a failure is retried in the
+/// other order; the first error is reported where both fail.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn with_decoder<T>(
     path: &Path,
@@ -22,7 +24,7 @@ pub(crate) fn with_decoder<T>(
     header: bool,
     block: Option<usize>,
     order: Option<ByteOrder>,
-    f: impl FnOnce(&mut dyn Decoder) -> Result<T>,
+    mut f: impl FnMut(&mut dyn Decoder) -> Result<T>,
 ) -> Result<T> {
     match encoding {
         Encoding::Ascii => {
@@ -46,7 +48,17 @@ pub(crate) fn with_decoder<T>(
                 start = binary_block_start(path, data, start, b)?;
             }
             let mut d = BinCursor::at(path, data, start, order);
-            f(&mut d)
+            let first = f(&mut d);
+            match (first, d.order()) {
+                (Err(e), Some(guessed)) if d.order_was_ambiguous() => {
+                    let other = match guessed {
+                        ByteOrder::Little => ByteOrder::Big,
+                        ByteOrder::Big => ByteOrder::Little,
+                    };
+                    f(&mut BinCursor::at(path, data, start, Some(other))).map_err(|_| e)
+                }
+                (result, _) => result,
+            }
         }
     }
 }
