@@ -58,29 +58,56 @@ fn narrow_words(runs: &[(u32, u32)], first: u32) -> Option<Vec<u32>> {
 /// not be addressable by 31 bits. A cluster is narrow where every part of its runs starts in
 /// the narrow range, else wide.
 pub fn pack(start: &[u32], ids: &[u32], size: u32) -> Option<(Vec<u32>, Vec<u32>)> {
+    use rayon::prelude::*;
     let clusters = start.len().saturating_sub(1);
-    let (mut base, mut words) = (Vec::with_capacity(clusters), Vec::new());
-    for c in 0..clusters {
-        let runs = runs_of(&ids[start[c] as usize..start[c + 1] as usize]);
-        let first = (c as u32).checked_mul(size)?;
-        let at = u32::try_from(words.len())
-            .ok()
-            .filter(|&a| a < WIDE_CLUSTER)?;
-        match narrow_words(&runs, first) {
-            Some(narrow) => {
-                base.push(at);
-                words.extend(narrow);
+    // Each block of clusters packed on its own (its clusters' word counts, whether wide, and
+    // words), then placed one after another: at 1M points a single pass took 80 ms.
+    const CLUSTERS_PER_BLOCK: usize = 256;
+    // Per block: each cluster's word count and whether it is wide; the block's words.
+    type Block = (Vec<(u32, bool)>, Vec<u32>);
+    let blocks: Vec<Block> = (0..clusters.div_ceil(CLUSTERS_PER_BLOCK))
+        .into_par_iter()
+        .map(|block| {
+            let (first_cluster, last) = (
+                block * CLUSTERS_PER_BLOCK,
+                ((block + 1) * CLUSTERS_PER_BLOCK).min(clusters),
+            );
+            let (mut counts, mut words) = (Vec::with_capacity(last - first_cluster), Vec::new());
+            for c in first_cluster..last {
+                let runs = runs_of(&ids[start[c] as usize..start[c + 1] as usize]);
+                let before = words.len();
+                let first = (c as u32).checked_mul(size)?;
+                let wide = match narrow_words(&runs, first) {
+                    Some(narrow) => {
+                        words.extend(narrow);
+                        false
+                    }
+                    None => {
+                        words.extend(runs.iter().flat_map(|&(j, len)| [j, len]));
+                        true
+                    }
+                };
+                counts.push((u32::try_from(words.len() - before).ok()?, wide));
             }
-            None => {
-                base.push(at | WIDE_CLUSTER);
-                words.extend(runs.iter().flat_map(|&(j, len)| [j, len]));
+            Some((counts, words))
+        })
+        .collect::<Option<_>>()?;
+    let (mut base, mut words) = (
+        Vec::with_capacity(clusters),
+        Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum()),
+    );
+    let mut at = 0u32;
+    for (counts, block_words) in blocks {
+        for (count, wide) in counts {
+            if at >= WIDE_CLUSTER {
+                return None;
             }
+            base.push(if wide { at | WIDE_CLUSTER } else { at });
+            at = at.checked_add(count)?;
         }
+        words.extend_from_slice(&block_words);
     }
-    u32::try_from(words.len())
-        .ok()
-        .filter(|&w| w <= WIDE_CLUSTER)?;
-    Some((base, words))
+    (at <= WIDE_CLUSTER).then_some((base, words))
 }
 
 /// Cluster `c`'s words: from its base to the next cluster's, or to `words` for the last.
