@@ -43,65 +43,9 @@ pub(crate) fn droplets<T: Real>(
     let d2 = |a: [f64; 3], b: [f64; 3]| {
         (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
     };
-    // Components by union-find, every root linked to a smaller one, so that each component's
-    // root is its smallest index whatever order the links come in. The lists stage gives the
-    // links by blocks of consecutive points (in a bake, where points come in spatial order):
-    // the links within a block are joined by that block's own task in its own slice of the
-    // parents, all blocks at once, and only the links between blocks (a tenth of them) one
-    // after another. A concurrent union-find over all links measured slower on 16 threads
-    // than this on one: every thread's links led to the same few roots.
-    fn root(parent: &mut [u32], offset: u32, mut i: u32) -> u32 {
-        while parent[(i - offset) as usize] != i {
-            let up = parent[(parent[(i - offset) as usize] - offset) as usize];
-            parent[(i - offset) as usize] = up;
-            i = up;
-        }
-        i
-    }
-    fn join(parent: &mut [u32], offset: u32, i: u32, j: u32) {
-        let (ri, rj) = (root(parent, offset, i), root(parent, offset, j));
-        if ri != rj {
-            parent[(ri.max(rj) - offset) as usize] = ri.min(rj);
-        }
-    }
-    let block = LIST_BLOCK;
-    let by_block = links.len() == n.div_ceil(block);
-    let local = |b: usize, (i, j): (u32, u32)| {
-        by_block && i as usize / block == b && j as usize / block == b
-    };
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    if by_block {
-        parent
-            .par_chunks_mut(block)
-            .zip(links)
-            .enumerate()
-            .for_each(|(b, (parent, links))| {
-                let offset = (b * block) as u32;
-                for &(i, j) in links {
-                    if local(b, (i, j)) {
-                        join(parent, offset, i, j);
-                    }
-                }
-            });
-    }
-    for (b, links) in links.iter().enumerate() {
-        for &(i, j) in links {
-            if !local(b, (i, j)) {
-                join(&mut parent, 0, i, j);
-            }
-        }
-    }
     // Members grouped by component (each root is its component's smallest index), in one
     // array: components in order of their first member, members in index order.
-    let roots: Vec<u32> = (0..n)
-        .into_par_iter()
-        .map(|mut i| {
-            while parent[i] as usize != i {
-                i = parent[i] as usize;
-            }
-            i as u32
-        })
-        .collect();
+    let roots = component_roots(n, links);
     let mut first = vec![0u32; n + 1];
     for &r in &roots {
         first[r as usize + 1] += 1;
@@ -223,4 +167,147 @@ fn second_half_width(points: &[[f64; 3]], members: &[usize], c: [f64; 3]) -> f64
     let (mut values, _) = crate::support::jacobi_eigen(cov);
     values.sort_by(f64::total_cmp);
     (3.0 * values[1].max(0.0)).sqrt()
+}
+
+/// Each point's component (points joined by `links`), named by its smallest index.
+fn component_roots(n: usize, links: &[Vec<(u32, u32)>]) -> Vec<u32> {
+    // Components by union-find, every root linked to a smaller one, so that each component's
+    // root is its smallest index whatever order the links come in. The lists stage gives the
+    // links by blocks of consecutive points (in a bake, where points come in spatial order):
+    // the links within a block are joined by that block's own task in its own slice of the
+    // parents, all blocks at once, and only the links between blocks (a tenth of them), as
+    // pairs of block roots, one after another. A concurrent union-find over all links measured slower on 16 threads
+    // than this on one: every thread's links led to the same few roots.
+    fn root(parent: &mut [u32], offset: u32, mut i: u32) -> u32 {
+        while parent[(i - offset) as usize] != i {
+            let up = parent[(parent[(i - offset) as usize] - offset) as usize];
+            parent[(i - offset) as usize] = up;
+            i = up;
+        }
+        i
+    }
+    fn join(parent: &mut [u32], offset: u32, i: u32, j: u32) {
+        let (ri, rj) = (root(parent, offset, i), root(parent, offset, j));
+        if ri != rj {
+            parent[(ri.max(rj) - offset) as usize] = ri.min(rj);
+        }
+    }
+    let block = LIST_BLOCK;
+    let by_block = links.len() == n.div_ceil(block);
+    let local = |b: usize, (i, j): (u32, u32)| {
+        by_block && i as usize / block == b && j as usize / block == b
+    };
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    if by_block {
+        parent
+            .par_chunks_mut(block)
+            .zip(links)
+            .enumerate()
+            .for_each(|(b, (parent, links))| {
+                let offset = (b * block) as u32;
+                for &(i, j) in links {
+                    if local(b, (i, j)) {
+                        join(parent, offset, i, j);
+                    }
+                }
+            });
+    }
+    // The links between blocks, as pairs of the roots their ends have after the blocks' own
+    // joins, each pair once: most join two blocks already joined by another link, and
+    // joining all of them one after another took most of the stage at 1M points.
+    let parent_ref = &parent;
+    let root_of = |i: u32| {
+        let mut i = i;
+        while parent_ref[i as usize] != i {
+            i = parent_ref[i as usize];
+        }
+        i
+    };
+    let mut between: Vec<(u32, u32)> = links
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(b, links)| {
+            let mut pairs: Vec<(u32, u32)> = links
+                .iter()
+                .filter(|&&l| !local(b, l))
+                .map(|&(i, j)| {
+                    let (ri, rj) = (root_of(i), root_of(j));
+                    (ri.min(rj), ri.max(rj))
+                })
+                .filter(|(a, b)| a != b)
+                .collect();
+            pairs.sort_unstable();
+            pairs.dedup();
+            pairs
+        })
+        .collect();
+    between.par_sort_unstable();
+    between.dedup();
+    for (i, j) in between {
+        join(&mut parent, 0, i, j);
+    }
+    (0..n)
+        .into_par_iter()
+        .map(|mut i| {
+            while parent[i] as usize != i {
+                i = parent[i] as usize;
+            }
+            i as u32
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Components against a breadth-first search over the same links, given by blocks (as
+    /// the lists stage gives them, links within and between blocks) and all in one list.
+    #[test]
+    fn component_roots_are_each_components_smallest_index() {
+        let n = 5 * LIST_BLOCK + 77;
+        let mut x = 99u32;
+        let mut next = move |m: u32| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x % m
+        };
+        // Chains within blocks, a few long jumps between them, isolated points.
+        let mut all: Vec<(u32, u32)> = Vec::new();
+        for i in 0..n as u32 {
+            match next(10) {
+                0..=6 if i + 1 < n as u32 => all.push((i, i + 1 + next(3).min(n as u32 - i - 2))),
+                7 => all.push((i, next(n as u32))),
+                _ => {}
+            }
+        }
+        let mut adjacency = vec![Vec::new(); n];
+        for &(i, j) in &all {
+            adjacency[i as usize].push(j as usize);
+            adjacency[j as usize].push(i as usize);
+        }
+        let mut want = vec![u32::MAX; n];
+        for s in 0..n {
+            if want[s] != u32::MAX {
+                continue;
+            }
+            let mut stack = vec![s];
+            want[s] = s as u32;
+            while let Some(i) = stack.pop() {
+                for &j in &adjacency[i] {
+                    if want[j] == u32::MAX {
+                        want[j] = s as u32;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        let mut by_block = vec![Vec::new(); n.div_ceil(LIST_BLOCK)];
+        for &(i, j) in &all {
+            by_block[i as usize / LIST_BLOCK].push((i, j));
+        }
+        assert_eq!(component_roots(n, &by_block), want, "links by block");
+        assert_eq!(component_roots(n, &[all]), want, "links in one list");
+    }
 }
