@@ -141,9 +141,9 @@ fn gpu_sections(
             })
         })
         .collect();
-    let balls: Vec<GpuBall> = made.iter().map(|m| m.0).collect();
-    let bits: Vec<BallBits> = made.iter().map(|m| m.1).collect();
-    let cubic: Vec<CubicWords> = made.iter().map(|m| m.2).collect();
+    let balls: Vec<GpuBall> = made.par_iter().map(|m| m.0).collect();
+    let bits: Vec<BallBits> = made.par_iter().map(|m| m.1).collect();
+    let cubic: Vec<CubicWords> = made.par_iter().map(|m| m.2).collect();
     // h is at half precision already (`slosh_mls::half_precision`), so exact in f32: per
     // point in `ball_h`, or the header's one value, which every ball then has.
     let per_point_h = if params.mls.per_point_h {

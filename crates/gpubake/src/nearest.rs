@@ -59,12 +59,27 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
                 buffers: &[(4, &out), (5, &todo_buffer)],
             })?;
             let found: Vec<u32> = index.search.read_back(&out, bytes)?;
-            for (k, ids) in found.chunks(count).enumerate() {
-                let t = todo.as_ref().map_or(first + k, |t| t[first + k] as usize);
-                if ids[0] == UNFINISHED {
-                    unfinished.push(t as u32);
-                } else {
-                    sorted_ids[t * count..][..count].copy_from_slice(ids);
+            match &todo {
+                // Consecutive points: one copy, and the few unfinished found in parallel (a
+                // loop over every point took 19 ms of a 1M step on the H200's host).
+                None => {
+                    sorted_ids[first * count..][..len * count].copy_from_slice(&found);
+                    let more: Vec<u32> = (0..len)
+                        .into_par_iter()
+                        .filter(|k| found[k * count] == UNFINISHED)
+                        .map(|k| (first + k) as u32)
+                        .collect();
+                    unfinished.extend(more);
+                }
+                Some(t) => {
+                    for (k, ids) in found.chunks(count).enumerate() {
+                        let t = t[first + k] as usize;
+                        if ids[0] == UNFINISHED {
+                            unfinished.push(t as u32);
+                        } else {
+                            sorted_ids[t * count..][..count].copy_from_slice(ids);
+                        }
+                    }
                 }
             }
         }
