@@ -226,36 +226,66 @@ impl CacheFile {
             ));
         }
         let items = n + spheres.len();
+        // A serial scan of the nodes would report the first node with a problem: its box, its
+        // children's place or its range (first), an item another leaf holds (then), an item
+        // outside its box (last). The items' leaves are marked in one pass, which notes the
+        // first overlap; every node is checked in parallel, and the earliest problem by
+        // (node, order) is reported: a scan with every check took 37 ms of a 1M verify.
+        let leaf_range = |node: &crate::bvh::BvhNode| {
+            node.first as usize..node.first as usize + node.count as usize
+        };
         let mut seen = vec![false; items];
+        let mut overlap: Option<(usize, String)> = None;
         for (k, node) in bvh.nodes.iter().enumerate() {
+            if node.count == 0 {
+                continue;
+            }
+            let range = leaf_range(node);
+            let Some(leaf) = seen.get_mut(range.clone()) else {
+                continue;
+            };
+            if let Some(j) = leaf.iter().position(|&s| s) {
+                overlap = Some((k, format!("BVH item {} is in two leaves", range.start + j)));
+                break;
+            }
+            leaf.fill(true);
+        }
+        let node_problem = |k: usize| -> Option<(usize, u8, String)> {
+            let node = &bvh.nodes[k];
             if !(node.lo.iter().chain(&node.hi).all(|c| c.is_finite()))
                 || (0..3).any(|a| node.lo[a] > node.hi[a])
             {
-                return Err(format!("a BVH node has an invalid box: {node:?}"));
+                return Some((k, 0, format!("a BVH node has an invalid box: {node:?}")));
             }
             if node.count == 0 {
                 // The tracer walks down only (its descent has no loop guard).
-                if node.first as usize <= k {
-                    return Err(format!(
-                        "BVH node {k} has children {} and {}: children must follow their parent",
-                        node.first,
-                        node.first + 1
-                    ));
-                }
-                continue;
+                return (node.first as usize <= k).then(|| {
+                    (
+                        k,
+                        0,
+                        format!(
+                            "BVH node {k} has children {} and {}: children must follow their \
+                             parent",
+                            node.first,
+                            node.first + 1
+                        ),
+                    )
+                });
             }
             // A leaf is a range of items (at most `MAX_LEAF_RANGE`, which its four bits of
             // count hold); the balls in it that are not candidates are skipped by the walk,
             // but no item belongs to two leaves.
-            let range = node.first as usize..node.first as usize + node.count as usize;
-            let leaf = seen.get_mut(range.clone()).ok_or(format!(
-                "a BVH leaf holds items {}..{} of {items}",
-                range.start, range.end
-            ))?;
-            if let Some(k) = leaf.iter().position(|&s| s) {
-                return Err(format!("BVH item {} is in two leaves", range.start + k));
+            let range = leaf_range(node);
+            if range.end > items {
+                return Some((
+                    k,
+                    0,
+                    format!(
+                        "a BVH leaf holds items {}..{} of {items}",
+                        range.start, range.end
+                    ),
+                ));
             }
-            leaf.fill(true);
             // The leaf's box holds the balls and spheres the walk tests in it (a box that
             // does not would hide them: a wrong picture, not an error), to within an f32
             // rounding of the stored centres.
@@ -266,21 +296,36 @@ impl CacheFile {
                         && node.hi[a] >= centre[a] + radius - slack
                 })
             };
-            for item in range {
-                let inside = match item.checked_sub(n) {
-                    Some(d) => held(spheres[d].centre, spheres[d].radius),
+            range
+                .into_iter()
+                .find(|&item| match item.checked_sub(n) {
+                    Some(d) => !held(spheres[d].centre, spheres[d].radius),
                     None => {
-                        !matches!(balls[item].kind(), BallState::Full | BallState::Degraded)
-                            || held(points[item].position, points[item].radius())
+                        matches!(balls[item].kind(), BallState::Full | BallState::Degraded)
+                            && !held(points[item].position, points[item].radius())
                     }
-                };
-                if !inside {
-                    return Err(format!(
-                        "BVH item {item} lies outside its leaf's box {:?} .. {:?}",
-                        node.lo, node.hi
-                    ));
-                }
-            }
+                })
+                .map(|item| {
+                    (
+                        k,
+                        2,
+                        format!(
+                            "BVH item {item} lies outside its leaf's box {:?} .. {:?}",
+                            node.lo, node.hi
+                        ),
+                    )
+                })
+        };
+        let first_problem = (0..bvh.nodes.len())
+            .into_par_iter()
+            .find_map_first(node_problem);
+        let overlap = overlap.map(|(k, problem)| (k, 1, problem));
+        if let Some((_, _, problem)) = first_problem
+            .into_iter()
+            .chain(overlap)
+            .min_by_key(|p| (p.0, p.1))
+        {
+            return Err(problem);
         }
         if let Some(i) = balls.par_iter().zip(&seen).position_first(|(b, &seen)| {
             !seen && matches!(b.kind(), BallState::Full | BallState::Degraded)
