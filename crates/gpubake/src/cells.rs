@@ -124,20 +124,24 @@ impl SortedPoints {
     /// level.
     fn occupied_cells(&self) -> Vec<usize> {
         const LEVELS: usize = MortonGrid::BITS as usize + 1;
-        let first_differing = self
-            .codes
-            .par_windows(2)
-            .fold(
-                || [0usize; LEVELS],
-                |mut count, w| {
-                    let d = w[0] ^ w[1];
+        // Pairs (i, i + 1) counted by chunks of i, each into a histogram of its own (one
+        // carried through a fold by value was copied at every pair).
+        const CHUNK: usize = 1 << 14;
+        let codes = &self.codes;
+        let pairs = codes.len().saturating_sub(1);
+        let first_differing = (0..pairs.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut count = [0usize; LEVELS];
+                for i in c * CHUNK..((c + 1) * CHUNK).min(pairs) {
+                    let d = codes[i] ^ codes[i + 1];
                     if d != 0 {
                         let high = 63 - d.leading_zeros();
                         count[(MortonGrid::BITS - high / 3) as usize] += 1;
                     }
-                    count
-                },
-            )
+                }
+                count
+            })
             .reduce(
                 || [0usize; LEVELS],
                 |a, b| std::array::from_fn(|l| a[l] + b[l]),
