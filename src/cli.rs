@@ -38,9 +38,12 @@ pub enum Command {
     Bench(BenchCommand),
 }
 
-/// Where `slosh bake` finds neighbours.
+/// Where `slosh bake` runs its data-parallel stages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum BakeDevice {
+    /// A GPU where one is found (a discrete or integrated adapter; not a software rasteriser
+    /// such as lavapipe, on which the CPU is faster), else the CPU.
+    Auto,
     Cpu,
     Gpu,
 }
@@ -447,11 +450,12 @@ pub struct FitSettings {
 /// neighbours.
 #[derive(Debug, Clone, Args)]
 pub struct SelectSettings {
-    /// Where each step's data-parallel stages run: the CPU, or a GPU through Vulkan (the
-    /// surface estimate's neighbours, kNN and radii, neighbour lists, initial fits and the
-    /// BVH's tree; the same selection and lists where no distances tie, docs/bake.md; the
-    /// other stages stay on the CPU for now).
-    #[arg(long, value_enum, default_value_t = BakeDevice::Cpu)]
+    /// Where each step's data-parallel stages run: a GPU through Vulkan (the surface
+    /// estimate's neighbours, kNN and radii, neighbour lists, initial fits and the BVH's
+    /// tree; the same selection and lists where no distances tie, docs/bake.md; the other
+    /// stages stay on the CPU for now), or the CPU. `auto` takes a GPU where one is found (a
+    /// discrete or integrated adapter, not a software one such as lavapipe) and k allows.
+    #[arg(long, value_enum, default_value_t = BakeDevice::Auto)]
     pub device: BakeDevice,
     /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable
     /// `surface` if the case has one, else all).

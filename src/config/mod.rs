@@ -218,23 +218,52 @@ fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {
 }
 
 /// The bake's stages where `--device` asks for them, the GPU's fits for `degree` compiled.
+/// `auto` takes the GPU's where an adapter that is a GPU opens and `k` is within its search,
+/// else the CPU's (the bake's `stages:` line says which).
 fn bake_stages(
     device: crate::cli::BakeDevice,
     adapter: Option<&str>,
     degree: u8,
+    k: usize,
 ) -> Result<slosh_bake::Stages> {
+    let gpu_stages = || -> Result<slosh_bake::Stages> {
+        let gpu = slosh_render::Gpu::new(adapter).context("--device gpu")?;
+        gpu_stages_on(gpu, degree)
+    };
     Ok(match device {
         crate::cli::BakeDevice::Cpu => slosh_bake::Stages::cpu(),
-        crate::cli::BakeDevice::Gpu => {
-            let gpu = slosh_render::Gpu::new(adapter).context("--device gpu")?;
-            let stages = slosh_gpubake::GpuStages::new(std::sync::Arc::new(gpu))
-                .context("--device gpu: the bake's passes")?;
-            stages
-                .compile_fits(degree)
-                .context("--device gpu: the initial fits")?;
-            std::sync::Arc::new(stages).stages()
+        crate::cli::BakeDevice::Gpu => gpu_stages()?,
+        crate::cli::BakeDevice::Auto => {
+            // Adapters are listed before one is opened: most machines without a GPU have
+            // none, or only a software one.
+            let is_gpu = |info: &wgpu::AdapterInfo| {
+                matches!(
+                    info.device_type,
+                    wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
+                ) && adapter.is_none_or(|n| info.name.to_lowercase().contains(&n.to_lowercase()))
+            };
+            let found = k < slosh_gpubake::NEAREST_MAX
+                && slosh_render::adapters()
+                    .iter()
+                    .any(|a| is_gpu(&a.get_info()));
+            match found.then(|| slosh_render::Gpu::new(adapter)) {
+                Some(Ok(gpu)) if is_gpu(&gpu.info) => {
+                    gpu_stages_on(gpu, degree).unwrap_or_else(|_| slosh_bake::Stages::cpu())
+                }
+                _ => slosh_bake::Stages::cpu(),
+            }
         }
     })
+}
+
+/// The GPU's stages on `gpu`, its fits for `degree` compiled.
+fn gpu_stages_on(gpu: slosh_render::Gpu, degree: u8) -> Result<slosh_bake::Stages> {
+    let stages = slosh_gpubake::GpuStages::new(std::sync::Arc::new(gpu))
+        .context("--device gpu: the bake's passes")?;
+    stages
+        .compile_fits(degree)
+        .context("--device gpu: the initial fits")?;
+    Ok(std::sync::Arc::new(stages).stages())
 }
 
 impl BakeConfig {
@@ -442,6 +471,7 @@ impl BakeConfig {
                     a.settings.select.device,
                     a.adapter.as_deref(),
                     a.settings.fit.degree,
+                    a.settings.fit.k,
                 )?,
             },
             quiet: a.quiet,

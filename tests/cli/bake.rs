@@ -673,6 +673,36 @@ fn a_case_renders_after_its_steps_are_baked_beside_it() {
     );
 }
 
+/// `--device auto`, the default, bakes on a GPU where Vulkan lists one (a discrete or
+/// integrated adapter) and on the CPU where it lists only a software one (lavapipe, on which
+/// the CPU is faster: CI's case) or none; with a k beyond the GPU's search it bakes on the
+/// CPU where `--device gpu` is refused.
+#[test]
+fn the_default_device_is_a_gpu_where_one_is_found() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(
+        &dir.path().join("case"),
+        &["sphere", "--points", "2000", "--steps", "1"],
+    );
+    let case = dir.path().join("case/sphere.case");
+    let gpu_found = slosh_render::adapters().iter().any(|a| {
+        matches!(
+            a.get_info().device_type,
+            wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
+        )
+    });
+    let (ok, out, err) = bake_case(&case, &dir.path().join("auto"), &[]);
+    assert!(ok, "{err}");
+    let want = if gpu_found { "gpu" } else { "cpu" };
+    assert!(
+        out.contains(&format!("stages: neighbours on {want}")),
+        "a GPU found: {gpu_found}; {out}"
+    );
+    let (ok, out, err) = bake_case(&case, &dir.path().join("k40"), &["--k", "40"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("stages: neighbours on cpu"), "{out}");
+}
+
 /// `--device gpu` finds the neighbours, fits the balls and links the BVH on the GPU: every
 /// section but the balls' and the BVH's is the CPU bake's, byte for byte, where no distances
 /// tie (none do in this seeded scene: the lists are then equal, `docs/algorithm.md`); the
