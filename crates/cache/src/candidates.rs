@@ -304,7 +304,9 @@ mod tests {
                 1 => (first..first + 40).collect(),
                 2 => (0..30).map(|k| first + 3 * k).collect(),
                 3 => vec![first, first + 1, 1_000_000 + c],
-                _ => (first.saturating_sub(20)..first + 60).chain([5_000_000]).collect(),
+                _ => (first.saturating_sub(20)..first + 60)
+                    .chain([5_000_000])
+                    .collect(),
             };
             ids.extend(&list);
             start.push(ids.len() as u32);
