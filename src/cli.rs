@@ -454,7 +454,8 @@ pub struct SelectSettings {
     /// estimate's neighbours, kNN and radii, neighbour lists, initial fits and the BVH's
     /// tree; the same selection and lists where no distances tie, docs/bake.md; the other
     /// stages stay on the CPU for now), or the CPU. `auto` takes a GPU where one is found (a
-    /// discrete or integrated adapter, not a software one such as lavapipe) and k allows.
+    /// discrete or integrated adapter, not a software one such as lavapipe) and k allows, or
+    /// the one --adapter names.
     #[arg(long, value_enum, default_value_t = BakeDevice::Auto)]
     pub device: BakeDevice,
     /// Surface particles: a flag variable's name, `estimate`, or `all` (default: the variable
@@ -517,7 +518,8 @@ pub struct BakeArgs {
     pub shard: Option<String>,
     #[command(flatten)]
     pub settings: BakeSettings,
-    /// With --device gpu: the adapter whose name contains this (default: the best one).
+    /// The GPU adapter whose name contains this (with --device auto or gpu; default: the best
+    /// one). Naming one asks for the GPU: with --device auto, no CPU fallback.
     #[arg(long)]
     pub adapter: Option<String>,
     /// Rebuild manifest.json from the step files in the directory, bake nothing.

@@ -218,8 +218,8 @@ fn parse_shard(s: &str) -> Result<slosh_bake::Shard> {
 }
 
 /// The bake's stages where `--device` asks for them, the GPU's fits for `degree` compiled.
-/// `auto` takes the GPU's where an adapter that is a GPU opens and `k` is within its search,
-/// else the CPU's (the bake's `stages:` line says which).
+/// `auto` takes the GPU's where `adapter` is named, or where an adapter that is a GPU opens
+/// and `k` is within its search; else the CPU's (the bake's `stages:` line says which).
 fn bake_stages(
     device: crate::cli::BakeDevice,
     adapter: Option<&str>,
@@ -232,7 +232,10 @@ fn bake_stages(
     };
     Ok(match device {
         crate::cli::BakeDevice::Cpu => slosh_bake::Stages::cpu(),
+        // An adapter named is a GPU asked for: a name no adapter has is an error, not a
+        // silent bake on the CPU.
         crate::cli::BakeDevice::Gpu => gpu_stages()?,
+        crate::cli::BakeDevice::Auto if adapter.is_some() => gpu_stages()?,
         crate::cli::BakeDevice::Auto => {
             // Adapters are listed before one is opened: most machines without a GPU have
             // none, or only a software one.
@@ -240,7 +243,7 @@ fn bake_stages(
                 matches!(
                     info.device_type,
                     wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
-                ) && adapter.is_none_or(|n| info.name.to_lowercase().contains(&n.to_lowercase()))
+                )
             };
             let found = k < slosh_gpubake::NEAREST_MAX
                 && slosh_render::adapters()

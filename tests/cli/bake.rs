@@ -676,7 +676,7 @@ fn a_case_renders_after_its_steps_are_baked_beside_it() {
 /// `--device auto`, the default, bakes on a GPU where Vulkan lists one (a discrete or
 /// integrated adapter) and on the CPU where it lists only a software one (lavapipe, on which
 /// the CPU is faster: CI's case) or none; with a k beyond the GPU's search it bakes on the
-/// CPU where `--device gpu` is refused.
+/// CPU where `--device gpu` is refused; an `--adapter` named asks for that GPU.
 #[test]
 fn the_default_device_is_a_gpu_where_one_is_found() {
     let dir = tempfile::tempdir().unwrap();
@@ -701,6 +701,11 @@ fn the_default_device_is_a_gpu_where_one_is_found() {
     let (ok, out, err) = bake_case(&case, &dir.path().join("k40"), &["--k", "40"]);
     assert!(ok, "{err}");
     assert!(out.contains("stages: neighbours on cpu"), "{out}");
+    // An adapter named is a GPU asked for: a name none has is an error, not the CPU.
+    let named = dir.path().join("named");
+    let (ok, _, err) = bake_case(&case, &named, &["--adapter", "no-such-adapter"]);
+    assert!(!ok && err.contains("no-such-adapter"), "{err}");
+    assert!(!named.join("step-00000.slc").exists());
 }
 
 /// `--device gpu` finds the neighbours, fits the balls and links the BVH on the GPU: every
