@@ -176,8 +176,9 @@ fn component_roots(n: usize, links: &[Vec<(u32, u32)>]) -> Vec<u32> {
     // links by blocks of consecutive points (in a bake, where points come in spatial order):
     // the links within a block are joined by that block's own task in its own slice of the
     // parents, all blocks at once, and only the links between blocks (a tenth of them), as
-    // pairs of block roots, one after another. A concurrent union-find over all links measured slower on 16 threads
-    // than this on one: every thread's links led to the same few roots.
+    // pairs of block roots, one after another. A concurrent union-find over all links
+    // measured slower on 16 threads than this on one: every thread's links led to the same
+    // few roots.
     fn root(parent: &mut [u32], offset: u32, mut i: u32) -> u32 {
         while parent[(i - offset) as usize] != i {
             let up = parent[(parent[(i - offset) as usize] - offset) as usize];
