@@ -221,7 +221,7 @@ impl<T: Real> SurfaceParts<T> {
         };
         let k_query = NonZero::new(k.max(orient_with) + 1).ok_or(SurfaceError::BadK)?;
         let nearest_ids = index.nearest(k_query)?;
-        let queried: Vec<(f64, f64, Around)> = nearest_ids
+        let queried: Vec<(f64, f64, Around, f64)> = nearest_ids
             .par_chunks(k_query.get())
             .enumerate()
             .map(|(i, nn)| {
@@ -232,11 +232,13 @@ impl<T: Real> SurfaceParts<T> {
                 for (slot, j) in around.iter_mut().zip(others.take(orient_with)) {
                     *slot = j;
                 }
-                (dist(k), dist(1), around)
+                let second = if k_query.get() > 2 { dist(2) } else { f64::NAN };
+                (dist(k), dist(1), around, second)
             })
             .collect();
         let mut radii: Vec<f64> = queried.par_iter().map(|q| q.0).collect();
         let nearest: Vec<f64> = queried.par_iter().map(|q| q.1).collect();
+        let second_nearest: Vec<f64> = queried.par_iter().map(|q| q.3).collect();
         let spacing = nearest.iter().sum::<f64>() / n as f64;
         clock.lap("kd-tree and radii (kNN)");
         let orientation = match unit_normals.as_mut() {
@@ -259,8 +261,14 @@ impl<T: Real> SurfaceParts<T> {
         // Where most particles have a twin at their place (a pile, or particles written
         // twice), the median nearest distance is 0, and every ball and spray sphere sized by
         // it would be too: the spacing is then the median of the distances that are not.
+        // Where most have a twin a little apart (written twice, then moved by noise), that
+        // median is a fraction of the spacing, while the second nearest distance is not:
+        // below half the median second nearest distance, the spacing is that.
         let dense_spacing = match quantile(&nearest, H_QUANTILE) {
-            s if s > 0.0 => s,
+            s if s > 0.0 => match quantile(&second_nearest, H_QUANTILE) {
+                s2 if s < 0.5 * s2 => s2,
+                _ => s,
+            },
             _ => {
                 let apart: Vec<f64> = nearest.par_iter().copied().filter(|&d| d > 0.0).collect();
                 quantile(&apart, H_QUANTILE)
