@@ -62,10 +62,10 @@ fn mostly_duplicated_particles_keep_their_spacing() {
 }
 
 /// Most particles written twice and every one moved a little (noise σ 0.1 spacings): twins
-/// lie far nearer than the spacing, so the dense spacing (the median nearest distance) is a
-/// fraction of it while the single particles raise the mean nearest distance above it. By the
-/// mean alone the whole fluid was spray: every particle a sphere, no surface, no error. Now
-/// the surface is fitted and found where the particles are.
+/// lie far nearer than the spacing, so the dense spacing (the median nearest distance) was a
+/// fraction of it, against which the fluid's own gaps looked like spray spread thin: every
+/// particle a sphere, no surface, no error. The dense spacing is now the median second-nearest
+/// distance there; the surface is fitted and found where the particles are.
 #[test]
 fn particles_written_twice_with_noise_are_a_surface_not_spray() {
     let mut s = spec(SceneKind::Sphere, 3000);
