@@ -310,28 +310,26 @@ fn a_pile_of_coincident_particles_on_the_surface_bakes_a_walkable_tree() {
     assert!(hit_pixels(&cache, &dir.path().join("aov.npy")) > 500);
 }
 
+/// A sphere of 5000 particles with the `slosh gen` hard-case `flags`, one step, baked into
+/// `DIR/cache-NAME`; the cache.
+fn baked_sphere(dir: &Path, name: &str, flags: &[&str]) -> std::path::PathBuf {
+    let run = dir.join(format!("run-{name}"));
+    let mut args = vec!["sphere", "--points", "5000", "--steps", "1"];
+    args.extend(flags);
+    crate::util::generate(&run, &args);
+    let cache = dir.join(format!("cache-{name}"));
+    let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &["--quiet"]);
+    assert!(ok, "{out}{err}");
+    cache
+}
+
 /// Most particles written twice (a solver writing a block of its particles twice): every
 /// step failed ("droplet sphere 0 … has no positive radius"), the dense spacing being the
 /// median nearest distance, 0. It bakes, verifies and renders.
 #[test]
 fn mostly_duplicated_particles_bake() {
     let dir = tempfile::tempdir().unwrap();
-    let run = dir.path().join("run");
-    crate::util::generate(
-        &run,
-        &[
-            "sphere",
-            "--points",
-            "5000",
-            "--steps",
-            "1",
-            "--duplicates",
-            "0.7",
-        ],
-    );
-    let cache = dir.path().join("cache");
-    let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &["--quiet"]);
-    assert!(ok, "{out}{err}");
+    let cache = baked_sphere(dir.path(), "twice", &["--duplicates", "0.7"]);
     assert!(hit_pixels(&cache, &dir.path().join("aov.npy")) > 500);
 }
 
@@ -344,24 +342,11 @@ fn particles_written_twice_with_noise_draw_a_surface() {
     let dir = tempfile::tempdir().unwrap();
     let mut hits = Vec::new();
     for duplicates in ["0", "0.7"] {
-        let run = dir.path().join(format!("run{duplicates}"));
-        crate::util::generate(
-            &run,
-            &[
-                "sphere",
-                "--points",
-                "5000",
-                "--steps",
-                "1",
-                "--noise",
-                "0.1",
-                "--duplicates",
-                duplicates,
-            ],
+        let cache = baked_sphere(
+            dir.path(),
+            duplicates,
+            &["--noise", "0.1", "--duplicates", duplicates],
         );
-        let cache = dir.path().join(format!("cache{duplicates}"));
-        let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &["--quiet"]);
-        assert!(ok, "{out}{err}");
         let (ok, out, err) = slosh(&["inspect", cache.join("step-00000.slc").to_str().unwrap()]);
         assert!(ok, "{err}");
         assert!(out.contains("droplets   0 spheres"), "{out}");

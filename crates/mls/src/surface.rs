@@ -238,12 +238,11 @@ impl<T: Real> SurfaceParts<T> {
             .collect();
         let mut radii: Vec<f64> = queried.par_iter().map(|q| q.0).collect();
         let nearest: Vec<f64> = queried.par_iter().map(|q| q.1).collect();
-        let second_nearest: Vec<f64> = queried.par_iter().map(|q| q.3).collect();
         let spacing = nearest.iter().sum::<f64>() / n as f64;
         clock.lap("kd-tree and radii (kNN)");
         let orientation = match unit_normals.as_mut() {
             Some(ns) => {
-                let around: Vec<Around> = queried.into_par_iter().map(|q| q.2).collect();
+                let around: Vec<Around> = queried.par_iter().map(|q| q.2).collect();
                 repair_orientation(&rel, ns, &around)
             }
             None => OrientationRepair::default(),
@@ -257,18 +256,26 @@ impl<T: Real> SurfaceParts<T> {
         }
         // h from the dense fluid, not the spray: the median radius, which sparse points
         // (large radii) cannot inflate while they are fewer than half.
-        let h = half_precision(params.h_scale * quantile(&radii, H_QUANTILE));
+        let median_radius = quantile(&radii, H_QUANTILE);
+        let h = half_precision(params.h_scale * median_radius);
         // Where most particles have a twin at their place (a pile, or particles written
         // twice), the median nearest distance is 0, and every ball and spray sphere sized by
         // it would be too: the spacing is then the median of the distances that are not.
         // Where most have a twin a little apart (written twice, then moved by noise), that
         // median is a fraction of the spacing, while the second nearest distance is not:
-        // below half the median second nearest distance, the spacing is that.
+        // below half the median second nearest distance, the spacing is that. Each point's
+        // second nearest lies within its radius (the k-th, k ≥ 2), so where the median
+        // nearest reaches half the median radius (almost every step) that median is not
+        // computed.
         let dense_spacing = match quantile(&nearest, H_QUANTILE) {
-            s if s > 0.0 => match quantile(&second_nearest, H_QUANTILE) {
-                s2 if s < 0.5 * s2 => s2,
-                _ => s,
-            },
+            s if s > 0.0 && (k < 2 || s < 0.5 * median_radius) => {
+                let second: Vec<f64> = queried.par_iter().map(|q| q.3).collect();
+                match quantile(&second, H_QUANTILE) {
+                    s2 if s < 0.5 * s2 => s2,
+                    _ => s,
+                }
+            }
+            s if s > 0.0 => s,
             _ => {
                 let apart: Vec<f64> = nearest.par_iter().copied().filter(|&d| d > 0.0).collect();
                 quantile(&apart, H_QUANTILE)
