@@ -17,8 +17,8 @@ pub mod series;
 pub mod timeline;
 
 pub use engine::{
-    Engine, EngineOptions, FrameReport, FrameRequest, GpuSource, Pace, Prepared, Probe, Quality,
-    Uploaded, default_budget, default_loaders,
+    Engine, EngineOptions, FrameReport, FrameRequest, FreshBuffers, GpuSource, Pace, Prepared,
+    Probe, Quality, Uploaded, default_budget, default_loaders,
 };
 pub use error::{Error, Result};
 pub use frame_budget::FrameBudget;

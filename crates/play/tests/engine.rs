@@ -161,11 +161,13 @@ fn streams_under_a_tiny_budget_with_stand_ins_and_never_evicts_the_shown_step() 
             );
             assert_eq!(r.stand_in, shown != target);
             assert!(engine.used_bytes() <= budget);
+            // A step may hold section buffers of a step dropped before it, up to a
+            // sixteenth larger than its own (`BufferShelf`): the pool counts what is held.
             let held: u64 = engine.resident().iter().map(|&i| bytes[i]).sum();
-            assert_eq!(
-                engine.used_bytes(),
-                held,
-                "bytes counted differ from the buffers'"
+            let used = engine.used_bytes();
+            assert!(
+                used >= held && used <= held + held / 16,
+                "{used} bytes counted for buffers of {held}"
             );
         });
         assert!(

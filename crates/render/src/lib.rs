@@ -7,6 +7,7 @@
 //! oracle.
 
 mod bindings;
+mod buffer_shelf;
 pub mod colormap;
 mod context;
 pub mod cpu_shade;
@@ -24,6 +25,7 @@ mod upload;
 pub mod water;
 mod widen;
 
+pub use buffer_shelf::BufferShelf;
 pub use colormap::Colormap;
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
 pub use error::{Error, Result};

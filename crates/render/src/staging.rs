@@ -2,8 +2,11 @@
 //! page on first touch, which made the copy into a new 160 MB staging buffer several times
 //! slower than the memory allows; a recycled buffer is already faulted in. A buffer goes back
 //! to the pool once the GPU has finished reading it: `recycle` maps it again, and wgpu
-//! completes that map only after the submitted copies, during a later device poll.
+//! completes that map only after the submitted copies, during a later device poll. The
+//! first upload of a pool fills it on a thread of its own (`warm`), so that the first
+//! uploads after a series opens do not each fault in a buffer of their own.
 
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
 use crate::context::Gpu;
@@ -60,13 +63,24 @@ impl Shelf {
 #[derive(Debug, Clone)]
 pub struct StagingPool {
     shelf: Shelf,
+    /// Buffers an upload had to make because none was ready.
+    fresh: Arc<AtomicUsize>,
+    /// Whether the pool was filled once (see [`StagingPool::take`]).
+    warmed: Arc<AtomicBool>,
 }
 
 impl StagingPool {
     pub fn new(keep: usize) -> StagingPool {
         StagingPool {
             shelf: Shelf::new(keep),
+            fresh: Arc::new(AtomicUsize::new(0)),
+            warmed: Arc::new(AtomicBool::new(false)),
         }
+    }
+
+    /// Buffers uploads had to make because none was ready (the warm-up's excluded).
+    pub fn fresh(&self) -> usize {
+        self.fresh.load(Ordering::Relaxed)
     }
 
     /// Buffers ready now.
@@ -75,17 +89,39 @@ impl StagingPool {
     }
 
     /// A mapped `MAP_WRITE | COPY_SRC` buffer of at least `size` bytes: the smallest ready
-    /// one that fits, or a new one.
+    /// one that fits, or a new one. The first call also fills the pool on a thread of its
+    /// own, with buffers an eighth larger than `size` (a series' steps are of about one
+    /// size), their pages written once so that they are faulted in.
     pub(crate) fn take(&self, gpu: &Gpu, size: u64) -> wgpu::Buffer {
+        if !self.warmed.swap(true, Ordering::Relaxed) {
+            self.warm(gpu, size + size / 8);
+        }
         if let Some(buffer) = self.shelf.take(size) {
             return buffer;
         }
-        gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("staging (pooled)"),
-            size: size.next_multiple_of(STAGING_GRANULE),
-            usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: true,
-        })
+        self.fresh.fetch_add(1, Ordering::Relaxed);
+        new_staging(&gpu.device, size)
+    }
+
+    /// Fills the shelf, but for the buffer the caller is about to make, with buffers of
+    /// `size` on a thread of its own.
+    fn warm(&self, gpu: &Gpu, size: u64) {
+        let (device, shelf) = (gpu.device.clone(), self.shelf.clone());
+        let count = self.shelf.keep.saturating_sub(1);
+        let spawned = std::thread::Builder::new()
+            .name("staging warm-up".into())
+            .spawn(move || {
+                for _ in 0..count {
+                    let buffer = new_staging(&device, size);
+                    // A view that cannot be had leaves the buffer unfaulted, not unusable.
+                    if let Ok(mut view) = buffer.slice(..).get_mapped_range_mut() {
+                        view.slice(..).fill(0);
+                    }
+                    shelf.put(buffer);
+                }
+            });
+        // Without a thread the pool fills as uploads go, as it did before.
+        drop(spawned);
     }
 
     /// Takes back a buffer from [`StagingPool::take`] that is still mapped (an upload that
@@ -104,4 +140,14 @@ impl StagingPool {
             }
         });
     }
+}
+
+/// A mapped `MAP_WRITE | COPY_SRC` buffer of at least `size` bytes, in whole granules.
+fn new_staging(device: &wgpu::Device, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("staging (pooled)"),
+        size: size.next_multiple_of(STAGING_GRANULE),
+        usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: true,
+    })
 }

@@ -1214,6 +1214,78 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
     }
 }
 
+/// A step uploaded into section buffers another step held (kept on a `BufferShelf` when it
+/// was dropped, some larger than needed, their tails holding the other step's bytes) draws
+/// the same pixels, refined, as one uploaded into new buffers; the shelf hands out buffers
+/// within its limit only, and none once the limit is zero.
+#[test]
+fn steps_in_reused_section_buffers_draw_as_in_new_ones() {
+    let Some(dev) = device() else { return };
+    let steps = uploaded_scenes(
+        dev,
+        &[(SceneKind::Sphere, 3000, 5), (SceneKind::Sphere, 3000, 6)],
+    );
+    let refined = |step: &GpuStep| TraceParams::for_step(step, 3);
+    let alone = frames_alone(dev, &steps, refined);
+    let files: Vec<CacheFile> = [5, 6]
+        .iter()
+        .map(|&seed| {
+            bake(
+                &input_of(&SceneSpec::new(SceneKind::Sphere, 3000, seed)),
+                2,
+                0.0,
+            )
+            .0
+        })
+        .collect();
+    let shelf = slosh_render::BufferShelf::new();
+    shelf.set_limit(1 << 30);
+    let upload = |file: &CacheFile| {
+        let host = slosh_render::HostStep::read(file, None).unwrap();
+        let mut encoder = dev
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let options = slosh_render::UploadOptions {
+            shelf: Some(&shelf),
+            ..Default::default()
+        };
+        let step = GpuStep::create_in(&dev.gpu, &host, &mut encoder, options).unwrap();
+        dev.gpu.queue.submit([encoder.finish()]);
+        step
+    };
+    let first = upload(&files[0]);
+    let made = shelf.fresh();
+    assert!(made >= 8, "{made} section buffers made for the first step");
+    drop(first);
+    assert!(
+        shelf.bytes() > 0,
+        "the dropped step's buffers were not kept"
+    );
+    for k in [1, 0, 1] {
+        let before = shelf.fresh();
+        let step = upload(&files[k]);
+        let reused = made - (shelf.fresh() - before);
+        eprintln!("step {k}: {reused} of {made} section buffers reused");
+        assert!(reused >= 4, "{reused} section buffers reused");
+        let frame = Tracer::new(&dev.gpu)
+            .unwrap()
+            .render(&dev.gpu, &step, &steps[k].0, &refined(&step))
+            .unwrap();
+        assert!(hit_pixels(&frame) > 500);
+        assert!(
+            frame.hits == alone[k].hits && frame.rgba == alone[k].rgba,
+            "step {k} in reused buffers draws other pixels"
+        );
+    }
+    shelf.set_limit(0);
+    assert_eq!(shelf.bytes(), 0);
+    let before = shelf.fresh();
+    drop(upload(&files[0]));
+    assert_eq!(shelf.bytes(), 0, "a shelf of no bytes kept buffers");
+    assert_eq!(shelf.fresh() - before, made);
+}
+
 /// Pooled read-backs return what the buffer holds, whatever the size asked (a pooled buffer
 /// larger than the read is only read as far as asked), appended or whole, and keep their
 /// buffers for the next reads up to the pool's size.

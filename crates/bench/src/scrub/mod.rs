@@ -165,7 +165,7 @@ struct JumpParts {
 
 impl JumpBreakdown {
     /// Medians over all jumps, and means over the slowest tenth.
-    fn of(parts: &[JumpParts]) -> JumpBreakdown {
+    fn of(parts: &[JumpParts], fresh: slosh_play::FreshBuffers) -> JumpBreakdown {
         let rest = |p: &JumpParts| p.total - p.host - p.record;
         let column = |f: &dyn Fn(&JumpParts) -> f64| median(parts.iter().map(f).collect());
         let mut slowest: Vec<&JumpParts> = parts.iter().collect();
@@ -182,6 +182,7 @@ impl JumpBreakdown {
                 mean(&|p| p.record),
                 mean(&rest),
             ],
+            fresh,
         }
     }
 }
@@ -360,7 +361,7 @@ fn measure(
             &mut copies,
             slosh_render::UploadOptions {
                 staging: Some(&staging),
-                cancelled: None,
+                ..slosh_render::UploadOptions::default()
             },
         )?;
         let t = Instant::now();
@@ -457,6 +458,7 @@ fn measure(
     drop(engine);
     let mut engine = Engine::open(gpu.clone(), dir, options(step_gpu_bytes * 3))?;
     show(&mut engine, &mut request, 0)?;
+    let fresh_before = engine.fresh_buffers();
     let mut page_cache = Vec::new();
     let mut jump_parts = Vec::new();
     while page_cache.len() < args.jumps {
@@ -477,6 +479,11 @@ fn measure(
             record,
         });
     }
+    let fresh_after = engine.fresh_buffers();
+    let fresh = slosh_play::FreshBuffers {
+        staging: fresh_after.staging - fresh_before.staging,
+        sections: fresh_after.sections - fresh_before.sections,
+    };
     // Jumps from storage: the page cache dropped before each one (root only).
     let cold = if args.cold {
         Some(cold_jumps(
@@ -534,7 +541,7 @@ fn measure(
         streaming_record_ms: median(loads.record_ms),
         jumps_pool: jumps_pool.map(spread),
         jumps_page_cache: spread(page_cache),
-        jump_parts: JumpBreakdown::of(&jump_parts),
+        jump_parts: JumpBreakdown::of(&jump_parts, fresh),
         cold,
         codecs: codec_table(&paths[0])?,
     })

@@ -58,6 +58,9 @@ pub struct SeriesReport {
 pub struct JumpBreakdown {
     pub median: [f64; 3],
     pub slowest_tenth: [f64; 4],
+    /// Buffers the engine created during the jumps (none kept fitted), the engine's first
+    /// step excluded.
+    pub fresh: slosh_play::FreshBuffers,
 }
 
 /// Jumps with the page cache dropped before each, and the disk's floor in the same run.
@@ -183,14 +186,15 @@ impl Report for ScrubReport {
         );
         let _ = writeln!(
             md,
-            "Where the page-cache jumps' time went: the host and record halves of the step asked for (run one after the other by a loader), and the rest (waiting for a loader, the frame loop taking the step in, the copies, the frame).\n\n| series | median host / record / rest ms | slowest tenth: mean total / host / record / rest ms |\n|---|---|---|"
+            "Where the page-cache jumps' time went: the host and record halves of the step asked for (run one after the other by a loader), and the rest (waiting for a loader, the frame loop taking the step in, the copies, the frame).\n\n| series | median host / record / rest ms | slowest tenth: mean total / host / record / rest ms | buffers created during the jumps: staging / sections |\n|---|---|---|---|"
         );
         for r in reports {
             let (m, s) = (r.jump_parts.median, r.jump_parts.slowest_tenth);
+            let fresh = r.jump_parts.fresh;
             let _ = writeln!(
                 md,
-                "| {} | {:.2} / {:.2} / {:.2} | {:.2} / {:.2} / {:.2} / {:.2} |",
-                r.label, m[0], m[1], m[2], s[0], s[1], s[2], s[3]
+                "| {} | {:.2} / {:.2} / {:.2} | {:.2} / {:.2} / {:.2} / {:.2} | {} / {} |",
+                r.label, m[0], m[1], m[2], s[0], s[1], s[2], s[3], fresh.staging, fresh.sections
             );
         }
         let _ = writeln!(md);

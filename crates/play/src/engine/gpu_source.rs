@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use slosh_render::{Gpu, GpuStep, HostStep, StagingPool, UploadOptions};
+use slosh_render::{BufferShelf, Gpu, GpuStep, HostStep, StagingPool, UploadOptions};
 
 use crate::prefetch::StepLoader;
 
@@ -31,6 +31,8 @@ pub struct GpuSource {
         Option<slosh_cache::SeriesKey>,
     )>,
     pub(super) staging: StagingPool,
+    /// Section buffers of steps dropped from the pool, for the next uploads.
+    pub(super) shelf: BufferShelf,
     pub(super) delay: Option<std::time::Duration>,
     pub(super) paths: Mutex<HashMap<usize, PathBuf>>,
     pub(super) field: Mutex<Option<String>>,
@@ -114,6 +116,7 @@ impl StepLoader for GpuSource {
         }
         let options = UploadOptions {
             staging: Some(&self.staging),
+            shelf: Some(&self.shelf),
             cancelled: Some(withdrawn),
         };
         let step = GpuStep::create_in(&self.gpu, &host, &mut encoder, options)

@@ -9,7 +9,8 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use slosh_mls::Camera;
 use slosh_render::{
-    FrameTargets, Gpu, GpuStep, HostField, MaskProgress, RowSet, StagingPool, TraceParams, Tracer,
+    BufferShelf, FrameTargets, Gpu, GpuStep, HostField, MaskProgress, RowSet, StagingPool,
+    TraceParams, Tracer,
 };
 
 mod gpu_source;
@@ -32,6 +33,19 @@ use crate::timeline::{Direction, Looping, Timeline};
 const RATE_WINDOW_SECONDS: f64 = 0.5;
 /// Steps one frame may count towards that rate (a jump is not motion).
 const MAX_STEPS_PER_FRAME: f64 = 4.0;
+/// Steps' worth of section buffers kept, beyond the budget, for the uploads that replace
+/// the steps dropped from the pool.
+const SHELVED_STEPS: u64 = 2;
+
+/// Buffers the engine's uploads had to create (none being kept that fitted), since it
+/// opened.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FreshBuffers {
+    /// Staging buffers (host-visible), the warm-up's excluded.
+    pub staging: usize,
+    /// Device-local section buffers.
+    pub sections: usize,
+}
 
 /// How the engine streams.
 #[derive(Debug, Clone, PartialEq)]
@@ -237,6 +251,7 @@ impl Engine {
             gpu: gpu.clone(),
             belongs: Mutex::new((None, None)),
             staging: StagingPool::new(options.loaders + 2),
+            shelf: BufferShelf::new(),
             delay: options.load_delay,
             paths: Mutex::new(HashMap::new()),
             field: Mutex::new(options.field.clone()),
@@ -371,6 +386,19 @@ impl Engine {
 
     pub fn used_bytes(&self) -> u64 {
         self.pool.used()
+    }
+
+    /// Buffers the uploads had to create so far.
+    pub fn fresh_buffers(&self) -> FreshBuffers {
+        FreshBuffers {
+            staging: self.source.staging.fresh(),
+            sections: self.source.shelf.fresh(),
+        }
+    }
+
+    /// Bytes of section buffers kept for the next uploads, beyond the budget.
+    pub fn shelved_bytes(&self) -> u64 {
+        self.source.shelf.bytes()
     }
 
     /// Series positions resident on the GPU.
@@ -615,6 +643,8 @@ impl Engine {
                         });
                         let n = self.pool.len() as u64;
                         self.step_bytes = (self.step_bytes * (n - 1) + bytes) / n.max(1);
+                        // Room for the buffers of the steps the next uploads replace.
+                        self.source.shelf.set_limit(SHELVED_STEPS * self.step_bytes);
                     }
                 }
             }

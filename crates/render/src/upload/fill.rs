@@ -7,6 +7,7 @@ use slosh_cache::{CacheFile, Encoding, SectionEntry};
 
 use super::EMPTY_BINDING;
 use super::host::Source;
+use crate::buffer_shelf::{BufferShelf, new_section};
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::staging::StagingPool;
@@ -22,6 +23,14 @@ enum Piece<'a> {
     },
 }
 
+/// Where [`storage_buffers`] takes its memory from, and when it gives up.
+#[derive(Clone, Copy, Default)]
+pub(super) struct Memory<'a> {
+    pub(super) staging: Option<&'a StagingPool>,
+    pub(super) shelf: Option<&'a BufferShelf>,
+    pub(super) cancelled: Option<&'a (dyn Fn() -> bool + Sync)>,
+}
+
 /// Device-local storage buffers for `arrays` (label, bytes), all filled
 /// through one staging buffer (one allocation per step, not one per section), whose pieces
 /// are copied or decoded in parallel; the copies are recorded into `encoder`.
@@ -30,9 +39,13 @@ pub(super) fn storage_buffers(
     file: &CacheFile,
     arrays: &[(&str, Source<'_>)],
     encoder: &mut wgpu::CommandEncoder,
-    pool: Option<&StagingPool>,
-    cancelled: Option<&(dyn Fn() -> bool + Sync)>,
+    memory: Memory<'_>,
 ) -> Result<(Vec<wgpu::Buffer>, Option<wgpu::Buffer>)> {
+    let Memory {
+        staging: pool,
+        shelf,
+        cancelled,
+    } = memory;
     // Each array's place in the staging buffer, 256-byte aligned.
     let mut offsets = Vec::with_capacity(arrays.len());
     let mut total = 0u64;
@@ -43,12 +56,12 @@ pub(super) fn storage_buffers(
     let targets: Vec<wgpu::Buffer> = arrays
         .iter()
         .map(|(label, source)| {
-            gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: source.len().max(EMPTY_BINDING).next_multiple_of(4),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
+            let size = source.len().max(EMPTY_BINDING).next_multiple_of(4);
+            // An empty section binds zeros: only a new buffer is known to hold them.
+            match shelf {
+                Some(shelf) if source.len() > 0 => shelf.take(gpu, label, size),
+                _ => new_section(gpu, label, size),
+            }
         })
         .collect();
     if total == 0 {

@@ -6,10 +6,11 @@ use std::time::Instant;
 
 use slosh_cache::{CacheFile, names};
 
-use super::fill::storage_buffers;
+use super::fill::{Memory, storage_buffers};
 use super::host::{HostField, HostStep, Source, StepInfo};
 use super::{EMPTY_BINDING, field_buffer_size, invalid};
 use crate::bindings::{bind_entries, needs_split};
+use crate::buffer_shelf::BufferShelf;
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::shaders::{
@@ -105,6 +106,9 @@ pub struct UploadOptions<'a> {
     /// Takes the staging memory from this pool; hand it back with
     /// [`GpuStep::take_staging`] and [`StagingPool::recycle`] once the copies are submitted.
     pub staging: Option<&'a StagingPool>,
+    /// Takes the section buffers from this shelf where it has some of the right sizes; the
+    /// step gives them back to it when dropped.
+    pub shelf: Option<&'a BufferShelf>,
     /// Asked between pieces of the staging fill: `true` abandons the upload with
     /// [`Error::Cancelled`] (a prefetch that a jump made stale).
     pub cancelled: Option<&'a (dyn Fn() -> bool + Sync)>,
@@ -114,6 +118,7 @@ impl std::fmt::Debug for UploadOptions<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("UploadOptions")
             .field("staging", &self.staging)
+            .field("shelf", &self.shelf)
             .field("cancelled", &self.cancelled.is_some())
             .finish()
     }
@@ -136,6 +141,22 @@ pub struct GpuStep {
     binding_limit: u64,
     /// The pooled staging buffer of the upload, until taken back.
     staging: Option<wgpu::Buffer>,
+    /// Where the section buffers go when the step is dropped.
+    shelf: Option<BufferShelf>,
+}
+
+impl Drop for GpuStep {
+    fn drop(&mut self) {
+        if let Some(shelf) = &self.shelf {
+            let b = &self.buffers;
+            for buffer in b.in_binding_order() {
+                shelf.put(buffer.clone());
+            }
+            for buffer in [&b.cluster_base, &b.cluster_ids, &b.bvh_nodes] {
+                shelf.put(buffer.clone());
+            }
+        }
+    }
 }
 
 /// How the passes bind each array of [`HostStep::gpu_arrays`]: the candidate runs and their
@@ -241,7 +262,11 @@ impl GpuStep {
         encoder: &mut wgpu::CommandEncoder,
         options: UploadOptions<'_>,
     ) -> Result<GpuStep> {
-        let UploadOptions { staging, cancelled } = options;
+        let UploadOptions {
+            staging,
+            shelf,
+            cancelled,
+        } = options;
         let start = Instant::now();
         let file = host.file();
         let info = host.info.clone();
@@ -276,8 +301,12 @@ impl GpuStep {
             arrays.push(("field", Source::Bytes(&f.bytes)));
         }
         stats.bytes = arrays.iter().map(|(_, b)| b.len()).sum();
-        let (mut sections, staging) =
-            storage_buffers(gpu, file, &arrays, encoder, staging, cancelled)?;
+        let memory = Memory {
+            staging,
+            shelf,
+            cancelled,
+        };
+        let (mut sections, staging) = storage_buffers(gpu, file, &arrays, encoder, memory)?;
         let field_values = match &host.field {
             Some(_) => sections
                 .pop()
@@ -322,6 +351,7 @@ impl GpuStep {
             bind_group,
             binding_limit,
             staging,
+            shelf: shelf.cloned(),
         })
     }
 
