@@ -15,7 +15,8 @@ use slosh_fileio::FileBytes;
 use crate::claim::STEP_LOCKS_NAME;
 use crate::params::BakeParams;
 use crate::select::StepInput;
-use crate::step::bake_step_with;
+use crate::step::{BakeError, bake_step_unless_withdrawn};
+use crate::withdrawable::Withdrawn;
 
 /// Where steps come from: an EnSight case, or a single point-cloud file.
 pub trait StepSource: Sync {
@@ -182,11 +183,17 @@ pub(crate) fn bake_one(
     index: usize,
     opts: &BatchOptions,
     key: &SeriesKey,
+    withdrawn: Withdrawn<'_>,
 ) -> StepOutcome {
     let path = opts.out.join(step_file_name(index));
     let identity = source.identity(index);
     if is_current(&path, key, index, identity.as_deref()) {
         return StepOutcome::Kept;
+    }
+    let withdrawn_now =
+        || withdrawn().then(|| StepOutcome::Failed(BakeError::Withdrawn { step: index }.problem()));
+    if let Some(outcome) = withdrawn_now() {
+        return outcome;
     }
     let start = Instant::now();
     let input = match source.read(index) {
@@ -196,12 +203,15 @@ pub(crate) fn bake_one(
     let read_seconds = start.elapsed().as_secs_f64();
     let mut input = input;
     input.identity = identity;
-    let baked = match bake_step_with(&input, &opts.params, &opts.stages) {
+    let baked = match bake_step_unless_withdrawn(&input, &opts.params, &opts.stages, withdrawn) {
         Ok(b) => b,
         // The report names the step; the error's own "step N:" would say it twice.
         Err(e) => return StepOutcome::Failed(e.problem()),
     };
     drop(input);
+    if let Some(outcome) = withdrawn_now() {
+        return outcome;
+    }
     let mut header = baked.header;
     header.series = key.series;
     header.source.path.clone_from(&key.source);
@@ -390,7 +400,7 @@ pub fn run_batch(
                     } else {
                         step_locks.try_lock(index as u64)
                     };
-                    let bake = || bake_one(source, index, opts, key);
+                    let bake = || bake_one(source, index, opts, key, &|| false);
                     let outcome = match held {
                         Ok(None) => {
                             deferred

@@ -12,6 +12,7 @@ mod point_cloud;
 mod select;
 mod stages;
 mod step;
+mod withdrawable;
 
 pub use batch::{
     BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, files_identity, is_current,
@@ -33,5 +34,7 @@ pub use select::{
 pub use slosh_mls::morton_order;
 pub use stages::Stages;
 pub use step::{
-    BakeError, BakedStep, bake_step, bake_step_parts, bake_step_parts_with, bake_step_with,
+    BakeError, BakedStep, bake_step, bake_step_parts, bake_step_parts_with,
+    bake_step_unless_withdrawn, bake_step_with,
 };
+pub use withdrawable::Withdrawn;

@@ -10,6 +10,7 @@ use crate::batch::{
     BatchOptions, StepOutcome, StepSource, bake_one, plan, prepare_dir, series_key,
 };
 use crate::claim::Claim;
+use crate::withdrawable::Withdrawn;
 
 /// A cache directory held for one series, whose steps are baked on request.
 pub struct OnDemand {
@@ -50,6 +51,31 @@ impl OnDemand {
         })
     }
 
+    /// [`OnDemand::open`] over an EnSight case (`case`, opened from `path`), its points as
+    /// the case's variables say ([`slosh_ensight::PointSource::Auto`]), baked one step at a
+    /// time on `threads` threads by `stages`, with `params`.
+    pub fn of_case(
+        case: slosh_ensight::Case,
+        path: &Path,
+        out: PathBuf,
+        params: crate::BakeParams,
+        threads: usize,
+        stages: crate::Stages,
+    ) -> Result<OnDemand, slosh_cache::Error> {
+        let source =
+            crate::EnsightSource::new(case, path, slosh_ensight::PointSource::Auto, &params);
+        let opts = BatchOptions {
+            out,
+            steps: None,
+            jobs: 1,
+            threads,
+            shard: crate::Shard::WHOLE,
+            params,
+            stages,
+        };
+        OnDemand::open(Box::new(source), opts)
+    }
+
     /// (step index, time) of every step of the series, in order.
     pub fn steps(&self) -> &[(usize, f64)] {
         &self.steps
@@ -74,6 +100,13 @@ impl OnDemand {
     /// bake that completes the series writes its manifest, as `slosh bake` does. Another
     /// holder baking the same step (in this process or another) is waited for.
     pub fn bake(&self, index: usize) -> StepOutcome {
+        self.bake_unless_withdrawn(index, &|| false)
+    }
+
+    /// [`OnDemand::bake`], given up (a failed outcome, nothing written) once `withdrawn`
+    /// says so: it is asked before the read, between the bake's stages and before each
+    /// neighbour search, and before the step is encoded and written.
+    pub fn bake_unless_withdrawn(&self, index: usize, withdrawn: Withdrawn<'_>) -> StepOutcome {
         if !self.steps.iter().any(|(i, _)| *i == index) {
             return StepOutcome::Failed(format!("step {index} is not in the series"));
         }
@@ -91,7 +124,13 @@ impl OnDemand {
             Ok(lock) => lock,
             Err(e) => return StepOutcome::Failed(e.to_string()),
         };
-        let outcome = bake_one(self.source.as_ref(), index, &self.opts, &self.key);
+        let outcome = bake_one(
+            self.source.as_ref(),
+            index,
+            &self.opts,
+            &self.key,
+            withdrawn,
+        );
         drop(lock);
         if matches!(outcome, StepOutcome::Baked { .. })
             && self.steps.iter().all(|(i, _)| self.path(*i).exists())

@@ -13,6 +13,7 @@ use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::select::{StepInput, estimate_surface_normals_with};
 use crate::stages::Stages;
+use crate::withdrawable::{Withdrawable, Withdrawn};
 
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
@@ -26,6 +27,9 @@ pub enum BakeError {
     },
     #[error("step {step}: the BVH: {problem}")]
     Tree { step: usize, problem: String },
+    /// The caller withdrew the bake ([`bake_step_unless_withdrawn`]).
+    #[error("step {step}: withdrawn by its caller")]
+    Withdrawn { step: usize },
 }
 
 impl BakeError {
@@ -35,6 +39,7 @@ impl BakeError {
             BakeError::Input { problem, .. } => problem.clone(),
             BakeError::Surface { source, .. } => source.to_string(),
             BakeError::Tree { problem, .. } => format!("the BVH: {problem}"),
+            BakeError::Withdrawn { .. } => "withdrawn by its caller".into(),
         }
     }
 }
@@ -355,6 +360,30 @@ pub fn bake_step_parts_with(
     params: &BakeParams,
     stages: &Stages,
 ) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
+    bake_parts(input, params, stages, &|| false)
+}
+
+/// [`bake_step_with`], given up with [`BakeError::Withdrawn`] once `withdrawn` says so: it
+/// is asked between stages and before each neighbour search.
+pub fn bake_step_unless_withdrawn(
+    input: &StepInput,
+    params: &BakeParams,
+    stages: &Stages,
+    withdrawn: Withdrawn<'_>,
+) -> Result<BakedStep, BakeError> {
+    bake_parts(input, params, stages, withdrawn).map(|(baked, _)| baked)
+}
+
+fn bake_parts(
+    input: &StepInput,
+    params: &BakeParams,
+    stages: &Stages,
+    withdrawn: Withdrawn<'_>,
+) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
+    let search = Withdrawable {
+        inner: stages.search.as_ref(),
+        withdrawn,
+    };
     let mut clock = StageClock::start();
     let step = input.index;
     let input_err = |problem: String| BakeError::Input { step, problem };
@@ -385,7 +414,7 @@ pub fn bake_step_parts_with(
     let estimated: Vec<(bool, [f64; 3])> = if matches!(params.surface, SurfaceSelect::Estimate)
         || matches!(params.normals, crate::params::NormalSource::Estimate)
     {
-        estimate_surface_normals_with(&permute(&input.positions, &finite), stages.search.as_ref())
+        estimate_surface_normals_with(&permute(&input.positions, &finite), &search)
             .map_err(|source| BakeError::Surface { step, source })?
     } else {
         Vec::new()
@@ -515,10 +544,13 @@ pub fn bake_step_parts_with(
             &local,
             normals.as_deref(),
             &params.mls,
-            stages.search.as_ref(),
+            &search,
             start_bvh,
         )
         .map_err(|source| BakeError::Surface { step, source })?;
+        if withdrawn() {
+            return Err(BakeError::Withdrawn { step });
+        }
         // Sections, in the GPU layouts (the BVH's are added once it is built).
         let sections_start = std::time::Instant::now();
         let (sections, fields, kinds) = gpu_sections(&surface, input, &source_index, params)?;

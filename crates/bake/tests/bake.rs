@@ -815,6 +815,13 @@ fn every_isolated_cluster_of_the_demo_is_closed_from_26_directions() {
     assert!(total > 3, "{total} isolated clusters");
 }
 
+/// A holder of `cache` for the EnSight `case` (all points, the data's normals), on the CPU.
+fn holder(case: &Path, cache: &Path) -> OnDemand {
+    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    let opened = slosh_ensight::Case::open(case).unwrap();
+    OnDemand::of_case(opened, case, cache.to_path_buf(), params, 1, Stages::cpu()).unwrap()
+}
+
 /// Two holders of one raw case's directory (two players, or a player and a render) asking
 /// for one step at once: it is baked once, the other finds it current, and the file the
 /// first wrote stays in place.
@@ -825,26 +832,7 @@ fn two_holders_of_a_case_bake_a_step_once() {
     let case =
         slosh_testkit::write_surface_case(&dir.path().join("case"), "sphere", &scene, 2).unwrap();
     let cache = dir.path().join("cache");
-    let holder = || {
-        let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
-        let source = EnsightSource::new(
-            slosh_ensight::Case::open(&case).unwrap(),
-            &case,
-            slosh_ensight::PointSource::Auto,
-            &params,
-        );
-        let opts = BatchOptions {
-            out: cache.clone(),
-            steps: None,
-            jobs: 1,
-            threads: 1,
-            shard: Shard::WHOLE,
-            params,
-            stages: Stages::cpu(),
-        };
-        OnDemand::open(Box::new(source), opts).unwrap()
-    };
-    let (a, b) = (holder(), holder());
+    let (a, b) = (holder(&case, &cache), holder(&case, &cache));
     let outcomes: Vec<StepOutcome> = std::thread::scope(|s| {
         let x = s.spawn(|| a.bake(1));
         let y = s.spawn(|| b.bake(1));
@@ -863,4 +851,54 @@ fn two_holders_of_a_case_bake_a_step_once() {
         .unwrap()
         .verify()
         .unwrap();
+}
+
+/// A viewer's bake withdrawn at any of the points where it is asked (before the read, before
+/// each neighbour search, between stages, before the write) gives up there: a failed outcome
+/// that says so, no step file and nothing left behind; the withdrawn bake asked at least
+/// four times (before the read, two searches, after the surface), and a bake of the same
+/// step not withdrawn then writes a file that verifies.
+#[test]
+fn a_withdrawn_on_demand_bake_gives_up_and_writes_nothing() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 5000, 3)).unwrap();
+    let case =
+        slosh_testkit::write_surface_case(&dir.path().join("case"), "sphere", &scene, 2).unwrap();
+    let cache = dir.path().join("cache");
+    let holder = holder(&case, &cache);
+    let step_file = cache.join(step_file_name(1));
+    // How often an unwithdrawn bake asks.
+    let asked = AtomicUsize::new(0);
+    let counting = || {
+        asked.fetch_add(1, Ordering::Relaxed);
+        false
+    };
+    let outcome = holder.bake_unless_withdrawn(0, &counting);
+    assert!(matches!(outcome, StepOutcome::Baked { .. }), "{outcome:?}");
+    let asks = asked.load(Ordering::Relaxed);
+    assert!(asks >= 4, "asked {asks} times");
+    // Withdrawn at the k-th ask, for every k the bake reaches.
+    for k in 1..=asks {
+        let count = AtomicUsize::new(0);
+        let withdrawn = || count.fetch_add(1, Ordering::Relaxed) + 1 >= k;
+        let outcome = holder.bake_unless_withdrawn(1, &withdrawn);
+        match &outcome {
+            StepOutcome::Failed(why) => assert!(why.contains("withdrawn"), "{why}"),
+            other => panic!("withdrawn at ask {k}: {other:?}"),
+        }
+        assert!(!step_file.exists(), "withdrawn at ask {k}: a step file");
+        let left: Vec<_> = std::fs::read_dir(&cache)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|name| name.contains("00001"))
+            .collect();
+        assert!(
+            left.is_empty(),
+            "withdrawn at ask {k}: {left:?} left behind"
+        );
+    }
+    let outcome = holder.bake(1);
+    assert!(matches!(outcome, StepOutcome::Baked { .. }), "{outcome:?}");
+    CacheFile::open(&step_file).unwrap().verify().unwrap();
 }

@@ -12,4 +12,7 @@ pub enum SurfaceError {
     Index(String),
     #[error("inconsistent surface parts: {0}")]
     Parts(String),
+    /// The caller withdrew the work (a viewer's bake of a step it no longer wants).
+    #[error("withdrawn by its caller")]
+    Withdrawn,
 }

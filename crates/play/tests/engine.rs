@@ -501,22 +501,9 @@ fn show_refined(engine: &mut Engine, request: &FrameRequest, position: usize) {
 /// The case's steps, baked on demand into `cache` by `slosh bake`'s settings for it.
 fn on_demand(case: &Path, cache: &Path) -> slosh_bake::OnDemand {
     let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
-    let source = slosh_bake::EnsightSource::new(
-        slosh_ensight::Case::open(case).unwrap(),
-        case,
-        slosh_ensight::PointSource::Auto,
-        &params,
-    );
-    let opts = slosh_bake::BatchOptions {
-        out: cache.to_path_buf(),
-        steps: None,
-        jobs: 1,
-        threads: 1,
-        shard: slosh_bake::Shard::WHOLE,
-        params,
-        stages: slosh_bake::Stages::cpu(),
-    };
-    slosh_bake::OnDemand::open(Box::new(source), opts).unwrap()
+    let opened = slosh_ensight::Case::open(case).unwrap();
+    let cpu = slosh_bake::Stages::cpu();
+    slosh_bake::OnDemand::of_case(opened, case, cache.to_path_buf(), params, 1, cpu).unwrap()
 }
 
 /// A raw case plays with no bake first: every step is a position from the start, a step is

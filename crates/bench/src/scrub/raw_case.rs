@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
-use slosh_bake::{BatchOptions, EnsightSource, OnDemand, Shard, StepOutcome, StepSource};
+use slosh_bake::{EnsightSource, OnDemand, StepOutcome, StepSource};
 use slosh_play::{Engine, EngineOptions, FrameRequest, Pace};
 use slosh_render::{Gpu, TraceParams};
 use slosh_scenes::{Scene, SceneKind, SceneSpec};
@@ -59,23 +59,14 @@ fn ensure_case(dir: &Path, points: usize, steps: usize) -> Result<std::path::Pat
 /// `stages`.
 fn on_demand(case: &Path, cache: &Path, stages: &slosh_bake::Stages) -> Result<OnDemand> {
     let _ = std::fs::remove_dir_all(cache);
-    let params = series_params();
-    let source = EnsightSource::new(
+    Ok(OnDemand::of_case(
         slosh_ensight::Case::open(case)?,
         case,
-        slosh_ensight::PointSource::Auto,
-        &params,
-    );
-    let opts = BatchOptions {
-        out: cache.to_path_buf(),
-        steps: None,
-        jobs: 1,
-        threads: slosh_bake::cores(),
-        shard: Shard::WHOLE,
-        params,
-        stages: stages.clone(),
-    };
-    Ok(OnDemand::open(Box::new(source), opts)?)
+        cache.to_path_buf(),
+        series_params(),
+        slosh_bake::cores(),
+        stages.clone(),
+    )?)
 }
 
 pub fn measure(

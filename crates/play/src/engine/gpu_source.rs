@@ -73,7 +73,9 @@ impl StepLoader for GpuSource {
             if withdrawn() {
                 return Err("withdrawn".into());
             }
-            if let slosh_bake::StepOutcome::Failed(why) = bake.bake(index) {
+            if let slosh_bake::StepOutcome::Failed(why) =
+                bake.bake_unless_withdrawn(index, withdrawn)
+            {
                 return Err(format!("step {index} did not bake: {why}"));
             }
         }
