@@ -9,6 +9,7 @@ mod jobs;
 mod on_demand;
 mod params;
 mod point_cloud;
+mod reach;
 mod select;
 mod stages;
 mod step;

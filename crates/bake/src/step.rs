@@ -11,6 +11,7 @@ use slosh_ensight::FieldValues;
 use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
 
 use crate::params::{BakeParams, SurfaceSelect};
+use crate::reach::stored_reach;
 use crate::select::{StepInput, estimate_surface_normals_with};
 use crate::stages::Stages;
 use crate::withdrawable::{Withdrawable, Withdrawn};
@@ -190,15 +191,13 @@ fn gpu_sections(
     let points: Vec<GpuPoint> = (0..n)
         .into_par_iter()
         .map(|i| {
-            let far2 = surface
-                .neighbours_of(i)
-                .iter()
-                .map(|&j| (stored[j as usize] - stored[i]).length_squared())
-                .fold(0.0f32, f32::max);
-            let mut r = (surface.reach[i] as f32).max(far2.sqrt());
-            while r * r < far2 || f64::from(r) < surface.reach[i] {
-                r = r.next_up();
-            }
+            let r = stored_reach(surface.reach[i], || {
+                surface
+                    .neighbours_of(i)
+                    .iter()
+                    .map(|&j| (stored[j as usize] - stored[i]).length_squared())
+                    .fold(0.0f32, f32::max)
+            });
             let p = stored[i];
             GpuPoint::new([p.x, p.y, p.z], surface.radii[i], f64::from(r)).ok_or_else(|| {
                 input_err(format!(

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use slosh_bake::*;
 use slosh_cache::{
-    CacheFile, Compression, LoadedStep, Manifest, encode_step, names, step_file_name,
+    CacheFile, Compression, GpuPoint, LoadedStep, Manifest, encode_step, names, step_file_name,
 };
 use slosh_ensight::FieldValues;
 use slosh_fileio::FileBytes;
@@ -278,9 +278,9 @@ fn radii_reaches_h_and_states_that_do_not_fit_are_refused() {
         sections.iter().position(|s| s.name == name)
     };
     let points_at = index(&baked.sections, names::POINTS).unwrap();
-    let points: Vec<slosh_cache::GpuPoint> =
+    let points: Vec<GpuPoint> =
         bytemuck::pod_collect_to_vec(&baked.sections[points_at].bytes);
-    let with_points = |points: &[slosh_cache::GpuPoint]| {
+    let with_points = |points: &[GpuPoint]| {
         let mut sections = baked.sections.clone();
         sections[points_at].bytes = bytemuck::cast_slice(points).to_vec();
         verify_sections(&baked.header, &sections)
@@ -368,7 +368,7 @@ fn selection_drops_non_finite_and_interior_and_keeps_fields_aligned() {
     // Every 4th particle unflagged; index 5 and 9 were already gone (neither is a multiple of 4).
     assert_eq!(h.stats.dropped_interior as usize, n.div_ceil(4));
     assert_eq!(h.points as usize, n - 2 - n.div_ceil(4));
-    let points: Vec<slosh_cache::GpuPoint> = file.decode(names::POINTS).unwrap();
+    let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
     let field: Vec<f32> = file.decode("field.x").unwrap();
     for (p, x) in points.iter().zip(&field) {
         let world = h.transform.to_world(p.position.map(f64::from));
@@ -392,7 +392,7 @@ fn probes_read_the_nearest_input_particle_and_the_field_as_shaded() {
     let h = file.header();
     let spacing = h.spacing * h.transform.scale;
     let probe = slosh_cache::SurfaceProbe::open(&file).unwrap();
-    let points: Vec<slosh_cache::GpuPoint> = file.decode(names::POINTS).unwrap();
+    let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
     let c: Vec<f32> = file.decode("field.c").unwrap();
     let x: Vec<f32> = file.decode("field.x").unwrap();
     assert_eq!(probe.point_count(), points.len());
@@ -687,7 +687,7 @@ fn isolated_clusters(points: &[[f32; 3]], link: f64) -> Vec<Vec<usize>> {
 fn back_facing_hits_on_clusters(file: &CacheFile) -> (usize, usize, usize) {
     let step = LoadedStep::load(file).unwrap();
     let h = file.header();
-    let points: Vec<slosh_cache::GpuPoint> = file.decode(names::POINTS).unwrap();
+    let points: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
     let local: Vec<[f32; 3]> = points.iter().map(|p| p.position).collect();
     // Linked as the spray rule links them: within h.
     let clusters = isolated_clusters(&local, h.smoothing_length);
@@ -901,4 +901,55 @@ fn a_withdrawn_on_demand_bake_gives_up_and_writes_nothing() {
     let outcome = holder.bake(1);
     assert!(matches!(outcome, StepOutcome::Baked { .. }), "{outcome:?}");
     CacheFile::open(&step_file).unwrap().verify().unwrap();
+}
+
+/// Every point's stored reach holds its whole list as the GPU's expansion measures it: in
+/// f32, on the stored positions. The bake raises a reach where those distances pass it and
+/// measures only the lists whose stored half float lies within `REACH_SLACK` above the f64
+/// reach; scenes with noise, spray, a density jump, per-point h and an offset of 1e5 (the
+/// largest rounding before recentring). It also counts the lists whose f32 reach came within
+/// a thousandth of the stored half float, so that the margin is seen to be exercised.
+#[test]
+fn every_list_lies_within_its_stored_reach_in_f32() {
+    let mut close = 0usize;
+    for (kind, points, noise, per_point_h) in [
+        (SceneKind::Sphere, 6000, 0.3, false),
+        (SceneKind::Droplets, 5000, 0.0, true),
+        (SceneKind::Wave, 5000, 0.1, false),
+        (SceneKind::Tank, 5000, 0.0, true),
+    ] {
+        let mut spec = SceneSpec::new(kind, points, 3);
+        spec.hard.noise = noise;
+        spec.hard.density_jump = if per_point_h { 20.0 } else { 1.0 };
+        spec.hard.offset = 1e5;
+        let scene = Scene::new(spec).unwrap();
+        let input = slosh_testkit::scene_step(&scene, 1, &format!("{kind:?}"));
+        let mut p = params();
+        p.mls.per_point_h = per_point_h;
+        let (_, parts) = bake_step_parts(&input, &p).unwrap();
+        let file = bake_to_file(&input, &p);
+        let stored: Vec<GpuPoint> = file.decode(names::POINTS).unwrap();
+        assert_eq!(stored.len(), parts.points.len(), "{kind:?}");
+        let at = |i: usize| stored[i].position;
+        for (i, point) in stored.iter().enumerate() {
+            let reach = point.reach();
+            let far2 = parts
+                .neighbours
+                .of(i)
+                .iter()
+                .map(|&j| {
+                    let (a, b) = (at(i), at(j as usize));
+                    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+                    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+                })
+                .fold(0.0f32, f32::max);
+            assert!(
+                far2 <= reach * reach,
+                "{kind:?}: point {i}'s list reaches {} beyond its stored reach {reach}",
+                far2.sqrt()
+            );
+            close += usize::from(far2.sqrt() > reach * 0.999);
+        }
+    }
+    assert!(close > 0, "no list came near its stored reach");
 }
