@@ -25,7 +25,8 @@ struct Settings {
 // Per sorted point: where its list begins among all lists, and its smoothing length.
 @group(0) @binding(4) var<storage, read> list_start: array<u32>;
 @group(0) @binding(5) var<storage, read> smoothing: array<f32>;
-// This dispatch's lists (lists.wgsl's words: the caller's indices, with LINK_BIT).
+// This dispatch's lists (lists.wgsl's words: the caller's indices, with LINK_BIT and FAR_BIT;
+// those constants and ID_MASK come from crates/gpubake/src/layout.rs).
 @group(0) @binding(6) var<storage, read> lists: array<u32>;
 // Sorted position of each caller's index (the lists hold the caller's indices).
 @group(0) @binding(7) var<storage, read> rank: array<u32>;
@@ -33,7 +34,6 @@ struct Settings {
 @group(0) @binding(8) var<storage, read_write> fits_out: array<vec4<f32>>;
 
 const NO_NEIGHBOUR: u32 = 0xffffffffu;
-const LINK_BIT: u32 = 0x80000000u;
 
 // The point being fitted, as two f32s a coordinate: the fits run in coordinates centred on
 // it (r = 0), where a neighbour's offset is as accurate as f32 allows of the offset itself.
@@ -72,7 +72,7 @@ fn next_neighbour(nb: Neighbourhood, cursor: ptr<function, Cursor>) -> u32 {
     if (*cursor).at >= nb.end {
         return NO_NEIGHBOUR;
     }
-    let id = lists[(*cursor).at] & ~LINK_BIT;
+    let id = lists[(*cursor).at] & ID_MASK;
     (*cursor).at += 1u;
     return rank[id];
 }

@@ -22,12 +22,13 @@
 @group(0) @binding(7) var<storage, read_write> cut: array<vec4<u32>>;
 // Per point of the set: where its list begins among all lists (write only).
 @group(0) @binding(8) var<storage, read> list_start: array<u32>;
-// The dispatch's lists, from slot `out_base`: each id, with LINK_BIT where it is a link.
+// The dispatch's lists, from slot `out_base`: each id, with LINK_BIT where it is a link and
+// FAR_BIT where the list was cut and its squared distance lies within NEAR_CUT of the cut's
+// (those constants and ID_MASK come from crates/gpubake/src/layout.rs).
 @group(0) @binding(9) var<storage, read_write> lists_out: array<u32>;
 // With flag 8, the sorted positions of the dispatch's points (else first + k).
 @group(0) @binding(11) var<storage, read> todo: array<u32>;
 
-const LINK_BIT: u32 = 0x80000000u;
 const ALL: u32 = 0xffffffffu;
 // cut[t].w of a point whose reach spans more cells than MOST_CELLS: left to a coarser grid, so
 // that no thread walks a whole sparse grid (an isolated particle's reach with h per point).
@@ -52,6 +53,8 @@ var<private> reach2: f32;
 var<private> own_normal: vec3<f32>;
 var<private> own_link2: f32;
 var<private> cut_key: u32;
+// Members at or above this key are marked FAR_BIT (ALL: the list was not cut).
+var<private> near_key: u32;
 var<private> cut_id: u32;
 var<private> digits: array<u32, 16>;
 var<private> select_prefix: u32;
@@ -126,6 +129,9 @@ fn visit(mode: u32, j: u32) {
             var word = id;
             if (params.flags & 2u) != 0u && d2 <= own_link2 && id != centre_id {
                 word |= LINK_BIT;
+            }
+            if key >= near_key {
+                word |= FAR_BIT;
             }
             lists_out[out_at] = word;
             out_at += 1u;
@@ -372,6 +378,10 @@ fn write_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     begin(t);
     cut_key = cut[t].x;
     cut_id = cut[t].y;
+    near_key = ALL;
+    if (cut[t].w & 1u) != 0u {
+        near_key = bitcast<u32>(bitcast<f32>(cut_key) * (1.0 - NEAR_CUT));
+    }
     let first = list_start[t] - params.out_base;
     out_at = first;
     walk(WRITE);
@@ -383,7 +393,7 @@ fn write_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var i = first + 1u; i < out_at; i += 1u) {
         let word = lists_out[i];
         var at = i;
-        while at > first && (lists_out[at - 1u] & ~LINK_BIT) > (word & ~LINK_BIT) {
+        while at > first && (lists_out[at - 1u] & ID_MASK) > (word & ID_MASK) {
             lists_out[at] = lists_out[at - 1u];
             at -= 1u;
         }

@@ -278,8 +278,7 @@ fn radii_reaches_h_and_states_that_do_not_fit_are_refused() {
         sections.iter().position(|s| s.name == name)
     };
     let points_at = index(&baked.sections, names::POINTS).unwrap();
-    let points: Vec<GpuPoint> =
-        bytemuck::pod_collect_to_vec(&baked.sections[points_at].bytes);
+    let points: Vec<GpuPoint> = bytemuck::pod_collect_to_vec(&baked.sections[points_at].bytes);
     let with_points = |points: &[GpuPoint]| {
         let mut sections = baked.sections.clone();
         sections[points_at].bytes = bytemuck::cast_slice(points).to_vec();

@@ -88,6 +88,25 @@ pub(crate) const UNFINISHED: u32 = u32::MAX;
 
 /// Where the lists pass marks a link (`LINK_BIT` in `shaders/lists.wgsl`).
 pub(crate) const LINK_BIT: u32 = 0x8000_0000;
+/// Where the lists pass marks a member of a cut list whose squared distance lies within
+/// [`NEAR_CUT`] of the cut's (`FAR_BIT` in `shaders/lists.wgsl`): only those can be the
+/// list's farthest point in f64, which the host measures for its reach.
+pub(crate) const FAR_BIT: u32 = 0x4000_0000;
+/// The bits of a list word that hold the point's index: a step holds fewer points.
+pub(crate) const ID_MASK: u32 = !(LINK_BIT | FAR_BIT);
+/// How far below the cut's squared distance, relatively, a member is marked with
+/// [`FAR_BIT`]: the pass's squared distances (differences of split positions, in f32) lie
+/// within about 5e-7 of f64's, relatively, so a member unmarked lies nearer in f64 than the
+/// point the cut fell on. Twenty times that.
+pub(crate) const NEAR_CUT: f32 = 1e-5;
+
+/// The list words' constants, for the modules that read or write them.
+fn list_word_consts() -> String {
+    format!(
+        "const LINK_BIT: u32 = {LINK_BIT}u;\nconst FAR_BIT: u32 = {FAR_BIT}u;\n\
+         const ID_MASK: u32 = {ID_MASK}u;\nconst NEAR_CUT: f32 = {NEAR_CUT:e};\n"
+    )
+}
 
 const GRID_WGSL: &str = include_str!("../../../shaders/neighbour_grid.wgsl");
 
@@ -101,7 +120,11 @@ pub fn nearest_source() -> String {
 
 /// The lists module: entry points `cut_lists` and `write_lists`.
 pub fn lists_source() -> String {
-    format!("{GRID_WGSL}{}", include_str!("../../../shaders/lists.wgsl"))
+    format!(
+        "{}{GRID_WGSL}{}",
+        list_word_consts(),
+        include_str!("../../../shaders/lists.wgsl")
+    )
 }
 
 /// The BVH build's module: entry points `link_nodes`, `measure_depths`, `place_nodes`,
@@ -116,7 +139,8 @@ pub fn tree_source() -> String {
 /// The initial-fits module: entry point `initial_fits`, the tracer's fit maths after it.
 pub fn fits_source() -> String {
     format!(
-        "{}{}",
+        "{}{}{}",
+        list_word_consts(),
         include_str!("../../../shaders/bake_fit.wgsl"),
         slosh_render::shaders::FIT_WGSL
     )

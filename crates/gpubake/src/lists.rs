@@ -9,7 +9,9 @@ use slosh_mls::{
 
 use crate::dispatch::{gpu_error, output, storage};
 use crate::index::{Dispatch, GpuIndex};
-use crate::layout::{DEFERRED, FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, FLAG_TODO, LINK_BIT};
+use crate::layout::{
+    DEFERRED, FAR_BIT, FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, FLAG_TODO, ID_MASK, LINK_BIT,
+};
 
 /// (point, neighbour) within the link distance.
 type Link = (u32, u32);
@@ -31,6 +33,12 @@ pub(crate) fn lists(
     let n = sorted.len();
     let order = &sorted.order;
     let cap = request.cap.max(1);
+    if n as u64 > u64::from(ID_MASK) + 1 {
+        return Err(gpu_error(format!(
+            "{n} points; the lists' words hold indices below {}",
+            u64::from(ID_MASK) + 1
+        )));
+    }
     if request.reach.len() != n {
         return Err(gpu_error(format!(
             "{} reaches for {n} points",
@@ -246,46 +254,51 @@ pub(crate) fn lists(
         first = last;
     }
 
-    // Links out and their marks cleared, in place, piece by piece (in sorted order).
-    let links: Vec<Vec<Link>> = csr_pieces(&start, &mut words, POINTS_PER_PIECE)
+    // Links out, the marks cleared in place, and each list's reach, piece by piece (in
+    // sorted order). A cut list reaches as far as its farthest point in f64 (`lists.rs` in
+    // slosh-mls): the point the cut fell on, which the list keeps unless its normal opposes,
+    // or a member marked near the cut (only those could lie farther, where two distances tie
+    // within f32; `NEAR_CUT`).
+    let points = index.points;
+    let pieces: Vec<(Vec<Link>, Vec<f64>)> = csr_pieces(&start, &mut words, POINTS_PER_PIECE)
         .into_par_iter()
-        .map(|(points, piece)| {
-            let base = start[points.start] as usize;
+        .map(|(range, piece)| {
+            let base = start[range.start] as usize;
             let mut links = Vec::new();
-            for t in points {
+            let mut reach = Vec::with_capacity(range.len());
+            for t in range {
+                let (c, i) = (cuts[t], order[t] as usize);
+                let cut = c[3] & 1 != 0;
+                let mut far = if cut {
+                    distance2(points[i], points[c[1] as usize])
+                } else {
+                    0.0
+                };
                 for w in &mut piece[start[t] as usize - base..start[t + 1] as usize - base] {
-                    if *w & LINK_BIT != 0 {
-                        *w &= !LINK_BIT;
-                        links.push((order[t], *w));
+                    // Most words carry no mark: they are read, not written.
+                    if *w & !ID_MASK == 0 {
+                        continue;
                     }
+                    let j = *w & ID_MASK;
+                    if *w & LINK_BIT != 0 {
+                        links.push((order[t], j));
+                    }
+                    if *w & FAR_BIT != 0 {
+                        far = far.max(distance2(points[i], points[j as usize]));
+                    }
+                    *w = j;
                 }
+                reach.push(if cut {
+                    far.sqrt().next_up().next_up()
+                } else {
+                    request.reach[i]
+                });
             }
-            links
+            (links, reach)
         })
         .collect();
-    // A cut list reaches as far as its farthest point in f64 (`lists.rs` in slosh-mls): the
-    // point the cut fell on, which the list keeps unless its normal opposes, and every
-    // member (which could only lie farther where two distances tie within f32).
-    let points = index.points;
-    let reach_out: Vec<f64> = {
-        let by_sorted: Vec<f64> = (0..n)
-            .into_par_iter()
-            .map(|t| {
-                let (c, i) = (cuts[t], order[t] as usize);
-                if c[3] & 1 == 0 {
-                    return request.reach[i];
-                }
-                let list = &words[start[t] as usize..start[t + 1] as usize];
-                let far = list
-                    .iter()
-                    .chain(std::iter::once(&c[1]))
-                    .map(|&j| distance2(points[i], points[j as usize]))
-                    .fold(0.0, f64::max);
-                far.sqrt().next_up().next_up()
-            })
-            .collect();
-        sorted.unsort(by_sorted)
-    };
+    let (links, by_sorted): (Vec<Vec<Link>>, Vec<Vec<f64>>) = pieces.into_iter().unzip();
+    let reach_out = sorted.unsort(by_sorted.concat());
     let capped = cuts.iter().filter(|c| c[3] & 1 != 0).count();
     let lists = if sorted.identity {
         Neighbours::from_csr(start, words)

@@ -38,6 +38,9 @@ struct Case {
     normals: Vec<Option<[f64; 3]>>,
     link2: f64,
     cap: usize,
+    /// Distances tie in f32 where they do not in f64, so that the lists differ at many cuts
+    /// (each difference still a tie).
+    tied_in_f32: bool,
 }
 
 fn scene_case(kind: SceneKind, points: usize, hard: HardCases, shuffle: bool) -> Case {
@@ -72,6 +75,7 @@ fn scene_case(kind: SceneKind, points: usize, hard: HardCases, shuffle: bool) ->
         points,
         link2: (1.5 * spacing).powi(2),
         cap: 48,
+        tied_in_f32: false,
     }
 }
 
@@ -96,6 +100,7 @@ fn lattice_case() -> Case {
         points,
         link2: 1.1f64.powi(2),
         cap: 40,
+        tied_in_f32: false,
     }
 }
 
@@ -165,6 +170,18 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
     cases.push(wide);
     cases.push(scene_case(SceneKind::Wave, 3000, hard, true));
     cases.push(lattice_case());
+    // The lattice moved by a billionth of its spacing: distances that tie in f32 but not in
+    // f64, so that a cut list's farthest member in f64 may be another than the one the cut
+    // fell on (the pass marks those near the cut for the host to measure).
+    let mut jittered = lattice_case();
+    for (k, p) in jittered.points.iter_mut().enumerate() {
+        for (a, c) in p.iter_mut().enumerate() {
+            *c += 1e-9 * (((k * 7 + a * 3) % 11) as f64 - 5.0);
+        }
+    }
+    jittered.name = "lattice, jittered by 1e-9".into();
+    jittered.tied_in_f32 = true;
+    cases.push(jittered);
     let (mut some_capped, mut some_uncapped) = (false, false);
     for case in &cases {
         let n = case.points.len();
@@ -209,7 +226,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
         // Ties within 1e-6 are rare in generated data (exact ties, as in the lattice, are
         // broken alike).
         assert!(
-            differing * 1000 <= entries,
+            differing * 1000 <= entries || case.tied_in_f32,
             "{}: {differing} of {entries} entries differ",
             case.name
         );
@@ -218,7 +235,9 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
             // The same reach where the lists agree (a cut list's, its farthest point's f64
             // distance rounded up alike); one that holds every member in f64 regardless.
             let (c, g) = (cpu.reach[i], gpu.reach[i]);
-            if cpu.lists.of(i) == gpu.lists.of(i) {
+            // (Where distances tie in f32 only, the point each cut fell on may differ, and
+            // with it the reach, by the tie.)
+            if cpu.lists.of(i) == gpu.lists.of(i) && !case.tied_in_f32 {
                 assert_eq!(g, c, "{}: point {i}'s reach", case.name);
             }
             for &j in gpu.lists.of(i) {
