@@ -52,8 +52,11 @@ impl GpuIndex<'_> {
         ]
     }
 
-    /// Records and submits `dispatch` ([`GpuStages::run`]).
-    pub(crate) fn submit(&self, dispatch: Dispatch<'_>) -> Result<(), SurfaceError> {
+    /// Records and submits `dispatch` ([`GpuStages::run`]); returns the submission.
+    pub(crate) fn submit(
+        &self,
+        dispatch: Dispatch<'_>,
+    ) -> Result<wgpu::SubmissionIndex, SurfaceError> {
         let gpu = self.search.gpu();
         let (x, y, row_threads) = groups(gpu, dispatch.count as u32);
         let params = uniform(
@@ -84,7 +87,6 @@ impl GpuIndex<'_> {
         let entries: Vec<(u32, &wgpu::Buffer)> =
             grid.iter().chain(dispatch.buffers).copied().collect();
         let group = bind(gpu, dispatch.layout, &entries);
-        self.search.run(&[(dispatch.pipeline, (x, y))], &group)?;
-        Ok(())
+        self.search.run(&[(dispatch.pipeline, (x, y))], &group)
     }
 }

@@ -203,6 +203,8 @@ pub(crate) fn lists(
         }
         let count = u64::from(start[last] - start[first]);
         let lists_out = output(gpu, "lists", count * 4);
+        // The batch's last write, which the fits wait for.
+        let mut written = None;
         if count > 0 {
             let out_base = start[first];
             let write = |level, starts, first, count, todo| {
@@ -218,20 +220,29 @@ pub(crate) fn lists(
                     lists_out: &lists_out,
                 })
             };
-            write(level, &starts, first, last - first, None)?;
+            written = Some(write(level, &starts, first, last - first, None)?);
             // The batch's points cut on coarser grids, each on its own.
             for (coarse_level, coarse_starts, points) in &coarser {
                 let lo = points.partition_point(|&t| (t as usize) < first);
                 let hi = points.partition_point(|&t| (t as usize) < last);
                 for todo in points[lo..hi].chunks(MAX_TODO) {
-                    write(*coarse_level, coarse_starts, 0, todo.len(), Some(todo))?;
+                    written = Some(write(
+                        *coarse_level,
+                        coarse_starts,
+                        0,
+                        todo.len(),
+                        Some(todo),
+                    )?);
                 }
             }
         }
         // Fitted where the lists are, before they are read back.
         if let Some(inputs) = &fit_inputs {
-            // The lists done first, so that the fits' time is their own.
-            gpu.wait().map_err(gpu_error)?;
+            // The lists done first, so that the fits' time is their own (this job's lists:
+            // other jobs' later work on the device is not waited for).
+            if let Some(written) = written {
+                gpu.wait_for(written).map_err(gpu_error)?;
+            }
             let fitting = std::time::Instant::now();
             sorted_fits.extend(crate::fits::fit_batch(
                 index,

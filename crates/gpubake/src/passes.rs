@@ -185,11 +185,12 @@ impl GpuStages {
 
     /// Records `dispatches` over `group` in one pass and submits them; where the device has
     /// timestamps, waits for them and adds their GPU time to [`GpuStages::gpu_seconds`].
+    /// Returns the submission, for a caller that waits for it.
     pub(crate) fn run(
         &self,
         dispatches: &[(&wgpu::ComputePipeline, (u32, u32))],
         group: &wgpu::BindGroup,
-    ) -> Result<(), slosh_mls::SurfaceError> {
+    ) -> Result<wgpu::SubmissionIndex, slosh_mls::SurfaceError> {
         let gpu = &self.gpu;
         let mut encoder = gpu
             .device
@@ -198,13 +199,13 @@ impl GpuStages {
             });
         let stamps = Stamps::new(gpu);
         record(&mut encoder, dispatches, group, stamps.as_ref());
-        gpu.queue.submit([encoder.finish()]);
+        let submitted = gpu.queue.submit([encoder.finish()]);
         if let Some(stamps) = stamps {
             let seconds = stamps.seconds(gpu)?;
             self.gpu_nanos
                 .fetch_add((seconds * 1e9).round() as u64, Ordering::Relaxed);
         }
-        Ok(())
+        Ok(submitted)
     }
 
     /// Compiles the initial fits for `degree` now rather than in the first step's bake (a

@@ -249,4 +249,17 @@ impl Gpu {
             .map(|_| ())
             .map_err(|e| Error::Readback(e.to_string()))
     }
+
+    /// Blocks until the submission `index` (and every one before it) has run, not the ones
+    /// other threads made since: bake jobs sharing the device each wait for their own work
+    /// instead of everyone's.
+    pub fn wait_for(&self, index: wgpu::SubmissionIndex) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(index),
+                timeout: None,
+            })
+            .map(|_| ())
+            .map_err(|e| Error::Readback(e.to_string()))
+    }
 }

@@ -747,12 +747,12 @@ impl Tracer {
                 label: Some("frame"),
             });
         self.record(gpu, step, targets, camera, params, &mut encoder)?;
-        gpu.queue.submit([encoder.finish()]);
+        let submitted = gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
         if targets.queries.is_none() {
-            gpu.wait()?;
+            gpu.wait_for(submitted)?;
         }
         self.pass_times(gpu, targets)
     }

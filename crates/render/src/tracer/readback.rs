@@ -11,7 +11,7 @@ use crate::staging::Shelf;
 
 /// Maps a `MAP_READ` buffer, waits, and copies its contents out as `T`s.
 pub fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
-    read(gpu, buffer)
+    read(gpu, buffer, None)
 }
 
 /// The first `size` bytes of a `COPY_SRC` buffer, copied out once the work submitted before
@@ -21,7 +21,19 @@ pub fn read_storage<T: bytemuck::Pod>(
     source: &wgpu::Buffer,
     size: u64,
 ) -> Result<Vec<T>> {
-    read(gpu, &staged(gpu, source, 0, size))
+    read_range(gpu, source, 0, size)
+}
+
+/// `size` bytes of `source` from `offset`, copied out once that copy has run (waits for it
+/// alone).
+fn read_range<T: bytemuck::Pod>(
+    gpu: &Gpu,
+    source: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+) -> Result<Vec<T>> {
+    let (staging, copied) = staged(gpu, source, offset, size);
+    read(gpu, &staging, Some(copied))
 }
 
 /// Read-back buffers reused across reads: fresh host-visible memory costs a page fault (and a
@@ -91,8 +103,8 @@ impl ReadbackPool {
         take: impl FnOnce(&[u8]) -> R,
     ) -> Result<R> {
         let buffer = self.take(gpu, size);
-        copy_out(gpu, source, 0, &buffer, size);
-        let out = mapped(gpu, &buffer, size, take);
+        let copied = copy_out(gpu, source, 0, &buffer, size);
+        let out = mapped(gpu, &buffer, size, Some(copied), take);
         if out.is_ok() {
             self.shelf.put(buffer);
         }
@@ -119,18 +131,25 @@ impl ReadbackPool {
     }
 }
 
-/// Maps a MAP_READ buffer and copies its contents out.
-pub(super) fn read<T: bytemuck::Pod>(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
-    mapped(gpu, buffer, buffer.size(), |bytes| {
+/// Maps a MAP_READ buffer and copies its contents out, once the submission `written` that
+/// last wrote it has run (or every submission, where that is not known).
+pub(super) fn read<T: bytemuck::Pod>(
+    gpu: &Gpu,
+    buffer: &wgpu::Buffer,
+    written: Option<wgpu::SubmissionIndex>,
+) -> Result<Vec<T>> {
+    mapped(gpu, buffer, buffer.size(), written, |bytes| {
         bytemuck::pod_collect_to_vec(bytes)
     })
 }
 
-/// Maps the first `size` bytes of a MAP_READ buffer, waits, and hands them to `take`.
+/// Maps the first `size` bytes of a MAP_READ buffer, waits (for the submission `written`,
+/// or for every submission), and hands them to `take`.
 fn mapped<R>(
     gpu: &Gpu,
     buffer: &wgpu::Buffer,
     size: u64,
+    written: Option<wgpu::SubmissionIndex>,
     take: impl FnOnce(&[u8]) -> R,
 ) -> Result<R> {
     let slice = buffer.slice(..size);
@@ -138,7 +157,10 @@ fn mapped<R>(
     slice.map_async(wgpu::MapMode::Read, move |r| {
         let _ = tx.send(r);
     });
-    gpu.wait()?;
+    match written {
+        Some(index) => gpu.wait_for(index)?,
+        None => gpu.wait()?,
+    }
     rx.recv()
         .map_err(|e| Error::Readback(e.to_string()))?
         .map_err(|e| Error::Readback(e.to_string()))?;
@@ -152,27 +174,40 @@ fn mapped<R>(
     Ok(out)
 }
 
-/// `size` bytes of `source` from `offset` copied into a new `MAP_READ` buffer (submitted).
-fn staged(gpu: &Gpu, source: &wgpu::Buffer, offset: u64, size: u64) -> wgpu::Buffer {
+/// `size` bytes of `source` from `offset` copied into a new `MAP_READ` buffer, and the
+/// copy's submission.
+fn staged(
+    gpu: &Gpu,
+    source: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+) -> (wgpu::Buffer, wgpu::SubmissionIndex) {
     let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
         size,
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    copy_out(gpu, source, offset, &staging, size);
-    staging
+    let copied = copy_out(gpu, source, offset, &staging, size);
+    (staging, copied)
 }
 
-/// Submits a copy of `size` bytes of `source` from `offset` to the start of `staging`.
-fn copy_out(gpu: &Gpu, source: &wgpu::Buffer, offset: u64, staging: &wgpu::Buffer, size: u64) {
+/// Submits a copy of `size` bytes of `source` from `offset` to the start of `staging`;
+/// returns the submission.
+fn copy_out(
+    gpu: &Gpu,
+    source: &wgpu::Buffer,
+    offset: u64,
+    staging: &wgpu::Buffer,
+    size: u64,
+) -> wgpu::SubmissionIndex {
     let mut encoder = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("readback"),
         });
     encoder.copy_buffer_to_buffer(source, offset, staging, 0, size);
-    gpu.queue.submit([encoder.finish()]);
+    gpu.queue.submit([encoder.finish()])
 }
 
 impl Tracer {
@@ -182,7 +217,7 @@ impl Tracer {
         let Some((_, _, readback)) = &targets.queries else {
             return Ok(None);
         };
-        let stamps: Vec<u64> = read(gpu, readback)?;
+        let stamps: Vec<u64> = read(gpu, readback, None)?;
         let period = f64::from(gpu.queue.get_timestamp_period()) * 1e-6;
         let ms = |a: usize, b: usize| stamps[b].saturating_sub(stamps[a]) as f64 * period;
         Ok(Some(PassTimes {
@@ -193,8 +228,7 @@ impl Tracer {
 
     /// Reads the hits and pixels of the last frame submitted into `targets` (waits).
     pub fn read_frame(&self, gpu: &Gpu, targets: &FrameTargets) -> Result<Frame> {
-        let whole = |b: &wgpu::Buffer| staged(gpu, b, 0, b.size());
-        let mut hits: Vec<GpuHit> = read(gpu, &whole(&targets.hits))?;
+        let mut hits: Vec<GpuHit> = read_range(gpu, &targets.hits, 0, targets.hits.size())?;
         // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
         for hit in hits.iter_mut().filter(|h| h.status == status::MISS) {
             *hit = GpuHit {
@@ -202,7 +236,7 @@ impl Tracer {
                 ..GpuHit::zeroed()
             };
         }
-        let rgba = read(gpu, &whole(&targets.image))?;
+        let rgba = read_range(gpu, &targets.image, 0, targets.image.size())?;
         Ok(Frame {
             width: targets.width,
             height: targets.height,
@@ -225,7 +259,7 @@ impl Tracer {
         }
         let size = size_of::<GpuHit>() as u64;
         let offset = (u64::from(y) * u64::from(targets.width) + u64::from(x)) * size;
-        let hit: Vec<GpuHit> = read(gpu, &staged(gpu, &targets.hits, offset, size))?;
+        let hit: Vec<GpuHit> = read_range(gpu, &targets.hits, offset, size)?;
         // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
         Ok(hit.first().copied().filter(|h| h.status != status::MISS))
     }

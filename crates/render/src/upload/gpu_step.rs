@@ -234,11 +234,11 @@ impl GpuStep {
         let mut step = GpuStep::create(gpu, &host, &mut encoder)?;
         let submitted = Instant::now();
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        gpu.queue.submit([encoder.finish()]);
+        let copied = gpu.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
-        gpu.wait()?;
+        gpu.wait_for(copied)?;
         step.upload.gpu_seconds = submitted.elapsed().as_secs_f64();
         step.upload.total_seconds = start.elapsed().as_secs_f64();
         Ok(step)
