@@ -150,7 +150,13 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     })?;
     bar.finish_and_clear();
 
-    let stage_total: f64 = report.stages.iter().map(|(_, s)| s).sum();
+    // A stage's parts ("stage: part") lie within its own lap.
+    let stage_total: f64 = report
+        .stages
+        .iter()
+        .filter(|(name, _)| slosh_mls::stage_part(name).is_none())
+        .map(|(_, s)| s)
+        .sum();
     say!(
         "baked {} steps, kept {} already current, {} failed, into {} in {:.2} s",
         report.baked,
@@ -167,8 +173,12 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             report.bytes as f64 / report.points.max(1) as f64
         );
         for (name, s) in &report.stages {
+            let shown = match slosh_mls::stage_part(name) {
+                Some((_, part)) => format!("  of which {part}"),
+                None => name.clone(),
+            };
             say!(
-                "  {name:<26} {s:>9.3} s  {:>5.1} %",
+                "  {shown:<26} {s:>9.3} s  {:>5.1} %",
                 100.0 * s / stage_total.max(f64::MIN_POSITIVE)
             );
         }

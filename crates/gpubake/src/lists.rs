@@ -27,6 +27,8 @@ pub(crate) fn lists(
     index: &GpuIndex<'_>,
     request: ListRequest<'_>,
 ) -> Result<NeighbourLists, SurfaceError> {
+    // Where the time goes, part by part (`NeighbourLists::parts`).
+    let mut parts = slosh_mls::StageClock::start();
     let sorted = &index.sorted;
     let search = index.search;
     let gpu = search.gpu();
@@ -88,6 +90,7 @@ pub(crate) fn lists(
         )));
     }
     let cut = output(gpu, "list cuts", cut_bytes);
+    parts.lap("neighbour lists: inputs");
     // One dispatch of the cut or the write pass: points first.. (or `todo`'s) on the grid of
     // `level`.
     struct Pass<'p> {
@@ -181,10 +184,13 @@ pub(crate) fn lists(
     }
     let start: Vec<u32> = start.iter().map(|&s| s as u32).collect();
     let start_buffer = storage(gpu, "list starts", &start);
+    parts.lap("neighbour lists: cut and offsets");
     let fit_inputs = request
         .fits
         .map(|f| crate::fits::prepare(index, f, request.normals.is_some()))
         .transpose()?;
+    parts.lap("neighbour lists: fit inputs");
+    let (mut write_seconds, mut read_seconds) = (0.0, 0.0);
     let mut sorted_fits: Vec<Option<InitialFit>> = Vec::new();
     let mut fit_seconds = 0.0;
     // Batches of consecutive points whose lists fit one output.
@@ -194,6 +200,7 @@ pub(crate) fn lists(
     let mut words: Vec<u32> = Vec::with_capacity(total as usize);
     let mut first = 0;
     while first < n {
+        let writing = std::time::Instant::now();
         let mut last = first + 1;
         while last < n
             && last - first < limit_points
@@ -258,10 +265,13 @@ pub(crate) fn lists(
             )?);
             fit_seconds += fitting.elapsed().as_secs_f64();
         }
+        let reading = std::time::Instant::now();
+        write_seconds += (reading - writing).as_secs_f64();
         search
             .readback
             .read_into(gpu, &lists_out, count * 4, &mut words)
             .map_err(gpu_error)?;
+        read_seconds += reading.elapsed().as_secs_f64();
         first = last;
     }
 
@@ -270,6 +280,13 @@ pub(crate) fn lists(
     // slosh-mls): the point the cut fell on, which the list keeps unless its normal opposes,
     // or a member marked near the cut (only those could lie farther, where two distances tie
     // within f32; `NEAR_CUT`).
+    parts.extend(&[
+        (
+            "neighbour lists: write",
+            (write_seconds - fit_seconds).max(0.0),
+        ),
+        ("neighbour lists: read back", read_seconds),
+    ]);
     let points = index.points;
     let pieces: Vec<(Vec<Link>, Vec<f64>)> = csr_pieces(&start, &mut words, POINTS_PER_PIECE)
         .into_par_iter()
@@ -310,6 +327,7 @@ pub(crate) fn lists(
         .collect();
     let (links, by_sorted): (Vec<Vec<Link>>, Vec<Vec<f64>>) = pieces.into_iter().unzip();
     let reach_out = sorted.unsort(by_sorted.concat());
+    parts.lap("neighbour lists: links and reach");
     let capped = cuts.iter().filter(|c| c[3] & 1 != 0).count();
     let lists = if sorted.identity {
         Neighbours::from_csr(start, words)
@@ -334,6 +352,7 @@ pub(crate) fn lists(
     .ok_or_else(|| gpu_error("the lists read back do not match their counts"))?;
     // Fits in the caller's order.
     let fits = fit_inputs.map(|_| sorted.unsort(sorted_fits));
+    parts.lap("neighbour lists: order");
     Ok(NeighbourLists {
         lists,
         reach: reach_out,
@@ -342,5 +361,6 @@ pub(crate) fn lists(
         links,
         fits,
         fit_seconds,
+        parts: parts.laps,
     })
 }

@@ -29,4 +29,7 @@ pub struct NeighbourLists {
     /// seconds they took (within the call).
     pub fits: Option<Vec<Option<InitialFit>>>,
     pub fit_seconds: f64,
+    /// Where the search's own time went, by part ("neighbour lists: …", seconds), for the
+    /// bake's stage laps after its "neighbour lists"; empty where the search does not say.
+    pub parts: Vec<(&'static str, f64)>,
 }

@@ -58,6 +58,6 @@ pub use support::{
 pub use surface::{
     BallFit, BesideFits, Surface, SurfaceError, SurfaceParams, SurfaceParts, half_precision,
 };
-pub use timing::StageClock;
+pub use timing::{StageClock, stage_part};
 pub use tracer::{Camera, CameraBasis, MAX_CANDIDATES, TraceHit};
 pub use up::guess_up;

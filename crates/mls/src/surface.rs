@@ -311,6 +311,7 @@ impl<T: Real> SurfaceParts<T> {
             links,
             fits: searched_fits,
             fit_seconds: searched_fit_seconds,
+            parts: list_parts,
         } = index.lists(ListRequest {
             reach: &reach_wanted,
             cap: cap.get(),
@@ -330,6 +331,8 @@ impl<T: Real> SurfaceParts<T> {
         if let Some(lap) = clock.laps.last_mut() {
             lap.1 = (lap.1 - searched_fit_seconds).max(0.0);
         }
+        // The search's parts of it, after it (their sum is within the lap and the fits).
+        clock.extend(&list_parts);
 
         // Spray first, from the lists alone and on every core: the fits do not need it, but the
         // work beside them does, and beside the fits it would get too few cores to keep up.

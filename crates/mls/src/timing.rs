@@ -2,6 +2,12 @@
 
 use std::time::Instant;
 
+/// A lap named "stage: part" is a part of the stage's lap before it (its time is within it),
+/// for reports that break a stage down: (stage, part), or `None` for a stage's own lap.
+pub fn stage_part(name: &str) -> Option<(&str, &str)> {
+    name.split_once(": ")
+}
+
 #[derive(Debug)]
 pub struct StageClock {
     last: Instant,

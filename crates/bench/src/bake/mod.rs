@@ -60,6 +60,14 @@ const GPU_STAGES: [&str; 4] = [
     "bvh",
 ];
 
+/// The part of the neighbour lists a stage lap is, if it is one (as the GPU's search reports
+/// them, [`slosh_mls::stage_part`]).
+fn list_part(name: &str) -> Option<&str> {
+    slosh_mls::stage_part(name)
+        .filter(|(stage, _)| *stage == GPU_STAGES[1])
+        .map(|(_, part)| part)
+}
+
 /// The sphere step of `points` points, and its mean particle spacing.
 fn input(points: usize) -> (StepInput, f64) {
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))
@@ -237,8 +245,15 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             on_cpu: gpu_runs[0]
                 .stages
                 .iter()
-                .filter(|(name, _)| !GPU_STAGES.contains(&name.as_str()))
+                .filter(|(name, _)| {
+                    !GPU_STAGES.contains(&name.as_str()) && slosh_mls::stage_part(name).is_none()
+                })
                 .map(|(name, _)| (name.clone(), gpu_stage(name)))
+                .collect(),
+            list_parts: gpu_runs[0]
+                .stages
+                .iter()
+                .filter_map(|(name, _)| Some((list_part(name)?.to_string(), gpu_stage(name))))
                 .collect(),
         });
         if let Some(g) = &gpu {

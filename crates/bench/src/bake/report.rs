@@ -49,6 +49,8 @@ pub struct GpuBakeRow {
     pub cpu_bvh: f64,
     /// The GPU bake's stages that ran on the CPU, by name, in its order.
     pub on_cpu: Vec<(String, f64)>,
+    /// The GPU's neighbour lists by part ("neighbour lists: …"), in its order.
+    pub list_parts: Vec<(String, f64)>,
 }
 
 /// One size's stored bytes: the file, and each section's stored and raw bytes.
@@ -225,31 +227,59 @@ impl BakeReport {
                     .map_or("—".into(), |(s, _)| format!("{:.1}× faster", s / g.total)),
             );
         }
-        // The stages the GPU bake still runs on the CPU, as its runs measured them.
-        if let Some((_, first)) = rows.first() {
-            let names: Vec<&str> = first.on_cpu.iter().map(|(n, _)| n.as_str()).collect();
-            let _ = writeln!(
-                md,
-                "\nThe GPU bake's stages still on the CPU (wall time, medians of the same runs):\n\n\
-                 | points | {} |\n|---|{}",
-                names.join(" | "),
-                "---|".repeat(names.len())
-            );
-            for (points, g) in &rows {
-                let cells: Vec<String> = names
-                    .iter()
-                    .map(|name| {
-                        g.on_cpu
-                            .iter()
-                            .find(|(n, _)| n == name)
-                            .map_or("—".into(), |(_, s)| ms(*s))
-                    })
-                    .collect();
-                let _ = writeln!(md, "| {points} | {} |", cells.join(" | "));
-            }
-        }
+        // The stages the GPU bake still runs on the CPU, as its runs measured them, and the
+        // GPU lists by part.
+        stage_table(
+            &mut md,
+            "The GPU bake's stages still on the CPU (wall time, medians of the same runs):",
+            &rows,
+            |g| &g.on_cpu,
+        );
+        stage_table(
+            &mut md,
+            "The GPU bake's neighbour lists by part (wall time, medians of the same runs; \
+             *write* is the passes until the lists are on the GPU, the initial fits taken out, \
+             *read back* the lists copied to the host, *links and reach* their marks taken out \
+             on the CPU):",
+            &rows,
+            |g| &g.list_parts,
+        );
         md.push('\n');
         md
+    }
+}
+
+/// A table of named stage times per size: the first row's names as columns, each in ms.
+fn stage_table(
+    md: &mut String,
+    intro: &str,
+    rows: &[(usize, &GpuBakeRow)],
+    stages: impl Fn(&GpuBakeRow) -> &[(String, f64)],
+) {
+    let Some((_, first)) = rows.first() else {
+        return;
+    };
+    let names: Vec<&str> = stages(first).iter().map(|(n, _)| n.as_str()).collect();
+    if names.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "\n{intro}\n\n| points | {} |\n|---|{}",
+        names.join(" | "),
+        "---|".repeat(names.len())
+    );
+    for (points, g) in rows {
+        let cells: Vec<String> = names
+            .iter()
+            .map(|name| {
+                stages(g)
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .map_or("—".into(), |(_, s)| format!("{:.1} ms", s * 1e3))
+            })
+            .collect();
+        let _ = writeln!(md, "| {points} | {} |", cells.join(" | "));
     }
 }
 
