@@ -416,6 +416,26 @@ impl CacheFile {
             })
     }
 
+    /// Checks every run of `entry` against its checksum and, where compressed, that it
+    /// decodes to its raw size, keeping nothing: runs in parallel, each decoded into a
+    /// buffer its thread reuses, so that a verifier allocates no section's worth of memory. A
+    /// raw run, checksummed, is what a reader gets (opening the file checked that raw runs
+    /// are stored as they are).
+    pub fn check_decodes(&self, entry: &SectionEntry) -> Result<()> {
+        use rayon::prelude::*;
+        let spans = entry.chunk_spans();
+        (0..spans.len()).into_par_iter().try_for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(out, scratch), k| {
+                if entry.encoding == crate::format::Encoding::Raw {
+                    return self.checked_run(entry, &spans, k).map(|_| ());
+                }
+                out.resize(spans[k].1.len(), 0);
+                self.decode_run_into(entry, &spans, k, out, scratch)
+            },
+        )
+    }
+
     /// Run `k` of a section as stored (its chunk, or the whole section where the table has no
     /// chunks; `spans` from [`SectionEntry::chunk_spans`]), its checksum checked: a raw run is
     /// then ready to copy where it belongs. Whoever copies it asks [`CacheFile::unchanged`]
