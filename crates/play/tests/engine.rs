@@ -152,7 +152,11 @@ fn streams_under_a_tiny_budget_with_stand_ins_and_never_evicts_the_shown_step() 
         first[since..].iter().all(|r| r.shown.is_some()),
         "once a step is shown the frame is never blank"
     );
-    for target in [7, 2, 9, 0, 5, 6, 1] {
+    let mut after_first_jump = 0;
+    for (k, target) in [7, 2, 9, 0, 5, 6, 1].into_iter().enumerate() {
+        if k == 1 {
+            after_first_jump = engine.fresh_buffers().sections;
+        }
         let reports = show_checking(&mut engine, &request, target, |engine, r| {
             let shown = r.shown.expect("a step is always shown once one was");
             assert!(
@@ -178,6 +182,36 @@ fn streams_under_a_tiny_budget_with_stand_ins_and_never_evicts_the_shown_step() 
         assert!(engine.resident().len() <= 2);
     }
     assert!(engine.failures().is_empty());
+    // Steps dropped from the pool leave their section buffers to the next uploads: the six
+    // later jumps (their steps and the loaders' window) made fewer than half as many as
+    // their own steps hold.
+    let later = engine.fresh_buffers().sections - after_first_jump;
+    let per_step = section_buffers(dir.path(), &gpu, 0);
+    eprintln!(
+        "{later} section buffers made in six jumps, {per_step} a step; {} bytes kept",
+        engine.shelved_bytes()
+    );
+    assert!(per_step >= 5, "{per_step} section buffers a step");
+    assert!(
+        later * 2 < 6 * per_step,
+        "{later} section buffers made anew"
+    );
+    assert!(engine.shelved_bytes() <= 2 * largest + largest / 8);
+}
+
+/// How many section buffers step `index` takes (its sections that hold bytes).
+fn section_buffers(dir: &Path, gpu: &Gpu, index: usize) -> usize {
+    let host = HostStep::open(&dir.join(step_file_name(index)), None).unwrap();
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    let shelf = slosh_render::BufferShelf::new();
+    let options = slosh_render::UploadOptions {
+        shelf: Some(&shelf),
+        ..Default::default()
+    };
+    drop(GpuStep::create_in(gpu, &host, &mut encoder, options).unwrap());
+    shelf.fresh()
 }
 
 #[test]
