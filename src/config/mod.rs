@@ -251,7 +251,17 @@ fn bake_stages(
                     .any(|a| is_gpu(&a.get_info()));
             match found.then(|| slosh_render::Gpu::new(adapter)) {
                 Some(Ok(gpu)) if is_gpu(&gpu.info) => {
-                    gpu_stages_on(gpu, degree).unwrap_or_else(|_| slosh_bake::Stages::cpu())
+                    let name = gpu.describe();
+                    // A GPU whose passes will not build is said, not passed over in silence:
+                    // the bake goes on, on the CPU.
+                    gpu_stages_on(gpu, degree).unwrap_or_else(|e| {
+                        eprintln!(
+                            "--device auto: {name} was found, but the bake's passes did not \
+                             build on it ({e:#}); baking on the CPU (--device gpu makes this \
+                             an error)"
+                        );
+                        slosh_bake::Stages::cpu()
+                    })
                 }
                 _ => slosh_bake::Stages::cpu(),
             }
