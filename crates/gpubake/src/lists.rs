@@ -16,6 +16,9 @@ use crate::layout::{
 /// (point, neighbour) within the link distance.
 type Link = (u32, u32);
 
+/// List words are allocated in multiples of this many (16 MB).
+const WORDS_GRANULE: usize = 4 << 20;
+
 /// The most points of one dispatch over a list of points.
 const MAX_TODO: usize = 1 << 20;
 
@@ -197,7 +200,9 @@ pub(crate) fn lists(
     let limit_ids = (search.output_limit() / 4).max(cap as u64);
     // A batch's fits take 64 bytes a point.
     let limit_points = (search.output_limit() / 64).max(1) as usize;
-    let mut words: Vec<u32> = Vec::with_capacity(total as usize);
+    // In whole 16 MB steps, so that the next step's lists (of a slightly other length) find
+    // this one's memory free rather than fault in fresh pages.
+    let mut words: Vec<u32> = Vec::with_capacity((total as usize).next_multiple_of(WORDS_GRANULE));
     let mut first = 0;
     while first < n {
         let writing = std::time::Instant::now();
