@@ -5,6 +5,7 @@ use slosh_render::Gpu;
 use wgpu::util::DeviceExt;
 
 use crate::layout::WORKGROUP;
+use crate::passes::GpuStages;
 
 /// A GPU failure, as the build reports it.
 pub(crate) fn gpu_error(what: impl std::fmt::Display) -> slosh_mls::SurfaceError {
@@ -33,31 +34,76 @@ pub(crate) fn guarded<T, E>(
     }
 }
 
-/// A read-only storage buffer holding `data` (one zero element where it is empty: a binding
-/// cannot be empty).
-pub(crate) fn storage<T: bytemuck::Pod>(gpu: &Gpu, label: &str, data: &[T]) -> wgpu::Buffer {
+/// The usage of the passes' storage buffers: bound, uploaded into, cleared, read back.
+pub(crate) const PASS_BUFFER_USAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
+    .union(wgpu::BufferUsages::COPY_SRC)
+    .union(wgpu::BufferUsages::COPY_DST);
+
+/// A pass buffer from the bake's shelf, given back to it when dropped: fresh device memory
+/// for every input and output of every step was allocated and freed again, step by step.
+pub(crate) struct Pooled {
+    buffer: wgpu::Buffer,
+    shelf: slosh_render::BufferShelf,
+}
+
+impl std::ops::Deref for Pooled {
+    type Target = wgpu::Buffer;
+
+    fn deref(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+}
+
+impl Drop for Pooled {
+    fn drop(&mut self) {
+        // Work already submitted that reads it runs before any later submission writes it.
+        self.shelf.put(self.buffer.clone());
+    }
+}
+
+/// A storage buffer holding `data` (one zero element where it is empty: a binding cannot be
+/// empty), uploaded through the bake's staging pool and submitted before it returns.
+pub(crate) fn storage<T: bytemuck::Pod>(
+    stages: &GpuStages,
+    label: &str,
+    data: &[T],
+) -> Result<Pooled, slosh_mls::SurfaceError> {
     let zero = [0u8; 16];
     let bytes: &[u8] = if data.is_empty() {
         &zero
     } else {
         bytemuck::cast_slice(data)
     };
-    gpu.device
-        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        })
+    let size = (bytes.len() as u64).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
+    let buffer = stages.buffers.take(&stages.gpu, label, size);
+    stages
+        .staging
+        .upload(&stages.gpu, bytes, &buffer)
+        .map_err(gpu_error)?;
+    Ok(Pooled {
+        buffer,
+        shelf: stages.buffers.clone(),
+    })
 }
 
-/// A storage buffer of `bytes` (at least 16) that a pass writes and the host reads back.
-pub(crate) fn output(gpu: &Gpu, label: &str, bytes: u64) -> wgpu::Buffer {
-    gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes.max(16).next_multiple_of(4),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    })
+/// A storage buffer of `bytes` (at least 16), zeroed, that a pass writes and the host reads
+/// back.
+pub(crate) fn output(stages: &GpuStages, label: &str, bytes: u64) -> Pooled {
+    let size = bytes.max(16).next_multiple_of(4);
+    let buffer = stages.buffers.take(&stages.gpu, label, size);
+    // A kept buffer holds its last step's bytes; passes may count into theirs.
+    let mut encoder = stages
+        .gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("clear"),
+        });
+    encoder.clear_buffer(&buffer, 0, None);
+    stages.gpu.queue.submit([encoder.finish()]);
+    Pooled {
+        buffer,
+        shelf: stages.buffers.clone(),
+    }
 }
 
 pub(crate) fn uniform<T: bytemuck::Pod>(gpu: &Gpu, params: &T) -> wgpu::Buffer {

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use slosh_mls::{FitRequest, InitialFit, NormalsMode, Poly, SurfaceError};
 
-use crate::dispatch::{bind, gpu_error, groups, output, storage, uniform};
+use crate::dispatch::{Pooled, bind, gpu_error, groups, output, storage, uniform};
 use crate::index::GpuIndex;
 use crate::layout::FitSettings;
 
@@ -15,8 +15,8 @@ const VEC4_PER_FIT: usize = 4;
 /// sorted position of each caller's index.
 pub(crate) struct FitInputs<'a> {
     pipeline: &'a wgpu::ComputePipeline,
-    smoothing: wgpu::Buffer,
-    rank: wgpu::Buffer,
+    smoothing: Pooled,
+    rank: Pooled,
     has_normals: bool,
     normals_mode: u32,
 }
@@ -26,7 +26,6 @@ pub(crate) fn prepare<'a>(
     request: FitRequest<'_>,
     has_normals: bool,
 ) -> Result<FitInputs<'a>, SurfaceError> {
-    let gpu = index.search.gpu();
     let order = &index.sorted.order;
     let smoothing: Vec<f32> = order
         .par_iter()
@@ -37,8 +36,8 @@ pub(crate) fn prepare<'a>(
             .search
             .fits_pipeline(request.degree)
             .map_err(gpu_error)?,
-        smoothing: storage(gpu, "smoothing lengths", &smoothing),
-        rank: storage(gpu, "ranks", &index.sorted.rank()),
+        smoothing: storage(index.search, "smoothing lengths", &smoothing)?,
+        rank: storage(index.search, "ranks", &index.sorted.rank())?,
         has_normals,
         normals_mode: match request.normals {
             NormalsMode::Mean => 0,
@@ -66,7 +65,7 @@ pub(crate) fn fit_batch(
 ) -> Result<Vec<Option<InitialFit>>, SurfaceError> {
     let gpu = index.search.gpu();
     let bytes = (batch.count * VEC4_PER_FIT * 16) as u64;
-    let out = output(gpu, "initial fits", bytes);
+    let out = output(index.search, "initial fits", bytes);
     let (x, y, row_threads) = groups(gpu, batch.count as u32);
     let settings = uniform(
         gpu,

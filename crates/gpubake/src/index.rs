@@ -3,7 +3,7 @@
 use crate::cells::SortedPoints;
 use slosh_mls::SurfaceError;
 
-use crate::dispatch::{bind, groups, uniform};
+use crate::dispatch::{Pooled, bind, groups, uniform};
 use crate::layout::SearchParams;
 use crate::passes::GpuStages;
 
@@ -32,9 +32,9 @@ pub(crate) struct GpuIndex<'a> {
     /// The caller's points, in f64.
     pub points: &'a [[f64; 3]],
     pub sorted: SortedPoints,
-    pub positions: wgpu::Buffer,
-    pub residuals: wgpu::Buffer,
-    pub original: wgpu::Buffer,
+    pub positions: Pooled,
+    pub residuals: Pooled,
+    pub original: Pooled,
     /// Added to every reach when the shaders pick cells: far above the f32 rounding of a
     /// cell's bounds.
     pub margin: f64,

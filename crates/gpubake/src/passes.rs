@@ -38,7 +38,18 @@ pub struct GpuStages {
     gpu_nanos: AtomicU64,
     /// Buffers the large read-backs (lists, nearest points, fits, nodes) reuse.
     pub(crate) readback: slosh_render::ReadbackPool,
+    /// The passes' inputs and outputs, kept from step to step (`dispatch::Pooled`), and the
+    /// staging memory their inputs arrive through.
+    pub(crate) buffers: slosh_render::BufferShelf,
+    pub(crate) staging: slosh_render::StagingPool,
 }
+
+/// The most bytes of pass buffers kept between steps (an eighth of the device's memory where
+/// that is less).
+const KEPT_BUFFER_BYTES: u64 = 2 << 30;
+
+/// Staging buffers kept for the passes' inputs.
+const STAGING_BUFFERS_KEPT: usize = 8;
 
 /// Reads from this size on reuse pooled buffers; smaller ones are cheap to make.
 const POOLED_READ_BYTES: u64 = 1 << 20;
@@ -153,6 +164,11 @@ impl GpuStages {
         let place_nodes = tree_entry("place_nodes")?;
         let fit_boxes = tree_entry("fit_boxes")?;
         let next_depth = tree_entry("next_depth")?;
+        let buffers = slosh_render::BufferShelf::of(crate::dispatch::PASS_BUFFER_USAGE, true);
+        buffers.set_limit(
+            gpu.device_memory()
+                .map_or(KEPT_BUFFER_BYTES, |m| (m / 8).min(KEPT_BUFFER_BYTES)),
+        );
         Ok(GpuStages {
             gpu,
             nearest_layout,
@@ -171,6 +187,8 @@ impl GpuStages {
             next_depth,
             gpu_nanos: AtomicU64::new(0),
             readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT),
+            buffers,
+            staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT),
         })
     }
 

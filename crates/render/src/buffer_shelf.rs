@@ -1,4 +1,5 @@
-//! Device-local step buffers kept for reuse. Creating a buffer is usually a sub-allocation,
+//! Device-local buffers kept for reuse: a step's sections (the player's), or a bake's
+//! inputs and outputs (the GPU bake's). Creating a buffer is usually a sub-allocation,
 //! but where the allocator has no room left it allocates a new block of device memory, and
 //! it frees a block once its last buffer is dropped: a series streaming through a full pool
 //! did both again and again, some milliseconds each, on the path of a jump. A step dropped
@@ -13,20 +14,44 @@ use crate::context::Gpu;
 pub(crate) const SECTION_USAGE: wgpu::BufferUsages =
     wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_DST);
 
-/// Kept section buffers, up to a number of bytes.
-#[derive(Debug, Clone, Default)]
+/// Kept buffers of one usage, up to a number of bytes.
+#[derive(Debug, Clone)]
 pub struct BufferShelf {
     free: Arc<Mutex<Vec<wgpu::Buffer>>>,
+    /// The usage of every buffer it makes and keeps.
+    usage: wgpu::BufferUsages,
+    /// Whether a new buffer is made a sixteenth larger than asked, so that the next,
+    /// slightly larger, request finds it.
+    headroom: bool,
     /// The most bytes kept; a buffer that would pass it is dropped when it comes back.
     limit: Arc<AtomicU64>,
     /// Buffers an upload made because none on the shelf fitted.
     fresh: Arc<AtomicUsize>,
 }
 
+impl Default for BufferShelf {
+    fn default() -> BufferShelf {
+        BufferShelf::new()
+    }
+}
+
 impl BufferShelf {
-    /// A shelf that keeps nothing until [`BufferShelf::set_limit`].
+    /// A shelf of step sections ([`SECTION_USAGE`], made as large as asked) that keeps
+    /// nothing until [`BufferShelf::set_limit`].
     pub fn new() -> BufferShelf {
-        BufferShelf::default()
+        BufferShelf::of(SECTION_USAGE, false)
+    }
+
+    /// A shelf of buffers of `usage`, each made a sixteenth larger than asked where
+    /// `headroom`, that keeps nothing until [`BufferShelf::set_limit`].
+    pub fn of(usage: wgpu::BufferUsages, headroom: bool) -> BufferShelf {
+        BufferShelf {
+            free: Arc::default(),
+            usage,
+            headroom,
+            limit: Arc::default(),
+            fresh: Arc::default(),
+        }
     }
 
     /// Keeps at most `bytes`; what is over goes now.
@@ -52,14 +77,19 @@ impl BufferShelf {
         self.free.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// A section buffer of at least `size` bytes and at most a sixteenth more: the smallest
-    /// kept one, or a new one of `size` bytes.
-    pub(crate) fn take(&self, gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
+    /// A buffer of at least `size` bytes and at most a sixteenth more (an eighth with
+    /// headroom): the smallest kept one, or a new one. Its bytes are what its last user left.
+    pub fn take(&self, gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
+        let most = if self.headroom {
+            size + size / 8
+        } else {
+            size + size / 16
+        };
         let mut free = self.lock();
         let fit = free
             .iter()
             .enumerate()
-            .filter(|(_, b)| b.size() >= size && b.size() <= size + size / 16)
+            .filter(|(_, b)| b.size() >= size && b.size() <= most)
             .min_by_key(|(_, b)| b.size())
             .map(|(i, _)| i);
         if let Some(i) = fit {
@@ -67,14 +97,27 @@ impl BufferShelf {
         }
         drop(free);
         self.fresh.fetch_add(1, Ordering::Relaxed);
-        new_section(gpu, label, size)
+        // Never past what one binding holds: passes bind their buffers whole.
+        let made = if self.headroom {
+            (size + size / 16)
+                .min(gpu.max_binding().max(size))
+                .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
+        } else {
+            size
+        };
+        gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: made,
+            usage: self.usage,
+            mapped_at_creation: false,
+        })
     }
 
-    /// Keeps `buffer` (of [`SECTION_USAGE`]; others are dropped) within the limit, dropping
+    /// Keeps `buffer` (of the shelf's usage; others are dropped) within the limit, dropping
     /// the longest-kept buffers to make room.
-    pub(crate) fn put(&self, buffer: wgpu::Buffer) {
+    pub fn put(&self, buffer: wgpu::Buffer) {
         let limit = self.limit.load(Ordering::Relaxed);
-        if buffer.usage() != SECTION_USAGE || buffer.size() > limit {
+        if buffer.usage() != self.usage || buffer.size() > limit {
             return;
         }
         let mut free = self.lock();

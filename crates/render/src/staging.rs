@@ -124,6 +124,36 @@ impl StagingPool {
         drop(spawned);
     }
 
+    /// `bytes` copied into the start of `target` (a `COPY_DST` buffer) through a staging
+    /// buffer of the pool, submitted: work submitted after reads them. The staging buffer
+    /// comes back to the pool once the copy is done.
+    pub fn upload(
+        &self,
+        gpu: &Gpu,
+        bytes: &[u8],
+        target: &wgpu::Buffer,
+    ) -> Result<wgpu::SubmissionIndex, crate::Error> {
+        let size = (bytes.len() as u64).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
+        let staging = self.take(gpu, size);
+        {
+            let mut view = staging
+                .slice(..size)
+                .get_mapped_range_mut()
+                .map_err(|e| crate::Error::Readback(e.to_string()))?;
+            view.slice(..bytes.len()).copy_from_slice(bytes);
+        }
+        staging.unmap();
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("upload"),
+            });
+        encoder.copy_buffer_to_buffer(&staging, 0, target, 0, size);
+        let submitted = gpu.queue.submit([encoder.finish()]);
+        self.recycle(staging);
+        Ok(submitted)
+    }
+
     /// Takes back a buffer from [`StagingPool::take`] that is still mapped (an upload that
     /// gave up before unmapping it).
     pub(crate) fn restore(&self, buffer: wgpu::Buffer) {
