@@ -5,7 +5,6 @@ use slosh_render::Gpu;
 use wgpu::util::DeviceExt;
 
 use crate::layout::WORKGROUP;
-use crate::passes::GpuStages;
 
 /// A GPU failure, as the build reports it.
 pub(crate) fn gpu_error(what: impl std::fmt::Display) -> slosh_mls::SurfaceError {
@@ -39,6 +38,15 @@ pub(crate) const PASS_BUFFER_USAGE: wgpu::BufferUsages = wgpu::BufferUsages::STO
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
 
+/// Where the passes' buffers come from: kept from step to step on a shelf, their inputs
+/// uploaded through pooled staging memory (`GpuStages::memory`, shared by the jobs).
+#[derive(Debug)]
+pub(crate) struct PassMemory {
+    pub(crate) gpu: std::sync::Arc<Gpu>,
+    pub(crate) buffers: slosh_render::BufferShelf,
+    pub(crate) staging: slosh_render::StagingPool,
+}
+
 /// A pass buffer from the bake's shelf, given back to it when dropped: fresh device memory
 /// for every input and output of every step was allocated and freed again, step by step.
 pub(crate) struct Pooled {
@@ -64,7 +72,7 @@ impl Drop for Pooled {
 /// A storage buffer holding `data` (one zero element where it is empty: a binding cannot be
 /// empty), uploaded through the bake's staging pool and submitted before it returns.
 pub(crate) fn storage<T: bytemuck::Pod>(
-    stages: &GpuStages,
+    memory: &PassMemory,
     label: &str,
     data: &[T],
 ) -> Result<Pooled, slosh_mls::SurfaceError> {
@@ -75,34 +83,34 @@ pub(crate) fn storage<T: bytemuck::Pod>(
         bytemuck::cast_slice(data)
     };
     let size = (bytes.len() as u64).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
-    let buffer = stages.buffers.take(&stages.gpu, label, size);
-    stages
+    let buffer = memory.buffers.take(&memory.gpu, label, size);
+    memory
         .staging
-        .upload(&stages.gpu, bytes, &buffer)
+        .upload(&memory.gpu, bytes, &buffer)
         .map_err(gpu_error)?;
     Ok(Pooled {
         buffer,
-        shelf: stages.buffers.clone(),
+        shelf: memory.buffers.clone(),
     })
 }
 
 /// A storage buffer of `bytes` (at least 16), zeroed, that a pass writes and the host reads
 /// back.
-pub(crate) fn output(stages: &GpuStages, label: &str, bytes: u64) -> Pooled {
+pub(crate) fn output(memory: &PassMemory, label: &str, bytes: u64) -> Pooled {
     let size = bytes.max(16).next_multiple_of(4);
-    let buffer = stages.buffers.take(&stages.gpu, label, size);
+    let buffer = memory.buffers.take(&memory.gpu, label, size);
     // A kept buffer holds its last step's bytes; passes may count into theirs.
-    let mut encoder = stages
+    let mut encoder = memory
         .gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("clear"),
         });
     encoder.clear_buffer(&buffer, 0, None);
-    stages.gpu.queue.submit([encoder.finish()]);
+    memory.gpu.queue.submit([encoder.finish()]);
     Pooled {
         buffer,
-        shelf: stages.buffers.clone(),
+        shelf: memory.buffers.clone(),
     }
 }
 

@@ -36,8 +36,8 @@ pub(crate) fn prepare<'a>(
             .search
             .fits_pipeline(request.degree)
             .map_err(gpu_error)?,
-        smoothing: storage(index.search, "smoothing lengths", &smoothing)?,
-        rank: storage(index.search, "ranks", &index.sorted.rank())?,
+        smoothing: storage(&index.search.memory, "smoothing lengths", &smoothing)?,
+        rank: storage(&index.search.memory, "ranks", &index.sorted.rank())?,
         has_normals,
         normals_mode: match request.normals {
             NormalsMode::Mean => 0,
@@ -65,7 +65,7 @@ pub(crate) fn fit_batch(
 ) -> Result<Vec<Option<InitialFit>>, SurfaceError> {
     let gpu = index.search.gpu();
     let bytes = (batch.count * VEC4_PER_FIT * 16) as u64;
-    let out = output(index.search, "initial fits", bytes);
+    let out = output(&index.search.memory, "initial fits", bytes);
     let (x, y, row_threads) = groups(gpu, batch.count as u32);
     let settings = uniform(
         gpu,

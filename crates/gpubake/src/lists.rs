@@ -82,17 +82,17 @@ pub(crate) fn lists(
         *r.select_nth_unstable_by(mid, f32::total_cmp).1
     };
     let level = sorted.level_for_size(0.5 * f64::from(median), sorted.max_level(gpu.max_binding()));
-    let starts = storage(search, "cell starts", &sorted.cell_starts(level))?;
-    let reach_buffer = storage(search, "reach", &reach)?;
-    let normals_buffer = storage(search, "normals", &normals)?;
-    let link_buffer = storage(search, "link distances", &link2)?;
+    let starts = storage(&search.memory, "cell starts", &sorted.cell_starts(level))?;
+    let reach_buffer = storage(&search.memory, "reach", &reach)?;
+    let normals_buffer = storage(&search.memory, "normals", &normals)?;
+    let link_buffer = storage(&search.memory, "link distances", &link2)?;
     let cut_bytes = n as u64 * 16;
     if cut_bytes > gpu.max_binding() {
         return Err(gpu_error(format!(
             "{n} points' cuts take {cut_bytes} bytes, more than one binding holds"
         )));
     }
-    let cut = output(search, "list cuts", cut_bytes);
+    let cut = output(&search.memory, "list cuts", cut_bytes);
     parts.lap("neighbour lists: inputs");
     // One dispatch of the cut or the write pass: points first.. (or `todo`'s) on the grid of
     // `level`.
@@ -109,8 +109,8 @@ pub(crate) fn lists(
     }
     let pass = |p: Pass<'_>| {
         let todo = match p.todo {
-            Some(t) => storage(search, "lists todo", t)?,
-            None => output(search, "no todo", 16),
+            Some(t) => storage(&search.memory, "lists todo", t)?,
+            None => output(&search.memory, "no todo", 16),
         };
         index.submit(Dispatch {
             pipeline: p.pipeline,
@@ -137,8 +137,8 @@ pub(crate) fn lists(
     // The cut pass reads no offsets and writes no lists: two buffers of their own, since one
     // buffer may not be bound read-only and writable at once.
     let (no_starts, no_lists) = (
-        output(search, "no offsets", 16),
-        output(search, "no lists", 16),
+        output(&search.memory, "no offsets", 16),
+        output(&search.memory, "no lists", 16),
     );
     let cut_pass = |level: u32, starts: &wgpu::Buffer, todo: Option<&[u32]>| {
         pass(Pass {
@@ -164,7 +164,11 @@ pub(crate) fn lists(
     let mut coarse_level = level;
     while !deferred.is_empty() {
         coarse_level = coarse_level.saturating_sub(2).max(1);
-        let coarse_starts = storage(search, "cell starts", &sorted.cell_starts(coarse_level))?;
+        let coarse_starts = storage(
+            &search.memory,
+            "cell starts",
+            &sorted.cell_starts(coarse_level),
+        )?;
         for todo in deferred.chunks(MAX_TODO) {
             cut_pass(coarse_level, &coarse_starts, Some(todo))?;
         }
@@ -189,7 +193,7 @@ pub(crate) fn lists(
         )));
     }
     let start: Vec<u32> = start.iter().map(|&s| s as u32).collect();
-    let start_buffer = storage(search, "list starts", &start)?;
+    let start_buffer = storage(&search.memory, "list starts", &start)?;
     parts.lap("neighbour lists: cut and offsets");
     let fit_inputs = request
         .fits
@@ -217,7 +221,7 @@ pub(crate) fn lists(
             last += 1;
         }
         let count = u64::from(start[last] - start[first]);
-        let lists_out = output(search, "lists", count * 4);
+        let lists_out = output(&search.memory, "lists", count * 4);
         // The batch's last write, which the fits wait for.
         let mut written = None;
         if count > 0 {

@@ -36,16 +36,20 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
     // on grids of cells four times wider, until a grid of two cells a side visits them all.
     let mut todo: Option<Vec<u32>> = None;
     loop {
-        let starts = storage(index.search, "cell starts", &sorted.cell_starts(level))?;
+        let starts = storage(
+            &index.search.memory,
+            "cell starts",
+            &sorted.cell_starts(level),
+        )?;
         let points = todo.as_ref().map_or(n, Vec::len);
         let mut unfinished: Vec<u32> = Vec::new();
         for first in (0..points).step_by(per_batch) {
             let len = per_batch.min(points - first);
             let bytes = len as u64 * per_point;
-            let out = output(index.search, "nearest points", bytes);
+            let out = output(&index.search.memory, "nearest points", bytes);
             let todo_buffer = match &todo {
-                Some(t) => storage(index.search, "nearest todo", &t[first..first + len])?,
-                None => output(index.search, "no todo", 16),
+                Some(t) => storage(&index.search.memory, "nearest todo", &t[first..first + len])?,
+                None => output(&index.search.memory, "no todo", 16),
             };
             index.submit(Dispatch {
                 pipeline: &index.search.nearest,

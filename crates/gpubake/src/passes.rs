@@ -5,7 +5,7 @@ use std::sync::{Arc, OnceLock};
 
 use slosh_render::Gpu;
 
-use crate::dispatch::{Stamps, gpu_error, layout, record};
+use crate::dispatch::{PassMemory, Stamps, gpu_error, layout, record};
 use crate::layout::{fits_source, lists_source, nearest_source, tree_source};
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
@@ -40,8 +40,7 @@ pub struct GpuStages {
     pub(crate) readback: slosh_render::ReadbackPool,
     /// The passes' inputs and outputs, kept from step to step (`dispatch::Pooled`), and the
     /// staging memory their inputs arrive through.
-    pub(crate) buffers: slosh_render::BufferShelf,
-    pub(crate) staging: slosh_render::StagingPool,
+    pub(crate) memory: PassMemory,
 }
 
 /// The most bytes of pass buffers kept between steps (an eighth of the device's memory where
@@ -170,7 +169,6 @@ impl GpuStages {
                 .map_or(KEPT_BUFFER_BYTES, |m| (m / 8).min(KEPT_BUFFER_BYTES)),
         );
         Ok(GpuStages {
-            gpu,
             nearest_layout,
             nearest,
             lists_layout,
@@ -187,8 +185,12 @@ impl GpuStages {
             next_depth,
             gpu_nanos: AtomicU64::new(0),
             readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT),
-            buffers,
-            staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT),
+            memory: PassMemory {
+                gpu: gpu.clone(),
+                buffers,
+                staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT),
+            },
+            gpu,
         })
     }
 

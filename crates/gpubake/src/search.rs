@@ -29,9 +29,9 @@ impl NeighbourSearch for GpuStages {
         guarded(
             gpu,
             || {
-                let positions = storage(self, "search positions", &sorted.high)?;
-                let residuals = storage(self, "search residuals", &sorted.low)?;
-                let original = storage(self, "search order", &sorted.order)?;
+                let positions = storage(&self.memory, "search positions", &sorted.high)?;
+                let residuals = storage(&self.memory, "search residuals", &sorted.low)?;
+                let original = storage(&self.memory, "search order", &sorted.order)?;
                 Ok((positions, residuals, original))
             },
             gpu_error,

@@ -66,12 +66,12 @@ impl GpuStages {
                 _pad1: 0,
             },
         );
-        let keys = storage(self, "bvh keys", &keys).map_err(fault)?;
-        let sorted = storage(self, "bvh leaves", &sorted).map_err(fault)?;
-        let nodes = output(self, "bvh nodes", node_bytes);
-        let links = output(self, "bvh links", (m as u64 - 1) * 16);
-        let up = output(self, "bvh parents and slots", (m as u64 - 1) * 8);
-        let inner = output(self, "bvh depths and preorder", (m as u64 - 1) * 8);
+        let keys = storage(&self.memory, "bvh keys", &keys).map_err(fault)?;
+        let sorted = storage(&self.memory, "bvh leaves", &sorted).map_err(fault)?;
+        let nodes = output(&self.memory, "bvh nodes", node_bytes);
+        let links = output(&self.memory, "bvh links", (m as u64 - 1) * 16);
+        let up = output(&self.memory, "bvh parents and slots", (m as u64 - 1) * 8);
+        let inner = output(&self.memory, "bvh depths and preorder", (m as u64 - 1) * 8);
         let state = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("bvh depths"),
             size: 16,
