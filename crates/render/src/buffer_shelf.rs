@@ -36,8 +36,8 @@ impl Default for BufferShelf {
 }
 
 impl BufferShelf {
-    /// A shelf of step sections ([`SECTION_USAGE`], made as large as asked) that keeps
-    /// nothing until [`BufferShelf::set_limit`].
+    /// A shelf of step sections (storage and copy destination, made as large as asked) that
+    /// keeps nothing until [`BufferShelf::set_limit`].
     pub fn new() -> BufferShelf {
         BufferShelf::of(SECTION_USAGE, false)
     }
