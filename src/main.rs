@@ -128,15 +128,34 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Inspect(args) => inspect::run(&config::inspect::InspectConfig::from_args(&args)?),
         Command::Render(args) => {
             let mut config = config::render::RenderConfig::from_args(&args)?;
+            let mut unbaked = Vec::new();
             if args.path.is_file() && args.path.extension().is_some_and(|e| e == "case") {
-                config.path = render::bake_case(&args, &config.steps)?;
+                let (dir, failed) = render::bake_case(&args, &config.steps)?;
+                // A movie with frames missing would pass for whole: it is not made.
+                if !failed.is_empty() && config.movie.is_some() {
+                    anyhow::bail!(
+                        "{} of {} steps did not bake (steps {failed:?}); no movie was made",
+                        failed.len(),
+                        config.steps.len()
+                    );
+                }
+                config.path = dir;
+                config.steps.retain(|s| !failed.contains(s));
+                unbaked = failed;
             } else if args.cache.is_some() {
                 anyhow::bail!(
                     "--cache: {} is not a .case file (--cache is where a case's steps are baked)",
                     args.path.display()
                 );
             }
-            render::run(&config)
+            render::run(&config)?;
+            if !unbaked.is_empty() {
+                anyhow::bail!(
+                    "{} steps did not bake (steps {unbaked:?}); the others were rendered",
+                    unbaked.len()
+                );
+            }
+            Ok(())
         }
         Command::Play(args) => play::play(&args),
         Command::Demo(args) => play::demo(&config::demo::DemoConfig::from_args(&args)?),

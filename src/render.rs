@@ -17,7 +17,9 @@ use crate::config::render::RenderConfig;
 /// Bakes the `steps` of the case `args.path` that its cache does not hold yet (`slosh bake`'s
 /// single-step bake, with the default fit and `args.bake`'s selection), going on past a step
 /// that fails and then naming every one that did; the cache directory.
-pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<PathBuf> {
+/// The case's `steps` baked where they are not yet: the cache directory, and the steps that
+/// did not bake (each said on stderr), which the render leaves out and reports.
+pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(PathBuf, Vec<usize>)> {
     let settings = crate::cli::BakeSettings {
         fit: crate::cli::FitSettings::default(),
         select: args.bake.clone(),
@@ -44,14 +46,14 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<PathB
             }
         }
     }
-    if !failed.is_empty() {
+    if failed.len() == steps.len() {
         anyhow::bail!(
             "{} of {} steps did not bake (steps {failed:?}); nothing was rendered",
             failed.len(),
             steps.len()
         );
     }
-    Ok(bake.dir().to_path_buf())
+    Ok((bake.dir().to_path_buf(), failed))
 }
 
 fn step_path(path: &Path, step: usize) -> PathBuf {
@@ -97,8 +99,16 @@ fn h_factor(cfg: &RenderConfig, baked: f64) -> f64 {
 }
 
 pub fn run(config: &RenderConfig) -> Result<()> {
-    let first = CacheFile::open(&step_path(&config.path, config.steps[0]))
-        .with_context(|| format!("opening step {}", config.steps[0]))?;
+    // Framed by the first step that opens (a sequence goes on past one that does not).
+    let first = match config
+        .steps
+        .iter()
+        .find_map(|&s| CacheFile::open(&step_path(&config.path, s)).ok())
+    {
+        Some(file) => file,
+        None => CacheFile::open(&step_path(&config.path, config.steps[0]))
+            .with_context(|| format!("opening step {}", config.steps[0]))?,
+    };
     // The first step of the range with particles frames it (a Lagrangian run's first steps
     // may hold none, and an empty step has no extent).
     let framing = match first.header().points {
@@ -151,20 +161,25 @@ pub fn run(config: &RenderConfig) -> Result<()> {
             config.aov.as_ref().map(|p| step_pattern(p, step)),
         )
     };
+    // Steps that could not be drawn, each said when it failed; a sequence goes on past them.
+    let mut failed = Vec::new();
     if config.cpu {
         for (i, &step) in config.steps.iter().enumerate() {
             let (out, aov) = targets(step);
-            let movie = movie.as_mut().map(|(m, seconds)| (m, seconds[i]));
-            render_cpu(
+            let making_movie = movie.is_some();
+            let frame = movie.as_mut().map(|(m, seconds)| (m, seconds[i]));
+            let drawn = render_cpu(
                 config,
                 manifest.as_ref(),
                 &camera,
                 step,
-                (out.as_deref(), movie),
+                (out.as_deref(), frame),
                 aov.as_deref(),
-            )?;
+            );
+            go_on(drawn, step, making_movie, &mut failed)?;
         }
-        return finish_movie(movie);
+        finish_movie(movie)?;
+        return all_drawn(&failed, config.steps.len());
     }
     let gpu = slosh_render::Gpu::new(config.adapter.as_deref())?;
     let tracer = Tracer::new(&gpu)?;
@@ -176,68 +191,99 @@ pub fn run(config: &RenderConfig) -> Result<()> {
         );
     }
     for (i, &step) in config.steps.iter().enumerate() {
-        let path = step_path(&config.path, step);
-        let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
-        check_belongs(manifest.as_ref(), &config.path, step, &path, &file)
-            .map_err(anyhow::Error::msg)?;
-        let h = file.header();
-        let params = TraceParams {
-            iterations: config.iterations,
-            degree: config.degree.unwrap_or(h.mls.degree),
-            h_factor: h_factor(config, h.mls.h_scale) as f32,
-            covariance: config.covariance || h.mls.normals == "covariance",
-            epsilon: 1e-4,
-            mode: config.mode,
-            field_range: None,
-            colormap: config.colormap,
-            key_light: slosh_render::DEFAULT_KEY_LIGHT,
-        };
-        let start = std::time::Instant::now();
-        let (gpu_step, frame) = slosh_play::export::trace_file(
-            &gpu,
-            &tracer,
-            &file,
-            config.field.as_deref(),
-            &camera,
-            &params,
-        )?;
-        // The frame's time, the upload's (timed on its own) left out.
-        let seconds = start.elapsed().as_secs_f64() - gpu_step.upload.total_seconds;
-        let (out, aov) = targets(step);
-        let overlay = config
-            .labels
-            .then(|| Overlay::for_step(h.source.time, step, &gpu_step, &params));
-        let rgb = slosh_play::overlay::frame_rgb(&frame, overlay.as_ref());
-        if let Some(out) = &out {
-            slosh_render::write_rgb_png(out, frame.width, frame.height, &rgb)?;
-        }
-        if let Some((movie, seconds)) = movie.as_mut() {
-            movie.push_rgb(&rgb, seconds[i])?;
-        }
-        if let Some(aov) = &aov {
-            slosh_render::write_npy(
-                aov,
-                frame.height,
-                frame.width,
-                8,
-                &cpu_shade::gpu_hit_buffer(&gpu_step, &frame.hits),
+        let making_movie = movie.is_some();
+        let mut draw = || -> Result<()> {
+            let path = step_path(&config.path, step);
+            let file = CacheFile::open(&path).with_context(|| format!("opening step {step}"))?;
+            check_belongs(manifest.as_ref(), &config.path, step, &path, &file)
+                .map_err(anyhow::Error::msg)?;
+            let h = file.header();
+            let params = TraceParams {
+                iterations: config.iterations,
+                degree: config.degree.unwrap_or(h.mls.degree),
+                h_factor: h_factor(config, h.mls.h_scale) as f32,
+                covariance: config.covariance || h.mls.normals == "covariance",
+                epsilon: 1e-4,
+                mode: config.mode,
+                field_range: None,
+                colormap: config.colormap,
+                key_light: slosh_render::DEFAULT_KEY_LIGHT,
+            };
+            let start = std::time::Instant::now();
+            let (gpu_step, frame) = slosh_play::export::trace_file(
+                &gpu,
+                &tracer,
+                &file,
+                config.field.as_deref(),
+                &camera,
+                &params,
             )?;
-        }
-        let hits = frame.hits.iter().filter(|h| h.status != 0).count();
-        let up = gpu_step.upload;
-        say!(
-            "step {step} ({} points): {}x{}, {} iterations, {hits} hit pixels; upload {:.1} ms ({:.2} GB/s), frame {:.1} ms with readback, on {}",
-            h.points,
-            frame.width,
-            frame.height,
-            params.iterations,
-            up.total_seconds * 1e3,
-            up.gigabytes_per_second(),
-            seconds * 1e3,
-            gpu.info.name
-        );
+            // The frame's time, the upload's (timed on its own) left out.
+            let seconds = start.elapsed().as_secs_f64() - gpu_step.upload.total_seconds;
+            let (out, aov) = targets(step);
+            let overlay = config
+                .labels
+                .then(|| Overlay::for_step(h.source.time, step, &gpu_step, &params));
+            let rgb = slosh_play::overlay::frame_rgb(&frame, overlay.as_ref());
+            if let Some(out) = &out {
+                slosh_render::write_rgb_png(out, frame.width, frame.height, &rgb)?;
+            }
+            if let Some((movie, seconds)) = movie.as_mut() {
+                movie.push_rgb(&rgb, seconds[i])?;
+            }
+            if let Some(aov) = &aov {
+                slosh_render::write_npy(
+                    aov,
+                    frame.height,
+                    frame.width,
+                    8,
+                    &cpu_shade::gpu_hit_buffer(&gpu_step, &frame.hits),
+                )?;
+            }
+            let hits = frame.hits.iter().filter(|h| h.status != 0).count();
+            let up = gpu_step.upload;
+            say!(
+                "step {step} ({} points): {}x{}, {} iterations, {hits} hit pixels; upload {:.1} ms ({:.2} GB/s), frame {:.1} ms with readback, on {}",
+                h.points,
+                frame.width,
+                frame.height,
+                params.iterations,
+                up.total_seconds * 1e3,
+                up.gigabytes_per_second(),
+                seconds * 1e3,
+                gpu.info.name
+            );
+            Ok(())
+        };
+        go_on(draw(), step, making_movie, &mut failed)?;
     }
-    finish_movie(movie)
+    finish_movie(movie)?;
+    all_drawn(&failed, config.steps.len())
+}
+
+/// A step that was not drawn: said, and counted in `failed`, so that a sequence goes on past
+/// it; a movie stops there (one with a frame missing would pass for whole).
+fn go_on(drawn: Result<()>, step: usize, movie: bool, failed: &mut Vec<usize>) -> Result<()> {
+    match drawn {
+        Ok(()) => Ok(()),
+        Err(e) if movie => Err(e.context(format!("step {step}; the movie was not made"))),
+        Err(e) => {
+            eprintln!("step {step}: {e:#}");
+            failed.push(step);
+            Ok(())
+        }
+    }
+}
+
+/// An error naming the steps that were not drawn, if any.
+fn all_drawn(failed: &[usize], steps: usize) -> Result<()> {
+    if failed.is_empty() {
+        return Ok(());
+    }
+    anyhow::bail!(
+        "{} of {steps} steps were not drawn (steps {failed:?}); the others were",
+        failed.len()
+    )
 }
 
 fn finish_movie(movie: Option<(slosh_movie::MovieWriter, Vec<f64>)>) -> Result<()> {

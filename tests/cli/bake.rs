@@ -616,7 +616,8 @@ fn slurm_job_arrays_bake_like_one_process_and_resume() {
 /// `slosh render CASE.case`: the steps asked for are baked first into NAME.slosh beside the
 /// case (with the field the frame shows), and the frame is byte for byte what `slosh bake`
 /// then `slosh render DIR` make; a step that cannot be read fails the command, naming it,
-/// after the others are baked.
+/// after the others are baked and drawn (a sequence goes on past a bad step, from a case or
+/// from a series missing a step file).
 #[test]
 fn a_case_renders_after_its_steps_are_baked_beside_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -667,10 +668,28 @@ fn a_case_renders_after_its_steps_are_baked_beside_it() {
         err.contains("step 2 did not bake") && err.contains("sphere.geo00002"),
         "{err}"
     );
+    assert!(err.contains("the others were rendered"), "{err}");
     assert!(
         cache.join("step-00000.slc").exists(),
         "the others are baked"
     );
+    // The sequence goes on past the step: the others are drawn, that one is not.
+    let frame = |step: usize| dir.path().join(format!("f{step}.png"));
+    assert!(frame(0).exists() && frame(1).exists() && !frame(2).exists());
+    // So does a baked series missing a step file, named as such.
+    std::fs::remove_file(baked.join("step-00001.slc")).unwrap();
+    let from_dir = dir.path().join("d{}.png");
+    let (ok, _, err) = render(
+        &baked,
+        &["--steps", "0..=2", "--out", from_dir.to_str().unwrap()],
+    );
+    assert!(!ok, "a missing step fails the render");
+    assert!(
+        err.contains("step 1") && err.contains("step-00001.slc"),
+        "{err}"
+    );
+    let drawn = |step: usize| dir.path().join(format!("d{step}.png")).exists();
+    assert!(drawn(0) && !drawn(1) && drawn(2), "{err}");
 }
 
 /// `--device auto`, the default, bakes on a GPU where Vulkan lists one (a discrete or
