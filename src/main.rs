@@ -128,7 +128,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Inspect(args) => inspect::run(&config::inspect::InspectConfig::from_args(&args)?),
         Command::Render(args) => {
             let mut config = config::render::RenderConfig::from_args(&args)?;
-            let mut unbaked = Vec::new();
+            let (mut unbaked, mut asked) = (Vec::new(), 0);
             if args.path.is_file() && args.path.extension().is_some_and(|e| e == "case") {
                 let (dir, failed) = render::bake_case(&args, &config.steps)?;
                 // A movie with frames missing would pass for whole: it is not made.
@@ -140,6 +140,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                     );
                 }
                 config.path = dir;
+                asked = config.steps.len();
                 config.steps.retain(|s| !failed.contains(s));
                 unbaked = failed;
             } else if args.cache.is_some() {
@@ -151,7 +152,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             render::run(&config)?;
             if !unbaked.is_empty() {
                 anyhow::bail!(
-                    "{} steps did not bake (steps {unbaked:?}); the others were rendered",
+                    "{} of {asked} steps did not bake (steps {unbaked:?}); the others were rendered",
                     unbaked.len()
                 );
             }

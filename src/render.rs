@@ -268,7 +268,7 @@ fn go_on(drawn: Result<()>, step: usize, movie: bool, failed: &mut Vec<usize>) -
         Ok(()) => Ok(()),
         Err(e) if movie => Err(e.context(format!("step {step}; the movie was not made"))),
         Err(e) => {
-            eprintln!("step {step}: {e:#}");
+            eprintln!("step {step}: {}", crate::message(&e));
             failed.push(step);
             Ok(())
         }

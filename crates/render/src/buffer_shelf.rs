@@ -105,12 +105,7 @@ impl BufferShelf {
         } else {
             size
         };
-        gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: made,
-            usage: self.usage,
-            mapped_at_creation: false,
-        })
+        create(gpu, label, made, self.usage)
     }
 
     /// Keeps `buffer` (of the shelf's usage; others are dropped) within the limit, dropping
@@ -130,10 +125,14 @@ impl BufferShelf {
 
 /// A new section buffer of `size` bytes.
 pub(crate) fn new_section(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
+    create(gpu, label, size, SECTION_USAGE)
+}
+
+fn create(gpu: &Gpu, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
     gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size,
-        usage: SECTION_USAGE,
+        usage,
         mapped_at_creation: false,
     })
 }
