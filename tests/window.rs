@@ -962,6 +962,19 @@ fn a_slow_gpu_answers_within_100_ms_and_still_refines_to_the_render() {
             "no pass drew {kind}"
         );
     }
+    if *worst > 100.0 {
+        // What the player logged around the slowest pass, to say where its time went.
+        let lines: Vec<&str> = log.lines().collect();
+        let pass = line.split(':').next().unwrap_or_default();
+        if let Some(at) = lines
+            .iter()
+            .position(|l| l.starts_with(&format!("{pass}:")))
+        {
+            for l in &lines[at.saturating_sub(12)..(at + 3).min(lines.len())] {
+                eprintln!("  {l}");
+            }
+        }
+    }
     assert!(*worst <= 100.0, "a pass took {worst:.1} ms: {line}");
 
     // At rest, refined: the app's screenshot is `slosh render` of the view, pixel for pixel.

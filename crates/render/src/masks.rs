@@ -13,7 +13,7 @@ use crate::bindings::bind_entries;
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
-use crate::pass::{PassLayouts, StepPass, storage_buffer, uniform_buffer};
+use crate::pass::{PassLayouts, StepPass, held_storage, storage_buffer, uniform_buffer};
 use crate::shaders::{EXPAND_ARRAYS, MASK_ARRAYS, expand_wgsl};
 use crate::upload::{EMPTY_BINDING, GpuStep};
 
@@ -60,13 +60,16 @@ pub(crate) struct NeighbourMasks {
 
 /// A storage buffer of `size` bytes the mask pass writes (readable back for tests).
 pub(crate) fn mask_buffer(gpu: &Gpu, size: u64) -> wgpu::Buffer {
-    storage_buffer(gpu, "neighbour masks", size)
+    storage_buffer(gpu, MASKS_LABEL, size)
 }
 
 /// A buffer for the candidates the mask pass expands, one per slot.
 pub(crate) fn candidate_buffer(gpu: &Gpu, size: u64) -> wgpu::Buffer {
-    storage_buffer(gpu, "candidates", size)
+    storage_buffer(gpu, CANDIDATES_LABEL, size)
 }
+
+const MASKS_LABEL: &str = "neighbour masks";
+const CANDIDATES_LABEL: &str = "candidates";
 
 impl NeighbourMasks {
     pub(crate) fn new(gpu: &Gpu, limit: u64) -> NeighbourMasks {
@@ -138,18 +141,13 @@ impl NeighbourMasks {
         let current = held.as_ref().is_some_and(|h| h.step == step.id());
         if !current {
             let (needed, candidates_needed) = (step.info.mask_bytes(), step.info.candidate_bytes());
-            // The buffers are reused while they are large enough: the pass writes every word
-            // the step's clusters read.
+            // The pass writes every word the step's clusters read.
             let (buffer, candidates) = match held.take() {
                 Some(h) => (Some(h.buffer), Some(h.candidates)),
                 None => (None, None),
             };
-            let buffer = buffer
-                .filter(|b| b.size() >= needed)
-                .unwrap_or_else(|| mask_buffer(gpu, needed));
-            let candidates = candidates
-                .filter(|b| b.size() >= candidates_needed)
-                .unwrap_or_else(|| candidate_buffer(gpu, candidates_needed));
+            let buffer = held_storage(gpu, MASKS_LABEL, buffer, needed);
+            let candidates = held_storage(gpu, CANDIDATES_LABEL, candidates, candidates_needed);
             let group = Self::group(gpu, self.layout(), &buffer, &candidates, self.pass.limit);
             *held = Some(HeldMasks {
                 step: step.id(),

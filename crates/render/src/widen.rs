@@ -13,7 +13,7 @@ use crate::bindings::bind_entries;
 use crate::context::Gpu;
 use crate::error::{Error, Result};
 use crate::layout::WidenSettings;
-use crate::pass::{PassLayouts, StepPass, storage_buffer, uniform_buffer};
+use crate::pass::{PassLayouts, StepPass, held_storage, uniform_buffer};
 use crate::shaders::{TREE_ARRAYS, WIDEN_ARRAYS, WIDEN_GROUP, widen_wgsl};
 use crate::upload::GpuStep;
 
@@ -61,16 +61,9 @@ impl Widening {
         if let Some(h) = held.as_ref().filter(|h| h.step == step.id()) {
             return Ok(h.group.clone());
         }
-        // The buffer is reused while it is large enough (the pass writes every entry the walk
-        // can reach), and made a quarter larger than asked: steps of one series differ a
-        // little in node count, and a new buffer in the middle of playback costs an
-        // allocation.
-        let needed = step.info.wide_bytes();
-        let buffer = held
-            .take()
-            .map(|h| h.buffer)
-            .filter(|b| b.size() >= needed)
-            .unwrap_or_else(|| storage_buffer(gpu, "wide tree", needed + needed / 4));
+        // The pass writes every entry the walk can reach.
+        let held_buffer = held.take().map(|h| h.buffer);
+        let buffer = held_storage(gpu, "wide tree", held_buffer, step.info.wide_bytes());
         self.record(gpu, step, &buffer, encoder)?;
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("wide tree"),

@@ -1134,7 +1134,7 @@ fn the_tracer_widens_the_tree_of_the_step_it_draws() {
 /// The tracer holds the neighbour masks of one step, the one it last refined: refined frames
 /// of two steps taken in turn equal those of a tracer that saw only one of them (stale masks
 /// would refine with another step's neighbour lists), a one-iteration frame derives none, and
-/// what it holds is one buffer, as large as the larger step's masks.
+/// what it holds is one buffer, at most a quarter larger than the larger step's masks.
 #[test]
 fn the_tracer_derives_the_masks_of_the_step_it_refines() {
     let Some(dev) = device() else { return };
@@ -1170,8 +1170,9 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
             assert!(hits > 500, "{hits} hit pixels");
             assert!(frame.hits == alone[k].hits && frame.rgba == alone[k].rgba);
             assert!(
-                held >= step.info.mask_bytes() + step.info.candidate_bytes() && held <= largest,
-                "{held} bytes held"
+                held >= step.info.mask_bytes() + step.info.candidate_bytes()
+                    && held <= largest + largest / 4 + 2 * wgpu::COPY_BUFFER_ALIGNMENT,
+                "{held} bytes held, the largest step's masks {largest}"
             );
         }
     }
@@ -1212,6 +1213,37 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
             assert!(shared.mask_progress(step).finished());
         }
     }
+}
+
+/// A step a little larger than the one refined before it derives its masks into the buffers
+/// that one left (made a quarter larger than asked): on the path of its first refined frame,
+/// new buffers cost an allocation and their first clear (80 ms on lavapipe for a 300k-point
+/// step, over the 100 ms a UI pass may take).
+#[test]
+fn a_slightly_larger_step_refines_in_the_masks_buffers_held() {
+    let Some(dev) = device() else { return };
+    let steps = uploaded_scenes(
+        dev,
+        &[(SceneKind::Sphere, 3000, 5), (SceneKind::Sphere, 3100, 5)],
+    );
+    let bytes = |step: &GpuStep| step.info.mask_bytes() + step.info.candidate_bytes();
+    let (small, large) = (bytes(&steps[0].1), bytes(&steps[1].1));
+    assert!(
+        small < large && large < small + small / 8,
+        "{small} then {large} bytes"
+    );
+    let shared = Tracer::new(&dev.gpu).unwrap();
+    let mut held = Vec::new();
+    for (camera, step) in &steps {
+        let params = TraceParams::for_step(step, 3);
+        let frame = shared.render(&dev.gpu, step, camera, &params).unwrap();
+        assert!(hit_pixels(&frame) > 500);
+        held.push(shared.mask_bytes());
+    }
+    assert_eq!(
+        held[0], held[1],
+        "new masks buffers for {large} bytes after {small}"
+    );
 }
 
 /// A step uploaded into section buffers another step held (kept on a `BufferShelf` when it
