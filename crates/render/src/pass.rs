@@ -116,10 +116,10 @@ pub(crate) fn storage_buffer(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer 
 
 /// The storage buffer a pass writes for the step drawn last (the wide tree, the neighbour
 /// masks): `held` while it holds `needed` bytes (the pass writes every word the step reads),
-/// else a new one a quarter larger than asked. Steps of one series differ a little in size,
-/// and a new buffer costs an allocation and its first clear, on the path of a frame: on
-/// lavapipe, 27 MB of masks for a 300k-point step a few hundred bytes larger than the last
-/// took 80 ms more than its later parts.
+/// else a new one a quarter larger than asked (never past the device's largest buffer).
+/// Steps of one series differ a little in size, and a new buffer costs an allocation and its
+/// first clear, on the path of a frame: on lavapipe, 27 MB of masks for a 300k-point step a
+/// few hundred bytes larger than the last took 80 ms more than its later parts.
 pub(crate) fn held_storage(
     gpu: &Gpu,
     label: &str,
@@ -127,7 +127,9 @@ pub(crate) fn held_storage(
     needed: u64,
 ) -> wgpu::Buffer {
     held.filter(|b| b.size() >= needed).unwrap_or_else(|| {
-        let size = (needed + needed / 4).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
+        let align = wgpu::COPY_BUFFER_ALIGNMENT;
+        let largest = (gpu.device.limits().max_buffer_size / align * align).max(needed);
+        let size = (needed + needed / 4).next_multiple_of(align).min(largest);
         storage_buffer(gpu, label, size)
     })
 }

@@ -1218,7 +1218,7 @@ fn the_tracer_derives_the_masks_of_the_step_it_refines() {
 /// A step a little larger than the one refined before it derives its masks into the buffers
 /// that one left (made a quarter larger than asked): on the path of its first refined frame,
 /// new buffers cost an allocation and their first clear (80 ms on lavapipe for a 300k-point
-/// step, over the 100 ms a UI pass may take).
+/// step, which put a UI pass past the 100 ms it may take).
 #[test]
 fn a_slightly_larger_step_refines_in_the_masks_buffers_held() {
     let Some(dev) = device() else { return };
