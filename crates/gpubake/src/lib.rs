@@ -12,6 +12,7 @@
 mod cells;
 mod dispatch;
 mod fits;
+mod host_memory;
 mod index;
 mod layout;
 mod lists;

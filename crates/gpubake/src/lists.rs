@@ -210,6 +210,7 @@ pub(crate) fn lists(
     // In whole 16 MB steps, so that the next step's lists (of a slightly other length) find
     // this one's memory free rather than fault in fresh pages.
     let mut words: Vec<u32> = Vec::with_capacity((total as usize).next_multiple_of(WORDS_GRANULE));
+    crate::host_memory::advise_huge_pages(&mut words);
     let mut first = 0;
     while first < n {
         let writing = std::time::Instant::now();
