@@ -16,9 +16,8 @@ use crate::config::render::RenderConfig;
 
 /// Bakes the `steps` of the case `args.path` that its cache does not hold yet (`slosh bake`'s
 /// single-step bake, with the default fit and `args.bake`'s selection), going on past a step
-/// that fails and then naming every one that did; the cache directory.
-/// The case's `steps` baked where they are not yet: the cache directory, and the steps that
-/// did not bake (each said on stderr), which the render leaves out and reports.
+/// that fails: the cache directory, and the steps that did not bake (each said on stderr),
+/// which the render leaves out and reports. An error where none baked.
 pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(PathBuf, Vec<usize>)> {
     let settings = crate::cli::BakeSettings {
         fit: crate::cli::FitSettings::default(),
