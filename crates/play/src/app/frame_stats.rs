@@ -3,6 +3,7 @@
 
 use std::time::Instant;
 
+use super::run_queue::waited_for_a_core;
 use crate::engine::{Engine, FrameReport};
 use crate::refine::Draw;
 
@@ -12,6 +13,10 @@ pub struct FrameStats {
     last_frame: Instant,
     /// Milliseconds between the last two UI frames: what a person sees as the frame time.
     pub frame_ms: f64,
+    /// Milliseconds of `frame_ms` the UI thread waited, runnable, for a core (other processes
+    /// or the software GPU's threads held them); `None` where the kernel does not say.
+    pub queued_ms: Option<f64>,
+    queued_before: Option<std::time::Duration>,
     pub trace_ms: Option<f64>,
     pub upload_ms: f64,
     /// Frames drawn so far.
@@ -25,6 +30,8 @@ impl Default for FrameStats {
         FrameStats {
             last_frame: Instant::now(),
             frame_ms: 0.0,
+            queued_ms: None,
+            queued_before: waited_for_a_core(),
             trace_ms: None,
             upload_ms: 0.0,
             frames: 0,
@@ -39,6 +46,11 @@ impl FrameStats {
         let seconds = self.last_frame.elapsed().as_secs_f64();
         self.last_frame = Instant::now();
         self.frame_ms = seconds * 1e3;
+        let queued = waited_for_a_core();
+        self.queued_ms = queued
+            .zip(self.queued_before)
+            .map(|(now, before)| now.saturating_sub(before).as_secs_f64() * 1e3);
+        self.queued_before = queued;
         seconds
     }
 

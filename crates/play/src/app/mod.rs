@@ -8,6 +8,7 @@ mod frame_stats;
 mod launch;
 mod options;
 mod player;
+mod run_queue;
 mod timeline_panel;
 mod view;
 

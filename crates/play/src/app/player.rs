@@ -555,7 +555,8 @@ impl eframe::App for Player {
         self.stats.passes += 1;
         if self.log_frames {
             // The pass's interval since the last one (what delays an input event while the
-            // player is busy) and the time spent in this pass's own work.
+            // player is busy), the time spent in this pass's own work, and how much of the
+            // interval the UI thread waited, runnable, for a core.
             let band = match (&self.last.draw, self.last.masks) {
                 (
                     Some(Draw::Rows {
@@ -571,7 +572,7 @@ impl eframe::App for Player {
                 _ => String::new(),
             };
             say!(
-                "pass {}: wanted {} shown {:?}{}{}{band} ms {:.1}/{:.1} {} export {}..={}",
+                "pass {}: wanted {} shown {:?}{}{}{band} ms {:.1}/{:.1}/{} {} export {}..={}",
                 self.stats.passes,
                 self.last.wanted,
                 self.last.shown,
@@ -581,6 +582,9 @@ impl eframe::App for Player {
                     .map_or(String::new(), |n| format!(" drew {n}")),
                 self.stats.frame_ms,
                 pass_start.elapsed().as_secs_f64() * 1e3,
+                self.stats
+                    .queued_ms
+                    .map_or("-".into(), |q| format!("{q:.1}")),
                 if busy { "busy" } else { "idle" },
                 self.export.first,
                 self.export.last
