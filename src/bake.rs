@@ -183,19 +183,23 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             );
         }
     }
-    if !report.empty.is_empty() {
-        let mut list: Vec<String> = report
-            .empty
-            .iter()
-            .take(20)
-            .map(|i| i.to_string())
-            .collect();
-        if report.empty.len() > 20 {
-            list.push(format!("… ({} in all)", report.empty.len()));
+    for (steps, what) in [
+        (&report.empty, "hold no particles"),
+        (
+            &report.too_few,
+            "keep fewer than two particles after selection (too few to size a surface)",
+        ),
+    ] {
+        if steps.is_empty() {
+            continue;
+        }
+        let mut list: Vec<String> = steps.iter().take(20).map(|i| i.to_string()).collect();
+        if steps.len() > 20 {
+            list.push(format!("… ({} in all)", steps.len()));
         }
         say!(
-            "{} steps hold no particles and were baked as empty steps: {}",
-            report.empty.len(),
+            "{} steps {what} and were baked as empty steps: {}",
+            steps.len(),
             list.join(", ")
         );
     }

@@ -205,6 +205,51 @@ fn obj_clouds_without_faces_are_read() {
     assert!(!ok && err.contains("bad.obj: line 2"), "{err}");
 }
 
+/// `slosh gen sphere` of 500 particles and `steps` steps, as Gold ASCII, into `run`.
+fn gold_sphere(run: &Path, steps: usize) {
+    let (ok, _, err) = slosh(&[
+        "gen",
+        "sphere",
+        "--points",
+        "500",
+        "--steps",
+        &steps.to_string(),
+        "--format",
+        "gold-ascii",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+}
+
+/// Step `index` of the `gold_sphere` run replaced by `points` (x, y, z as written), each a
+/// surface particle whose normal is its position: in Gold ASCII every x, then every y, then
+/// every z, and each variable likewise per component.
+fn write_gold_step(run: &Path, index: usize, points: &[[&str; 3]]) {
+    let n = points.len();
+    let column = |c: usize| -> String { points.iter().map(|p| format!("{}\n", p[c])).collect() };
+    let xyz = format!("{}{}{}", column(0), column(1), column(2));
+    let ids: String = (1..=n).map(|i| format!("{i}\n")).collect();
+    write(
+        &run.join(format!("sphere.geo{index:05}")),
+        &format!(
+            "particles\nEnSight point data\nnode id assign\nelement id assign\npart\n1\n\
+             particles\ncoordinates\n{n}\n{xyz}point\n{n}\n{ids}"
+        ),
+    );
+    let ones = "1.0\n".repeat(n);
+    for (v, values) in [
+        ("normal", xyz.clone()),
+        ("pressure", ones.clone()),
+        ("surface", ones),
+    ] {
+        write(
+            &run.join(format!("sphere.{v}{index:05}")),
+            &format!("{v}\npart\n1\ncoordinates\n{values}"),
+        );
+    }
+}
+
 /// Item 16: a step without particles (a Lagrangian run before its first injection: a point
 /// part of no elements) is a valid step: baked as empty, verified, reported in the summary
 /// and by `inspect`, rendered as background, and the series framed by its other steps.
@@ -212,31 +257,9 @@ fn obj_clouds_without_faces_are_read() {
 fn empty_steps_are_valid_steps() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let (ok, _, err) = slosh(&[
-        "gen",
-        "sphere",
-        "--points",
-        "500",
-        "--steps",
-        "3",
-        "--format",
-        "gold-ascii",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
+    gold_sphere(&run, 3);
     // Step 0 before the injection: a point part of no elements, and variables of no values.
-    write(
-        &run.join("sphere.geo00000"),
-        "particles\nEnSight point data\nnode id assign\nelement id assign\npart\n         1\n\
-         particles\ncoordinates\n         0\npoint\n         0\n",
-    );
-    for v in ["normal", "pressure", "surface"] {
-        write(
-            &run.join(format!("sphere.{v}00000")),
-            &format!("{v}\npart\n         1\ncoordinates\n"),
-        );
-    }
+    write_gold_step(&run, 0, &[]);
     let cache = dir.path().join("cache");
     let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &["--fields", "pressure"]);
     assert!(ok, "{out}{err}");
@@ -278,6 +301,67 @@ fn empty_steps_are_valid_steps() {
         let n = hits(i);
         assert!(n > 200 && n < 48 * 48 * 9 / 10, "step {i}: {n} hit pixels");
     }
+}
+
+/// A step whose particles, once selected, are too few to size a surface (an injection's first
+/// particle; one finite among non-finite ones) is baked as an empty step that records what it
+/// dropped, not a failure; one with no finite particle at all is a failure that says so, and
+/// the batch goes on past it.
+#[test]
+fn a_lone_particle_is_an_empty_step_and_no_finite_one_a_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    gold_sphere(&run, 4);
+    write_gold_step(&run, 0, &[["0.1", "0.2", "0.9"]]);
+    write_gold_step(
+        &run,
+        1,
+        &[
+            ["0.1", "0.2", "0.9"],
+            ["nan", "0.2", "0.9"],
+            ["0.3", "inf", "0.9"],
+        ],
+    );
+    write_gold_step(&run, 2, &[["nan", "0.2", "0.9"], ["0.3", "0.2", "nan"]]);
+    let cache = dir.path().join("cache");
+    let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &[]);
+    assert!(!ok, "{out}{err}");
+    assert!(
+        out.contains("baked 3 steps") && out.contains("1 failed"),
+        "{out}"
+    );
+    assert!(
+        out.contains(
+            "2 steps keep fewer than two particles after selection (too few to size a surface) \
+             and were baked as empty steps: 0, 1"
+        ),
+        "{out}"
+    );
+    assert!(
+        err.contains("step 2: ") && err.contains("none of the 2 particles has finite coordinates"),
+        "{err}"
+    );
+    assert!(!cache.join("step-00002.slc").exists());
+    for (index, says) in [
+        (
+            0,
+            "0 kept of 1 read (0 non-finite, 0 not on the surface, 1 too few to size a surface dropped)",
+        ),
+        (
+            1,
+            "0 kept of 3 read (2 non-finite, 0 not on the surface, 1 too few to size a surface dropped)",
+        ),
+    ] {
+        let file = cache.join(format!("step-{index:05}.slc"));
+        let (ok, out, err) = slosh(&["inspect", file.to_str().unwrap(), "--verify"]);
+        assert!(
+            ok && out.contains(says) && out.contains("ok: footer checksum, every section"),
+            "{out}{err}"
+        );
+    }
+    // The steps around them bake as before.
+    let (ok, out, err) = slosh(&["inspect", cache.join("step-00003.slc").to_str().unwrap()]);
+    assert!(ok && out.contains("500 kept of 500 read"), "{out}{err}");
 }
 
 /// A pile of particles at one place on the surface (a solver parking particles, or writing a

@@ -119,6 +119,9 @@ pub struct BatchReport {
     pub failed: Vec<(usize, String)>,
     /// Steps baked without particles (valid steps, not failures), in order.
     pub empty: Vec<usize>,
+    /// Steps with particles baked empty, fewer than two being left after selection (one
+    /// cannot be sized), in order.
+    pub too_few: Vec<usize>,
     pub points: u64,
     pub bytes: u64,
     /// Summed seconds per stage over baked steps, pipeline order; plus "write".
@@ -429,8 +432,10 @@ pub fn run_batch(
                                 ..
                             } => {
                                 r.baked += 1;
-                                if *points == 0 {
+                                if *points == 0 && stats.input_points == 0 {
                                     r.empty.push(index);
+                                } else if *points == 0 {
+                                    r.too_few.push(index);
                                 }
                                 r.bytes += bytes;
                                 r.points += points;
@@ -453,6 +458,7 @@ pub fn run_batch(
     let mut report = report.into_inner().unwrap_or_else(|p| p.into_inner());
     report.failed.sort_by_key(|(i, _)| *i);
     report.empty.sort_unstable();
+    report.too_few.sort_unstable();
     // A manifest that cannot be written is reported beside the steps' own outcomes, which
     // must not be lost behind it.
     match Manifest::refresh(&opts.out) {

@@ -400,7 +400,10 @@ fn bake_parts(
     }
 
     if n_in == 0 {
-        return Ok((empty_step(input, params)?, SurfaceParts::empty(&params.mls)));
+        return Ok((
+            empty_step(input, params, StepStats::default())?,
+            SurfaceParts::empty(&params.mls),
+        ));
     }
 
     // 1. Select: finite positions, then the surface.
@@ -441,12 +444,25 @@ fn bake_parts(
         .filter_map(|(&i, &s)| s.then_some(i))
         .collect();
     let dropped_interior = finite.len() - kept.len();
-    if kept.len() < 2 {
+    if finite.is_empty() {
         return Err(input_err(format!(
-            "{} of {n_in} particles left after selection ({dropped_non_finite} non-finite, \
-             {dropped_interior} not on the surface): nothing to bake",
-            kept.len()
+            "none of the {n_in} particles has finite coordinates: nothing to bake"
         )));
+    }
+    if kept.len() < 2 {
+        // One particle (an injection's first, or the only one the selection keeps) has no
+        // spacing to size a sphere or a surface by: an empty step that says what it dropped.
+        let stats = StepStats {
+            input_points: n_in as u64,
+            dropped_non_finite: dropped_non_finite as u64,
+            dropped_interior: dropped_interior as u64,
+            dropped_too_few: kept.len() as u64,
+            ..StepStats::default()
+        };
+        return Ok((
+            empty_step(input, params, stats)?,
+            SurfaceParts::empty(&params.mls),
+        ));
     }
     clock.lap("select");
 
@@ -682,15 +698,23 @@ fn bvh_sections(nodes: &[slosh_cache::GpuBvhNode]) -> [SectionInput; 1] {
     .raw_within_budget(raw_rank::BVH_NODES)]
 }
 
-/// A step without particles (a Lagrangian or DEM run before its first injection): a valid
-/// step with every section empty, shown as empty and counted as such, not a failure.
-fn empty_step(input: &StepInput, params: &BakeParams) -> Result<BakedStep, BakeError> {
+/// A step without particles (a Lagrangian or DEM run before its first injection), or with
+/// too few left after selection to size a surface (`stats` says which): a valid step with
+/// every section empty, shown as empty and counted as such, not a failure.
+fn empty_step(
+    input: &StepInput,
+    params: &BakeParams,
+    stats: StepStats,
+) -> Result<BakedStep, BakeError> {
     let surface = SurfaceParts::<f64>::empty(&params.mls);
     let (mut sections, fields, _) = gpu_sections(&surface, input, &[], params)?;
     sections.extend(bvh_sections(&[]));
     sections.extend(fields);
     Ok(BakedStep {
-        header: step_header(input, params),
+        header: Header {
+            stats,
+            ..step_header(input, params)
+        },
         sections,
     })
 }

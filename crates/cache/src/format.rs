@@ -308,6 +308,9 @@ pub struct StepStats {
     pub dropped_non_finite: u64,
     /// Dropped as not on the surface.
     pub dropped_interior: u64,
+    /// Left after selection but too few (one) to size a surface by: dropped, the step kept
+    /// empty.
+    pub dropped_too_few: u64,
     /// Points whose neighbour list was cut at the cap.
     pub capped: u64,
     /// Normals the bake reversed because their neighbourhood contradicted them, in all, and
