@@ -1,0 +1,62 @@
+#!/bin/bash
+# The GPU figures the open issues' goals name (docs/results-scrub.md, docs/results-bake.md),
+# in parts that each fit one 10-minute command on a GPU host with 16 cores. Reports and
+# printed output go to OUT; series are written under /tmp and reused.
+#
+#   SLOSH=path/to/slosh scripts/gpu_figures.sh OUT scrub|scale|bake
+#
+# scrub: `bench scrub` 100k and 1M (page cache), `bench gpu` (table 4.6, 100k and 1M).
+# scale: `bench scrub` 4M, 500 steps of 1M resident (8 distinct shapes), the raw EnSight
+#        case at 1M with the GPU bake.
+# bake:  `bench bake` 100k and 1M with the GPU column, 64 steps of 1M through the batch,
+#        one 4M step baked on the GPU with its device memory sampled every 50 ms.
+set -euo pipefail
+slosh=$(readlink -f "${SLOSH:-slosh}")
+out=${1:?OUT}
+part=${2:?scrub, scale or bake}
+mkdir -p "$out"
+run() {
+    local name=$1
+    shift
+    echo "== $name: slosh $*"
+    local TIMEFORMAT="$name: %R s wall"
+    { time "$slosh" "$@"; } 2>&1 | tee "$out/$name.txt"
+}
+case $part in
+scrub)
+    run scrub bench scrub --points 100000,1000000 --dir /tmp/slosh-sd --out "$out/scrub.md"
+    run gpu bench gpu --tables 4.6 --points 100000,1000000 --max-iterations 2 \
+        --out "$out/gpu.md"
+    ;;
+scale)
+    run scrub-4m bench scrub --points 4000000 --steps 24 --distinct 4 --pool-steps 8 \
+        --jumps 40 --dir /tmp/slosh-sd --out "$out/scrub-4m.md"
+    run scrub-resident bench scrub --points 1000000 --steps 500 --distinct 8 \
+        --pool-steps 500 --jumps 100 --dir /tmp/slosh-sd --out "$out/scrub-resident.md"
+    run scrub-raw bench scrub --points 1000000 --steps 24 --jumps 30 --raw-case \
+        --raw-case-gpu --dir /tmp/slosh-sd --out "$out/scrub-raw.md"
+    ;;
+bake)
+    run bake bench bake --points 100000,1000000 --runs 3 --threads 16 --series 0 \
+        --out "$out/bake.md"
+    run bake-series bench bake --points 1000000 --runs 1 --threads 16 --series 64 \
+        --out "$out/bake-series.md"
+    [ -e /tmp/slosh-s4m/sphere.case ] ||
+        "$slosh" gen sphere --points 4000000 --steps 1 --out /tmp/slosh-s4m > /dev/null
+    rm -rf /tmp/slosh-c4m
+    if command -v nvidia-smi > /dev/null; then
+        nvidia-smi --query-gpu=memory.used --format=csv,noheader,nounits -lms 50 \
+            > "$out/bake-4m-memory.txt" &
+        sampler=$!
+    fi
+    run bake-4m bake /tmp/slosh-s4m/sphere.case --out /tmp/slosh-c4m --device gpu
+    if [ -n "${sampler:-}" ]; then
+        kill "$sampler"
+        echo "bake-4m: device memory used, MiB: idle $(head -1 "$out/bake-4m-memory.txt"), peak $(sort -n "$out/bake-4m-memory.txt" | tail -1)"
+    fi
+    ;;
+*)
+    echo "unknown part '$part': scrub, scale or bake" >&2
+    exit 2
+    ;;
+esac
