@@ -149,14 +149,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                     args.path.display()
                 );
             }
-            render::run(&config)?;
-            if !unbaked.is_empty() {
-                anyhow::bail!(
-                    "{} of {asked} steps did not bake (steps {unbaked:?}); the others were rendered",
-                    unbaked.len()
-                );
-            }
-            Ok(())
+            render::with_unbaked(render::run(&config), &unbaked, asked)
         }
         Command::Play(args) => play::play(&args),
         Command::Demo(args) => play::demo(&config::demo::DemoConfig::from_args(&args)?),

@@ -55,6 +55,22 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(Path
     Ok((bake.dir().to_path_buf(), failed))
 }
 
+/// A case render's outcome: the render's, with the `unbaked` of the `asked` steps named too
+/// (a render that also failed to draw some of the others says both).
+pub fn with_unbaked(rendered: Result<()>, unbaked: &[usize], asked: usize) -> Result<()> {
+    if unbaked.is_empty() {
+        return rendered;
+    }
+    let did_not_bake = format!(
+        "{} of {asked} steps did not bake (steps {unbaked:?})",
+        unbaked.len()
+    );
+    match rendered {
+        Ok(()) => bail!("{did_not_bake}; the others were rendered"),
+        Err(e) => Err(e.context(did_not_bake)),
+    }
+}
+
 fn step_path(path: &Path, step: usize) -> PathBuf {
     if path.is_dir() {
         path.join(step_file_name(step))
@@ -348,4 +364,29 @@ fn render_cpu(
         config.iterations
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Steps that did not bake are named whether or not the render drew all the others.
+    #[test]
+    fn a_case_render_names_unbaked_and_undrawn_steps_alike() {
+        let said = |r: Result<()>| r.map_err(|e| crate::message(&e)).unwrap_err();
+        assert_eq!(
+            said(with_unbaked(Ok(()), &[2], 3)),
+            "1 of 3 steps did not bake (steps [2]); the others were rendered"
+        );
+        assert_eq!(
+            said(with_unbaked(all_drawn(&[0], 2), &[2], 3)),
+            "1 of 3 steps did not bake (steps [2]): 1 of 2 steps were not drawn (steps [0]); \
+             the others were"
+        );
+        assert!(with_unbaked(Ok(()), &[], 3).is_ok());
+        assert_eq!(
+            said(with_unbaked(all_drawn(&[1], 3), &[], 3)),
+            "1 of 3 steps were not drawn (steps [1]); the others were"
+        );
+    }
 }
