@@ -166,11 +166,15 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         report.wall_seconds
     );
     if report.baked > 0 {
+        // Empty steps hold headers and no points: no bytes per point to say.
+        let per_point = match report.points {
+            0 => String::new(),
+            n => format!(" ({:.1} bytes per point)", report.bytes as f64 / n as f64),
+        };
         say!(
-            "{} points, {:.1} MB written ({:.1} bytes per point); per-stage CPU seconds summed over steps:",
+            "{} points, {:.1} MB written{per_point}; per-stage CPU seconds summed over steps:",
             report.points,
             report.bytes as f64 / 1e6,
-            report.bytes as f64 / report.points.max(1) as f64
         );
         for (name, s) in &report.stages {
             let shown = match slosh_mls::stage_part(name) {
