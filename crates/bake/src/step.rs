@@ -104,9 +104,14 @@ mod raw_rank {
     pub const CLUSTER_NEIGHBOURS: u8 = 3;
 }
 
-/// A step's sections in the GPU layouts, but for the BVH's, its field sections, and each
-/// ball's state as stored.
-type Sections = (Vec<SectionInput>, Vec<SectionInput>, Vec<BallState>);
+/// A step's sections in the GPU layouts, but for the BVH's, its field sections, each ball's
+/// state as stored, and where the time went ("sections: …" laps).
+type Sections = (
+    Vec<SectionInput>,
+    Vec<SectionInput>,
+    Vec<BallState>,
+    Vec<(&'static str, f64)>,
+);
 
 /// A step's sections in the GPU layouts, but for the BVH's, and its field sections.
 fn gpu_sections(
@@ -115,6 +120,7 @@ fn gpu_sections(
     source_index: &[u32],
     params: &BakeParams,
 ) -> Result<Sections, BakeError> {
+    let mut parts = StageClock::start();
     let n = surface.len();
     let input_err = |problem: String| BakeError::Input {
         step: input.index,
@@ -168,6 +174,7 @@ fn gpu_sections(
         }
         None
     };
+    parts.lap("sections: balls");
     // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
     // rounded up to f32 keeps every stored list within its distance filter.
     let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
@@ -178,6 +185,7 @@ fn gpu_sections(
                 cluster_ids.len()
             ))
         })?;
+    parts.lap("sections: cluster lists");
     // The reach as f32, raised where needed so that the expansion, which measures distances
     // in f32 on the stored positions, keeps every neighbour the f64 lists hold; the point
     // stores the half float at or above it.
@@ -207,6 +215,7 @@ fn gpu_sections(
             })
         })
         .collect::<Result<_, _>>()?;
+    parts.lap("sections: points");
     let spheres: Vec<GpuSphere> = surface
         .spheres
         .iter()
@@ -323,7 +332,8 @@ fn gpu_sections(
         });
     }
     let kinds = bits.iter().map(|b| b.kind()).collect();
-    Ok((sections, fields, kinds))
+    parts.lap("sections: arrays");
+    Ok((sections, fields, kinds, parts.laps))
 }
 
 fn permute<T: Copy + Send + Sync>(values: &[T], order: &[u32]) -> Vec<T> {
@@ -568,7 +578,8 @@ fn bake_parts(
         }
         // Sections, in the GPU layouts (the BVH's are added once it is built).
         let sections_start = std::time::Instant::now();
-        let (sections, fields, kinds) = gpu_sections(&surface, input, &source_index, params)?;
+        let (sections, fields, kinds, section_parts) =
+            gpu_sections(&surface, input, &source_index, params)?;
         let sections_seconds = sections_start.elapsed().as_secs_f64();
         Ok((
             surface,
@@ -576,10 +587,11 @@ fn bake_parts(
             sections,
             fields,
             kinds,
-            sections_seconds,
+            (sections_seconds, section_parts),
         ))
     });
-    let (surface, build_laps, mut sections, fields, kinds, sections_seconds) = built?;
+    let (surface, build_laps, mut sections, fields, kinds, (sections_seconds, section_parts)) =
+        built?;
     let candidate = |i: usize| matches!(kinds[i], BallState::Full | BallState::Degraded);
     clock.extend(&build_laps);
     let n = surface.len();
@@ -636,6 +648,7 @@ fn bake_parts(
     }
     // The BVH's own wall time: it ran beside the fits.
     clock.extend(&[("bvh", bvh_seconds), ("sections", sections_seconds)]);
+    clock.extend(&section_parts);
     stats.stage_seconds = clock
         .laps
         .iter()
@@ -707,7 +720,7 @@ fn empty_step(
     stats: StepStats,
 ) -> Result<BakedStep, BakeError> {
     let surface = SurfaceParts::<f64>::empty(&params.mls);
-    let (mut sections, fields, _) = gpu_sections(&surface, input, &[], params)?;
+    let (mut sections, fields, _, _) = gpu_sections(&surface, input, &[], params)?;
     sections.extend(bvh_sections(&[]));
     sections.extend(fields);
     Ok(BakedStep {

@@ -60,11 +60,11 @@ const GPU_STAGES: [&str; 4] = [
     "bvh",
 ];
 
-/// The part of the neighbour lists a stage lap is, if it is one (as the GPU's search reports
-/// them, [`slosh_mls::stage_part`]).
-fn list_part(name: &str) -> Option<&str> {
+/// The part of `stage` a stage lap is, if it is one ([`slosh_mls::stage_part`]): the GPU
+/// search's neighbour lists, or the sections.
+fn part_of<'a>(name: &'a str, stage: &str) -> Option<&'a str> {
     slosh_mls::stage_part(name)
-        .filter(|(stage, _)| *stage == GPU_STAGES[1])
+        .filter(|(of, _)| *of == stage)
         .map(|(_, part)| part)
 }
 
@@ -183,6 +183,13 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         let mut last_baked = None;
         let mut gpu_runs: Vec<TimedStep> = Vec::new();
         let mut gpu_times: Vec<f64> = Vec::new();
+        // The size's first GPU step, apart from the runs: it makes the pools' buffers for a
+        // step of this size (device memory, host memory the read backs map), which a
+        // series' later steps find made.
+        let gpu_first = match &args.gpu {
+            Ok(gpu) => Some(bake_and_encode(&inp, &params, &gpu.clone().stages())?),
+            Err(_) => None,
+        };
         // Baseline and bake (and the bake with the GPU's neighbours) alternate, so that all
         // see the same machine load.
         for _ in 0..runs {
@@ -231,6 +238,15 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
                     .collect(),
             )
         };
+        // A stage's parts, in the order the first GPU run timed them.
+        let parts = |of: &str| -> Vec<(String, f64)> {
+            gpu_runs.first().map_or(Vec::new(), |run| {
+                run.stages
+                    .iter()
+                    .filter_map(|(name, _)| Some((part_of(name, of)?.to_string(), gpu_stage(name))))
+                    .collect()
+            })
+        };
         let gpu = (!gpu_runs.is_empty()).then(|| GpuBakeRow {
             total: median(gpu_runs.iter().map(|r| r.seconds).collect()),
             gpu_time: (!gpu_times.is_empty()).then(|| median(gpu_times.clone())),
@@ -250,11 +266,15 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
                 })
                 .map(|(name, _)| (name.clone(), gpu_stage(name)))
                 .collect(),
-            list_parts: gpu_runs[0]
-                .stages
-                .iter()
-                .filter_map(|(name, _)| Some((list_part(name)?.to_string(), gpu_stage(name))))
-                .collect(),
+            first: gpu_first.as_ref().map_or(0.0, |f| f.seconds),
+            first_list_parts: gpu_first.as_ref().map_or(Vec::new(), |f| {
+                f.stages
+                    .iter()
+                    .filter_map(|(name, s)| Some((part_of(name, GPU_STAGES[1])?.to_string(), *s)))
+                    .collect()
+            }),
+            list_parts: parts(GPU_STAGES[1]),
+            section_parts: parts("sections"),
         });
         if let Some(g) = &gpu {
             gpu_one_step.push((n, g.total));

@@ -33,6 +33,10 @@ pub struct PeerRow {
 #[derive(Debug, Clone, PartialEq)]
 pub struct GpuBakeRow {
     pub total: f64,
+    /// The size's first GPU step (seconds), before the runs: the pools' buffers made.
+    pub first: f64,
+    /// Its neighbour lists by part.
+    pub first_list_parts: Vec<(String, f64)>,
     /// The GPU's own time in the bake (timestamp queries of its passes), where the device
     /// has timestamps.
     pub gpu_time: Option<f64>,
@@ -51,6 +55,8 @@ pub struct GpuBakeRow {
     pub on_cpu: Vec<(String, f64)>,
     /// The GPU's neighbour lists by part ("neighbour lists: …"), in its order.
     pub list_parts: Vec<(String, f64)>,
+    /// The sections by part ("sections: …"), in their order.
+    pub section_parts: Vec<(String, f64)>,
 }
 
 /// One size's stored bytes: the file, and each section's stored and raw bytes.
@@ -193,10 +199,12 @@ impl BakeReport {
              above.\n\n\
              *GPU time* is the passes' own (timestamp queries), which the stages' wall times \
              include with their transfers and host work. The BVH is built beside the initial \
-             fits, so the stages add up to more than the bake.\n\n\
-             | points | CPU bake | GPU bake | speed-up | GPU time | kNN + radii CPU / GPU | \
+             fits, so the stages add up to more than the bake. *First step* is each size's \
+             first GPU bake, before the runs: it makes the buffers the later steps of a series \
+             find made.\n\n\
+             | points | CPU bake | GPU bake | speed-up | first step | GPU time | kNN + radii CPU / GPU | \
              neighbour lists CPU / GPU | initial fits CPU / GPU | BVH CPU / GPU | against splashsurf |\n\
-             |---|---|---|---|---|---|---|---|---|---|",
+             |---|---|---|---|---|---|---|---|---|---|---|",
             self.threads
         );
         let ms = |s: f64| format!("{:.1} ms", s * 1e3);
@@ -209,11 +217,12 @@ impl BakeReport {
             let Some(g) = &r.gpu else { continue };
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.2}× | {} | {} / {} | {} / {} | {} / {} | {} / {} | {} |",
+                "| {} | {} | {} | {:.2}× | {} | {} | {} / {} | {} / {} | {} / {} | {} / {} | {} |",
                 r.points,
                 ms(r.total),
                 ms(g.total),
                 r.total / g.total,
+                ms(g.first),
                 g.gpu_time.map_or("no timestamps".into(), ms),
                 ms(g.cpu_nearest),
                 ms(g.nearest),
@@ -243,6 +252,21 @@ impl BakeReport {
              on the CPU):",
             &rows,
             |g| &g.list_parts,
+        );
+        stage_table(
+            &mut md,
+            "The same parts in each size's first step (one run):",
+            &rows,
+            |g| &g.first_list_parts,
+        );
+        stage_table(
+            &mut md,
+            "The GPU bake's sections by part (wall time, medians of the same runs; *balls* the \
+             fits in the stored layout, *cluster lists* the union of each cluster's neighbour \
+             lists, *points* positions with radii and reaches as stored, *arrays* the sections' \
+             bytes copied out and the fields):",
+            &rows,
+            |g| &g.section_parts,
         );
         md.push('\n');
         md
