@@ -31,8 +31,9 @@ scrub)
 scale)
     run scrub-4m bench scrub --points 4000000 --steps 24 --distinct 4 --pool-steps 8 \
         --jumps 40 --dir /tmp/slosh-sd --out "$out/scrub-4m.md"
+    # The resident jumps fill a pool that holds the whole series first.
     run scrub-resident bench scrub --points 1000000 --steps 500 --distinct 8 \
-        --pool-steps 500 --jumps 100 --dir /tmp/slosh-sd --out "$out/scrub-resident.md"
+        --jumps 100 --dir /tmp/slosh-sd --out "$out/scrub-resident.md"
     run scrub-raw bench scrub --points 1000000 --steps 24 --jumps 30 --raw-case \
         --raw-case-gpu --dir /tmp/slosh-sd --out "$out/scrub-raw.md"
     ;;

@@ -318,7 +318,19 @@ fn a_frame_budget_refines_in_parts_to_the_direct_render_and_probes_it() {
         }
     }
     assert!(engine.probe(0, 0, 1.0).unwrap().is_none());
-    let probe = engine.probe(32, 24, 1.0).unwrap().unwrap();
+    // The first probe of a step asks for its surface on a thread of its own: none until read.
+    assert!(engine.probe(32, 24, 1.0).unwrap().is_none());
+    let started = std::time::Instant::now();
+    let probe = loop {
+        if let Some(probe) = engine.probe(32, 24, 1.0).unwrap() {
+            break probe;
+        }
+        assert!(
+            engine.probe_preparing() && started.elapsed().as_secs() < 60,
+            "no probe, and none being prepared"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    };
     let file = slosh_cache::CacheFile::open(&dir.path().join(step_file_name(1))).unwrap();
     let header = file.header();
     let spacing = header.spacing * header.transform.scale;

@@ -58,6 +58,8 @@ pub(super) struct Player {
     /// What the surface holds under the pointer, and the pixel and frame count it was read
     /// at.
     probe: Option<(Probe, (u32, u32), u64)>,
+    /// A click whose probe waits for the step's surface to be prepared: said once read.
+    click_pending: bool,
 }
 
 impl Player {
@@ -117,6 +119,7 @@ impl Player {
             log_frames: options.log_frames,
             title: String::new(),
             probe: None,
+            click_pending: false,
         }
     }
 
@@ -273,9 +276,10 @@ impl Player {
             self.engine.targets().map(|t| t.size()),
         ) else {
             self.probe = None;
+            self.click_pending = false;
             return;
         };
-        let clicked = response.clicked();
+        let clicked = response.clicked() || self.click_pending;
         let at_rest = !moving && self.last.progress.is_some_and(|p| p.finished());
         if !clicked && !at_rest {
             self.probe = None;
@@ -293,7 +297,11 @@ impl Player {
             .is_some_and(|(_, at, frames)| *at == pixel && *frames == self.stats.frames);
         if clicked || !current {
             let h_factor = self.view.params(&self.engine).h_factor;
-            match self.engine.probe(pixel.0, pixel.1, h_factor) {
+            let probed = self.engine.probe(pixel.0, pixel.1, h_factor);
+            // Asked again in the next passes while the step's surface is prepared.
+            self.click_pending =
+                clicked && matches!(probed, Ok(None)) && self.engine.probe_preparing();
+            match probed {
                 Ok(Some(probe)) => {
                     if clicked {
                         let line = probe_line(&probe, pixel);
@@ -551,7 +559,8 @@ impl eframe::App for Player {
             || waiting_for_load
             || self.last.progress.is_some_and(|p| !p.finished())
             || self.screenshot_pending
-            || self.export.running();
+            || self.export.running()
+            || self.engine.probe_preparing();
         self.stats.passes += 1;
         if self.log_frames {
             // The pass's interval since the last one (what delays an input event while the

@@ -219,6 +219,8 @@ pub struct Engine {
     step_bytes: u64,
     /// The shown step's surface, once a pixel of it was probed.
     probed: Option<probe::HeldProbe>,
+    /// What a probe of a step not yet probed asked for, being prepared.
+    probing: Option<probe::PreparingProbe>,
     /// The GPU time [`Engine::finish_frame`] measured of the last frame.
     last_gpu_ms: Option<f64>,
 }
@@ -291,6 +293,7 @@ impl Engine {
             shown: None,
             step_bytes: 0,
             probed: None,
+            probing: None,
             last_gpu_ms: None,
         };
         engine.adopt_series();

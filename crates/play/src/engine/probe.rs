@@ -1,6 +1,8 @@
 //! What the picture on screen shows at a pixel: the hit read back from the GPU, the step's
 //! surface probed there on the host (world position, nearest particle, field value), and
-//! that particle's index in the EnSight case the step was baked from.
+//! that particle's index in the EnSight case the step was baked from. What a step's probes
+//! need (its surface decoded, its case's particles read: a second or more for a large ASCII
+//! case) is prepared on a thread of its own, so that the UI thread never waits for it.
 
 use slosh_cache::{CacheFile, ProbeReading, Source, SurfaceProbe};
 use slosh_ensight::{Case, PointSource, StepRequest};
@@ -34,11 +36,26 @@ pub(super) struct HeldProbe {
     revision: u64,
     surface: SurfaceProbe,
     field: Option<Vec<f32>>,
-    /// The step's particles as its EnSight case holds them, once read.
-    input: Option<std::result::Result<Vec<[f32; 3]>, String>>,
+    /// The step's particles as its EnSight case holds them.
+    input: std::result::Result<Vec<[f32; 3]>, String>,
     source: Source,
     /// How far a stored point may lie from its input particle: f32 round trips.
     tolerance: f64,
+}
+
+/// A step's [`HeldProbe`] being prepared: for the resident step and field revision it was
+/// asked for.
+#[derive(Debug)]
+pub(super) struct PreparingProbe {
+    step_id: u64,
+    revision: u64,
+    thread: std::thread::JoinHandle<Result<HeldProbe>>,
+}
+
+impl PreparingProbe {
+    pub(super) fn is_finished(&self) -> bool {
+        self.thread.is_finished()
+    }
 }
 
 /// The particles of step `source.step` of the case `source.path`, as the bake read them.
@@ -56,14 +73,48 @@ fn input_particles(source: &Source) -> std::result::Result<Vec<[f32; 3]>, String
 }
 
 impl HeldProbe {
+    /// What probing the step file `path` needs (field `field` read), for the resident step
+    /// `step_id` at field revision `revision`.
+    fn prepare(
+        path: &std::path::Path,
+        field: Option<&str>,
+        step_id: u64,
+        revision: u64,
+    ) -> Result<HeldProbe> {
+        let file = CacheFile::open(path)?;
+        let field = match field {
+            Some(name) => Some(
+                HostField::read(&file, name)?
+                    .bytes
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                    .collect(),
+            ),
+            None => None,
+        };
+        let header = file.header();
+        Ok(HeldProbe {
+            step_id,
+            revision,
+            surface: SurfaceProbe::open(&file)?,
+            field,
+            input: input_particles(&header.source),
+            source: header.source.clone(),
+            // Positions go through f32 local coordinates and back.
+            tolerance: 1e-5 * header.transform.scale.max(f64::MIN_POSITIVE)
+                + 1e-6
+                    * header
+                        .transform
+                        .origin
+                        .iter()
+                        .fold(0.0f64, |m, o| m.max(o.abs())),
+        })
+    }
+
     /// The input particle at the stored point `world`: its index and position.
-    fn input_at(&mut self, world: [f64; 3]) -> std::result::Result<(usize, [f64; 3]), String> {
+    fn input_at(&self, world: [f64; 3]) -> std::result::Result<(usize, [f64; 3]), String> {
         let source = &self.source;
-        let particles = self
-            .input
-            .get_or_insert_with(|| input_particles(source))
-            .as_ref()
-            .map_err(Clone::clone)?;
+        let particles = self.input.as_ref().map_err(Clone::clone)?;
         let distance2 =
             |p: &[f32; 3]| -> f64 { (0..3).map(|a| (f64::from(p[a]) - world[a]).powi(2)).sum() };
         let (index, d2) = particles
@@ -83,9 +134,15 @@ impl HeldProbe {
 }
 
 impl Engine {
+    /// Whether what a probe asked for is still being prepared (probe again once not).
+    pub fn probe_preparing(&self) -> bool {
+        self.probing.as_ref().is_some_and(|p| !p.is_finished())
+    }
+
     /// What the picture on screen shows at pixel (`x`, `y`) of [`Engine::targets`] (a
-    /// preview's pixels while one is shown): `None` for a miss or before any frame. The
-    /// step's surface is decoded on the first probe of each step loaded.
+    /// preview's pixels while one is shown): `None` for a miss, before any frame, or while
+    /// what the shown step's probes need is prepared ([`Engine::probe_preparing`]: asked for
+    /// by the first probe of each step loaded).
     pub fn probe(&mut self, x: u32, y: u32, h_factor: f32) -> Result<Option<Probe>> {
         let (Some(index), Some(targets)) = (self.shown, self.targets()) else {
             return Ok(None);
@@ -96,45 +153,50 @@ impl Engine {
         let Some(hit) = self.tracer.read_hit(&self.gpu, targets, x, y)? else {
             return Ok(None);
         };
+        let revision = self.revision;
         let stale = self
             .probed
             .as_ref()
-            .is_none_or(|p| p.step_id != step_id || p.revision != self.revision);
+            .is_none_or(|p| p.step_id != step_id || p.revision != revision);
         if stale {
-            let path = self.source.path(index).ok_or_else(|| Error::Series {
-                path: self.series.dir().to_path_buf(),
-                problem: format!("step {index} is not in the series"),
-            })?;
-            let file = CacheFile::open(&path)?;
-            let field = match &self.field {
-                Some(name) => Some(
-                    HostField::read(&file, name)?
-                        .bytes
-                        .chunks_exact(4)
-                        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                        .collect(),
-                ),
-                None => None,
-            };
-            let header = file.header();
-            self.probed = Some(HeldProbe {
-                step_id,
-                revision: self.revision,
-                surface: SurfaceProbe::open(&file)?,
-                field,
-                input: None,
-                source: header.source.clone(),
-                // Positions go through f32 local coordinates and back.
-                tolerance: 1e-5 * header.transform.scale.max(f64::MIN_POSITIVE)
-                    + 1e-6
-                        * header
-                            .transform
-                            .origin
-                            .iter()
-                            .fold(0.0f64, |m, o| m.max(o.abs())),
-            });
+            match self.probing.take() {
+                Some(p) if p.step_id == step_id && p.revision == revision => {
+                    if !p.is_finished() {
+                        self.probing = Some(p);
+                        return Ok(None);
+                    }
+                    let held = p.thread.join().map_err(|_| Error::Series {
+                        path: self.series.dir().to_path_buf(),
+                        problem: format!("reading step {index} for probing failed"),
+                    })??;
+                    self.probed = Some(held);
+                }
+                // None yet, or one for another step (left to finish on its own).
+                _ => {
+                    let path = self.source.path(index).ok_or_else(|| Error::Series {
+                        path: self.series.dir().to_path_buf(),
+                        problem: format!("step {index} is not in the series"),
+                    })?;
+                    let field = self.field.clone();
+                    let thread = std::thread::Builder::new()
+                        .name("probe".into())
+                        .spawn(move || {
+                            HeldProbe::prepare(&path, field.as_deref(), step_id, revision)
+                        })
+                        .map_err(|e| Error::Series {
+                            path: self.series.dir().to_path_buf(),
+                            problem: format!("no thread to read step {index} for probing: {e}"),
+                        })?;
+                    self.probing = Some(PreparingProbe {
+                        step_id,
+                        revision,
+                        thread,
+                    });
+                    return Ok(None);
+                }
+            }
         }
-        let Some(held) = &mut self.probed else {
+        let Some(held) = &self.probed else {
             return Ok(None);
         };
         let ball = (hit.status != status::DROPLET).then_some(hit.item as usize);
