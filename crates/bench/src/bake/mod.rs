@@ -68,6 +68,19 @@ fn part_of<'a>(name: &'a str, stage: &str) -> Option<&'a str> {
         .map(|(_, part)| part)
 }
 
+/// The parts of `stage` among `stages` (in their order), each timed by `time` (its name,
+/// its seconds in `stages`).
+fn parts_in(
+    stages: &[(String, f64)],
+    stage: &str,
+    time: impl Fn(&str, f64) -> f64,
+) -> Vec<(String, f64)> {
+    stages
+        .iter()
+        .filter_map(|(name, s)| Some((part_of(name, stage)?.to_string(), time(name, *s))))
+        .collect()
+}
+
 /// The sphere step of `points` points, and its mean particle spacing.
 fn input(points: usize) -> (StepInput, f64) {
     let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))
@@ -238,13 +251,10 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
                     .collect(),
             )
         };
-        // A stage's parts, in the order the first GPU run timed them.
-        let parts = |of: &str| -> Vec<(String, f64)> {
+        // A stage's parts, in the order the first GPU run timed them, medians of the runs.
+        let parts = |of: &str| {
             gpu_runs.first().map_or(Vec::new(), |run| {
-                run.stages
-                    .iter()
-                    .filter_map(|(name, _)| Some((part_of(name, of)?.to_string(), gpu_stage(name))))
-                    .collect()
+                parts_in(&run.stages, of, |name, _| gpu_stage(name))
             })
         };
         let gpu = (!gpu_runs.is_empty()).then(|| GpuBakeRow {
@@ -268,10 +278,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
                 .collect(),
             first: gpu_first.as_ref().map_or(0.0, |f| f.seconds),
             first_list_parts: gpu_first.as_ref().map_or(Vec::new(), |f| {
-                f.stages
-                    .iter()
-                    .filter_map(|(name, s)| Some((part_of(name, GPU_STAGES[1])?.to_string(), *s)))
-                    .collect()
+                parts_in(&f.stages, GPU_STAGES[1], |_, seconds| seconds)
             }),
             list_parts: parts(GPU_STAGES[1]),
             section_parts: parts("sections"),

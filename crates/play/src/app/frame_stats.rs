@@ -14,7 +14,8 @@ pub struct FrameStats {
     /// Milliseconds between the last two UI frames: what a person sees as the frame time.
     pub frame_ms: f64,
     /// Milliseconds of `frame_ms` the UI thread waited, runnable, for a core (other processes
-    /// or the software GPU's threads held them); `None` where the kernel does not say.
+    /// or the software GPU's threads held them), where [`FrameStats::with_queue_waits`] asked
+    /// for them and the kernel says.
     pub queued_ms: Option<f64>,
     queued_before: Option<std::time::Duration>,
     pub trace_ms: Option<f64>,
@@ -31,7 +32,7 @@ impl Default for FrameStats {
             last_frame: Instant::now(),
             frame_ms: 0.0,
             queued_ms: None,
-            queued_before: waited_for_a_core(),
+            queued_before: None,
             trace_ms: None,
             upload_ms: 0.0,
             frames: 0,
@@ -41,16 +42,25 @@ impl Default for FrameStats {
 }
 
 impl FrameStats {
+    /// Timings that also say how long the UI thread waited for a core (a file read a frame:
+    /// for the frame log only).
+    pub fn with_queue_waits() -> FrameStats {
+        FrameStats {
+            queued_before: waited_for_a_core(),
+            ..FrameStats::default()
+        }
+    }
+
     /// Seconds since the last frame began, and a new frame begun.
     pub fn begin_frame(&mut self) -> f64 {
         let seconds = self.last_frame.elapsed().as_secs_f64();
         self.last_frame = Instant::now();
         self.frame_ms = seconds * 1e3;
-        let queued = waited_for_a_core();
-        self.queued_ms = queued
-            .zip(self.queued_before)
-            .map(|(now, before)| now.saturating_sub(before).as_secs_f64() * 1e3);
-        self.queued_before = queued;
+        if let Some(before) = self.queued_before {
+            let queued = waited_for_a_core();
+            self.queued_ms = queued.map(|now| now.saturating_sub(before).as_secs_f64() * 1e3);
+            self.queued_before = queued;
+        }
         seconds
     }
 

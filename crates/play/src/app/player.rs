@@ -107,7 +107,11 @@ impl Player {
             fields: engine.series().fields(),
             bounds,
             texture: None,
-            stats: FrameStats::default(),
+            stats: if options.log_frames {
+                FrameStats::with_queue_waits()
+            } else {
+                FrameStats::default()
+            },
             last: FrameReport::default(),
             message: None,
             last_refresh: Instant::now(),

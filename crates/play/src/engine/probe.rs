@@ -171,7 +171,13 @@ impl Engine {
                     })??;
                     self.probed = Some(held);
                 }
-                // None yet, or one for another step (left to finish on its own).
+                // One for another step (the shown one changed meanwhile) is let finish first:
+                // one preparation at a time, however fast steps are flipped.
+                Some(p) if !p.is_finished() => {
+                    self.probing = Some(p);
+                    return Ok(None);
+                }
+                // None yet, or another step's, finished and no longer wanted.
                 _ => {
                     let path = self.source.path(index).ok_or_else(|| Error::Series {
                         path: self.series.dir().to_path_buf(),
