@@ -18,6 +18,10 @@ pub struct FrameStats {
     /// for them and the kernel says.
     pub queued_ms: Option<f64>,
     queued_before: Option<std::time::Duration>,
+    /// Milliseconds of CPU the window's previous frame took (this player's pass, then eframe's
+    /// tessellation and paint recording), less its waits for the surface and the present:
+    /// what eframe says, `None` before it says.
+    pub previous_cpu_ms: Option<f64>,
     pub trace_ms: Option<f64>,
     pub upload_ms: f64,
     /// Frames drawn so far.
@@ -33,6 +37,7 @@ impl Default for FrameStats {
             frame_ms: 0.0,
             queued_ms: None,
             queued_before: None,
+            previous_cpu_ms: None,
             trace_ms: None,
             upload_ms: 0.0,
             frames: 0,

@@ -498,8 +498,9 @@ impl Player {
 }
 
 impl eframe::App for Player {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let pass_start = Instant::now();
+        self.stats.previous_cpu_ms = frame.info().cpu_usage.map(|s| f64::from(s) * 1e3);
         let ctx = ui.ctx().clone();
         self.keys(&ctx);
         if let Some(message) = self.export.poll() {
@@ -568,8 +569,10 @@ impl eframe::App for Player {
         self.stats.passes += 1;
         if self.log_frames {
             // The pass's interval since the last one (what delays an input event while the
-            // player is busy), the time spent in this pass's own work, and how much of the
-            // interval the UI thread waited, runnable, for a core.
+            // player is busy), the time spent in this pass's own work, how much of the
+            // interval the UI thread waited, runnable, for a core, and the CPU time of the
+            // frame before (its pass and eframe's paint, without the waits for the surface and
+            // the present).
             let band = match (&self.last.draw, self.last.masks) {
                 (
                     Some(Draw::Rows {
@@ -585,7 +588,7 @@ impl eframe::App for Player {
                 _ => String::new(),
             };
             say!(
-                "pass {}: wanted {} shown {:?}{}{}{band} ms {:.1}/{:.1}/{} {} export {}..={}",
+                "pass {}: wanted {} shown {:?}{}{}{band} ms {:.1}/{:.1}/{}/{} {} export {}..={}",
                 self.stats.passes,
                 self.last.wanted,
                 self.last.shown,
@@ -598,6 +601,9 @@ impl eframe::App for Player {
                 self.stats
                     .queued_ms
                     .map_or("-".into(), |q| format!("{q:.1}")),
+                self.stats
+                    .previous_cpu_ms
+                    .map_or("-".into(), |c| format!("{c:.1}")),
                 if busy { "busy" } else { "idle" },
                 self.export.first,
                 self.export.last
