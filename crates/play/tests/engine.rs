@@ -317,20 +317,23 @@ fn a_frame_budget_refines_in_parts_to_the_direct_render_and_probes_it() {
             break;
         }
     }
-    assert!(engine.probe(0, 0, 1.0).unwrap().is_none());
-    // The first probe of a step asks for its surface on a thread of its own: none until read.
-    assert!(engine.probe(32, 24, 1.0).unwrap().is_none());
-    let started = std::time::Instant::now();
-    let probe = loop {
-        if let Some(probe) = engine.probe(32, 24, 1.0).unwrap() {
-            break probe;
+    // A pixel is read back, and the first probe of a step asks for its surface on a thread of
+    // its own: none until both are read.
+    let mut settled = |x: u32, y: u32| {
+        assert!(engine.probe(x, y, 1.0).unwrap().is_none());
+        assert!(engine.probe_preparing(), "the pixel was read at once");
+        let started = std::time::Instant::now();
+        loop {
+            let probe = engine.probe(x, y, 1.0).unwrap();
+            if probe.is_some() || !engine.probe_preparing() {
+                break probe;
+            }
+            assert!(started.elapsed().as_secs() < 60, "the probe never came");
+            std::thread::sleep(Duration::from_millis(5));
         }
-        assert!(
-            engine.probe_preparing() && started.elapsed().as_secs() < 60,
-            "no probe, and none being prepared"
-        );
-        std::thread::sleep(Duration::from_millis(5));
     };
+    assert!(settled(0, 0).is_none());
+    let probe = settled(32, 24).expect("no probe, and none being prepared");
     let file = slosh_cache::CacheFile::open(&dir.path().join(step_file_name(1))).unwrap();
     let header = file.header();
     let spacing = header.spacing * header.transform.scale;

@@ -34,8 +34,8 @@ pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use pass::checked_pipeline;
 pub use staging::StagingPool;
 pub use tracer::{
-    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, ReadbackPool, RowSet, ShadeMode,
-    TraceParams, Tracer, read_buffer, read_storage, settings,
+    FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, PendingHit, ReadbackPool, RowSet,
+    ShadeMode, TraceParams, Tracer, read_buffer, read_storage, settings,
 };
 pub use upload::{
     GpuStep, HostField, HostStep, MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, StepBuffers,

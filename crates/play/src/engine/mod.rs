@@ -221,6 +221,10 @@ pub struct Engine {
     probed: Option<probe::HeldProbe>,
     /// What a probe of a step not yet probed asked for, being prepared.
     probing: Option<probe::PreparingProbe>,
+    /// Traced frames recorded so far: a hit read back belongs to the frame it came from.
+    frames_recorded: u64,
+    /// The hit a probe asked for, being read back, and the last one read.
+    hit: probe::HitReadback,
     /// The GPU time [`Engine::finish_frame`] measured of the last frame.
     last_gpu_ms: Option<f64>,
 }
@@ -294,6 +298,8 @@ impl Engine {
             step_bytes: 0,
             probed: None,
             probing: None,
+            frames_recorded: 0,
+            hit: probe::HitReadback::default(),
             last_gpu_ms: None,
         };
         engine.adopt_series();
@@ -863,6 +869,7 @@ impl Engine {
                         preview: true,
                     };
                     self.unmeasured = Some((recorded, std::time::Instant::now()));
+                    self.frames_recorded += 1;
                     self.showing_preview = true;
                     self.quality = Some(Quality {
                         scale: preview_scale,
@@ -893,6 +900,7 @@ impl Engine {
                         preview: false,
                     };
                     self.unmeasured = Some((recorded, std::time::Instant::now()));
+                    self.frames_recorded += 1;
                     if completes {
                         self.showing_preview = false;
                         self.quality = Some(Quality {

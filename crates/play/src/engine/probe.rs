@@ -2,11 +2,12 @@
 //! surface probed there on the host (world position, nearest particle, field value), and
 //! that particle's index in the EnSight case the step was baked from. What a step's probes
 //! need (its surface decoded, its case's particles read: a second or more for a large ASCII
-//! case) is prepared on a thread of its own, so that the UI thread never waits for it.
+//! case) is prepared on a thread of its own, and the pixel is read back without waiting for
+//! the GPU, so that the UI thread never waits for either.
 
 use slosh_cache::{CacheFile, ProbeReading, Source, SurfaceProbe};
 use slosh_ensight::{Case, PointSource, StepRequest};
-use slosh_render::{GpuStep, HostField, status};
+use slosh_render::{GpuHit, GpuStep, HostField, PendingHit, status};
 
 use super::Engine;
 use crate::error::{Error, Result};
@@ -133,24 +134,96 @@ impl HeldProbe {
     }
 }
 
+/// A pixel asked for: where, of which step and frame size, and in which recorded frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct HitKey {
+    x: u32,
+    y: u32,
+    step_id: u64,
+    size: (u32, u32),
+    frame: u64,
+}
+
+impl HitKey {
+    /// The same pixel of the same step's picture, perhaps of a frame recorded since: a hit
+    /// read from a frame a few passes older is still a point of that step's surface.
+    fn same_pixel(&self, other: &HitKey) -> bool {
+        HitKey {
+            frame: other.frame,
+            ..*self
+        } == *other
+    }
+}
+
+/// The hit a probe asked for, read back without waiting for the GPU (which on a software
+/// adapter runs the copy behind the window's paint and present), and the last one read.
+#[derive(Debug, Default)]
+pub(super) struct HitReadback {
+    pending: Option<(HitKey, PendingHit)>,
+    read: Option<(HitKey, Option<GpuHit>)>,
+}
+
 impl Engine {
-    /// Whether what a probe asked for is still being prepared (probe again once not).
+    /// Whether what a probe asked for is still being prepared or read back (probe again
+    /// once not).
     pub fn probe_preparing(&self) -> bool {
-        self.probing.as_ref().is_some_and(|p| !p.is_finished())
+        self.probing.as_ref().is_some_and(|p| !p.is_finished()) || self.hit.pending.is_some()
+    }
+
+    /// The hit at pixel (`x`, `y`) of the step `step_id`'s picture on screen, once read
+    /// back: asked for at the first call, taken at a later one (`Ok(None)` until then, and
+    /// for a miss).
+    fn hit_at(&mut self, step_id: u64, x: u32, y: u32) -> Result<Option<GpuHit>> {
+        let Some(size) = self.targets().map(|t| t.size()) else {
+            return Ok(None);
+        };
+        let key = HitKey {
+            x,
+            y,
+            step_id,
+            size,
+            frame: self.frames_recorded,
+        };
+        if let Some((at, hit)) = &self.hit.read
+            && *at == key
+        {
+            return Ok(*hit);
+        }
+        match self.hit.pending.take() {
+            Some((at, pending)) if at.same_pixel(&key) => match pending.poll(&self.gpu)? {
+                Some(hit) => {
+                    self.hit.read = Some((at, hit));
+                    Ok(hit)
+                }
+                None => {
+                    self.hit.pending = Some((at, pending));
+                    Ok(None)
+                }
+            },
+            // None asked for yet, or for another pixel or step: that one is let go.
+            _ => {
+                let pending = self
+                    .targets()
+                    .and_then(|t| self.tracer.request_hit(&self.gpu, t, x, y));
+                self.hit.pending = pending.map(|p| (key, p));
+                Ok(None)
+            }
+        }
     }
 
     /// What the picture on screen shows at pixel (`x`, `y`) of [`Engine::targets`] (a
     /// preview's pixels while one is shown): `None` for a miss, before any frame, or while
-    /// what the shown step's probes need is prepared ([`Engine::probe_preparing`]: asked for
-    /// by the first probe of each step loaded).
+    /// the pixel is read back or what the shown step's probes need is prepared
+    /// ([`Engine::probe_preparing`]: the pixel asked for by a probe of another pixel or step,
+    /// the rest by the first probe of each step loaded).
     pub fn probe(&mut self, x: u32, y: u32, h_factor: f32) -> Result<Option<Probe>> {
-        let (Some(index), Some(targets)) = (self.shown, self.targets()) else {
+        let Some(index) = self.shown else {
             return Ok(None);
         };
         let Some(step_id) = self.pool.peek(index).map(GpuStep::id) else {
             return Ok(None);
         };
-        let Some(hit) = self.tracer.read_hit(&self.gpu, targets, x, y)? else {
+        let Some(hit) = self.hit_at(step_id, x, y)? else {
             return Ok(None);
         };
         let revision = self.revision;

@@ -51,7 +51,7 @@ mod readback;
 mod rows;
 
 pub use params::{ShadeMode, TraceParams, settings};
-pub use readback::{ReadbackPool, read_buffer, read_storage};
+pub use readback::{PendingHit, ReadbackPool, read_buffer, read_storage};
 pub use rows::RowSet;
 
 /// A rendered frame read back from the GPU.

@@ -1,6 +1,8 @@
 //! GPU buffers read back to the host, and what a frame's targets hold: its pass times, its
 //! hits and pixels.
 
+use std::sync::{Arc, OnceLock};
+
 use bytemuck::Zeroable;
 
 use super::{Frame, FrameTargets, PassTimes, Tracer};
@@ -245,22 +247,62 @@ impl Tracer {
         })
     }
 
-    /// The hit at pixel (`x`, `y`) of the last frame recorded into `targets` (waits; one
-    /// pixel's bytes cross): `None` for a miss or a pixel outside the frame.
-    pub fn read_hit(
+    /// Asks for the hit at pixel (`x`, `y`) of the last frame recorded into `targets`, one
+    /// pixel's bytes copied back without waiting: taken with [`PendingHit::poll`] once the GPU
+    /// has run the copy (a software adapter may run it behind the window's paint and present).
+    /// `None` for a pixel outside the frame.
+    pub fn request_hit(
         &self,
         gpu: &Gpu,
         targets: &FrameTargets,
         x: u32,
         y: u32,
-    ) -> Result<Option<GpuHit>> {
+    ) -> Option<PendingHit> {
         if x >= targets.width || y >= targets.height {
-            return Ok(None);
+            return None;
         }
         let size = size_of::<GpuHit>() as u64;
         let offset = (u64::from(y) * u64::from(targets.width) + u64::from(x)) * size;
-        let hit: Vec<GpuHit> = read_range(gpu, &targets.hits, offset, size)?;
-        // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
-        Ok(hit.first().copied().filter(|h| h.status != status::MISS))
+        let (staging, _) = staged(gpu, &targets.hits, offset, size);
+        let mapped = Arc::new(OnceLock::new());
+        let set = mapped.clone();
+        staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            let _ = set.set(r);
+        });
+        Some(PendingHit { staging, mapped })
+    }
+}
+
+/// A pixel's hit being copied back ([`Tracer::request_hit`]).
+#[derive(Debug)]
+pub struct PendingHit {
+    staging: wgpu::Buffer,
+    /// Set by the mapping's callback, on whichever thread polls the device.
+    mapped: Arc<OnceLock<std::result::Result<(), wgpu::BufferAsyncError>>>,
+}
+
+impl PendingHit {
+    /// The hit once the copy has run (`Some(None)` for a miss), `None` while it has not:
+    /// checks the device once, without waiting.
+    pub fn poll(&self, gpu: &Gpu) -> Result<Option<Option<GpuHit>>> {
+        gpu.device
+            .poll(wgpu::PollType::Poll)
+            .map_err(|e| Error::Readback(e.to_string()))?;
+        match self.mapped.get() {
+            None => Ok(None),
+            Some(Err(e)) => Err(Error::Readback(e.to_string())),
+            Some(Ok(())) => {
+                let hit: GpuHit = {
+                    let view = self
+                        .staging
+                        .slice(..)
+                        .get_mapped_range()
+                        .map_err(|e| Error::Readback(e.to_string()))?;
+                    bytemuck::pod_read_unaligned(&view)
+                };
+                // The trace pass writes a miss's status word alone (write_miss in mls.wgsl).
+                Ok(Some((hit.status != status::MISS).then_some(hit)))
+            }
+        }
     }
 }
