@@ -107,7 +107,7 @@ pub fn scrub(a: &ScrubBenchArgs) -> Result<scrub::Settings> {
         points: a.points.clone(),
         steps: a.steps,
         distinct: a.distinct,
-        size: super::render::parse_size(&a.size)?,
+        size: super::render::parse_size("size", &a.size)?,
         jumps: a.jumps,
         seed: a.seed,
         loaders: a.loaders,

@@ -16,8 +16,7 @@ fn up_axis(s: &str) -> Result<[f64; 3]> {
 }
 
 fn window(s: &str) -> Result<(f32, f32)> {
-    let (w, h) = super::render::parse_size(s)
-        .map_err(|_| anyhow::anyhow!("--window {s}: expected WxH, e.g. 1280x800"))?;
+    let (w, h) = super::render::parse_size("window", s)?;
     Ok((w as f32, h as f32))
 }
 

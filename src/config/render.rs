@@ -25,13 +25,22 @@ pub fn parse_vec3(flag: &str, s: &str) -> Result<[f64; 3]> {
     Ok(v)
 }
 
-/// `WxH` of positive sides, at most 2^28 pixels, for `--size`.
-pub fn parse_size(s: &str) -> Result<(u32, u32)> {
-    let bad = || anyhow!("--size {s}: expected WxH, e.g. 1280x800");
+/// The most pixels a `WxH` flag may ask for.
+const MAX_PIXELS: u64 = 1 << 28;
+
+/// `WxH` of positive sides, at most [`MAX_PIXELS`] pixels, for `--flag`.
+pub fn parse_size(flag: &str, s: &str) -> Result<(u32, u32)> {
+    let bad = || anyhow!("--{flag} {s}: expected WxH, e.g. 1280x800");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
     let (w, h): (u32, u32) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-    if w == 0 || h == 0 || u64::from(w) * u64::from(h) > 1 << 28 {
-        return Err(bad());
+    if w == 0 || h == 0 {
+        bail!("--{flag} {s}: expected both sides of at least one pixel");
+    }
+    if u64::from(w) * u64::from(h) > MAX_PIXELS {
+        bail!(
+            "--{flag} {s}: {} pixels, expected at most {MAX_PIXELS} (16384x16384)",
+            u64::from(w) * u64::from(h)
+        );
     }
     Ok((w, h))
 }
@@ -127,7 +136,7 @@ impl RenderConfig {
                 );
             }
         }
-        let (width, height) = parse_size(&args.size)?;
+        let (width, height) = parse_size("size", &args.size)?;
         // A frame holds its hits and pixels on the device and again in memory when read back
         // (about 120 bytes a pixel): refuse what the machine cannot hold instead of aborting.
         let needed = u64::from(width) * u64::from(height) * BYTES_PER_PIXEL;

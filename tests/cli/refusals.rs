@@ -172,6 +172,18 @@ fn meaningless_or_destructive_render_settings_are_refused() {
     ]);
     assert!(!ok);
     assert!(err.contains("a file of the cache being rendered"), "{err}");
+    // A size the flag cannot take says which bound it breaks.
+    for (size, expected) in [
+        ("16X", "expected WxH"),
+        ("0x16", "both sides of at least one pixel"),
+        (
+            "100000x100000",
+            "10000000000 pixels, expected at most 268435456",
+        ),
+    ] {
+        let (ok, _, err) = slosh(&["render", c, "--cpu", "--size", size, "--out", p]);
+        assert!(!ok && err.contains(expected), "{size}: {err}");
+    }
     // A frame larger than memory is refused by its size, not by running out (about 32 GB at
     // 16384×16384; the test machines have less available).
     let (ok, _, err) = slosh(&["render", c, "--cpu", "--size", "16384x16384", "--out", p]);
@@ -209,4 +221,23 @@ fn endless_inputs_are_refused_and_errors_said_once() {
     let (ok, _, err) = slosh(&["info", missing.to_str().unwrap()]);
     assert!(!ok);
     assert_eq!(err.matches("(os error 2)").count(), 1, "{err}");
+}
+
+/// A bake's `--out` that is a file, not a directory, is named as such and left as it was.
+#[test]
+fn a_bake_into_a_file_is_refused_and_the_file_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    generate(
+        &dir.path().join("case"),
+        &["sphere", "--points", "1500", "--steps", "2"],
+    );
+    let out = dir.path().join("notes.txt");
+    std::fs::write(&out, "kept").unwrap();
+    let (ok, _, err) = bake_case(&dir.path().join("case/sphere.case"), &out, &["--quiet"]);
+    assert!(!ok);
+    assert!(
+        err.contains("notes.txt") && err.contains("is not a directory"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "kept");
 }

@@ -341,6 +341,15 @@ pub(crate) fn prepare_dir(
     planned: &[(usize, f64)],
     key: &SeriesKey,
 ) -> Result<crate::claim::Claim, slosh_cache::Error> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(slosh_fileio::IoError::new(
+            dir,
+            std::io::Error::other(
+                "is there and is not a directory (a bake writes its steps into one)",
+            ),
+        )
+        .into());
+    }
     std::fs::create_dir_all(dir).map_err(|e| slosh_fileio::IoError::new(dir, e))?;
     let claim = crate::claim::claim(dir, key)?;
     remove_stale_temps(dir);
