@@ -3,7 +3,12 @@
 # in parts that each fit one 10-minute command on a GPU host with 16 cores. Reports and
 # printed output go to OUT; series are written under /tmp and reused.
 #
-#   SLOSH=path/to/slosh scripts/gpu_figures.sh OUT scrub|scale|bake
+#   scripts/gpu_figures.sh OUT scrub|scale|bake
+#
+# slosh is $SLOSH, else .dev/slosh, else the one on PATH. Where the repo holds .gl and .whl
+# (scripts/gpu_prepare.sh makes them), the loaders are unpacked and pysplashsurf installed
+# first. SMALL=1 runs every command at sizes a 2-core machine takes in minutes (a check of
+# the script and its flags, not figures).
 #
 # scrub: `bench scrub` 100k and 1M (page cache), `bench gpu` (table 4.6, 100k and 1M).
 # scale: `bench scrub` 4M, 500 steps of 1M resident (8 distinct shapes), the raw EnSight
@@ -11,10 +16,28 @@
 # bake:  `bench bake` 100k and 1M with the GPU column, 64 steps of 1M through the batch,
 #        one 4M step baked on the GPU with its device memory sampled every 50 ms.
 set -euo pipefail
-slosh=$(readlink -f "${SLOSH:-slosh}")
+cd "$(dirname "$0")/.."
+default=slosh
+[ -x .dev/slosh ] && default=.dev/slosh
+slosh=$(readlink -f "$(command -v "${SLOSH:-$default}")")
 out=${1:?OUT}
 part=${2:?scrub, scale or bake}
 mkdir -p "$out"
+if ls .gl/*.deb > /dev/null 2>&1 && ! ldconfig -p | grep -q libvulkan; then
+    for f in .gl/*.deb; do dpkg -x "$f" /; done
+    ldconfig
+fi
+if ls .whl/*.whl > /dev/null 2>&1 && ! python3 -c 'import pysplashsurf' 2> /dev/null; then
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+        --target /tmp/site .whl/*.whl
+    export PYTHONPATH=/tmp/site
+fi
+# Sizes: the issues' own, or SMALL ones for a check of the script here.
+if [ -n "${SMALL:-}" ]; then
+    p100k=2000 p1m=5000 p4m=10000 resident=24 threads=2 series=4 tmp=/tmp/slosh-small
+else
+    p100k=100000 p1m=1000000 p4m=4000000 resident=500 threads=16 series=64 tmp=/tmp
+fi
 run() {
     local name=$1
     shift
@@ -24,33 +47,33 @@ run() {
 }
 case $part in
 scrub)
-    run scrub bench scrub --points 100000,1000000 --dir /tmp/slosh-sd --out "$out/scrub.md"
-    run gpu bench gpu --tables 4.6 --points 100000,1000000 --max-iterations 2 \
+    run scrub bench scrub --points $p100k,$p1m --dir $tmp/slosh-sd --out "$out/scrub.md"
+    run gpu bench gpu --tables 4.6 --points $p100k,$p1m --max-iterations 2 \
         --out "$out/gpu.md"
     ;;
 scale)
-    run scrub-4m bench scrub --points 4000000 --steps 24 --distinct 4 --pool-steps 8 \
-        --jumps 40 --dir /tmp/slosh-sd --out "$out/scrub-4m.md"
+    run scrub-4m bench scrub --points $p4m --steps 24 --distinct 4 --pool-steps 8 \
+        --jumps 40 --dir $tmp/slosh-sd --out "$out/scrub-4m.md"
     # The resident jumps fill a pool that holds the whole series first.
-    run scrub-resident bench scrub --points 1000000 --steps 500 --distinct 8 \
-        --jumps 100 --dir /tmp/slosh-sd --out "$out/scrub-resident.md"
-    run scrub-raw bench scrub --points 1000000 --steps 24 --jumps 30 --raw-case \
-        --raw-case-gpu --dir /tmp/slosh-sd --out "$out/scrub-raw.md"
+    run scrub-resident bench scrub --points $p1m --steps $resident --distinct 8 \
+        --jumps 100 --dir $tmp/slosh-sd --out "$out/scrub-resident.md"
+    run scrub-raw bench scrub --points $p1m --steps 24 --jumps 30 --raw-case \
+        --raw-case-gpu --dir $tmp/slosh-sd --out "$out/scrub-raw.md"
     ;;
 bake)
-    run bake bench bake --points 100000,1000000 --runs 3 --threads 16 --series 0 \
+    run bake bench bake --points $p100k,$p1m --runs 3 --threads $threads --series 0 \
         --out "$out/bake.md"
-    run bake-series bench bake --points 1000000 --runs 1 --threads 16 --series 64 \
+    run bake-series bench bake --points $p1m --runs 1 --threads $threads --series $series \
         --out "$out/bake-series.md"
-    [ -e /tmp/slosh-s4m/sphere.case ] ||
-        "$slosh" gen sphere --points 4000000 --steps 1 --out /tmp/slosh-s4m > /dev/null
-    rm -rf /tmp/slosh-c4m
+    [ -e $tmp/slosh-s4m/sphere.case ] ||
+        "$slosh" gen sphere --points $p4m --steps 1 --out $tmp/slosh-s4m > /dev/null
+    rm -rf $tmp/slosh-c4m
     if command -v nvidia-smi > /dev/null; then
         nvidia-smi --query-gpu=memory.used --format=csv,noheader,nounits -lms 50 \
             > "$out/bake-4m-memory.txt" &
         sampler=$!
     fi
-    run bake-4m bake /tmp/slosh-s4m/sphere.case --out /tmp/slosh-c4m --device gpu
+    run bake-4m bake $tmp/slosh-s4m/sphere.case --out $tmp/slosh-c4m --device gpu
     if [ -n "${sampler:-}" ]; then
         kill "$sampler"
         echo "bake-4m: device memory used, MiB: idle $(head -1 "$out/bake-4m-memory.txt"), peak $(sort -n "$out/bake-4m-memory.txt" | tail -1)"
