@@ -23,7 +23,9 @@ slosh=$(readlink -f "$(command -v "${SLOSH:-$default}")")
 out=${1:?OUT}
 part=${2:?scrub, scale or bake}
 mkdir -p "$out"
-if ls .gl/*.deb > /dev/null 2>&1 && ! ldconfig -p | grep -q libvulkan; then
+# (grep reads all of ldconfig's list: with -q it could stop early, and pipefail would then
+# take ldconfig's broken pipe for "not found".)
+if ls .gl/*.deb > /dev/null 2>&1 && ! ldconfig -p | grep libvulkan > /dev/null; then
     for f in .gl/*.deb; do dpkg -x "$f" /; done
     ldconfig
 fi
