@@ -3,16 +3,14 @@
 /// Keeps freed memory in the process for reuse instead of returning it to the system. A bake
 /// allocates and frees gigabytes per step, and glibc maps every block above its mmap
 /// threshold (32 MB at most) afresh and unmaps it when freed, so each step faulted its large
-/// arrays in and had the kernel zero them again: a fifth of a 1M-point bake's samples were in
-/// `clear_page`. With no mmap at all, large blocks come from the heap, which is never trimmed,
-/// and later steps reuse it: a 3-step 1M-point series on the 2-core machine took 22.1–23.7 s
-/// against 24.9–26.4 s (three alternated runs each, system time 5.0–5.8 s against 6.8–9.8).
+/// arrays in and had the kernel zero them again (a fifth of a 1M-point bake's samples were in
+/// `clear_page`). With no mmap at all, large blocks come from the heap, which is never trimmed,
+/// and later steps reuse it.
 ///
 /// Threads other than the first allocate from heaps of their own (64 MB each), and glibc
 /// unmaps a thread's extra heap once it is wholly free, whatever the trim threshold, unless
-/// the top pad asks to keep that much: with a pad of one such heap, a 4-step 1M-point bake on
-/// the 2-core machine faulted 645–651k pages against 774–876k and took 13.9–14.3 s against
-/// 14.5–15.5 s (three alternated runs each). The H200's sandbox pays more for each fault.
+/// the top pad asks to keep that much: so the pad is one such heap. What each saved, in page
+/// faults and wall time, is in `docs/results-bake.md`.
 pub fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets the allocator's thresholds; it is called first thing in main,
