@@ -118,7 +118,7 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 200)]
     pub steps: usize,
     /// Particles per step.
-    #[arg(long, default_value_t = 20_000)]
+    #[arg(long, default_value_t = 20_000, value_parser = point_count)]
     pub points: usize,
     /// Where the demo lives (default: the user's cache directory, slosh/demo).
     #[arg(long)]
@@ -151,7 +151,7 @@ pub struct ScrubBenchArgs {
     #[arg(long, default_value = "docs/results-scrub.md")]
     pub out: PathBuf,
     /// Points per step of each series measured (default 100000,1000000; --quick 2000).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = point_count)]
     pub points: Vec<usize>,
     /// Steps per series.
     #[arg(long, default_value_t = 64)]
@@ -227,7 +227,7 @@ pub struct GpuBenchArgs {
     #[arg(long, value_enum, value_delimiter = ',')]
     pub tables: Vec<BenchTable>,
     /// Point counts of table 4.6 (default 2500,10000,100000,1000000; --quick 2500,10000).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = point_count)]
     pub points: Vec<usize>,
 }
 
@@ -254,7 +254,7 @@ pub struct PrecisionBenchArgs {
     #[arg(long, default_value = "docs/results-precision.md")]
     pub out: PathBuf,
     /// Particles per scene.
-    #[arg(long, default_value_t = 20_000)]
+    #[arg(long, default_value_t = 20_000, value_parser = point_count)]
     pub points: usize,
     /// Image size in pixels (square) of every render.
     #[arg(long, default_value_t = 128)]
@@ -267,17 +267,17 @@ pub struct BakeBenchArgs {
     #[arg(long, default_value = "docs/results-bake.md")]
     pub out: PathBuf,
     /// Runs per size (median reported; 1 at 1M points).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = at_least_one)]
     pub runs: usize,
     /// Only 2.5k and 10k points.
     #[arg(long)]
     pub quick: bool,
     /// Point counts to bake (default 2500,10000,100000,1000000; --quick 2500,10000).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = point_count)]
     pub points: Vec<usize>,
     /// Thread counts of the scaling table: each size baked on a pool of each (default 1, 2
     /// and every core).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = at_least_one)]
     pub threads: Vec<usize>,
     /// Steps of the series baked through the batch driver per size, against one step alone
     /// (0 skips it).
@@ -346,7 +346,7 @@ pub struct GenArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Particles of the main body (droplets and hard-case extras come on top).
-    #[arg(long, default_value_t = 10_000)]
+    #[arg(long, default_value_t = 10_000, value_parser = point_count)]
     pub points: usize,
     #[arg(long, default_value_t = 10)]
     pub steps: usize,
@@ -481,6 +481,29 @@ pub struct SelectSettings {
 }
 
 /// A flag group with every flag at its default, as a command line without them parses.
+/// A count of particles a generated scene can have: 1 to [`slosh_scenes::MAX_POINTS`].
+fn point_count(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .parse()
+        .map_err(|_| format!("expected a count of points, found '{s}'"))?;
+    if n == 0 || n > slosh_scenes::MAX_POINTS {
+        return Err(format!(
+            "expected 1 to {} points, found {n}",
+            slosh_scenes::MAX_POINTS
+        ));
+    }
+    Ok(n)
+}
+
+/// A count of at least one (runs, threads).
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse() {
+        Ok(0) => Err("expected at least 1, found 0".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("expected a whole number, found '{s}'")),
+    }
+}
+
 fn flag_defaults<T: Args + clap::FromArgMatches>() -> T {
     let command = T::augment_args(clap::Command::new("slosh"));
     T::from_arg_matches(&command.get_matches_from(["slosh"])).unwrap_or_else(|e| e.exit())

@@ -241,3 +241,45 @@ fn a_bake_into_a_file_is_refused_and_the_file_kept() {
     );
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "kept");
 }
+
+/// Counts a benchmark or a scene cannot take are refused by flag, before any work: `bench
+/// bake --points 0` and `--runs 0` panicked.
+#[test]
+fn point_and_run_counts_out_of_range_are_refused_by_flag() {
+    for (line, expected) in [
+        (
+            "bench bake --points 0",
+            "'--points <POINTS>': expected 1 to 200000000 points",
+        ),
+        (
+            "bench bake --runs 0",
+            "'--runs <RUNS>': expected at least 1",
+        ),
+        (
+            "bench bake --threads 2,0",
+            "'--threads <THREADS>': expected at least 1",
+        ),
+        (
+            "bench scrub --points 1000,0",
+            "expected 1 to 200000000 points",
+        ),
+        (
+            "bench gpu --points x",
+            "expected a count of points, found 'x'",
+        ),
+        ("bench precision --points 300000000", "found 300000000"),
+        (
+            "gen sphere --points 0 --out unused",
+            "expected 1 to 200000000",
+        ),
+        ("demo --points 0", "expected 1 to 200000000"),
+    ] {
+        let args: Vec<&str> = line.split_whitespace().collect();
+        let (ok, _, err) = slosh(&args);
+        assert!(!ok, "{line} accepted");
+        assert!(
+            err.contains(expected) && !err.contains("panicked"),
+            "{line}: {err}"
+        );
+    }
+}

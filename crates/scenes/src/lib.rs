@@ -10,6 +10,7 @@ pub use glam::{DMat3, DVec3};
 pub use ray::{Hit, TrueRay};
 pub use sampling::{fibonacci_sphere, fibonacci_torus, jittered_block, tied_lattice};
 pub use scene::{
-    DENSITY, Droplet, Extra, GRAVITY, HardCases, Particles, Scene, SceneError, SceneKind, SceneSpec,
+    DENSITY, Droplet, Extra, GRAVITY, HardCases, MAX_POINTS, Particles, Scene, SceneError,
+    SceneKind, SceneSpec,
 };
 pub use truth::{Truth, Wave, height, height_gradient};

@@ -82,11 +82,10 @@ fn parts_in(
 }
 
 /// The sphere step of `points` points, and its mean particle spacing.
-fn input(points: usize) -> (StepInput, f64) {
-    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))
-        .unwrap_or_else(|_| unreachable!("sphere scenes of a positive size always build"));
+fn input(points: usize) -> Result<(StepInput, f64)> {
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, points, 1))?;
     let input = slosh_testkit::scene_step(&scene, 0, &format!("sphere {points}"));
-    (input, scene.spacing())
+    Ok((input, scene.spacing()))
 }
 
 /// The peer on the same particles and cores: splashsurf (pysplashsurf 0.14.1) reconstructing
@@ -182,7 +181,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
     // The same with the GPU's stages, where they ran.
     let mut gpu_one_step: Vec<(usize, f64)> = Vec::new();
     for &n in &sizes {
-        let (inp, spacing) = input(n);
+        let (inp, spacing) = input(n)?;
         let runs = if n >= 1_000_000 { 1 } else { args.runs };
         // The bare baseline: kiddo kNN, neighbour lists and fits, nothing else.
         let bare_params = SurfaceParams {
@@ -223,7 +222,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             }
         }
         let Some(baked) = last_baked else {
-            unreachable!("at least one run per size")
+            anyhow::bail!("no run baked {n} points: at least one run per size is needed");
         };
         let stage = |name: &str| {
             median(
@@ -507,7 +506,7 @@ fn scaling_and_series(
     let cores = slosh_bake::cores();
     let mut scaling = Vec::new();
     for &n in sizes {
-        let (inp, _) = input(n);
+        let (inp, _) = input(n)?;
         let runs = if n >= 1_000_000 { 1 } else { args.runs.max(1) };
         let mut first_total = None;
         for t in thread_counts(args, cores) {

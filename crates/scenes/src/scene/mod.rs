@@ -31,6 +31,8 @@ use tank::{slosh_waves, tank_spacing, tank_waves};
 pub const GRAVITY: f64 = 9.81;
 /// Density used for the pressure-like field (kg/m³).
 pub const DENSITY: f64 = 1000.0;
+/// The most particles a scene makes.
+pub const MAX_POINTS: usize = 200_000_000;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -279,9 +281,9 @@ impl Scene {
                 h.density_jump
             )));
         }
-        if spec.points == 0 || spec.points > 200_000_000 {
+        if spec.points == 0 || spec.points > MAX_POINTS {
             return Err(SceneError::Invalid(format!(
-                "points must be in 1..=200000000, got {}",
+                "points must be in 1..={MAX_POINTS}, got {}",
                 spec.points
             )));
         }
