@@ -15,6 +15,7 @@ pub mod fuzzing;
 mod layout;
 mod manifest;
 pub mod names;
+mod nearest_point;
 pub mod octahedral;
 mod probe;
 mod reader;
@@ -43,6 +44,7 @@ pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,
     step_file_name,
 };
+pub use nearest_point::NearestPoints;
 pub use probe::{ProbeReading, SurfaceProbe};
 pub use reader::CacheFile;
 pub use statistics::{Statistics, Summary};

@@ -7,6 +7,7 @@ use slosh_mls::{MIN_WEIGHT, V3, expand_one, weight};
 use crate::error::{Error, Result};
 use crate::format::Transform;
 use crate::names;
+use crate::nearest_point::NearestPoints;
 use crate::reader::CacheFile;
 
 /// One step's points, neighbour lists and input indices, held for probing.
@@ -21,6 +22,8 @@ pub struct SurfaceProbe {
     cluster_size: usize,
     cluster_start: Vec<u32>,
     candidates: Vec<u32>,
+    /// The stored points, searchable for the nearest.
+    nearest: NearestPoints,
 }
 
 /// What the surface holds at a probed point.
@@ -53,7 +56,15 @@ impl SurfaceProbe {
                 problem: format!("{n} points, {} balls", balls.len()),
             });
         }
+        let nearest = NearestPoints::new(
+            &geometry
+                .positions
+                .iter()
+                .map(|p| [p.x, p.y, p.z])
+                .collect::<Vec<_>>(),
+        );
         Ok(SurfaceProbe {
+            nearest,
             transform: file.header().transform,
             positions: geometry.positions,
             normals: geometry.normals,
@@ -86,12 +97,8 @@ impl SurfaceProbe {
         field: Option<&[f32]>,
     ) -> Option<ProbeReading> {
         let x = V3::new(local[0], local[1], local[2]);
-        let (nearest, d2) = self
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (i, (*p - x).length_squared()))
-            .min_by(|a, b| a.1.total_cmp(&b.1))?;
+        let nearest = self.nearest.nearest(local)?;
+        let d2 = (self.positions[nearest] - x).length_squared();
         let field = field.filter(|f| f.len() == self.positions.len()).map(|f| {
             match ball.filter(|&i| i < self.positions.len()) {
                 Some(i) => self.weighted_mean(i, x, h_factor, f).unwrap_or(f[i]),

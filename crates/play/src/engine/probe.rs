@@ -5,7 +5,7 @@
 //! case) is prepared on a thread of its own, and the pixel is read back without waiting for
 //! the GPU, so that the UI thread never waits for either.
 
-use slosh_cache::{CacheFile, ProbeReading, Source, SurfaceProbe};
+use slosh_cache::{CacheFile, NearestPoints, ProbeReading, Source, SurfaceProbe};
 use slosh_ensight::{Case, PointSource, StepRequest};
 use slosh_render::{GpuHit, GpuStep, HostField, PendingHit, status};
 
@@ -37,8 +37,8 @@ pub(super) struct HeldProbe {
     revision: u64,
     surface: SurfaceProbe,
     field: Option<Vec<f32>>,
-    /// The step's particles as its EnSight case holds them.
-    input: std::result::Result<Vec<[f32; 3]>, String>,
+    /// The step's particles as its EnSight case holds them, searchable for the nearest.
+    input: std::result::Result<(Vec<[f32; 3]>, NearestPoints), String>,
     source: Source,
     /// How far a stored point may lie from its input particle: f32 round trips.
     tolerance: f64,
@@ -99,7 +99,10 @@ impl HeldProbe {
             revision,
             surface: SurfaceProbe::open(&file)?,
             field,
-            input: input_particles(&header.source),
+            input: input_particles(&header.source).map(|p| {
+                let nearest = NearestPoints::new(&p);
+                (p, nearest)
+            }),
             source: header.source.clone(),
             // Positions go through f32 local coordinates and back.
             tolerance: 1e-5 * header.transform.scale.max(f64::MIN_POSITIVE)
@@ -115,15 +118,13 @@ impl HeldProbe {
     /// The input particle at the stored point `world`: its index and position.
     fn input_at(&self, world: [f64; 3]) -> std::result::Result<(usize, [f64; 3]), String> {
         let source = &self.source;
-        let particles = self.input.as_ref().map_err(Clone::clone)?;
-        let distance2 =
-            |p: &[f32; 3]| -> f64 { (0..3).map(|a| (f64::from(p[a]) - world[a]).powi(2)).sum() };
-        let (index, d2) = particles
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (i, distance2(p)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
+        let (particles, nearest) = self.input.as_ref().map_err(Clone::clone)?;
+        let index = nearest
+            .nearest(world.map(|c| c as f32))
             .ok_or_else(|| format!("{} holds no particles at step {}", source.path, source.step))?;
+        let d2: f64 = (0..3)
+            .map(|a| (f64::from(particles[index][a]) - world[a]).powi(2))
+            .sum();
         if d2.sqrt() > self.tolerance {
             return Err(format!(
                 "{} holds no particle where the stored one is (changed since the bake?)",
