@@ -16,12 +16,14 @@
 # bake:  `bench bake` 100k and 1M with the GPU column, 64 steps of 1M through the batch,
 #        one 4M step baked on the GPU with its device memory sampled every 50 ms.
 set -euo pipefail
+# OUT and $SLOSH are the caller's paths; the rest is the repo's.
+out=$(readlink -m "${1:?OUT}")
+part=${2:?scrub, scale or bake}
+[ -n "${SLOSH:-}" ] && SLOSH=$(readlink -f "$(command -v "$SLOSH")")
 cd "$(dirname "$0")/.."
 default=slosh
 [ -x .dev/slosh ] && default=.dev/slosh
 slosh=$(readlink -f "$(command -v "${SLOSH:-$default}")")
-out=${1:?OUT}
-part=${2:?scrub, scale or bake}
 mkdir -p "$out"
 # (grep reads all of ldconfig's list: with -q it could stop early, and pipefail would then
 # take ldconfig's broken pipe for "not found".)
