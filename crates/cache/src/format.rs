@@ -12,10 +12,17 @@ pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// them); minor versions only add.
 pub const MAJOR: u16 = 9;
 pub const MINOR: u16 = 0;
-/// Raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
+/// The most raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
 /// element size.
 pub const CHUNK_RAW: u64 = 1 << 20;
+/// The fewest raw bytes per chunk: smaller chunks would compress worse and lengthen the
+/// table for less than they gain in parallel decoding.
+pub const CHUNK_RAW_MIN: u64 = 64 << 10;
+/// Chunks a section is cut into where [`CHUNK_RAW_MIN`] and [`CHUNK_RAW`] allow: a small
+/// step's sections (a ball section of 100k points is 1.6 MB) would otherwise be one or two
+/// chunks, and their upload would wait for one core to decode each.
+pub const CHUNKS_PER_SECTION: u64 = 16;
 pub const PREAMBLE_LEN: usize = 32;
 pub const FOOTER_LEN: usize = 32;
 /// Sections start on this boundary, so raw sections can be used in place from the map.
@@ -144,11 +151,17 @@ impl Encoding {
         }
     }
 
-    /// Raw bytes per chunk of a section in this encoding: [`CHUNK_RAW`], or the largest
-    /// multiple of the shuffle width below it (20- and 24-byte elements do not divide 1 MiB).
-    pub fn chunk_raw(self) -> u64 {
+    /// Raw bytes per chunk of a section of `raw` bytes in this encoding: a sixteenth of the
+    /// section ([`CHUNKS_PER_SECTION`]) rounded up to a whole element, within
+    /// [`CHUNK_RAW_MIN`] and the largest multiple of the shuffle width up to [`CHUNK_RAW`]
+    /// (20- and 24-byte elements do not divide 1 MiB).
+    pub fn chunk_raw(self, raw: u64) -> u64 {
         let width = self.shuffle_width().unwrap_or(4) as u64;
-        CHUNK_RAW - CHUNK_RAW % width
+        let most = CHUNK_RAW - CHUNK_RAW % width;
+        raw.div_ceil(CHUNKS_PER_SECTION)
+            .max(CHUNK_RAW_MIN)
+            .next_multiple_of(width)
+            .min(most)
     }
 
     /// The byte shuffle within whole elements of `size` bytes, then zstd (`shuffle4+zstd`

@@ -34,6 +34,12 @@ pub struct SectionInput {
 pub const RAW_BUDGET_BYTES_PER_POINT: u64 = 46;
 
 impl SectionInput {
+    /// Raw bytes per chunk of this section ([`Encoding::chunk_raw`]), whether it ends up
+    /// compressed or raw.
+    fn chunk_raw(&self) -> u64 {
+        self.encoding.chunk_raw(self.bytes.len() as u64)
+    }
+
     pub fn new<T: bytemuck::Pod>(
         name: &str,
         element: Element,
@@ -84,11 +90,7 @@ pub fn encode_step(
     let jobs: Vec<(usize, &[u8])> = sections
         .iter()
         .enumerate()
-        .flat_map(|(i, s)| {
-            s.bytes
-                .chunks(s.encoding.chunk_raw() as usize)
-                .map(move |c| (i, c))
-        })
+        .flat_map(|(i, s)| s.bytes.chunks(s.chunk_raw() as usize).map(move |c| (i, c)))
         .collect();
     let packed: Vec<Option<Vec<u8>>> = jobs
         .par_iter()
@@ -107,7 +109,7 @@ pub fn encode_step(
     let spans: Vec<std::ops::Range<usize>> = sections
         .iter()
         .map(|s| {
-            let n = s.bytes.len().div_ceil(s.encoding.chunk_raw() as usize);
+            let n = s.bytes.len().div_ceil(s.chunk_raw() as usize);
             at += n;
             at - n..at
         })
@@ -189,7 +191,7 @@ pub fn encode_step(
                     raw: s.bytes.len() as u64,
                     encoding: *encoding,
                     xxh3: hex64(xxh3_64(bytes)),
-                    chunk_raw: s.encoding.chunk_raw(),
+                    chunk_raw: s.chunk_raw(),
                     chunks: chunks.clone(),
                 };
                 offset = align_up(offset + bytes.len());

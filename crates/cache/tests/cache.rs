@@ -158,6 +158,34 @@ fn element_shuffles_round_trip_whole_elements_only() {
     }
 }
 
+/// A section's chunks: never under 64 KiB, a sixteenth of the section between, never over
+/// 1 MiB (or, for elements that do not divide it, the most whole elements within it).
+#[test]
+fn chunks_are_a_sixteenth_of_a_section_within_their_bounds() {
+    for encoding in [
+        Encoding::Raw,
+        Encoding::Shuffle4Zstd,
+        Encoding::Shuffle20Zstd,
+    ] {
+        let width = encoding.shuffle_width().unwrap_or(4) as u64;
+        assert_eq!(encoding.chunk_raw(0), CHUNK_RAW_MIN.next_multiple_of(width));
+        assert_eq!(
+            encoding.chunk_raw(1000),
+            CHUNK_RAW_MIN.next_multiple_of(width)
+        );
+        // 100k 16-byte balls: 1.6 MB in sixteen chunks of 100,000 bytes.
+        assert_eq!(
+            encoding.chunk_raw(1_600_000),
+            100_000u64.next_multiple_of(width)
+        );
+        let most = encoding.chunk_raw(u64::MAX / 2);
+        assert_eq!(most, CHUNK_RAW - CHUNK_RAW % width);
+        assert_eq!(encoding.chunk_raw(64 * CHUNK_RAW), most);
+    }
+    // 20-byte elements do not divide 1 MiB: their largest chunks hold 1,048,560 bytes.
+    assert_eq!(Encoding::Shuffle20Zstd.chunk_raw(1 << 30), 1_048_560);
+}
+
 /// Sections of several chunks: every encoding round-trips, and a flip in any chunk is caught
 /// naming that chunk.
 #[test]
@@ -192,22 +220,34 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
     let bytes = encode_step(header(), &sections, Compression::Level(1)).unwrap();
     let file = open(bytes.clone()).unwrap();
     for (entry, input) in file.header().sections.iter().zip(&sections) {
-        assert_eq!(entry.chunks.len(), 4, "{}", entry.name);
-        // 20-byte elements do not divide 1 MiB: their chunks hold 1,048,560 bytes.
+        // About 3 MiB each: a sixteenth of the section per chunk, rounded up to whole
+        // elements, so sixteen chunks, the last holding the rest.
+        let width = input.encoding.shuffle_width().unwrap_or(4) as u64;
         assert_eq!(
-            entry.chunk_raw,
-            input.encoding.chunk_raw(),
+            entry.chunks.len() as u64,
+            CHUNKS_PER_SECTION,
             "{}",
             entry.name
         );
-        assert!(CHUNK_RAW - entry.chunk_raw < 32, "{}", entry.name);
+        assert_eq!(
+            entry.chunk_raw,
+            entry
+                .raw
+                .div_ceil(CHUNKS_PER_SECTION)
+                .next_multiple_of(width),
+            "{}",
+            entry.name
+        );
         let mut out = vec![0u8; entry.raw as usize];
         file.decode_into(entry, &mut out, &mut Vec::new()).unwrap();
         assert!(out == input.bytes, "{} differs after decoding", entry.name);
     }
     for entry in &file.header().sections {
         let spans = entry.chunk_spans();
-        for (k, (stored, _)) in spans.iter().enumerate() {
+        // The first, a middle and the last chunk (the last is the short one).
+        let last = spans.len() - 1;
+        for k in [0, last / 2, last] {
+            let stored = &spans[k].0;
             let mut damaged = bytes.clone();
             damaged[entry.offset as usize + stored.start + stored.len() / 2] ^= 0x01;
             let file = open(damaged).unwrap();

@@ -1310,6 +1310,30 @@ fn steps_in_reused_section_buffers_draw_as_in_new_ones() {
             "step {k} in reused buffers draws other pixels"
         );
     }
+    // An upload given up part-way (a prefetch that a jump made stale) puts back the section
+    // buffers it took: the next uploads would otherwise allocate on the jump's path.
+    let kept = shelf.bytes();
+    let host = slosh_render::HostStep::read(&files[0], None).unwrap();
+    let mut encoder = dev
+        .gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    let given_up = || true;
+    let options = slosh_render::UploadOptions {
+        shelf: Some(&shelf),
+        cancelled: Some(&given_up),
+        ..Default::default()
+    };
+    let cancelled = GpuStep::create_in(&dev.gpu, &host, &mut encoder, options);
+    assert!(
+        matches!(cancelled, Err(slosh_render::Error::Cancelled)),
+        "{cancelled:?}"
+    );
+    assert!(
+        shelf.bytes() >= kept,
+        "a cancelled upload kept {} of the shelf's {kept} bytes",
+        shelf.bytes()
+    );
     shelf.set_limit(0);
     assert_eq!(shelf.bytes(), 0);
     let before = shelf.fresh();

@@ -228,7 +228,7 @@ fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
         if entry.encoding != slosh_cache::Encoding::Raw {
             let mut raw = vec![0u8; entry.raw as usize];
             file.decode_into(entry, &mut raw, &mut Vec::new())?;
-            sections.push((entry.encoding, raw));
+            sections.push((entry.encoding, entry.chunk_raw, raw));
         }
     }
     let mut rows = Vec::new();
@@ -236,8 +236,9 @@ fn codec_table(path: &Path) -> Result<Vec<CodecRow>> {
         let (mut stored, mut raw_bytes) = (0u64, 0u64);
         let mut packed = Vec::new();
         let t = Instant::now();
-        for (encoding, raw) in &sections {
-            for chunk in raw.chunks(encoding.chunk_raw() as usize) {
+        // In the file's own chunks.
+        for (encoding, chunk_raw, raw) in &sections {
+            for chunk in raw.chunks(*chunk_raw as usize) {
                 let bytes = slosh_cache::encode_bytes(chunk, *encoding, level)?;
                 stored += bytes.len() as u64;
                 raw_bytes += chunk.len() as u64;

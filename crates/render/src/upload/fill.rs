@@ -154,9 +154,16 @@ pub(super) fn storage_buffers(
     // Raw pieces were copied straight from the map, which may have gone to zeros under them.
     let filled = filled.and_then(|()| file.unchanged().map_err(Error::from));
     if let Err(e) = filled {
-        // Still mapped and never submitted: ready for the next upload as it is.
+        // Still mapped and never submitted: ready for the next upload as it is. The section
+        // buffers go back too: a prefetch that a jump cancels would otherwise drop a step's
+        // worth, and the next uploads would allocate device memory on the jump's path.
         if let Some(pool) = pool {
             pool.restore(staging);
+        }
+        if let Some(shelf) = shelf {
+            for target in targets {
+                shelf.put(target);
+            }
         }
         return Err(e);
     }
