@@ -3,7 +3,7 @@
 # in parts that each fit one 10-minute command on a GPU host with 16 cores. Reports and
 # printed output go to OUT; series are written under /tmp and reused.
 #
-#   scripts/gpu_figures.sh OUT scrub|scale|bake
+#   scripts/gpu_figures.sh OUT scrub|scale|bake|before
 #
 # slosh is $SLOSH, else .dev/slosh, else the one on PATH. Where the repo holds .gl and .whl
 # (scripts/gpu_prepare.sh makes them), the loaders are unpacked and pysplashsurf installed
@@ -15,11 +15,22 @@
 #        case at 1M with the GPU bake.
 # bake:  `bench bake` 100k and 1M with the GPU column, 64 steps of 1M through the batch,
 #        one 4M step baked on the GPU with its device memory sampled every 50 ms.
+# before: the baseline binary $BEFORE (the one an issue's "now" column came from) on this
+#        card: `bench gpu` alternated with slosh (before, after, before, after), and its
+#        `bench scrub` of the scrub and scale parts' 100k, 1M and 4M series.
 set -euo pipefail
 # OUT and $SLOSH are the caller's paths; the rest is the repo's.
 out=$(readlink -m "${1:?OUT}")
-part=${2:?scrub, scale or bake}
+part=${2:?scrub, scale, bake or before}
+case $part in
+scrub | scale | bake | before) ;;
+*)
+    echo "unknown part '$part': scrub, scale, bake or before" >&2
+    exit 2
+    ;;
+esac
 [ -n "${SLOSH:-}" ] && SLOSH=$(readlink -f "$(command -v "$SLOSH")")
+[ -n "${BEFORE:-}" ] && BEFORE=$(readlink -f "$(command -v "$BEFORE")")
 cd "$(dirname "$0")/.."
 default=slosh
 [ -x .dev/slosh ] && default=.dev/slosh
@@ -42,16 +53,18 @@ if [ -n "${SMALL:-}" ]; then
 else
     p100k=100000 p1m=1000000 p4m=4000000 resident=500 threads=16 series=64 tmp=/tmp
 fi
+# run NAME ARGS: slosh ARGS, its output to OUT/NAME.txt; with BIN set, that binary instead.
 run() {
     local name=$1
     shift
-    echo "== $name: slosh $*"
+    local bin=${BIN:-$slosh}
+    echo "== $name: $(basename "$bin") $*"
     local TIMEFORMAT="$name: %R s wall"
-    { time "$slosh" "$@"; } 2>&1 | tee "$out/$name.txt"
+    { time "$bin" "$@"; } 2>&1 | tee "$out/$name.txt"
 }
 case $part in
 scrub)
-    run scrub bench scrub --points $p100k,$p1m --dir $tmp/slosh-sd --out "$out/scrub.md"
+    run scrub bench scrub --points $p100k,$p1m --dir $tmp/slosh-sd --cold --out "$out/scrub.md"
     run gpu bench gpu --tables 4.6 --points $p100k,$p1m --max-iterations 2 \
         --out "$out/gpu.md"
     ;;
@@ -83,8 +96,16 @@ bake)
         echo "bake-4m: device memory used, MiB: idle $(head -1 "$out/bake-4m-memory.txt"), peak $(sort -n "$out/bake-4m-memory.txt" | tail -1)"
     fi
     ;;
-*)
-    echo "unknown part '$part': scrub, scale or bake" >&2
-    exit 2
+before)
+    [ -x "${BEFORE:-}" ] || { echo "before: BEFORE names no binary" >&2; exit 2; }
+    gpu=(bench gpu --tables 4.6 --points $p100k,$p1m --max-iterations 2)
+    for round in 1 2; do
+        BIN=$BEFORE run gpu-before-$round "${gpu[@]}" --out "$out/gpu-before-$round.md"
+        run gpu-after-$round "${gpu[@]}" --out "$out/gpu-after-$round.md"
+    done
+    BIN=$BEFORE run scrub-before bench scrub --points $p100k,$p1m --dir $tmp/slosh-sd-before \
+        --out "$out/scrub-before.md"
+    BIN=$BEFORE run scrub-4m-before bench scrub --points $p4m --steps 24 --distinct 4 \
+        --pool-steps 8 --jumps 40 --dir $tmp/slosh-sd-before --out "$out/scrub-4m-before.md"
     ;;
 esac
