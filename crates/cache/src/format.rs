@@ -23,6 +23,10 @@ pub const CHUNK_RAW_MIN: u64 = 64 << 10;
 /// step's sections (a ball section of 100k points is 1.6 MB) would otherwise be one or two
 /// chunks, and their upload would wait for one core to decode each.
 pub const CHUNKS_PER_SECTION: u64 = 16;
+/// Every chunk's raw bytes start on this boundary: a run is decoded straight into its place
+/// in a mapped GPU staging buffer, and mapped ranges start on 8 bytes (wgpu's
+/// `MAP_ALIGNMENT`).
+pub const CHUNK_ALIGN: u64 = 8;
 pub const PREAMBLE_LEN: usize = 32;
 pub const FOOTER_LEN: usize = 32;
 /// Sections start on this boundary, so raw sections can be used in place from the map.
@@ -151,16 +155,27 @@ impl Encoding {
         }
     }
 
-    /// Raw bytes per chunk of a section of `raw` bytes in this encoding: a sixteenth of the
-    /// section ([`CHUNKS_PER_SECTION`]) rounded up to a whole element, within
-    /// [`CHUNK_RAW_MIN`] and the largest multiple of the shuffle width up to [`CHUNK_RAW`]
-    /// (20- and 24-byte elements do not divide 1 MiB).
-    pub fn chunk_raw(self, raw: u64) -> u64 {
+    /// What every chunk's raw length is a multiple of: the shuffle width (4 where there is
+    /// none) and [`CHUNK_ALIGN`].
+    pub fn chunk_step(self) -> u64 {
         let width = self.shuffle_width().unwrap_or(4) as u64;
-        let most = CHUNK_RAW - CHUNK_RAW % width;
+        let (mut a, mut b) = (width, CHUNK_ALIGN);
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        width / a * CHUNK_ALIGN
+    }
+
+    /// Raw bytes per chunk of a section of `raw` bytes in this encoding: a sixteenth of the
+    /// section ([`CHUNKS_PER_SECTION`]) rounded up to a [`Encoding::chunk_step`], within
+    /// [`CHUNK_RAW_MIN`] and the largest such multiple up to [`CHUNK_RAW`] (20- and 24-byte
+    /// elements do not divide 1 MiB).
+    pub fn chunk_raw(self, raw: u64) -> u64 {
+        let step = self.chunk_step();
+        let most = CHUNK_RAW - CHUNK_RAW % step;
         raw.div_ceil(CHUNKS_PER_SECTION)
             .max(CHUNK_RAW_MIN)
-            .next_multiple_of(width)
+            .next_multiple_of(step)
             .min(most)
     }
 

@@ -34,9 +34,9 @@ pub use codec::{
 };
 pub use error::{Error, Result};
 pub use format::{
-    ALIGN, CHUNK_RAW, CHUNK_RAW_MIN, CHUNKS_PER_SECTION, ChunkEntry, Encoding, FOOTER_LEN, Header,
-    MAJOR, MINOR, MlsSettings, PREAMBLE_LEN, SectionEntry, SeriesRecord, Source, StepStats,
-    Transform, hex64,
+    ALIGN, CHUNK_ALIGN, CHUNK_RAW, CHUNK_RAW_MIN, CHUNKS_PER_SECTION, ChunkEntry, Encoding,
+    FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings, PREAMBLE_LEN, SectionEntry, SeriesRecord,
+    Source, StepStats, Transform, hex64,
 };
 pub use layout::{
     BallState, CubicWords, Element, GpuBall, GpuPoint, GpuSphere, MAX_SPHERES, stored_radius,

@@ -13,8 +13,8 @@ use crate::bvh_grid::GpuBvhNode;
 use crate::codec::decode_into;
 use crate::error::{Error, Result};
 use crate::format::{
-    ALIGN, FOOTER_LEN, FOOTER_MAGIC, Footer, Header, MAGIC, MAJOR, MINOR, PREAMBLE_LEN, Preamble,
-    SectionEntry, hex64,
+    ALIGN, CHUNK_ALIGN, FOOTER_LEN, FOOTER_MAGIC, Footer, Header, MAGIC, MAJOR, MINOR,
+    PREAMBLE_LEN, Preamble, SectionEntry, hex64,
 };
 use crate::layout::Element;
 
@@ -43,15 +43,14 @@ fn older_source(bytes: &[u8], preamble: &Preamble) -> String {
 }
 
 /// The chunk table of a section: one chunk per `chunk_raw` raw bytes (a positive multiple
-/// of 4 and of the encoding's shuffle width), their stored sizes adding up to the section's,
+/// of 8 and of the encoding's shuffle width), their stored sizes adding up to the section's,
 /// each raw chunk stored as it is.
 fn check_chunks(s: &SectionEntry) -> std::result::Result<(), String> {
-    let width = s.encoding.shuffle_width().unwrap_or(4) as u64;
-    // Every shuffle width is a multiple of 4.
-    if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(width) {
+    let step = s.encoding.chunk_step();
+    if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(step) {
         return Err(format!(
-            "chunks of {} raw bytes (a positive multiple of 4 and of {width}, the {} width, \
-             expected)",
+            "chunks of {} raw bytes (a positive multiple of {step}: of {CHUNK_ALIGN}, and of \
+             the {} width, expected)",
             s.chunk_raw,
             s.encoding.name()
         ));

@@ -162,24 +162,30 @@ fn element_shuffles_round_trip_whole_elements_only() {
 /// 1 MiB (or, for elements that do not divide it, the most whole elements within it).
 #[test]
 fn chunks_are_a_sixteenth_of_a_section_within_their_bounds() {
-    for encoding in [
-        Encoding::Raw,
-        Encoding::Shuffle4Zstd,
-        Encoding::Shuffle20Zstd,
+    for (encoding, step) in [
+        (Encoding::Raw, 8),
+        (Encoding::Shuffle4Zstd, 8),
+        (Encoding::Shuffle16Zstd, 16),
+        (Encoding::Shuffle20Zstd, 40),
+        (Encoding::Shuffle24Zstd, 24),
     ] {
-        let width = encoding.shuffle_width().unwrap_or(4) as u64;
-        assert_eq!(encoding.chunk_raw(0), CHUNK_RAW_MIN.next_multiple_of(width));
+        assert_eq!(encoding.chunk_step(), step);
+        assert_eq!(encoding.chunk_raw(0), CHUNK_RAW_MIN.next_multiple_of(step));
         assert_eq!(
             encoding.chunk_raw(1000),
-            CHUNK_RAW_MIN.next_multiple_of(width)
+            CHUNK_RAW_MIN.next_multiple_of(step)
         );
         // 100k 16-byte balls: 1.6 MB in sixteen chunks of 100,000 bytes.
         assert_eq!(
             encoding.chunk_raw(1_600_000),
-            100_000u64.next_multiple_of(width)
+            100_000u64.next_multiple_of(step)
         );
+        // A sixteenth of 1M 12-byte points, 750,000 bytes, is no multiple of 8: such chunks
+        // could not be mapped where they go in a staging buffer.
+        let chunk = encoding.chunk_raw(12_000_000);
+        assert!(chunk >= 750_000 && chunk % CHUNK_ALIGN == 0, "{chunk}");
         let most = encoding.chunk_raw(u64::MAX / 2);
-        assert_eq!(most, CHUNK_RAW - CHUNK_RAW % width);
+        assert_eq!(most, CHUNK_RAW - CHUNK_RAW % step);
         assert_eq!(encoding.chunk_raw(64 * CHUNK_RAW), most);
     }
     // 20-byte elements do not divide 1 MiB: their largest chunks hold 1,048,560 bytes.
@@ -221,8 +227,8 @@ fn chunked_sections_round_trip_and_name_the_damaged_chunk() {
     let file = open(bytes.clone()).unwrap();
     for (entry, input) in file.header().sections.iter().zip(&sections) {
         // About 3 MiB each: a sixteenth of the section per chunk, rounded up to whole
-        // elements, so sixteen chunks, the last holding the rest.
-        let width = input.encoding.shuffle_width().unwrap_or(4) as u64;
+        // elements and 8 bytes, so sixteen chunks, the last holding the rest.
+        let width = input.encoding.chunk_step();
         assert_eq!(
             entry.chunks.len() as u64,
             CHUNKS_PER_SECTION,
@@ -409,4 +415,26 @@ fn ranked_sections_go_raw_in_rank_order_within_the_budget() {
             .iter()
             .all(|s| s.encoding == Encoding::Raw)
     );
+}
+
+/// A chunk table whose chunks would start off 8 bytes is refused when the file opens, naming
+/// the section: such a run cannot be mapped where it goes in a GPU staging buffer (a bake of
+/// 4-byte-multiple chunks made the H100's upload fail, then the process crash at exit).
+#[test]
+fn chunks_off_eight_bytes_are_refused_by_section() {
+    let mut bytes = encode_step(header(), &sample_sections(), Compression::None).unwrap();
+    // The preamble: the header's length at bytes 16..24, its hash at 24..32.
+    let header_len = u64::from_le_bytes(bytes[16..24].try_into().unwrap()) as usize;
+    let json = PREAMBLE_LEN..PREAMBLE_LEN + header_len;
+    let text = String::from_utf8(bytes[json.clone()].to_vec()).unwrap();
+    // Same length, so every offset stays: 65532 is a multiple of 4, not of 8.
+    let patched = text.replacen("\"chunk_raw\":65536", "\"chunk_raw\":65532", 1);
+    assert_ne!(patched, text, "no chunk_raw of 65536 in {text}");
+    bytes[json.clone()].copy_from_slice(patched.as_bytes());
+    let hash = xxhash_rust::xxh3::xxh3_64(patched.as_bytes());
+    bytes[24..32].copy_from_slice(&hash.to_le_bytes());
+    let err = open(bytes).unwrap_err().to_string();
+    for part in ["test.slc", "'ids'", "65532", "positive multiple of 8"] {
+        assert!(err.contains(part), "{part}: {err}");
+    }
 }

@@ -85,7 +85,6 @@ pub(super) fn storage_buffers(
             Source::Bytes(_) => Vec::new(),
         })
         .collect();
-    let mut pieces = Vec::new();
     let view = |start: u64, len: usize| {
         let end = start + (len as u64).next_multiple_of(4);
         staging
@@ -93,64 +92,72 @@ pub(super) fn storage_buffers(
             .get_mapped_range_mut()
             .map_err(|e| Error::Readback(e.to_string()))
     };
-    for (((_, source), &offset), spans) in arrays.iter().zip(&offsets).zip(&spans) {
-        match *source {
-            Source::Bytes(bytes) => {
-                for (k, piece) in bytes.chunks(COPY_PIECE).enumerate() {
-                    let at = offset + (k * COPY_PIECE) as u64;
-                    pieces.push((view(at, piece.len())?, Piece::Copy(piece)));
+    let pieces = || -> Result<Vec<_>> {
+        let mut pieces = Vec::new();
+        for (((_, source), &offset), spans) in arrays.iter().zip(&offsets).zip(&spans) {
+            match *source {
+                Source::Bytes(bytes) => {
+                    for (k, piece) in bytes.chunks(COPY_PIECE).enumerate() {
+                        let at = offset + (k * COPY_PIECE) as u64;
+                        pieces.push((view(at, piece.len())?, Piece::Copy(piece)));
+                    }
+                }
+                Source::Runs { file, entry } => {
+                    for (k, (_, raw)) in spans.iter().enumerate() {
+                        let at = offset + raw.start as u64;
+                        let piece = Piece::Run {
+                            file,
+                            entry,
+                            spans,
+                            k,
+                        };
+                        pieces.push((view(at, raw.len())?, piece));
+                    }
                 }
             }
-            Source::Runs { file, entry } => {
-                for (k, (_, raw)) in spans.iter().enumerate() {
-                    let at = offset + raw.start as u64;
-                    let piece = Piece::Run {
+        }
+        Ok(pieces)
+    };
+    // A view that cannot be made (a run placed off the mapping's alignment) is given up as a
+    // failed fill is: nothing is left mapped or taken.
+    let filled = pieces().and_then(|pieces| {
+        pieces.into_par_iter().try_for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(run, scratch), (mut view, piece)| -> Result<()> {
+                if cancelled.is_some_and(|c| c()) {
+                    return Err(Error::Cancelled);
+                }
+                match piece {
+                    Piece::Copy(bytes) => view.slice(..bytes.len()).copy_from_slice(bytes),
+                    Piece::Run {
                         file,
                         entry,
                         spans,
                         k,
-                    };
-                    pieces.push((view(at, raw.len())?, piece));
+                    } if entry.encoding == Encoding::Raw => {
+                        // A raw run is checksummed and copied straight in: one pass over the map.
+                        // Opening the file checked that raw chunks are stored as they are, so the
+                        // run fills its view.
+                        let bytes = file.checked_run(entry, spans, k)?;
+                        view.slice(..bytes.len()).copy_from_slice(bytes);
+                    }
+                    Piece::Run {
+                        file,
+                        entry,
+                        spans,
+                        k,
+                    } => {
+                        // Staging memory may be write-combined: decoding reads its own output
+                        // (matches, the filters), so it decodes here and is copied on once.
+                        run.resize(spans[k].1.len(), 0);
+                        file.decode_run_into(entry, spans, k, run, scratch)?;
+                        view.slice(..run.len()).copy_from_slice(run);
+                    }
                 }
-            }
-        }
-    }
-    let filled = pieces.into_par_iter().try_for_each_init(
-        || (Vec::new(), Vec::new()),
-        |(run, scratch), (mut view, piece)| -> Result<()> {
-            if cancelled.is_some_and(|c| c()) {
-                return Err(Error::Cancelled);
-            }
-            match piece {
-                Piece::Copy(bytes) => view.slice(..bytes.len()).copy_from_slice(bytes),
-                Piece::Run {
-                    file,
-                    entry,
-                    spans,
-                    k,
-                } if entry.encoding == Encoding::Raw => {
-                    // A raw run is checksummed and copied straight in: one pass over the map.
-                    // Opening the file checked that raw chunks are stored as they are, so the
-                    // run fills its view.
-                    let bytes = file.checked_run(entry, spans, k)?;
-                    view.slice(..bytes.len()).copy_from_slice(bytes);
-                }
-                Piece::Run {
-                    file,
-                    entry,
-                    spans,
-                    k,
-                } => {
-                    // Staging memory may be write-combined: decoding reads its own output
-                    // (matches, the filters), so it decodes here and is copied on once.
-                    run.resize(spans[k].1.len(), 0);
-                    file.decode_run_into(entry, spans, k, run, scratch)?;
-                    view.slice(..run.len()).copy_from_slice(run);
-                }
-            }
-            Ok(())
-        },
-    );
+                Ok(())
+            },
+        )
+    });
     // Raw pieces were copied straight from the map, which may have gone to zeros under them.
     let filled = filled.and_then(|()| file.unchanged().map_err(Error::from));
     if let Err(e) = filled {
