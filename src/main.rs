@@ -18,9 +18,16 @@ use slosh_fileio::say;
 
 use crate::cli::{Cli, Command};
 
+/// The longest the binary waits at exit for its GPU threads: one load in hand, which gives
+/// up at its next piece, or a staging warm-up.
+const BACKGROUND_GRACE: std::time::Duration = std::time::Duration::from_secs(10);
+
 fn main() -> std::process::ExitCode {
     machine::keep_freed_memory();
     let result = run(Cli::parse());
+    // Threads still using the GPU (loaders, a staging warm-up) end before the process does:
+    // a driver torn down under them at exit can crash it.
+    slosh_render::wait_for_background(BACKGROUND_GRACE);
     // Output that could not be written is an error too, once the work is done.
     let result = result.and_then(|()| match slosh_fileio::stdout::stdout_error() {
         Some(e) => Err(anyhow::anyhow!("writing to stdout: {e}")),

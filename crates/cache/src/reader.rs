@@ -48,11 +48,16 @@ fn older_source(bytes: &[u8], preamble: &Preamble) -> String {
 fn check_chunks(s: &SectionEntry) -> std::result::Result<(), String> {
     let step = s.encoding.chunk_step();
     if s.chunk_raw == 0 || !s.chunk_raw.is_multiple_of(step) {
+        let of = match s.encoding.shuffle_width() {
+            Some(width) => format!(
+                "a positive multiple of {step}: of {CHUNK_ALIGN}, and of {width}, the {} width",
+                s.encoding.name()
+            ),
+            None => format!("a positive multiple of {CHUNK_ALIGN}"),
+        };
         return Err(format!(
-            "chunks of {} raw bytes (a positive multiple of {step}: of {CHUNK_ALIGN}, and of \
-             the {} width, expected)",
-            s.chunk_raw,
-            s.encoding.name()
+            "chunks of {} raw bytes ({of} expected)",
+            s.chunk_raw
         ));
     }
     let expected = s.raw.div_ceil(s.chunk_raw);

@@ -70,9 +70,9 @@ impl<T: Send + 'static> Prefetcher<T> {
             let (shared, source, tx) = (shared.clone(), source.clone(), tx.clone());
             // A thread that cannot start leaves the others; with none, poll() stays empty and
             // the engine reports steps as not yet loaded.
-            let _ = std::thread::Builder::new()
-                .name(format!("slosh-prefetch-{n}"))
-                .spawn(move || worker(&shared, &*source, &tx));
+            let _ = slosh_render::spawn_background(format!("slosh-prefetch-{n}"), move || {
+                worker(&shared, &*source, &tx)
+            });
         }
         Prefetcher { shared, results }
     }
@@ -143,8 +143,13 @@ impl<T: Send + 'static> Prefetcher<T> {
 
 impl<T> Drop for Prefetcher<T> {
     fn drop(&mut self) {
-        // Threads end after the load in hand; nobody waits for a slow one.
-        self.shared.lock().shutdown = true;
+        // Threads end after the load in hand, which is withdrawn so that it gives up where it
+        // can; nobody here waits for a slow one (the binary does, before it exits).
+        let mut q = self.shared.lock();
+        q.shutdown = true;
+        let in_flight: Vec<usize> = q.in_flight.iter().copied().collect();
+        q.withdrawn.extend(in_flight);
+        drop(q);
         self.shared.wake.notify_all();
     }
 }
@@ -201,6 +206,8 @@ mod tests {
     /// Records every load; each waits for a go from the test.
     struct Gated {
         loads: Mutex<Vec<usize>>,
+        /// Loads that found themselves withdrawn when let go.
+        gave_up: Mutex<Vec<usize>>,
         started: Mutex<SyncSender<usize>>,
         go: Mutex<Receiver<()>>,
     }
@@ -227,6 +234,10 @@ mod tests {
                 .unwrap_or_else(PoisonError::into_inner)
                 .recv();
             if withdrawn() {
+                self.gave_up
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push(index);
                 Err("withdrawn".into())
             } else if index == 13 {
                 Err("step 13 is unlucky".into())
@@ -241,6 +252,7 @@ mod tests {
         let (go, go_rx) = channel();
         let source = Arc::new(Gated {
             loads: Mutex::new(Vec::new()),
+            gave_up: Mutex::new(Vec::new()),
             started: Mutex::new(started_tx),
             go: Mutex::new(go_rx),
         });
@@ -275,6 +287,31 @@ mod tests {
             .unwrap_or_else(PoisonError::into_inner)
             .clone();
         assert_eq!(loads, vec![0, 50, 51, 52], "stale requests never loaded");
+    }
+
+    /// A dropped prefetcher (the engine closed, or the process ending on an error) withdraws
+    /// the load in hand, so that it gives up at its next piece rather than running on.
+    #[test]
+    fn dropping_the_prefetcher_withdraws_the_load_in_hand() {
+        let (source, started, go) = gated();
+        let prefetch = Prefetcher::new(source.clone(), 1);
+        prefetch.request([7]);
+        assert_eq!(started.recv().ok(), Some(7));
+        drop(prefetch);
+        go.send(()).ok();
+        let deadline = Instant::now() + std::time::Duration::from_secs(10);
+        let gave_up = loop {
+            let gave_up = source
+                .gave_up
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .clone();
+            if !gave_up.is_empty() || Instant::now() > deadline {
+                break gave_up;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        };
+        assert_eq!(gave_up, vec![7]);
     }
 
     #[test]

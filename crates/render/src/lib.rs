@@ -6,6 +6,7 @@
 //! with GPU timestamps. The WGSL is a port of `slosh_mls`; the tests hold it to the CPU f64
 //! oracle.
 
+mod background;
 mod bindings;
 mod buffer_shelf;
 pub mod colormap;
@@ -25,6 +26,7 @@ mod upload;
 pub mod water;
 mod widen;
 
+pub use background::{spawn as spawn_background, wait_for_background};
 pub use buffer_shelf::BufferShelf;
 pub use colormap::Colormap;
 pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};

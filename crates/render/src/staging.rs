@@ -108,18 +108,16 @@ impl StagingPool {
     fn warm(&self, gpu: &Gpu, size: u64) {
         let (device, shelf) = (gpu.device.clone(), self.shelf.clone());
         let count = self.shelf.keep.saturating_sub(1);
-        let spawned = std::thread::Builder::new()
-            .name("staging warm-up".into())
-            .spawn(move || {
-                for _ in 0..count {
-                    let buffer = new_staging(&device, size);
-                    // A view that cannot be had leaves the buffer unfaulted, not unusable.
-                    if let Ok(mut view) = buffer.slice(..).get_mapped_range_mut() {
-                        view.slice(..).fill(0);
-                    }
-                    shelf.put(buffer);
+        let spawned = crate::background::spawn("staging warm-up".into(), move || {
+            for _ in 0..count {
+                let buffer = new_staging(&device, size);
+                // A view that cannot be had leaves the buffer unfaulted, not unusable.
+                if let Ok(mut view) = buffer.slice(..).get_mapped_range_mut() {
+                    view.slice(..).fill(0);
                 }
-            });
+                shelf.put(buffer);
+            }
+        });
         // Without a thread the pool fills as uploads go, as it did before.
         drop(spawned);
     }

@@ -300,11 +300,7 @@ fn measure(
         };
         let mut engine = Engine::open(gpu.clone(), dir, options)?;
         show(&mut engine, &mut request, 0)?;
-        let warm_up = Instant::now();
-        let seconds = if args.quick { 0.2 } else { 2.0 };
-        while warm_up.elapsed().as_secs_f64() < seconds {
-            engine.frame_and_wait(&request)?;
-        }
+        warm_up(&mut engine, &request, args)?;
     }
     // Floors. First a read of every file, so that all come from the page cache.
     for p in &paths {
@@ -516,7 +512,7 @@ fn measure(
             &mut rng,
             steps,
             step_gpu_bytes,
-            args.jumps,
+            args,
         )?),
     };
     Ok(SeriesReport {
@@ -603,6 +599,21 @@ fn drop_page_cache() -> Result<()> {
 
 /// Jumps to random resident steps in a pool that holds the whole series, filled first.
 #[allow(clippy::too_many_arguments)]
+/// Frames back to back for a while (`--quick`: briefly): a GPU that was idle, at the start
+/// or while the page cache was dropped and read again (`--cold`), runs its first work at low
+/// clocks.
+fn warm_up(engine: &mut Engine, request: &FrameRequest, args: &Settings) -> Result<()> {
+    let start = Instant::now();
+    let seconds = if args.quick { 0.2 } else { 2.0 };
+    let mut request = request.clone();
+    request.camera_moving = true;
+    while start.elapsed().as_secs_f64() < seconds {
+        engine.frame_and_wait(&request)?;
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
 fn resident_jumps(
     gpu: &Arc<Gpu>,
     dir: &Path,
@@ -611,8 +622,9 @@ fn resident_jumps(
     rng: &mut rand_chacha::ChaCha8Rng,
     steps: usize,
     step_gpu_bytes: u64,
-    jumps: usize,
+    args: &Settings,
 ) -> Result<Vec<f64>> {
+    let jumps = args.jumps;
     let mut engine = Engine::open(
         gpu.clone(),
         dir,
@@ -627,6 +639,7 @@ fn resident_jumps(
             engine.resident().len()
         );
     }
+    warm_up(&mut engine, request, args)?;
     let mut pool = Vec::new();
     let mut at = engine.timeline().current();
     while pool.len() < jumps {
