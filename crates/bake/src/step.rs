@@ -94,14 +94,17 @@ fn by_element(element: Element) -> Encoding {
 /// The ranks in which sections are stored raw while the step stays within its budget
 /// (`slosh_cache::RAW_BUDGET_BYTES_PER_POINT`, `docs/cache-format.md`): the BVH nodes, which
 /// the host half reads on every load, then the bulk of what a step holds on the GPU that
-/// compresses least (1.3–2.2×). A raw section loads as a checksummed copy from the map or a
-/// read in place; decoding them was what bounded scrubbing from the page cache. The balls
-/// (1.6–6× smaller compressed) and the offsets stay compressed.
+/// compresses least (1.3–2.2×), then the balls. A raw section loads as a checksummed copy
+/// from the map or a read in place; decoding was what bounded scrubbing from the page cache.
+/// The balls compress 4× and more, but they are the largest section and the slowest to
+/// decode (zstd and a 16-byte unshuffle: about three quarters of a 1M step's decoding), so
+/// they go raw before the candidate runs where the budget holds both only compressed.
 mod raw_rank {
     pub const BVH_NODES: u8 = 0;
     pub const POINTS: u8 = 1;
     pub const NORMALS: u8 = 2;
-    pub const CLUSTER_NEIGHBOURS: u8 = 3;
+    pub const BALLS: u8 = 3;
+    pub const CLUSTER_NEIGHBOURS: u8 = 4;
 }
 
 /// A step's sections in the GPU layouts, but for the BVH's, its field sections, each ball's
@@ -237,7 +240,8 @@ fn gpu_sections(
             Element::Ball,
             &balls,
             by_element(Element::Ball),
-        ),
+        )
+        .raw_within_budget(raw_rank::BALLS),
         SectionInput::new(
             names::BALL_STATES,
             Element::U32,
