@@ -27,8 +27,8 @@ pub struct SectionInput {
 }
 
 /// The stored bytes per point a step's sections may take when the bake compresses: sections
-/// with a [`SectionInput::raw_rank`] are stored raw, rank by rank, while the sections' total
-/// stays within this many bytes per point. A raw section loads as a checksummed copy from
+/// with a [`SectionInput::raw_rank`] are stored raw, rank by rank, while the sections' total,
+/// each padded to its page as the file lays it out, stays within this many bytes per point. A raw section loads as a checksummed copy from
 /// the map, with no decoding on the player's hot path; the budget keeps a step's file
 /// within 48 bytes per point (issue 27) with room for its header, padding and table.
 pub const RAW_BUDGET_BYTES_PER_POINT: u64 = 46;
@@ -130,12 +130,14 @@ pub fn encode_step(
         })
         .collect();
     // Sections with a raw rank go raw, rank by rank, while the total stays within budget.
+    // Each counts as the file lays it out, to whole pages: in a small step the pages a raw
+    // section adds are what passes the budget.
     let stored_len = |k: usize, keep: &[bool]| {
-        if keep[k] {
+        align_up(if keep[k] {
             packed_len(k)
         } else {
             sections[k].bytes.len()
-        }
+        })
     };
     let mut total: usize = (0..sections.len()).map(|k| stored_len(k, &keep)).sum();
     let budget = (header.points.saturating_mul(RAW_BUDGET_BYTES_PER_POINT)) as usize;
@@ -144,7 +146,7 @@ pub fn encode_step(
         .collect();
     ranked.sort_by_key(|&k| sections[k].raw_rank);
     for k in ranked {
-        let raw_total = total - packed_len(k) + sections[k].bytes.len();
+        let raw_total = total - align_up(packed_len(k)) + align_up(sections[k].bytes.len());
         if raw_total <= budget {
             keep[k] = false;
             total = raw_total;

@@ -367,18 +367,19 @@ fn a_file_changed_under_its_map_is_an_error_not_a_crash() {
     );
 }
 
-/// Sections with a raw rank are stored raw, rank by rank, while the sections' stored bytes
-/// stay within `RAW_BUDGET_BYTES_PER_POINT` per point; a rank that would overrun it is
-/// skipped and a later, smaller one still taken; without compression everything is raw.
+/// Sections with a raw rank are stored raw, rank by rank, while the sections' stored bytes,
+/// each padded to its page, stay within `RAW_BUDGET_BYTES_PER_POINT` per point; a rank that
+/// would overrun it is skipped and a later, smaller one still taken; without compression
+/// everything is raw.
 #[test]
 fn ranked_sections_go_raw_in_rank_order_within_the_budget() {
-    // 1000 "points": a budget of 46,000 bytes. Two compressible sections of 16,000 and
-    // 32,000 raw bytes, and one of 8,000: together compressed far below the budget.
+    // 2000 "points": a budget of 92,000 bytes. Compressible sections of 64,000, 32,000 and
+    // 8,000 raw bytes (16, 8 and 2 pages), each one page compressed.
     let small: Vec<u32> = (0..2000u32).map(|i| i / 8).collect();
-    let middle: Vec<u32> = (0..4000u32).map(|i| i / 8).collect();
-    let large: Vec<u32> = (0..8000u32).map(|i| i / 8).collect();
+    let middle: Vec<u32> = (0..8000u32).map(|i| i / 8).collect();
+    let large: Vec<u32> = (0..16000u32).map(|i| i / 8).collect();
     let mut header = header();
-    header.points = 1000;
+    header.points = 2000;
     let sections = vec![
         SectionInput::new("large", Element::U32, &large, Encoding::Shuffle4Zstd)
             .raw_within_budget(0),
@@ -390,14 +391,52 @@ fn ranked_sections_go_raw_in_rank_order_within_the_budget() {
     ];
     let file =
         open(encode_step(header.clone(), &sections, Compression::Level(1)).unwrap()).unwrap();
-    let encoding = |name: &str| file.section(name).unwrap().encoding;
-    // Rank 0 (32,000 bytes) fits; rank 1 (16,000 more) would pass 46,000; rank 2 fits.
-    assert_eq!(encoding("large"), Encoding::Raw);
-    assert_eq!(encoding("middle"), Encoding::Shuffle4Zstd);
-    assert_eq!(encoding("small"), Encoding::Raw);
-    assert_eq!(encoding("unranked"), Encoding::Shuffle4Zstd);
-    let stored: u64 = file.header().sections.iter().map(|s| s.stored).sum();
-    assert!(stored <= 1000 * RAW_BUDGET_BYTES_PER_POINT, "{stored}");
+    let encoding = |file: &CacheFile, name: &str| file.section(name).unwrap().encoding;
+    // Rank 0 fits (4 pages + 15 more); rank 1 (8 more pages) would pass 92,000; rank 2 (one
+    // more) fits.
+    assert_eq!(encoding(&file, "large"), Encoding::Raw);
+    assert_eq!(encoding(&file, "middle"), Encoding::Shuffle4Zstd);
+    assert_eq!(encoding(&file, "small"), Encoding::Raw);
+    assert_eq!(encoding(&file, "unranked"), Encoding::Shuffle4Zstd);
+    let pages = |file: &CacheFile| -> u64 {
+        file.header()
+            .sections
+            .iter()
+            .map(|s| s.stored.div_ceil(ALIGN as u64) * ALIGN as u64)
+            .sum()
+    };
+    assert!(
+        pages(&file) <= 2000 * RAW_BUDGET_BYTES_PER_POINT,
+        "{}",
+        pages(&file)
+    );
+    // 1000 points, a budget of 46,000, and sections of 32,000, 16,000 and 8,000 bytes: the
+    // first raw, the second compressed and the third raw would be some 40,200 bytes, within
+    // it, but 12 pages (49,152 bytes) as laid out, so the third stays compressed too.
+    header.points = 1000;
+    let few = vec![
+        SectionInput::new("large", Element::U32, &middle, Encoding::Shuffle4Zstd)
+            .raw_within_budget(0),
+        SectionInput::new(
+            "middle",
+            Element::U32,
+            &middle[..4000],
+            Encoding::Shuffle4Zstd,
+        )
+        .raw_within_budget(1),
+        SectionInput::new("small", Element::U32, &small, Encoding::Shuffle4Zstd)
+            .raw_within_budget(2),
+        SectionInput::new("unranked", Element::U32, &small, Encoding::Shuffle4Zstd),
+    ];
+    let file = open(encode_step(header.clone(), &few, Compression::Level(1)).unwrap()).unwrap();
+    assert_eq!(encoding(&file, "large"), Encoding::Raw);
+    assert_eq!(encoding(&file, "middle"), Encoding::Shuffle4Zstd);
+    assert_eq!(encoding(&file, "small"), Encoding::Shuffle4Zstd);
+    assert!(
+        pages(&file) <= 1000 * RAW_BUDGET_BYTES_PER_POINT,
+        "{}",
+        pages(&file)
+    );
     // A step of no points has no budget: every ranked section stays compressed.
     header.points = 0;
     let file =
