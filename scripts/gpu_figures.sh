@@ -8,7 +8,10 @@
 # slosh is $SLOSH, else .dev/slosh, else the one on PATH. Where the repo holds .gl and .whl
 # (scripts/gpu_prepare.sh makes them), the loaders are unpacked and pysplashsurf installed
 # first. SMALL=1 runs every command at sizes a 2-core machine takes in minutes (a check of
-# the script and its flags, not figures).
+# the script and its flags, not figures). A device command returns only a few files from
+# its $OUT, so give the script a folder of its own and pack that:
+#   scripts/gpu_figures.sh /tmp/w scrub; tar czf $OUT/scrub.tgz -C /tmp/w .
+# (the 'before' part writes 17 files; a call that returned them loose kept 8.)
 #
 # scrub: `bench scrub` 100k and 1M (page cache), `bench gpu` (table 4.6, 100k and 1M).
 # scale: `bench scrub` 4M, 500 steps of 1M resident (8 distinct shapes), the raw EnSight
