@@ -67,15 +67,11 @@ impl Statistics {
     /// The statistics of `file`, decoding the sections they need.
     pub fn of(file: &CacheFile) -> Result<Statistics> {
         let h = file.header();
-        let (start, _) = file.neighbour_lists()?;
+        let counts = file.neighbour_counts()?;
         let points: Vec<GpuPoint> = file.decode(names::POINTS)?;
         let balls = file.balls()?;
         let base: Vec<u32> = file.decode(names::CLUSTER_BASE)?;
         let wide = crate::candidates::WIDE_CLUSTER;
-        let counts: Vec<u32> = start
-            .windows(2)
-            .map(|w| w[1].saturating_sub(w[0]))
-            .collect();
         let mut histogram = vec![0u64; 9];
         for &c in &counts {
             histogram[(c as usize / 16).min(8)] += 1;

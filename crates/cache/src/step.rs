@@ -2,8 +2,8 @@
 //! reference tracer needs to trace straight from a cache.
 
 use slosh_mls::{
-    Ball, BallFit, Camera, FitStatus, Neighbours, NormalsMode, Params, Poly, Sphere, Surface,
-    SurfaceParams, SurfaceParts, TraceHit, V3,
+    Ball, BallFit, Camera, ClusterCandidates, FitStatus, Neighbours, NormalsMode, Params, Poly,
+    Sphere, Surface, SurfaceParams, SurfaceParts, TraceHit, V3,
 };
 
 use crate::ball_state::{BALLS_PER_STATE_WORD, BallBits, StoredBall, h_of};
@@ -89,17 +89,33 @@ impl CacheFile {
         })
     }
 
-    fn expand(&self, g: &Geometry) -> Result<(Vec<u32>, Vec<u32>)> {
+    /// The clusters' candidates as CSR: offsets per cluster, 32-bit indices.
+    fn cluster_csr(&self) -> Result<(Vec<u32>, Vec<u32>)> {
         let cluster_start: Vec<u32> = self.decode(names::CLUSTER_START)?;
         let cluster_ids = self.cluster_candidates(&cluster_start)?;
-        Ok(slosh_mls::expand_clusters(
-            &g.positions,
-            g.normals.as_deref(),
-            &g.reach,
-            self.header().neighbour_cluster as usize,
-            &cluster_start,
-            &cluster_ids,
-        ))
+        Ok((cluster_start, cluster_ids))
+    }
+
+    fn expand(&self, g: &Geometry) -> Result<(Vec<u32>, Vec<u32>)> {
+        let (start, ids) = self.cluster_csr()?;
+        Ok(self.clusters_of(g, &start, &ids).expand())
+    }
+
+    /// `g`'s points and the clusters' candidates `start` and `ids` ([`Self::cluster_csr`]).
+    fn clusters_of<'a>(
+        &self,
+        g: &'a Geometry,
+        start: &'a [u32],
+        ids: &'a [u32],
+    ) -> ClusterCandidates<'a, f32> {
+        ClusterCandidates {
+            points: &g.positions,
+            normals: g.normals.as_deref(),
+            reach: &g.reach,
+            size: self.header().neighbour_cluster as usize,
+            cluster_start: start,
+            cluster_ids: ids,
+        }
     }
 
     /// Every cluster's candidates as 32-bit indices (CSR over `cluster_start`), unpacked from
@@ -149,9 +165,16 @@ impl CacheFile {
     }
 
     /// Every point's neighbour list (CSR), recovered from the cluster lists by the rule in
-    /// `slosh_mls::expand_clusters`.
+    /// `slosh_mls::ClusterCandidates::expand`.
     pub fn neighbour_lists(&self) -> Result<(Vec<u32>, Vec<u32>)> {
         self.expand(&self.geometry()?)
+    }
+
+    /// Every point's neighbour count by the same rule, without keeping the lists.
+    pub fn neighbour_counts(&self) -> Result<Vec<u32>> {
+        let g = self.geometry()?;
+        let (start, ids) = self.cluster_csr()?;
+        Ok(self.clusters_of(&g, &start, &ids).neighbour_counts())
     }
 }
 

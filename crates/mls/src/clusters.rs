@@ -168,46 +168,81 @@ pub fn expand_one<T: Real>(
     }
 }
 
-/// Every point's neighbour list (CSR) from the cluster lists.
-pub fn expand<T: Real>(
-    points: &[V3<T>],
-    normals: Option<&[V3<T>]>,
-    reach: &[T],
-    size: usize,
-    cluster_start: &[u32],
-    cluster_ids: &[u32],
-) -> (Vec<u32>, Vec<u32>) {
-    let size = size.max(1);
-    let n = points.len();
-    // Clusters are independent: expand them in parallel, then concatenate in order.
-    let per_cluster: Vec<(Vec<u32>, Vec<u32>)> = (0..n.div_ceil(size))
-        .into_par_iter()
-        .map(|c| {
-            let candidates = match (cluster_start.get(c), cluster_start.get(c + 1)) {
-                (Some(&a), Some(&b)) => cluster_ids.get(a as usize..b as usize).unwrap_or(&[]),
-                _ => &[],
-            };
-            let mut counts = Vec::with_capacity(size);
-            let mut ids = Vec::with_capacity(candidates.len() * 4);
-            for i in c * size..((c + 1) * size).min(n) {
-                let before = ids.len();
-                expand_one(i, points, normals, reach, candidates, &mut ids);
-                counts.push((ids.len() - before) as u32);
+/// A step's points and their clusters' candidates (CSR over clusters of `size` consecutive
+/// points): what each point's neighbour list is recovered from, by the rule of
+/// [`expand_one`].
+#[derive(Debug, Clone, Copy)]
+pub struct ClusterCandidates<'a, T> {
+    pub points: &'a [V3<T>],
+    pub normals: Option<&'a [V3<T>]>,
+    pub reach: &'a [T],
+    pub size: usize,
+    pub cluster_start: &'a [u32],
+    pub cluster_ids: &'a [u32],
+}
+
+impl<T: Real> ClusterCandidates<'_, T> {
+    /// Every point's neighbour list (CSR).
+    pub fn expand(&self) -> (Vec<u32>, Vec<u32>) {
+        let per_cluster = self.expand_each(true);
+        let n = self.points.len();
+        let mut start = Vec::with_capacity(n + 1);
+        let mut ids = Vec::with_capacity(per_cluster.iter().map(|(_, v)| v.len()).sum());
+        start.push(0u32);
+        for (counts, list) in per_cluster {
+            for c in counts {
+                let last = start.last().copied().unwrap_or(0);
+                start.push(last + c);
             }
-            (counts, ids)
-        })
-        .collect();
-    let mut start = Vec::with_capacity(n + 1);
-    let mut ids = Vec::with_capacity(per_cluster.iter().map(|(_, v)| v.len()).sum());
-    start.push(0u32);
-    for (counts, list) in per_cluster {
-        for c in counts {
-            let last = start.last().copied().unwrap_or(0);
-            start.push(last + c);
+            ids.extend_from_slice(&list);
         }
-        ids.extend_from_slice(&list);
+        (start, ids)
     }
-    (start, ids)
+
+    /// Every point's neighbour count, without keeping the lists (a 1M-point step's would
+    /// take half a gigabyte).
+    pub fn neighbour_counts(&self) -> Vec<u32> {
+        self.expand_each(false)
+            .into_iter()
+            .flat_map(|(counts, _)| counts)
+            .collect()
+    }
+
+    /// Each cluster's members' neighbour counts and, where `keep`, their lists one after
+    /// another; clusters are independent, so they are expanded in parallel.
+    fn expand_each(&self, keep: bool) -> Vec<(Vec<u32>, Vec<u32>)> {
+        let size = self.size.max(1);
+        let n = self.points.len();
+        (0..n.div_ceil(size))
+            .into_par_iter()
+            .map(|c| {
+                let candidates = match (self.cluster_start.get(c), self.cluster_start.get(c + 1)) {
+                    (Some(&a), Some(&b)) => {
+                        self.cluster_ids.get(a as usize..b as usize).unwrap_or(&[])
+                    }
+                    _ => &[],
+                };
+                let mut counts = Vec::with_capacity(size);
+                let mut ids = Vec::with_capacity(candidates.len() * if keep { 4 } else { 1 });
+                for i in c * size..((c + 1) * size).min(n) {
+                    let before = ids.len();
+                    expand_one(
+                        i,
+                        self.points,
+                        self.normals,
+                        self.reach,
+                        candidates,
+                        &mut ids,
+                    );
+                    counts.push((ids.len() - before) as u32);
+                    if !keep {
+                        ids.clear();
+                    }
+                }
+                (counts, ids)
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]

@@ -31,7 +31,7 @@ mod timing;
 mod tracer;
 mod up;
 
-pub use clusters::{cluster_lists, expand as expand_clusters, expand_one};
+pub use clusters::{ClusterCandidates, cluster_lists, expand_one};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use found::{InitialFit, NeighbourLists};
 pub use frame::LocalFrame;

@@ -141,14 +141,15 @@ fn cluster_lists_expand_to_the_neighbour_lists() {
             true,
         );
         let (cs, ci) = cluster_lists(&surface.neighbours, 32);
-        let (start, ids) = expand_clusters(
-            &surface.points,
-            surface.normals.as_deref(),
-            &surface.reach,
-            32,
-            &cs,
-            &ci,
-        );
+        let candidates = ClusterCandidates {
+            points: &surface.points,
+            normals: surface.normals.as_deref(),
+            reach: &surface.reach,
+            size: 32,
+            cluster_start: &cs,
+            cluster_ids: &ci,
+        };
+        let (start, ids) = candidates.expand();
         eprintln!(
             "{kind:?} cap {cap}: {} capped, {:.1} ids per point in lists, {:.1} in clusters",
             surface.capped,
@@ -161,6 +162,10 @@ fn cluster_lists_expand_to_the_neighbour_lists() {
             surface.neighbours.ids().collect::<Vec<_>>(),
             "{kind:?} cap {cap}"
         );
+        // The counts alone (what `slosh inspect` summarises) by the same rule.
+        let counts = candidates.neighbour_counts();
+        let expected: Vec<u32> = start.windows(2).map(|w| w[1] - w[0]).collect();
+        assert_eq!(counts, expected, "{kind:?} cap {cap}");
     }
 }
 

@@ -179,7 +179,10 @@ impl ExportJob {
             Some(m) => m.path.clone(),
             None => request.dir.clone(),
         };
-        std::thread::spawn(move || {
+        // A thread the binary waits for before it exits (`slosh_render::wait_for_background`):
+        // a dropped job stops after the frame in hand, which must not meet the driver's
+        // exit-time teardown.
+        slosh_render::spawn_background("export".into(), move || {
             let tracer = match Tracer::new(&gpu) {
                 Ok(t) => t,
                 Err(e) => {
@@ -258,7 +261,8 @@ impl ExportJob {
                     return;
                 }
             }
-        });
+        })
+        .map_err(|e| format!("no thread for the export: {e}"))?;
         Ok(ExportJob {
             progress: rx,
             done: 0,
