@@ -480,7 +480,6 @@ pub struct SelectSettings {
     pub byte_order: Option<ByteOrderArg>,
 }
 
-/// A flag group with every flag at its default, as a command line without them parses.
 /// A count of particles a generated scene can have: 1 to [`slosh_scenes::MAX_POINTS`].
 fn point_count(s: &str) -> Result<usize, String> {
     let n: usize = s
@@ -504,6 +503,7 @@ fn at_least_one(s: &str) -> Result<usize, String> {
     }
 }
 
+/// A flag group with every flag at its default, as a command line without them parses.
 fn flag_defaults<T: Args + clap::FromArgMatches>() -> T {
     let command = T::augment_args(clap::Command::new("slosh"));
     T::from_arg_matches(&command.get_matches_from(["slosh"])).unwrap_or_else(|e| e.exit())

@@ -36,11 +36,9 @@ pub fn parse_size(flag: &str, s: &str) -> Result<(u32, u32)> {
     if w == 0 || h == 0 {
         bail!("--{flag} {s}: expected both sides of at least one pixel");
     }
-    if u64::from(w) * u64::from(h) > MAX_PIXELS {
-        bail!(
-            "--{flag} {s}: {} pixels, expected at most {MAX_PIXELS} (16384x16384)",
-            u64::from(w) * u64::from(h)
-        );
+    let pixels = u64::from(w) * u64::from(h);
+    if pixels > MAX_PIXELS {
+        bail!("--{flag} {s}: {pixels} pixels, expected at most {MAX_PIXELS} (16384x16384)");
     }
     Ok((w, h))
 }

@@ -28,9 +28,10 @@ pub struct SectionInput {
 
 /// The stored bytes per point a step's sections may take when the bake compresses: sections
 /// with a [`SectionInput::raw_rank`] are stored raw, rank by rank, while the sections' total,
-/// each padded to its page as the file lays it out, stays within this many bytes per point. A raw section loads as a checksummed copy from
-/// the map, with no decoding on the player's hot path; the budget keeps a step's file
-/// within 48 bytes per point (issue 27) with room for its header, padding and table.
+/// each padded to its page as the file lays it out, stays within this many bytes per point.
+/// A raw section loads as a checksummed copy from the map, with no decoding on the player's
+/// hot path; the budget keeps a step's file within 48 bytes per point (issue 27) with room
+/// for its header and table.
 pub const RAW_BUDGET_BYTES_PER_POINT: u64 = 46;
 
 impl SectionInput {
@@ -146,7 +147,8 @@ pub fn encode_step(
         .collect();
     ranked.sort_by_key(|&k| sections[k].raw_rank);
     for k in ranked {
-        let raw_total = total - align_up(packed_len(k)) + align_up(sections[k].bytes.len());
+        // `k` is still kept compressed here.
+        let raw_total = total - stored_len(k, &keep) + align_up(sections[k].bytes.len());
         if raw_total <= budget {
             keep[k] = false;
             total = raw_total;

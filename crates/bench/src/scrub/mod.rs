@@ -597,8 +597,6 @@ fn drop_page_cache() -> Result<()> {
     })
 }
 
-/// Jumps to random resident steps in a pool that holds the whole series, filled first.
-#[allow(clippy::too_many_arguments)]
 /// Frames back to back for a while (`--quick`: briefly): a GPU that was idle, at the start
 /// or while the page cache was dropped and read again (`--cold`), runs its first work at low
 /// clocks.
@@ -613,6 +611,7 @@ fn warm_up(engine: &mut Engine, request: &FrameRequest, args: &Settings) -> Resu
     Ok(())
 }
 
+/// Jumps to random resident steps in a pool that holds the whole series, filled first.
 #[allow(clippy::too_many_arguments)]
 fn resident_jumps(
     gpu: &Arc<Gpu>,
