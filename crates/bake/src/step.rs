@@ -8,7 +8,10 @@ use slosh_cache::{
     names, octahedral, pack_h, stored_radius,
 };
 use slosh_ensight::FieldValues;
-use slosh_mls::{BallFit, BesideFits, FitStatus, Sphere, StageClock, SurfaceError, SurfaceParts};
+use slosh_mls::{
+    BallFit, BesideFits, FitStatus, NEIGHBOUR_CLUSTER, Sphere, StageClock, SurfaceError,
+    SurfaceParts,
+};
 
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::reach::stored_reach;
@@ -44,11 +47,6 @@ impl BakeError {
         }
     }
 }
-
-/// Points per neighbour cluster. Measured on a 100k-point sphere at the default cap of 128:
-/// clusters of 16, 32 and 64 store 16.8, 10.9 and 7.4 candidate ids per point, against 128
-/// per point for separate lists; 32 also matches a GPU subgroup of points.
-pub const NEIGHBOUR_CLUSTER: u32 = 32;
 
 /// A baked step: the header (sections still empty) and the sections to write.
 #[derive(Debug)]

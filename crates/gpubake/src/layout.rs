@@ -45,6 +45,29 @@ pub struct FitSettings {
     pub _pad1: u32,
 }
 
+/// `UnionParams` in `shaders/cluster_unions.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct UnionParams {
+    pub first_cluster: u32,
+    pub clusters: u32,
+    pub points: u32,
+    pub size: u32,
+    pub list_base: u32,
+    pub row_groups: u32,
+    /// 0: count each union's ids; 1: write them.
+    pub write: u32,
+    pub _pad0: u32,
+}
+
+/// Words of the bitset a cluster's union is set in (`SPAN_WORDS` in
+/// `shaders/cluster_unions.wgsl`): ids spanning up to 64Ki indices, in 8 KiB of workgroup
+/// memory (of the 16 KiB every adapter gives).
+pub const UNION_SPAN_WORDS: u32 = 2048;
+
+/// A cluster's count where its ids span more than the bitset (`SPAN_WIDE`): the host merges it.
+pub(crate) const SPAN_WIDE: u32 = u32::MAX;
+
 /// `TreeParams` in `shaders/bvh_build.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
@@ -124,6 +147,16 @@ pub fn lists_source() -> String {
         "{}{GRID_WGSL}{}",
         list_word_consts(),
         include_str!("../../../shaders/lists.wgsl")
+    )
+}
+
+/// The cluster unions' module, its bitset `span_words` words wide: entry point
+/// `cluster_unions`.
+pub fn unions_source(span_words: u32) -> String {
+    format!(
+        "const ID_MASK: u32 = {ID_MASK}u;\nconst SPAN_WIDE: u32 = {SPAN_WIDE}u;\n\
+         const SPAN_WORDS: u32 = {span_words}u;\n{}",
+        include_str!("../../../shaders/cluster_unions.wgsl")
     )
 }
 

@@ -20,9 +20,10 @@ mod nearest;
 mod passes;
 mod search;
 mod tree;
+mod unions;
 
 pub use layout::{
-    FitSettings, NEAREST_MAX, SearchParams, TreeNode, TreeParams, fits_source, lists_source,
-    nearest_source, tree_source,
+    FitSettings, NEAREST_MAX, SearchParams, TreeNode, TreeParams, UNION_SPAN_WORDS, UnionParams,
+    fits_source, lists_source, nearest_source, tree_source, unions_source,
 };
 pub use passes::GpuStages;

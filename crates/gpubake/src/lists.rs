@@ -12,6 +12,7 @@ use crate::index::{Dispatch, GpuIndex};
 use crate::layout::{
     DEFERRED, FAR_BIT, FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, FLAG_TODO, ID_MASK, LINK_BIT,
 };
+use crate::unions::{CLUSTER, UnionBatch, Unions};
 
 /// (point, neighbour) within the link distance.
 type Link = (u32, u32);
@@ -211,6 +212,10 @@ pub(crate) fn lists(
     // this one's memory free rather than fault in fresh pages.
     let mut words: Vec<u32> = Vec::with_capacity((total as usize).next_multiple_of(WORDS_GRANULE));
     crate::host_memory::advise_huge_pages(&mut words);
+    // The bake's cluster unions, made where the points came in spatial order (each cluster
+    // is consecutive points here too) and every batch holds whole clusters.
+    let mut unions = sorted.identity.then(|| Unions::new(n));
+    let mut union_seconds = 0.0;
     let mut first = 0;
     while first < n {
         let writing = std::time::Instant::now();
@@ -220,6 +225,12 @@ pub(crate) fn lists(
             && u64::from(start[last + 1] - start[first]) <= limit_ids
         {
             last += 1;
+        }
+        if last < n {
+            match last - last % CLUSTER {
+                whole if whole > first => last = whole,
+                _ => unions = None,
+            }
         }
         let count = u64::from(start[last] - start[first]);
         let lists_out = output(&search.memory, "lists", count * 4);
@@ -285,6 +296,20 @@ pub(crate) fn lists(
             .read_into(gpu, &lists_out, count * 4, &mut words)
             .map_err(gpu_error)?;
         read_seconds += reading.elapsed().as_secs_f64();
+        if let Some(u) = &mut unions {
+            let merging = std::time::Instant::now();
+            u.add(
+                index,
+                UnionBatch {
+                    list_start: &start_buffer,
+                    lists: &lists_out,
+                    list_base: start[first],
+                    first,
+                    last,
+                },
+            )?;
+            union_seconds += merging.elapsed().as_secs_f64();
+        }
         first = last;
     }
 
@@ -299,6 +324,7 @@ pub(crate) fn lists(
             (write_seconds - fit_seconds).max(0.0),
         ),
         ("neighbour lists: read back", read_seconds),
+        ("neighbour lists: cluster unions", union_seconds),
     ]);
     let points = index.points;
     let pieces: Vec<(Vec<Link>, Vec<f64>)> = csr_pieces(&start, &mut words, POINTS_PER_PIECE)
@@ -363,6 +389,8 @@ pub(crate) fn lists(
         Neighbours::from_csr(by_point, ids)
     }
     .ok_or_else(|| gpu_error("the lists read back do not match their counts"))?;
+    // (Made only where the lists are in the caller's order.)
+    let run_unions = unions.and_then(|u| u.finish(&lists));
     // Fits in the caller's order.
     let fits = fit_inputs.map(|_| sorted.unsort(sorted_fits));
     parts.lap("neighbour lists: order");
@@ -370,7 +398,7 @@ pub(crate) fn lists(
         lists,
         reach: reach_out,
         capped,
-        run_unions: None,
+        run_unions,
         links,
         fits,
         fit_seconds,

@@ -6,7 +6,9 @@ use std::sync::{Arc, OnceLock};
 use slosh_render::Gpu;
 
 use crate::dispatch::{PassMemory, Stamps, gpu_error, layout, record};
-use crate::layout::{fits_source, lists_source, nearest_source, tree_source};
+use crate::layout::{
+    UNION_SPAN_WORDS, fits_source, lists_source, nearest_source, tree_source, unions_source,
+};
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
 /// larger outputs go in several dispatches, so that a 4M-point step's lists (about 2 GB)
@@ -34,6 +36,10 @@ pub struct GpuStages {
     pub(crate) place_nodes: wgpu::ComputePipeline,
     pub(crate) fit_boxes: wgpu::ComputePipeline,
     pub(crate) next_depth: wgpu::ComputePipeline,
+    /// `shaders/cluster_unions.wgsl`'s layout and pass.
+    pub(crate) unions_layout: wgpu::BindGroupLayout,
+    unions_pipeline_layout: wgpu::PipelineLayout,
+    pub(crate) cluster_unions: wgpu::ComputePipeline,
     /// GPU nanoseconds of every pass run so far (where the device has timestamps).
     gpu_nanos: AtomicU64,
     /// Buffers the large read-backs (lists, nearest points, fits, nodes) reuse.
@@ -56,6 +62,16 @@ const POOLED_READ_BYTES: u64 = 1 << 20;
 /// Read-back buffers kept for reuse: as many as steps commonly read back at once, each up to
 /// [`OUTPUT_BATCH_BYTES`].
 const READBACK_BUFFERS_KEPT: usize = 3;
+
+/// `cluster_unions` over a bitset of `span_words` words.
+fn union_pipeline(
+    gpu: &Gpu,
+    layout: &wgpu::PipelineLayout,
+    span_words: u32,
+) -> Result<wgpu::ComputePipeline, slosh_render::Error> {
+    let name = "cluster_unions";
+    slosh_render::checked_pipeline(gpu, layout, name, unions_source(span_words), name, &[])
+}
 
 /// Bindings every pass reads: positions, original indices, cell starts, residuals.
 const GRID_BINDINGS: [(u32, bool); 4] = [(1, false), (2, false), (3, false), (10, false)];
@@ -163,6 +179,13 @@ impl GpuStages {
         let place_nodes = tree_entry("place_nodes")?;
         let fit_boxes = tree_entry("fit_boxes")?;
         let next_depth = tree_entry("next_depth")?;
+        let unions_layout = layout(
+            &gpu,
+            "cluster unions",
+            &[(1, false), (2, false), (3, true), (4, false), (5, true)],
+        );
+        let unions_pipeline_layout = pipeline_layout(&unions_layout);
+        let cluster_unions = union_pipeline(&gpu, &unions_pipeline_layout, UNION_SPAN_WORDS)?;
         let buffers = slosh_render::BufferShelf::of(crate::dispatch::PASS_BUFFER_USAGE, true);
         buffers.set_limit(
             gpu.device_memory()
@@ -183,6 +206,9 @@ impl GpuStages {
             place_nodes,
             fit_boxes,
             next_depth,
+            unions_layout,
+            unions_pipeline_layout,
+            cluster_unions,
             gpu_nanos: AtomicU64::new(0),
             readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT),
             memory: PassMemory {
@@ -192,6 +218,15 @@ impl GpuStages {
             },
             gpu,
         })
+    }
+
+    /// The cluster unions' pass rebuilt with a bitset of `words` words (the shader's is
+    /// [`UNION_SPAN_WORDS`]), so that a test's small set has clusters wider than it, which
+    /// the host merges.
+    pub fn narrow_union_span(&mut self, words: u32) -> Result<(), slosh_render::Error> {
+        self.cluster_unions =
+            union_pipeline(&self.gpu, &self.unions_pipeline_layout, words.max(1))?;
+        Ok(())
     }
 
     /// GPU seconds of every pass this search has run (timestamp queries, not wall time:

@@ -7,7 +7,10 @@ use std::num::NonZero;
 use std::sync::Arc;
 
 use slosh_gpubake::GpuStages;
-use slosh_mls::{KdSearch, ListRequest, NeighbourLists, NeighbourSearch, morton_order};
+use slosh_mls::{
+    KdSearch, ListRequest, NEIGHBOUR_CLUSTER, NeighbourLists, NeighbourSearch, cluster_lists,
+    morton_order,
+};
 use slosh_render::Gpu;
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
 use slosh_testkit::{adapter, gpu_or_skip};
@@ -30,6 +33,35 @@ fn gpu_search() -> Option<GpuStages> {
     Some(GpuStages::new(Arc::new(gpu)).expect("the search passes compile"))
 }
 
+/// The search's unions of the bake's clusters as CSR (offsets, ids), where it made them.
+fn unions_csr(lists: &NeighbourLists) -> Option<(Vec<u32>, Vec<u32>)> {
+    lists.run_unions.as_ref().map(|u| {
+        assert_eq!(u.run(), NEIGHBOUR_CLUSTER as usize);
+        let (mut start, mut ids) = (vec![0u32], Vec::new());
+        for r in 0..u.len() {
+            ids.extend_from_slice(u.union(r));
+            start.push(ids.len() as u32);
+        }
+        (start, ids)
+    })
+}
+
+/// The GPU's cluster unions are the unions of its own lists (`slosh_mls::cluster_lists`), made
+/// wherever the points came in Morton order, and only there.
+fn check_unions(name: &str, gpu: &NeighbourLists, morton: bool) {
+    match unions_csr(gpu) {
+        Some(unions) => {
+            assert!(morton, "{name}: unions of points not in Morton order");
+            assert_eq!(
+                unions,
+                cluster_lists(&gpu.lists, NEIGHBOUR_CLUSTER as usize),
+                "{name}: cluster unions"
+            );
+        }
+        None => assert!(!morton, "{name}: no cluster unions"),
+    }
+}
+
 /// A point set, its reaches, data normals (some opposing, some missing) and link distance.
 struct Case {
     name: String,
@@ -41,6 +73,22 @@ struct Case {
     /// Distances tie in f32 where they do not in f64, so that the lists differ at many cuts
     /// (each difference still a tie).
     tied_in_f32: bool,
+    /// The points come in Morton order (as a bake's do).
+    morton: bool,
+}
+
+impl Case {
+    /// The case's lists, with links within `link2` (the case's link distance, in a closure
+    /// the request borrows).
+    fn request<'a>(&'a self, link2: &'a (dyn Fn(usize) -> f64 + Sync)) -> ListRequest<'a> {
+        ListRequest {
+            reach: &self.reach,
+            cap: self.cap,
+            normals: Some(&self.normals),
+            link_distance2: Some(link2),
+            fits: None,
+        }
+    }
 }
 
 fn scene_case(kind: SceneKind, points: usize, hard: HardCases, shuffle: bool) -> Case {
@@ -58,6 +106,11 @@ fn scene_case(kind: SceneKind, points: usize, hard: HardCases, shuffle: bool) ->
         points = (0..n).map(|i| points[i * 7919 % n]).collect();
         normals = (0..n).map(|i| normals[i * 7919 % n]).collect();
     }
+    // (A shuffle by 7919 is none where n divides 7918.)
+    let morton = morton_order(&points)
+        .iter()
+        .enumerate()
+        .all(|(i, &j)| i == j as usize);
     let spacing = scene.spacing();
     Case {
         name: format!("{}{}", kind.name(), if shuffle { ", shuffled" } else { "" }),
@@ -76,6 +129,7 @@ fn scene_case(kind: SceneKind, points: usize, hard: HardCases, shuffle: bool) ->
         link2: (1.5 * spacing).powi(2),
         cap: 48,
         tied_in_f32: false,
+        morton,
     }
 }
 
@@ -101,6 +155,7 @@ fn lattice_case() -> Case {
         link2: 1.1f64.powi(2),
         cap: 40,
         tied_in_f32: false,
+        morton: false,
     }
 }
 
@@ -186,13 +241,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
     for case in &cases {
         let n = case.points.len();
         let link2 = |_: usize| case.link2;
-        let request = ListRequest {
-            reach: &case.reach,
-            cap: case.cap,
-            normals: Some(&case.normals),
-            link_distance2: Some(&link2),
-            fits: None,
-        };
+        let request = case.request(&link2);
         let cpu_index = KdSearch.index(&case.points).unwrap();
         let gpu_index = search.index(&case.points).unwrap();
 
@@ -221,6 +270,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
             cpu_index.lists(request).unwrap(),
             gpu_index.lists(request).unwrap(),
         );
+        check_unions(&case.name, &gpu, case.morton);
         let entries: usize = (0..n).map(|i| cpu.lists.of(i).len()).sum();
         let differing: usize = (0..n).map(|i| differences_tie(case, i, &cpu, &gpu)).sum();
         // Ties within 1e-6 are rare in generated data (exact ties, as in the lattice, are
@@ -335,6 +385,28 @@ fn the_fit_settings_mirror_the_wgsl_layout() {
     );
 }
 
+#[test]
+fn the_union_params_mirror_the_wgsl_layout() {
+    use slosh_gpubake::{UNION_SPAN_WORDS, UnionParams, unions_source};
+    use slosh_testkit::check_layout;
+    let module = slosh_testkit::wgsl::validate("cluster unions", &unions_source(UNION_SPAN_WORDS));
+    check_layout!(
+        &module,
+        "UnionParams",
+        UnionParams,
+        [
+            first_cluster,
+            clusters,
+            points,
+            size,
+            list_base,
+            row_groups,
+            write,
+            _pad0
+        ]
+    );
+}
+
 /// Outputs larger than a binding go in batches: with bindings of 64 KiB, a 4000-point sphere's
 /// nearest points, lists and fits take many dispatches each, and give what one dispatch gives
 /// (lists equal to the k-d tree's; fits equal to an unlimited device's). A set whose positions
@@ -383,6 +455,8 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
     for i in 0..n {
         assert_eq!(batched.lists.of(i), cpu.lists.of(i), "point {i}");
     }
+    check_unions("batched", &batched, true);
+    assert_eq!(unions_csr(&batched), unions_csr(&once));
     assert_eq!(batched.reach, cpu.reach);
     assert_eq!(batched.fits, once.fits);
     // The same points shuffled (the path for points not in Morton order): each point's fit
@@ -435,4 +509,50 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
         .collect();
     let refused = small.index(&doubled).err().expect("refused").to_string();
     assert!(refused.contains("--device cpu"), "{refused}");
+}
+
+/// The words of a bitset that each cluster union's ids span (as the shader measures them).
+fn union_spans(lists: &NeighbourLists) -> Vec<u32> {
+    let (start, ids) = cluster_lists(&lists.lists, NEIGHBOUR_CLUSTER as usize);
+    start
+        .windows(2)
+        .filter_map(|w| {
+            let union = &ids[w[0] as usize..w[1] as usize];
+            Some((union.last()? - (union.first()? & !31)) / 32 + 1)
+        })
+        .collect()
+}
+
+/// Clusters whose ids span more than the shader's bitset are merged on the host, in their
+/// place among the GPU's: with a bitset as wide as the median cluster's span, a 3000-point
+/// sphere's clusters are some narrow and some wide, and the unions are those of the lists
+/// either way.
+#[test]
+fn clusters_wider_than_the_bitset_are_merged_in_their_place() {
+    let Some(mut narrow) = gpu_search() else {
+        return;
+    };
+    let case = scene_case(SceneKind::Sphere, 3000, HardCases::default(), false);
+    assert!(case.morton);
+    let link2 = |_: usize| case.link2;
+    let request = case.request(&link2);
+    let mut spans = union_spans(
+        &KdSearch
+            .index(&case.points)
+            .unwrap()
+            .lists(request)
+            .unwrap(),
+    );
+    spans.sort_unstable();
+    let words = spans[spans.len() / 2];
+    narrow.narrow_union_span(words).unwrap();
+    let lists = narrow.index(&case.points).unwrap().lists(request).unwrap();
+    check_unions("a narrow bitset", &lists, true);
+    let spans = union_spans(&lists);
+    let wide = spans.iter().filter(|&&s| s > words).count();
+    assert!(
+        wide > 0 && wide < spans.len(),
+        "{wide} of {} clusters wider than {words} words: both kinds must occur",
+        spans.len()
+    );
 }

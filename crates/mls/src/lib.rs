@@ -31,7 +31,9 @@ mod timing;
 mod tracer;
 mod up;
 
-pub use clusters::{ClusterCandidates, cluster_lists, expand_one};
+pub use clusters::{
+    ClusterCandidates, NEIGHBOUR_CLUSTER, cluster_lists, cluster_union, expand_one,
+};
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use found::{InitialFit, NeighbourLists};
 pub use frame::LocalFrame;

@@ -284,7 +284,9 @@ pub(crate) fn neighbour_lists(
     }
     .expect("the blocks hold exactly the lists their counts say");
     let run_unions = index_runs.then_some(RunUnions {
+        run: RUN,
         runs: n.div_ceil(RUN),
+        per_block: RUNS_PER_BLOCK,
         blocks: unions,
     });
     NeighbourLists {

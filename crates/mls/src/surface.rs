@@ -3,6 +3,7 @@
 //! fit as spheres, and a uniform grid over the balls. This is the CPU reference of what the
 //! bake stores in caches.
 
+use std::borrow::Cow;
 use std::num::NonZero;
 
 use rayon::prelude::*;
@@ -18,7 +19,7 @@ use crate::neighbours::Neighbours;
 use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
-use crate::runs::{LIST_RUN, RunUnions};
+use crate::runs::RunUnions;
 use crate::search::{FitRequest, KdSearch, ListRequest, NeighbourSearch};
 use crate::spray::{Sphere, droplets};
 use crate::support::{DataNormals, NormalsMode};
@@ -519,15 +520,24 @@ impl<T: Real> SurfaceParts<T> {
         self.neighbours.of(i)
     }
 
-    /// The union of the lists of each cluster of `size` consecutive points (CSR): merged from
-    /// the runs' unions where the build kept them and `size` is a multiple of the run, else
-    /// from every point's list.
-    pub fn cluster_lists(&self, size: usize) -> (Vec<u32>, Vec<u32>) {
+    /// The union of the lists of each cluster of `size` consecutive points (CSR): the runs'
+    /// unions themselves where the build kept them for runs of `size` (the GPU's, for the
+    /// bake's clusters), merged from them where `size` is a multiple of their run, else from
+    /// every point's list.
+    pub fn cluster_lists(&self, size: usize) -> (Cow<'_, [u32]>, Cow<'_, [u32]>) {
+        let whole = self.run_unions.as_ref().filter(|u| u.run() == size);
+        if let Some((start, ids)) = whole.and_then(RunUnions::as_one) {
+            return (Cow::Borrowed(start), Cow::Borrowed(ids));
+        }
         match &self.run_unions {
-            Some(unions) if size > 0 && size.is_multiple_of(LIST_RUN) => {
-                crate::clusters::cluster_lists_from_runs(unions, size)
+            Some(unions) if size > 0 && size.is_multiple_of(unions.run()) => {
+                let (start, ids) = crate::clusters::cluster_lists_from_runs(unions, size);
+                (Cow::Owned(start), Cow::Owned(ids))
             }
-            _ => crate::clusters::cluster_lists(&self.neighbours, size),
+            _ => {
+                let (start, ids) = crate::clusters::cluster_lists(&self.neighbours, size);
+                (Cow::Owned(start), Cow::Owned(ids))
+            }
         }
     }
 }

@@ -1,0 +1,177 @@
+//! The union of the lists of each of the bake's clusters, made on the GPU from each batch of
+//! lists while it is there (`shaders/cluster_unions.wgsl`): the sections store those unions,
+//! which the host otherwise merged from every point's list (at 1M points, most of the
+//! sections stage). A cluster whose ids span more than the shader's bitset is merged here.
+
+use slosh_mls::{Neighbours, RunUnions, SurfaceError, cluster_union};
+
+use crate::dispatch::{bind, gpu_error, output, storage, uniform};
+use crate::index::GpuIndex;
+use crate::layout::{SPAN_WIDE, UnionParams};
+
+/// Points per cluster: the bake's.
+pub(crate) const CLUSTER: usize = slosh_mls::NEIGHBOUR_CLUSTER as usize;
+
+/// The unions made so far, batch by batch.
+pub(crate) struct Unions {
+    /// Each cluster's union's length (0 for a wide one, whose ids are not among `ids`).
+    counts: Vec<u32>,
+    /// The clusters whose ids span more than the bitset.
+    wide: Vec<usize>,
+    ids: Vec<u32>,
+}
+
+/// One batch of lists on the GPU: its points (whole clusters, but for the set's last).
+pub(crate) struct UnionBatch<'b> {
+    pub list_start: &'b wgpu::Buffer,
+    pub lists: &'b wgpu::Buffer,
+    pub list_base: u32,
+    pub first: usize,
+    pub last: usize,
+}
+
+impl Unions {
+    pub(crate) fn new(points: usize) -> Unions {
+        Unions {
+            counts: Vec::with_capacity(points.div_ceil(CLUSTER)),
+            wide: Vec::new(),
+            ids: Vec::new(),
+        }
+    }
+
+    /// The unions of `batch`'s clusters, appended (waits for the GPU).
+    pub(crate) fn add(
+        &mut self,
+        index: &GpuIndex<'_>,
+        batch: UnionBatch<'_>,
+    ) -> Result<(), SurfaceError> {
+        let search = index.search;
+        let gpu = search.gpu();
+        let first_cluster = batch.first / CLUSTER;
+        debug_assert_eq!(first_cluster, self.counts.len());
+        let clusters = batch.last.div_ceil(CLUSTER) - first_cluster;
+        if clusters == 0 {
+            return Ok(());
+        }
+        let (x, y, row_groups) = cluster_groups(gpu, clusters as u32);
+        let params = |write: u32| {
+            uniform(
+                gpu,
+                &UnionParams {
+                    first_cluster: first_cluster as u32,
+                    clusters: clusters as u32,
+                    points: index.sorted.len() as u32,
+                    size: CLUSTER as u32,
+                    list_base: batch.list_base,
+                    row_groups,
+                    write,
+                    _pad0: 0,
+                },
+            )
+        };
+        let count_bytes = clusters as u64 * 4;
+        let counts = output(&search.memory, "union counts", count_bytes);
+        let no_starts = output(&search.memory, "no union starts", 16);
+        let no_unions = output(&search.memory, "no unions", 16);
+        let pass = |write, union_start: &wgpu::Buffer, unions: &wgpu::Buffer| {
+            let params = params(write);
+            let group = bind(
+                gpu,
+                &search.unions_layout,
+                &[
+                    (0, &params),
+                    (1, batch.list_start),
+                    (2, batch.lists),
+                    (3, &counts),
+                    (4, union_start),
+                    (5, unions),
+                ],
+            );
+            search.run(&[(&search.cluster_unions, (x, y))], &group)
+        };
+        pass(0, &no_starts, &no_unions)?;
+        let mut batch_counts: Vec<u32> = search.read_back(&counts, count_bytes)?;
+        let mut starts = Vec::with_capacity(clusters);
+        let mut total = 0u64;
+        for (k, c) in batch_counts.iter_mut().enumerate() {
+            if *c == SPAN_WIDE {
+                self.wide.push(first_cluster + k);
+                *c = 0;
+            }
+            starts.push(u32::try_from(total).map_err(|_| gpu_error("cluster unions too long"))?);
+            total += u64::from(*c);
+        }
+        if total > 0 {
+            let union_start = storage(&search.memory, "union starts", &starts)?;
+            let unions = output(&search.memory, "unions", total * 4);
+            pass(1, &union_start, &unions)?;
+            search
+                .readback
+                .read_into(gpu, &unions, total * 4, &mut self.ids)
+                .map_err(gpu_error)?;
+        }
+        self.counts.extend_from_slice(&batch_counts);
+        Ok(())
+    }
+
+    /// The unions of clusters of [`CLUSTER`] points, the wide ones merged from `lists` (their
+    /// marks cleared).
+    pub(crate) fn finish(self, lists: &Neighbours) -> Option<RunUnions> {
+        let n = lists.len();
+        let Unions {
+            mut counts,
+            wide,
+            ids,
+        } = self;
+        if counts.len() != n.div_ceil(CLUSTER) {
+            return None;
+        }
+        let mut start = Vec::with_capacity(counts.len() + 1);
+        start.push(0u32);
+        if wide.is_empty() {
+            for &c in &counts {
+                start.push(start[start.len() - 1].checked_add(c)?);
+            }
+            return RunUnions::whole(CLUSTER, n, start, ids);
+        }
+        // The wide clusters' unions merged here, each in its place.
+        let merged: Vec<Vec<u32>> = wide
+            .iter()
+            .map(|&c| {
+                let mut out = Vec::new();
+                cluster_union(lists, c * CLUSTER..((c + 1) * CLUSTER).min(n), &mut out);
+                out
+            })
+            .collect();
+        for (&c, m) in wide.iter().zip(&merged) {
+            counts[c] = u32::try_from(m.len()).ok()?;
+        }
+        let mut all = Vec::with_capacity(ids.len() + merged.iter().map(Vec::len).sum::<usize>());
+        let (mut from, mut next_wide) = (0usize, wide.iter().zip(&merged).peekable());
+        for (c, &count) in counts.iter().enumerate() {
+            match next_wide.peek() {
+                Some(&(&w, m)) if w == c => {
+                    all.extend_from_slice(m);
+                    next_wide.next();
+                }
+                _ => {
+                    all.extend_from_slice(&ids[from..from + count as usize]);
+                    from += count as usize;
+                }
+            }
+            start.push(start[start.len() - 1].checked_add(count)?);
+        }
+        RunUnions::whole(CLUSTER, n, start, all)
+    }
+}
+
+/// Workgroups along x and y for one workgroup per cluster, and the workgroups per row.
+fn cluster_groups(gpu: &slosh_render::Gpu, clusters: u32) -> (u32, u32, u32) {
+    let max = gpu
+        .device
+        .limits()
+        .max_compute_workgroups_per_dimension
+        .max(1);
+    let x = clusters.clamp(1, max);
+    (x, clusters.div_ceil(x), x)
+}
