@@ -8,8 +8,8 @@ use xxhash_rust::xxh3::xxh3_64;
 
 use crate::error::Result;
 use crate::format::{
-    ALIGN, ChunkEntry, Encoding, Footer, Header, MAJOR, MINOR, PREAMBLE_LEN, Preamble,
-    SectionEntry, align_up, hex64,
+    ChunkEntry, Encoding, Footer, Header, MAJOR, MINOR, PREAMBLE_LEN, Preamble, SectionEntry,
+    align_up, hex64,
 };
 use crate::layout::Element;
 
@@ -85,27 +85,15 @@ pub fn encode_step(
     sections: &[SectionInput],
     compression: Compression,
 ) -> Result<Vec<u8>, std::io::Error> {
-    // Every chunk of every section encoded in parallel; a section keeps its encoding only
-    // where that saves at least 10 % over all its chunks, and is stored raw instead where its
-    // raw rank comes up within the budget.
+    // Chunks are encoded in parallel; a section keeps its encoding only where that saves at
+    // least 10 % over all its chunks, and is stored raw instead where its raw rank comes up
+    // within the budget.
     let jobs: Vec<(usize, &[u8])> = sections
         .iter()
         .enumerate()
         .flat_map(|(i, s)| s.bytes.chunks(s.chunk_raw() as usize).map(move |c| (i, c)))
         .collect();
-    let packed: Vec<Option<Vec<u8>>> = jobs
-        .par_iter()
-        .map(|&(i, raw)| {
-            let s = &sections[i];
-            match compression {
-                Compression::Level(level) if s.encoding != Encoding::Raw => {
-                    crate::codec::encode(raw, s.encoding, level).map(Some)
-                }
-                _ => Ok(None),
-            }
-        })
-        .collect::<std::io::Result<_>>()?;
-    // Each section's chunks among the jobs, and whether its encoding saves 10 %.
+    // Each section's chunks among the jobs.
     let mut at = 0;
     let spans: Vec<std::ops::Range<usize>> = sections
         .iter()
@@ -115,65 +103,122 @@ pub fn encode_step(
             at - n..at
         })
         .collect();
-    let packed_len = |k: usize| -> usize {
+    let level = match compression {
+        Compression::Level(level) => Some(level),
+        Compression::None => None,
+    };
+    let compressible = |k: usize| level.is_some() && sections[k].encoding != Encoding::Raw;
+    let mut packed: Vec<Option<Vec<u8>>> = vec![None; jobs.len()];
+    // The chunks of sections `ks`, encoded.
+    let encode = |ks: &[usize], packed: &mut [Option<Vec<u8>>]| -> std::io::Result<()> {
+        let todo: Vec<usize> = ks.iter().flat_map(|&k| spans[k].clone()).collect();
+        let done: Vec<Vec<u8>> = todo
+            .par_iter()
+            .map(|&j| {
+                let (i, raw) = jobs[j];
+                crate::codec::encode(raw, sections[i].encoding, level.unwrap_or(1))
+            })
+            .collect::<std::io::Result<_>>()?;
+        for (j, bytes) in todo.into_iter().zip(done) {
+            packed[j] = Some(bytes);
+        }
+        Ok(())
+    };
+    let encoded_len = |k: usize, packed: &[Option<Vec<u8>>]| -> Option<usize> {
         packed[spans[k].clone()]
             .iter()
-            .flatten()
-            .map(Vec::len)
+            .map(|p| p.as_ref().map(Vec::len))
             .sum()
     };
-    let mut keep: Vec<bool> = sections
-        .iter()
-        .enumerate()
-        .map(|(k, s)| {
-            packed[spans[k].clone()].iter().all(Option::is_some)
-                && packed_len(k) * 10 <= s.bytes.len() * 9
-        })
-        .collect();
-    // Sections with a raw rank go raw, rank by rank, while the total stays within budget.
-    // Each counts as the file lays it out, to whole pages: in a small step the pages a raw
-    // section adds are what passes the budget.
-    let stored_len = |k: usize, keep: &[bool]| {
-        align_up(if keep[k] {
-            packed_len(k)
-        } else {
-            sections[k].bytes.len()
+    let keeps = |k: usize, packed: &[Option<Vec<u8>>]| {
+        encoded_len(k, packed).is_some_and(|len| len * 10 <= sections[k].bytes.len() * 9)
+    };
+    // Each section counts as the file lays it out, to whole pages: in a small step the pages
+    // a raw section adds are what passes the budget.
+    let stored_len = |k: usize, keep: bool, packed: &[Option<Vec<u8>>]| {
+        align_up(match (keep, encoded_len(k, packed)) {
+            (true, Some(len)) => len,
+            _ => sections[k].bytes.len(),
         })
     };
-    let mut total: usize = (0..sections.len()).map(|k| stored_len(k, &keep)).sum();
     let budget = (header.points.saturating_mul(RAW_BUDGET_BYTES_PER_POINT)) as usize;
+    // Sections without a raw rank are encoded; those with one, from the last rank down, only
+    // until the rest fit the budget raw: those then go raw whatever they would encode to
+    // (at 1M points, 40 of a step's 46 MB), as the rule below decides for them.
+    let unranked: Vec<usize> = (0..sections.len())
+        .filter(|&k| compressible(k) && sections[k].raw_rank.is_none())
+        .collect();
+    encode(&unranked, &mut packed)?;
     let mut ranked: Vec<usize> = (0..sections.len())
-        .filter(|&k| sections[k].raw_rank.is_some() && keep[k])
+        .filter(|&k| compressible(k) && sections[k].raw_rank.is_some())
         .collect();
     ranked.sort_by_key(|&k| sections[k].raw_rank);
-    for k in ranked {
+    let mut unencoded = ranked.len();
+    while unencoded > 0 {
+        let bound: usize = (0..sections.len())
+            .map(|k| stored_len(k, keeps(k, &packed), &packed))
+            .sum();
+        if bound <= budget {
+            break;
+        }
+        unencoded -= 1;
+        encode(&[ranked[unencoded]], &mut packed)?;
+    }
+    let mut keep: Vec<bool> = (0..sections.len()).map(|k| keeps(k, &packed)).collect();
+    // Sections with a raw rank go raw, rank by rank, while the total stays within budget.
+    let mut total: usize = (0..sections.len())
+        .map(|k| stored_len(k, keep[k], &packed))
+        .sum();
+    for &k in &ranked {
+        if !keep[k] {
+            continue;
+        }
         // `k` is still kept compressed here.
-        let raw_total = total - stored_len(k, &keep) + align_up(sections[k].bytes.len());
+        let raw_total = total - stored_len(k, true, &packed) + align_up(sections[k].bytes.len());
         if raw_total <= budget {
             keep[k] = false;
             total = raw_total;
         }
     }
-    let mut encoded: Vec<(Encoding, Vec<u8>, Vec<ChunkEntry>)> = Vec::new();
-    for (k, s) in sections.iter().enumerate() {
-        let chunks = &packed[spans[k].clone()];
-        let raws = &jobs[spans[k].clone()];
-        let keep = keep[k];
-        let parts: Vec<&[u8]> = if keep {
-            chunks.iter().flatten().map(Vec::as_slice).collect()
-        } else {
-            raws.iter().map(|(_, raw)| *raw).collect()
-        };
-        let table = parts
-            .iter()
-            .map(|p| ChunkEntry {
-                stored: p.len() as u64,
-                xxh3: hex64(xxh3_64(p)),
-            })
-            .collect();
-        let encoding = if keep { s.encoding } else { Encoding::Raw };
-        encoded.push((encoding, parts.concat(), table));
-    }
+    // Each section's stored chunks; their checksums, and each section's, all at once.
+    let parts: Vec<Vec<&[u8]>> = (0..sections.len())
+        .map(|k| {
+            spans[k]
+                .clone()
+                .map(|j| match (&packed[j], keep[k]) {
+                    (Some(bytes), true) => bytes.as_slice(),
+                    _ => jobs[j].1,
+                })
+                .collect()
+        })
+        .collect();
+    let sums: Vec<(u64, Vec<ChunkEntry>)> = parts
+        .par_iter()
+        .map(|chunks| {
+            let table = chunks
+                .par_iter()
+                .map(|p| ChunkEntry {
+                    stored: p.len() as u64,
+                    xxh3: hex64(xxh3_64(p)),
+                })
+                .collect();
+            let mut whole = xxhash_rust::xxh3::Xxh3::new();
+            for p in chunks {
+                whole.update(p);
+            }
+            (whole.digest(), table)
+        })
+        .collect();
+    let encoded: Vec<(Encoding, usize, u64, Vec<ChunkEntry>)> = sections
+        .iter()
+        .zip(sums)
+        .enumerate()
+        .map(|(k, (s, (xxh3, table)))| {
+            let encoding = if keep[k] { s.encoding } else { Encoding::Raw };
+            let stored = parts[k].iter().map(|p| p.len()).sum();
+            (encoding, stored, xxh3, table)
+        })
+        .collect();
 
     // The header records offsets, which depend on the header's length: lay out with a guess,
     // then again until the length settles (twice at most in practice).
@@ -184,21 +229,21 @@ pub fn encode_step(
         header.sections = sections
             .iter()
             .zip(&encoded)
-            .map(|(s, (encoding, bytes, chunks))| {
+            .map(|(s, (encoding, stored, xxh3, chunks))| {
                 offsets.push(offset);
                 let entry = SectionEntry {
                     name: s.name.clone(),
                     element: s.element.name().to_string(),
                     count: (s.bytes.len() / s.element.size()) as u64,
                     offset: offset as u64,
-                    stored: bytes.len() as u64,
+                    stored: *stored as u64,
                     raw: s.bytes.len() as u64,
                     encoding: *encoding,
-                    xxh3: hex64(xxh3_64(bytes)),
+                    xxh3: hex64(*xxh3),
                     chunk_raw: s.chunk_raw(),
                     chunks: chunks.clone(),
                 };
-                offset = align_up(offset + bytes.len());
+                offset = align_up(offset + stored);
                 entry
             })
             .collect();
@@ -212,25 +257,39 @@ pub fn encode_step(
     let body_end = offsets
         .last()
         .zip(encoded.last())
-        .map_or(PREAMBLE_LEN + header_bytes.len(), |(o, (_, b, _))| {
-            o + b.len()
-        });
-    let mut out = Vec::with_capacity(body_end + ALIGN);
-    out.extend_from_slice(
-        &Preamble {
-            major: MAJOR,
-            minor: MINOR,
-            flags: 0,
-            header_len: header_bytes.len() as u64,
-            header_xxh3: xxh3_64(&header_bytes),
-        }
-        .to_bytes(),
-    );
-    out.extend_from_slice(&header_bytes);
-    for (offset, (_, bytes, _)) in offsets.iter().zip(&encoded) {
-        out.resize(*offset, 0);
-        out.extend_from_slice(bytes);
+        .map_or(PREAMBLE_LEN + header_bytes.len(), |(o, e)| o + e.1);
+    // Zeroed by the allocator (fresh pages, not a pass over them): the padding stays zero.
+    let mut out = vec![0u8; body_end + crate::format::FOOTER_LEN];
+    let preamble = Preamble {
+        major: MAJOR,
+        minor: MINOR,
+        flags: 0,
+        header_len: header_bytes.len() as u64,
+        header_xxh3: xxh3_64(&header_bytes),
     }
+    .to_bytes();
+    out[..PREAMBLE_LEN].copy_from_slice(&preamble);
+    out[PREAMBLE_LEN..PREAMBLE_LEN + header_bytes.len()].copy_from_slice(&header_bytes);
+    // The sections copied into their places in parallel: at 1M points, one thread took as
+    // long as everything else here.
+    let mut places: Vec<(&mut [u8], &[u8])> = Vec::with_capacity(jobs.len());
+    let mut rest = &mut out[..];
+    let mut base = 0;
+    for (offset, chunks) in offsets.iter().zip(&parts) {
+        let mut at = *offset;
+        for &chunk in chunks {
+            let (_, tail) = rest.split_at_mut(at - base);
+            let (place, tail) = tail.split_at_mut(chunk.len());
+            places.push((place, chunk));
+            rest = tail;
+            at += chunk.len();
+            base = at;
+        }
+    }
+    places
+        .into_par_iter()
+        .for_each(|(place, chunk)| place.copy_from_slice(chunk));
+    out.truncate(body_end);
     let footer = Footer {
         file_len: (out.len() + crate::format::FOOTER_LEN) as u64,
         body_xxh3: xxh3_64(&out),
