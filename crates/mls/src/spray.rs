@@ -73,38 +73,35 @@ pub(crate) fn droplets<T: Real>(
         Blob { centre: [f64; 3], radius: f64 },
         Particles,
     }
-    // Each component on its own (its sums in member order), all at once.
+    // Each component on its own, all at once; a large one's sums by blocks too.
     let kinds: Vec<Spray> = components
         .par_iter()
         .map(|m| {
-            let mut c = [0.0; 3];
-            for &i in *m {
-                for a in 0..3 {
-                    c[a] += points[i][a] / m.len() as f64;
-                }
-            }
+            let len = m.len() as f64;
+            let [sx, sy, sz, gaps] = sum_over(m, |i| {
+                let p = points[i];
+                [p[0], p[1], p[2], nearest[i]]
+            });
+            let c = [sx / len, sy / len, sz / len];
             let far = m
-                .iter()
+                .par_iter()
+                .with_min_len(SUM_BLOCK)
                 .map(|&i| distance(points[i], c))
-                .fold(0.0, f64::max);
+                .reduce(|| 0.0, f64::max);
             // A surface: enough points, wider than h, in two directions at least, and
             // sampled about as densely as the fluid (spray spread thin is not a sheet to
             // stretch across its gaps).
-            let mean_gap = m.iter().map(|&i| nearest[i]).sum::<f64>() / m.len() as f64;
+            let mean_gap = gaps / len;
             let h = ball_h(m[0]);
             if m.len() >= below
                 && far > h
-                && second_half_width(points, m, c) > h
                 && mean_gap <= SPRAY_GAP * spacing
+                && second_half_width(points, m, c) > h
             {
                 return Spray::Surface;
             }
-            let rms = (m
-                .iter()
-                .map(|&i| distance(points[i], c).powi(2))
-                .sum::<f64>()
-                / m.len() as f64)
-                .sqrt();
+            let [squares] = sum_over(m, |i| [distance(points[i], c).powi(2)]);
+            let rms = (squares / len).sqrt();
             // A blob only where the particles fill it: no wider than their own volume's
             // sphere (N particles of radius s / 2 fill one of radius (s / 2)·∛N), with slack.
             let filled = rms <= 1.25 * particle * (m.len() as f64).cbrt();
@@ -151,22 +148,50 @@ pub(crate) fn droplets<T: Real>(
 /// sphere (σ² = R²/3 along every axis); a thread's thickness for points along a line; a
 /// sheet's half-width in its plane.
 fn second_half_width(points: &[[f64; 3]], members: &[usize], c: [f64; 3]) -> f64 {
-    let mut cov = [[0.0f64; 3]; 3];
-    for &i in members {
+    let len = members.len() as f64;
+    let [xx, xy, xz, yy, yz, zz] = sum_over(members, |i| {
         let d = [
             points[i][0] - c[0],
             points[i][1] - c[1],
             points[i][2] - c[2],
         ];
-        for (a, row) in cov.iter_mut().enumerate() {
-            for (b, v) in row.iter_mut().enumerate() {
-                *v += d[a] * d[b] / members.len() as f64;
-            }
-        }
-    }
+        [
+            d[0] * d[0],
+            d[0] * d[1],
+            d[0] * d[2],
+            d[1] * d[1],
+            d[1] * d[2],
+            d[2] * d[2],
+        ]
+    });
+    let cov = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]].map(|row| row.map(|v| v / len));
     let (mut values, _) = crate::support::jacobi_eigen(cov);
     values.sort_by(f64::total_cmp);
     (3.0 * values[1].max(0.0)).sqrt()
+}
+
+/// Members per block of [`sum_over`].
+const SUM_BLOCK: usize = 4096;
+
+/// Σ `term(i)` over `members`, by blocks of [`SUM_BLOCK`] summed in order: the same sum
+/// whatever the threads, and a component of a million points (the fluid itself) summed on
+/// every core: one thread summing it took most of the stage.
+fn sum_over<const K: usize>(
+    members: &[usize],
+    term: impl Fn(usize) -> [f64; K] + Sync,
+) -> [f64; K] {
+    let add = |mut s: [f64; K], t: [f64; K]| {
+        for (a, b) in s.iter_mut().zip(t) {
+            *a += b;
+        }
+        s
+    };
+    let block = |c: &[usize]| c.iter().fold([0.0; K], |s, &i| add(s, term(i)));
+    if members.len() <= SUM_BLOCK {
+        return block(members);
+    }
+    let blocks: Vec<[f64; K]> = members.par_chunks(SUM_BLOCK).map(block).collect();
+    blocks.into_iter().fold([0.0; K], add)
 }
 
 /// Each point's component (points joined by `links`), named by its smallest index.
@@ -310,5 +335,45 @@ mod tests {
         }
         assert_eq!(component_roots(n, &by_block), want, "links by block");
         assert_eq!(component_roots(n, &[all]), want, "links in one list");
+    }
+
+    /// A component's sums by blocks are the same on one thread as on several, and the
+    /// second half-width of a million points on a sphere of radius 2 (a Fibonacci lattice,
+    /// the fluid of a 1M step) is that radius: σ² = R²/3 along every axis.
+    #[test]
+    fn a_large_components_sums_do_not_depend_on_threads() {
+        let n = 1_000_000;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let points: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let a = golden * i as f64;
+                [
+                    2.0 * r * a.cos() + 0.25,
+                    2.0 * r * a.sin() - 1.0,
+                    2.0 * z + 3.0,
+                ]
+            })
+            .collect();
+        let members: Vec<usize> = (0..n).collect();
+        let width_on = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let [x, y, z] = sum_over(&members, |i| points[i]);
+                let c = [x / n as f64, y / n as f64, z / n as f64];
+                (c, second_half_width(&points, &members, c))
+            })
+        };
+        let (one, three) = (width_on(1), width_on(3));
+        assert_eq!(one, three, "sums on 1 and 3 threads");
+        let (c, width) = one;
+        for (got, want) in c.iter().zip([0.25, -1.0, 3.0]) {
+            assert!((got - want).abs() < 1e-6, "centroid {c:?}");
+        }
+        assert!((width - 2.0).abs() < 1e-4, "second half-width {width}");
     }
 }
