@@ -3,6 +3,7 @@
 //! which the host otherwise merged from every point's list (at 1M points, most of the
 //! sections stage). A cluster whose ids span more than the shader's bitset is merged here.
 
+use rayon::prelude::*;
 use slosh_mls::{Neighbours, RunUnions, SurfaceError, cluster_union};
 
 use crate::dispatch::{bind, gpu_error, output, storage, uniform};
@@ -134,9 +135,10 @@ impl Unions {
             }
             return RunUnions::whole(CLUSTER, n, start, ids);
         }
-        // The wide clusters' unions merged here, each in its place.
+        // The wide clusters' unions merged here (in parallel: some 8 % of a Morton-ordered
+        // step's clusters), each in its place.
         let merged: Vec<Vec<u32>> = wide
-            .iter()
+            .par_iter()
             .map(|&c| {
                 let mut out = Vec::new();
                 cluster_union(lists, c * CLUSTER..((c + 1) * CLUSTER).min(n), &mut out);

@@ -71,10 +71,6 @@ struct Edges<'a> {
 }
 
 impl Edges<'_> {
-    fn of(&self, i: usize) -> impl Iterator<Item = (u32, f64)> + '_ {
-        self.slots(i).map(|(_, j, w)| (j, w))
-    }
-
     /// The edges with the slot of `nearest[i]` each comes from.
     fn slots(&self, i: usize) -> impl Iterator<Item = (usize, u32, f64)> + '_ {
         let own = self.original[i];
@@ -98,28 +94,41 @@ pub fn repair_orientation(
     nearest: &[Around],
 ) -> OrientationRepair {
     let n = points.len();
-    let original: Vec<Option<[f64; 3]>> = normals.to_vec();
+    let original: Vec<Option<[f64; 3]>> = normals.par_iter().copied().collect();
     let edges = Edges {
         points,
         original: &original,
         nearest,
     };
-    for _ in 0..PASSES {
+    // Each point's patch edges (tangent weight ≥ PATCH_WEIGHT; bit k: its k-th neighbour),
+    // found by the first pass beside its votes: the weights come from the original normals,
+    // which no pass changes, and a second sweep over every edge took as long as the votes.
+    let mut strong: Vec<u32> = Vec::new();
+    for pass in 0..PASSES {
         let current: &[Option<[f64; 3]>] = normals;
-        let reverse: Vec<bool> = (0..n)
+        let voted: Vec<(bool, u32)> = (0..n)
             .into_par_iter()
             .map(|i| {
-                let Some(ni) = current[i] else { return false };
-                let (mut vote, mut total) = (0.0, 0.0);
-                for (j, w) in edges.of(i) {
+                let Some(ni) = current[i] else {
+                    return (false, 0);
+                };
+                let (mut vote, mut total, mut mask) = (0.0, 0.0, 0u32);
+                for (k, j, w) in edges.slots(i) {
+                    if w >= PATCH_WEIGHT {
+                        mask |= 1 << k;
+                    }
                     if let Some(nj) = current[j as usize] {
                         vote += w * dot(ni, nj).signum();
                         total += w;
                     }
                 }
-                total > 0.0 && vote < -REVERSE_BELOW * total
+                (total > 0.0 && vote < -REVERSE_BELOW * total, mask)
             })
             .collect();
+        let (reverse, masks): (Vec<bool>, Vec<u32>) = voted.into_par_iter().unzip();
+        if pass == 0 {
+            strong = masks;
+        }
         if !reverse.iter().any(|&r| r) {
             break;
         }
@@ -129,9 +138,9 @@ pub fn repair_orientation(
             }
         }
     }
-    let (patches, points_in) = reverse_contradicted_patches(normals, &edges);
+    let (patches, points_in) = reverse_contradicted_patches(normals, &edges, &strong);
     let flipped_points = normals
-        .iter()
+        .par_iter()
         .zip(&original)
         .filter(|(now, was)| matches!((now, was), (Some(a), Some(b)) if dot(*a, *b) < 0.0))
         .count();
@@ -143,8 +152,13 @@ pub fn repair_orientation(
 }
 
 /// Patches: points joined by tangent edges whose normals agree. A patch of at most
-/// `PATCH_FRACTION` of the points whose border edges all contradict it is reversed.
-fn reverse_contradicted_patches(normals: &mut [Option<[f64; 3]>], edges: &Edges) -> (usize, usize) {
+/// `PATCH_FRACTION` of the points whose border edges all contradict it is reversed. `strong`:
+/// each point's patch edges (bit k: its k-th neighbour's).
+fn reverse_contradicted_patches(
+    normals: &mut [Option<[f64; 3]>],
+    edges: &Edges,
+    strong: &[u32],
+) -> (usize, usize) {
     let n = normals.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
     fn root(parent: &mut [u32], mut i: u32) -> u32 {
@@ -158,17 +172,6 @@ fn reverse_contradicted_patches(normals: &mut [Option<[f64; 3]>], edges: &Edges)
         (Some(a), Some(b)) => dot(a, b) >= 0.0,
         _ => true,
     };
-    // Each point's patch edges (tangent weight ≥ PATCH_WEIGHT), found in parallel: bit k is
-    // its k-th neighbour.
-    let strong: Vec<u32> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            edges
-                .slots(i)
-                .filter(|&(_, _, w)| w >= PATCH_WEIGHT)
-                .fold(0u32, |mask, (k, _, _)| mask | 1 << k)
-        })
-        .collect();
     let strong_of = |i: usize| {
         let (mask, around) = (strong[i], &edges.nearest[i]);
         (0..ORIENT_NEIGHBOURS)
