@@ -4,8 +4,8 @@
 // workgroup memory and reads the set bits out in order, so the lists need not be read back to
 // be merged. Dispatched twice: first to count the ids each union holds (SPAN_WIDE where the
 // span is wider than the bitset: the host merges that cluster), then to write them where the
-// counts' prefix sum says. ID_MASK, SPAN_WORDS and SPAN_WIDE come from
-// crates/gpubake/src/layout.rs.
+// counts' prefix sum says. Follows list_batch.wgsl; ID_MASK, SPAN_WORDS and SPAN_WIDE come
+// from crates/gpubake/src/layout.rs.
 
 struct UnionParams {
     // The dispatch's first cluster, and how many it takes.
@@ -24,10 +24,6 @@ struct UnionParams {
 }
 
 @group(0) @binding(0) var<uniform> params: UnionParams;
-// Where each point's list begins among all lists (one more at the end).
-@group(0) @binding(1) var<storage, read> list_start: array<u32>;
-// The dispatch's lists, from slot `list_base`, their marks still in the high bits.
-@group(0) @binding(2) var<storage, read> lists: array<u32>;
 // Per cluster of the dispatch: its union's length, or SPAN_WIDE.
 @group(0) @binding(3) var<storage, read_write> counts: array<u32>;
 // Per cluster of the dispatch: where its union begins in `unions` (`write_unions`).

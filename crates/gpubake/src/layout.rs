@@ -45,6 +45,16 @@ pub struct FitSettings {
     pub _pad1: u32,
 }
 
+/// `ComponentParams` in `shaders/spray_components.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct ComponentParams {
+    pub first: u32,
+    pub count: u32,
+    pub list_base: u32,
+    pub row_threads: u32,
+}
+
 /// `UnionParams` in `shaders/cluster_unions.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
@@ -133,6 +143,9 @@ fn list_word_consts() -> String {
 
 const GRID_WGSL: &str = include_str!("../../../shaders/neighbour_grid.wgsl");
 
+/// The bindings of the passes over a batch of lists.
+const LIST_BATCH_WGSL: &str = include_str!("../../../shaders/list_batch.wgsl");
+
 /// The nearest-points module: entry point `nearest`.
 pub fn nearest_source() -> String {
     format!(
@@ -155,8 +168,17 @@ pub fn lists_source() -> String {
 pub fn unions_source(span_words: u32) -> String {
     format!(
         "const ID_MASK: u32 = {ID_MASK}u;\nconst SPAN_WIDE: u32 = {SPAN_WIDE}u;\n\
-         const SPAN_WORDS: u32 = {span_words}u;\n{}",
+         const SPAN_WORDS: u32 = {span_words}u;\n{LIST_BATCH_WGSL}{}",
         include_str!("../../../shaders/cluster_unions.wgsl")
+    )
+}
+
+/// The spray components' module: entry points `join_links` and `flatten`.
+pub fn components_source() -> String {
+    format!(
+        "{}{LIST_BATCH_WGSL}{}",
+        list_word_consts(),
+        include_str!("../../../shaders/spray_components.wgsl")
     )
 }
 

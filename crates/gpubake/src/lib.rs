@@ -10,6 +10,7 @@
 //! hands both to a bake.
 
 mod cells;
+mod components;
 mod dispatch;
 mod fits;
 mod host_memory;
@@ -23,7 +24,8 @@ mod tree;
 mod unions;
 
 pub use layout::{
-    FitSettings, NEAREST_MAX, SearchParams, TreeNode, TreeParams, UNION_SPAN_WORDS, UnionParams,
-    fits_source, lists_source, nearest_source, tree_source, unions_source,
+    ComponentParams, FitSettings, NEAREST_MAX, SearchParams, TreeNode, TreeParams,
+    UNION_SPAN_WORDS, UnionParams, components_source, fits_source, lists_source, nearest_source,
+    tree_source, unions_source,
 };
 pub use passes::GpuStages;

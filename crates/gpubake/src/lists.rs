@@ -7,6 +7,7 @@ use slosh_mls::{
     InitialFit, ListRequest, NeighbourLists, Neighbours, SurfaceError, csr_pieces, distance2,
 };
 
+use crate::components::Components;
 use crate::dispatch::{Pooled, gpu_error, output, storage};
 use crate::index::{Dispatch, GpuIndex};
 use crate::layout::{
@@ -215,6 +216,15 @@ pub(crate) fn lists(
     // The bake's cluster unions, made where the points came in spatial order (each cluster
     // is consecutive points here too) and every batch holds whole clusters.
     let mut unions = sorted.identity.then(|| Unions::new(n));
+    // The spray's components joined on the GPU where the lists are, but for points in
+    // another order (whose roots would be named by sorted positions): then the host joins the
+    // links it reads.
+    let components = if sorted.identity && flags & FLAG_LINKS != 0 {
+        Some(Components::new(index)?)
+    } else {
+        None
+    };
+    let host_links = components.is_none();
     let mut union_seconds = 0.0;
     let mut first = 0;
     while first < n {
@@ -296,6 +306,15 @@ pub(crate) fn lists(
             .read_into(gpu, &lists_out, count * 4, &mut words)
             .map_err(gpu_error)?;
         read_seconds += reading.elapsed().as_secs_f64();
+        if let Some(c) = &components {
+            c.join(
+                index,
+                &start_buffer,
+                &lists_out,
+                start[first],
+                (first, last),
+            )?;
+        }
         if let Some(u) = &mut unions {
             let merging = std::time::Instant::now();
             u.add(
@@ -312,6 +331,11 @@ pub(crate) fn lists(
         }
         first = last;
     }
+    let joining = std::time::Instant::now();
+    let components = components
+        .map(|c| c.finish(index, &start_buffer, &no_lists))
+        .transpose()?;
+    let component_seconds = joining.elapsed().as_secs_f64();
 
     // Links out, the marks cleared in place, and each list's reach, piece by piece (in
     // sorted order). A cut list reaches as far as its farthest point in f64 (`lists.rs` in
@@ -325,6 +349,7 @@ pub(crate) fn lists(
         ),
         ("neighbour lists: read back", read_seconds),
         ("neighbour lists: cluster unions", union_seconds),
+        ("neighbour lists: spray components", component_seconds),
     ]);
     let points = index.points;
     let pieces: Vec<(Vec<Link>, Vec<f64>)> = csr_pieces(&start, &mut words, POINTS_PER_PIECE)
@@ -347,7 +372,7 @@ pub(crate) fn lists(
                         continue;
                     }
                     let j = *w & ID_MASK;
-                    if *w & LINK_BIT != 0 {
+                    if host_links && *w & LINK_BIT != 0 {
                         links.push((order[t], j));
                     }
                     if *w & FAR_BIT != 0 {
@@ -400,6 +425,7 @@ pub(crate) fn lists(
         capped,
         run_unions,
         links,
+        components,
         fits,
         fit_seconds,
         parts: parts.laps,

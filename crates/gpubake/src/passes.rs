@@ -7,7 +7,8 @@ use slosh_render::Gpu;
 
 use crate::dispatch::{PassMemory, Stamps, gpu_error, layout, record};
 use crate::layout::{
-    UNION_SPAN_WORDS, fits_source, lists_source, nearest_source, tree_source, unions_source,
+    UNION_SPAN_WORDS, components_source, fits_source, lists_source, nearest_source, tree_source,
+    unions_source,
 };
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
@@ -36,6 +37,10 @@ pub struct GpuStages {
     pub(crate) place_nodes: wgpu::ComputePipeline,
     pub(crate) fit_boxes: wgpu::ComputePipeline,
     pub(crate) next_depth: wgpu::ComputePipeline,
+    /// `shaders/spray_components.wgsl`'s layout and entry points.
+    pub(crate) components_layout: wgpu::BindGroupLayout,
+    pub(crate) join_links: wgpu::ComputePipeline,
+    pub(crate) flatten: wgpu::ComputePipeline,
     /// `shaders/cluster_unions.wgsl`'s layout and pass.
     pub(crate) unions_layout: wgpu::BindGroupLayout,
     unions_pipeline_layout: wgpu::PipelineLayout,
@@ -69,8 +74,31 @@ fn union_pipeline(
     layout: &wgpu::PipelineLayout,
     span_words: u32,
 ) -> Result<wgpu::ComputePipeline, slosh_render::Error> {
-    let name = "cluster_unions";
-    slosh_render::checked_pipeline(gpu, layout, name, unions_source(span_words), name, &[])
+    let [pipeline] = entry_points(gpu, layout, &unions_source(span_words), ["cluster_unions"])?;
+    Ok(pipeline)
+}
+
+/// The pipelines of a module's `entries`, each labelled by its name.
+fn entry_points<const N: usize>(
+    gpu: &Gpu,
+    layout: &wgpu::PipelineLayout,
+    source: &str,
+    entries: [&str; N],
+) -> Result<[wgpu::ComputePipeline; N], slosh_render::Error> {
+    let mut pipelines = Vec::with_capacity(N);
+    for entry in entries {
+        pipelines.push(slosh_render::checked_pipeline(
+            gpu,
+            layout,
+            entry,
+            source.to_string(),
+            entry,
+            &[],
+        )?);
+    }
+    pipelines
+        .try_into()
+        .map_err(|_| unreachable!("one pipeline per entry"))
 }
 
 /// Bindings every pass reads: positions, original indices, cell starts, residuals.
@@ -164,21 +192,35 @@ impl GpuStages {
             ],
         );
         let tree_pipeline_layout = pipeline_layout(&tree_layout);
-        let tree_entry = |entry: &str| {
-            slosh_render::checked_pipeline(
-                &gpu,
-                &tree_pipeline_layout,
-                entry,
-                tree_source(),
-                entry,
-                &[],
-            )
-        };
-        let link_nodes = tree_entry("link_nodes")?;
-        let measure_depths = tree_entry("measure_depths")?;
-        let place_nodes = tree_entry("place_nodes")?;
-        let fit_boxes = tree_entry("fit_boxes")?;
-        let next_depth = tree_entry("next_depth")?;
+        let [
+            link_nodes,
+            measure_depths,
+            place_nodes,
+            fit_boxes,
+            next_depth,
+        ] = entry_points(
+            &gpu,
+            &tree_pipeline_layout,
+            &tree_source(),
+            [
+                "link_nodes",
+                "measure_depths",
+                "place_nodes",
+                "fit_boxes",
+                "next_depth",
+            ],
+        )?;
+        let components_layout = layout(
+            &gpu,
+            "spray components",
+            &[(1, false), (2, false), (3, true)],
+        );
+        let [join_links, flatten] = entry_points(
+            &gpu,
+            &pipeline_layout(&components_layout),
+            &components_source(),
+            ["join_links", "flatten"],
+        )?;
         let unions_layout = layout(
             &gpu,
             "cluster unions",
@@ -206,6 +248,9 @@ impl GpuStages {
             place_nodes,
             fit_boxes,
             next_depth,
+            components_layout,
+            join_links,
+            flatten,
             unions_layout,
             unions_pipeline_layout,
             cluster_unions,

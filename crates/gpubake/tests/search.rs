@@ -9,7 +9,7 @@ use std::sync::Arc;
 use slosh_gpubake::GpuStages;
 use slosh_mls::{
     KdSearch, ListRequest, NEIGHBOUR_CLUSTER, NeighbourLists, NeighbourSearch, cluster_lists,
-    morton_order,
+    component_roots, morton_order,
 };
 use slosh_render::Gpu;
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
@@ -238,6 +238,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
     jittered.tied_in_f32 = true;
     cases.push(jittered);
     let (mut some_capped, mut some_uncapped) = (false, false);
+    let mut most_components = 0;
     for case in &cases {
         let n = case.points.len();
         let link2 = |_: usize| case.link2;
@@ -310,7 +311,27 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
         };
         let (cpu_links, gpu_links) = (links(&cpu), links(&gpu));
         assert!(!cpu_links.is_empty(), "{}: no links to test", case.name);
+        match &gpu.components {
+            // Joined on the GPU (points in Morton order): the components the CPU's links make.
+            Some(roots) => {
+                assert!(case.morton && gpu_links.is_empty(), "{}", case.name);
+                assert_eq!(
+                    roots,
+                    &component_roots(n, &cpu.links),
+                    "{}: spray components",
+                    case.name
+                );
+                let mut distinct = roots.clone();
+                distinct.sort_unstable();
+                distinct.dedup();
+                most_components = most_components.max(distinct.len());
+            }
+            None => assert!(!case.morton, "{}: no components", case.name),
+        }
         for (a, b) in [(&cpu_links, &gpu_links), (&gpu_links, &cpu_links)] {
+            if gpu.components.is_some() {
+                break;
+            }
             for &(i, j) in a.iter().filter(|l| b.binary_search(l).is_err()) {
                 let (i, j) = (i as usize, j as usize);
                 let d = d2(case.points[i], case.points[j]);
@@ -331,6 +352,10 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
     assert!(
         some_capped && some_uncapped,
         "the cap must cut some lists, not all"
+    );
+    assert!(
+        most_components > 10,
+        "some case must have many components ({most_components} at most)"
     );
 }
 
@@ -386,6 +411,19 @@ fn the_fit_settings_mirror_the_wgsl_layout() {
 }
 
 #[test]
+fn the_component_params_mirror_the_wgsl_layout() {
+    use slosh_gpubake::{ComponentParams, components_source};
+    use slosh_testkit::check_layout;
+    let module = slosh_testkit::wgsl::validate("spray components", &components_source());
+    check_layout!(
+        &module,
+        "ComponentParams",
+        ComponentParams,
+        [first, count, list_base, row_threads]
+    );
+}
+
+#[test]
 fn the_union_params_mirror_the_wgsl_layout() {
     use slosh_gpubake::{UNION_SPAN_WORDS, UnionParams, unions_source};
     use slosh_testkit::check_layout;
@@ -429,11 +467,12 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
     let reach = vec![4.0 * scene.spacing(); n];
     let h = 1.5 * scene.spacing();
     let ball_h = |_: usize| h;
+    let link2 = |_: usize| (1.5 * scene.spacing()).powi(2);
     let request = ListRequest {
         reach: &reach,
         cap: 40,
         normals: Some(&normals),
-        link_distance2: None,
+        link_distance2: Some(&link2),
         fits: Some(slosh_mls::FitRequest {
             h: &ball_h,
             degree: 2,
@@ -456,6 +495,11 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
         assert_eq!(batched.lists.of(i), cpu.lists.of(i), "point {i}");
     }
     check_unions("batched", &batched, true);
+    assert_eq!(
+        batched.components,
+        Some(component_roots(n, &cpu.links)),
+        "spray components over batches"
+    );
     assert_eq!(unions_csr(&batched), unions_csr(&once));
     assert_eq!(batched.reach, cpu.reach);
     assert_eq!(batched.fits, once.fits);

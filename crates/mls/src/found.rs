@@ -25,6 +25,9 @@ pub struct NeighbourLists {
     /// (i, j) for every j ≠ i in i's list within the link distance of i, in no useful order
     /// (a pair may come both ways), in pieces.
     pub links: Vec<Vec<(u32, u32)>>,
+    /// Each point's spray component (points joined by the links), named by its smallest
+    /// index, where the search joined the links itself; `links` may then be empty.
+    pub components: Option<Vec<u32>>,
     /// Every point's initial fit, where the search made them (`ListRequest::fits`), and the
     /// seconds they took (within the call).
     pub fits: Option<Vec<Option<InitialFit>>>,

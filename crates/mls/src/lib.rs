@@ -52,7 +52,7 @@ pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};
 pub use runs::{LIST_BLOCK, LIST_RUN, RunUnions};
 pub use search::{FitRequest, KdSearch, ListRequest, NeighbourSearch, PointIndex};
-pub use spray::Sphere;
+pub use spray::{Sphere, component_roots};
 pub use support::{
     CANCELLATION, MIN_WEIGHT, NormalsMode, Support, SupportStatus, jacobi_eigen, support_normal,
     weight,

@@ -295,6 +295,7 @@ pub(crate) fn neighbour_lists(
         capped,
         run_unions,
         links,
+        components: None,
         fits: None,
         fit_seconds: 0.0,
         parts: Vec::new(),

@@ -31,6 +31,7 @@ pub struct Sphere<T> {
 pub(crate) fn droplets<T: Real>(
     points: &[[f64; 3]],
     links: &[Vec<(u32, u32)>],
+    components: Option<Vec<u32>>,
     ball_h: &(dyn Fn(usize) -> f64 + Sync),
     nearest: &[f64],
     spacing: f64,
@@ -45,7 +46,11 @@ pub(crate) fn droplets<T: Real>(
     };
     // Members grouped by component (each root is its component's smallest index), in one
     // array: components in order of their first member, members in index order.
-    let roots = component_roots(n, links);
+    // Joined by the search where it did (the GPU's), else here.
+    let roots = match components {
+        Some(roots) if roots.len() == n => roots,
+        _ => component_roots(n, links),
+    };
     let mut first = vec![0u32; n + 1];
     for &r in &roots {
         first[r as usize + 1] += 1;
@@ -195,7 +200,7 @@ fn sum_over<const K: usize>(
 }
 
 /// Each point's component (points joined by `links`), named by its smallest index.
-fn component_roots(n: usize, links: &[Vec<(u32, u32)>]) -> Vec<u32> {
+pub fn component_roots(n: usize, links: &[Vec<(u32, u32)>]) -> Vec<u32> {
     // Components by union-find, every root linked to a smaller one, so that each component's
     // root is its smallest index whatever order the links come in. The lists stage gives the
     // links by blocks of consecutive points (in a bake, where points come in spatial order):

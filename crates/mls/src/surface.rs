@@ -310,6 +310,7 @@ impl<T: Real> SurfaceParts<T> {
             capped,
             run_unions,
             links,
+            components,
             fits: searched_fits,
             fit_seconds: searched_fit_seconds,
             parts: list_parts,
@@ -341,6 +342,7 @@ impl<T: Real> SurfaceParts<T> {
         let (spheres, droplet_of) = droplets::<T>(
             &rel,
             &links,
+            components,
             &ball_h,
             &nearest,
             dense_spacing,
