@@ -1,11 +1,12 @@
 // The union of the neighbour lists of each cluster of consecutive points
 // (crates/gpubake/src/unions.rs), as slosh_mls::cluster_lists makes it: each id once, in index
-// order. A workgroup takes one cluster: it sets its members' ids in a bitset over their span in
-// workgroup memory and reads the set bits out in order, so the lists need not be read back to
-// be merged. Dispatched twice: first to count the ids each union holds (SPAN_WIDE where the
-// span is wider than the bitset: the host merges that cluster), then to write them where the
-// counts' prefix sum says. Follows list_batch.wgsl; ID_MASK, SPAN_WORDS and SPAN_WIDE come
-// from crates/gpubake/src/layout.rs.
+// order. A workgroup takes one cluster: it sets its members' ids in a bitset in workgroup
+// memory, over their span, or (where they span more) its halves over the ids nearest the
+// lowest and those nearest the highest, and reads the set bits out in order, so the lists
+// need not be read back to be merged. Dispatched twice: first to count the ids each union
+// holds (SPAN_WIDE where an id falls outside the bitset: the host merges that cluster), then
+// to write them where the counts' prefix sum says. Follows list_batch.wgsl; ID_MASK,
+// SPAN_WORDS and SPAN_WIDE come from crates/gpubake/src/layout.rs.
 
 struct UnionParams {
     // The dispatch's first cluster, and how many it takes.
@@ -32,18 +33,47 @@ struct UnionParams {
 
 const THREADS: u32 = 64u;
 const EMPTY: u32 = 0xffffffffu;
+// Words of each half of a split bitset.
+const HALF: u32 = SPAN_WORDS / 2u;
 
 var<workgroup> bits: array<atomic<u32>, SPAN_WORDS>;
 var<workgroup> lowest: atomic<u32>;
 var<workgroup> highest: atomic<u32>;
+// Set where an id falls between the halves of a split bitset.
+var<workgroup> stray: atomic<u32>;
 // Set bits in each thread's share of the words (consecutive words, thread by thread).
 var<workgroup> thread_counts: array<u32, THREADS>;
 
+// Where a cluster's ids span more words than the bitset has (a cluster beside a boundary of
+// the Morton order: some of its neighbours lie far along the order), its halves take the ids
+// nearest the lowest and those nearest the highest, which are often all of them.
 struct Span {
-    // The id of bit 0 of word 0, and the words the ids span (0: no ids).
+    // The id of bit 0 of word 0, and (split) of word HALF.
     base: u32,
+    high_base: u32,
+    // The words in use (0: no ids).
     words: u32,
+    split: bool,
     wide: bool,
+}
+
+// The bit of `id` in the bitset, or EMPTY where it falls between the halves.
+fn bit_of(span: Span, id: u32) -> u32 {
+    if !span.split || id < span.base + HALF * 32u {
+        return id - span.base;
+    }
+    if id >= span.high_base {
+        return HALF * 32u + (id - span.high_base);
+    }
+    return EMPTY;
+}
+
+// The id of bit 0 of word `w`.
+fn word_base(span: Span, w: u32) -> u32 {
+    if span.split && w >= HALF {
+        return span.high_base + (w - HALF) * 32u;
+    }
+    return span.base + w * 32u;
 }
 
 // The cluster's ids set in `bits`, each thread's count of them in `thread_counts`.
@@ -54,6 +84,7 @@ fn set_bits(cluster: u32, thread: u32) -> Span {
     if thread == 0u {
         atomicStore(&lowest, EMPTY);
         atomicStore(&highest, 0u);
+        atomicStore(&stray, 0u);
     }
     workgroupBarrier();
     let first_point = min(cluster * params.size, params.points);
@@ -68,19 +99,26 @@ fn set_bits(cluster: u32, thread: u32) -> Span {
     workgroupBarrier();
     let lo = atomicLoad(&lowest);
     let hi = atomicLoad(&highest);
-    var span = Span(0u, 0u, false);
+    var span = Span(0u, 0u, 0u, false, false);
     if lo <= hi {
         span.base = lo & ~31u;
-        span.words = (hi - span.base) / 32u + 1u;
-        span.wide = span.words > SPAN_WORDS;
+        let words = (hi - span.base) / 32u + 1u;
+        span.split = words > SPAN_WORDS;
+        span.words = min(words, SPAN_WORDS);
+        if span.split {
+            span.high_base = (hi & ~31u) - (HALF - 1u) * 32u;
+        }
     }
-    if !span.wide {
-        for (var k = a + thread; k < b; k += THREADS) {
-            let at = (lists[k] & ID_MASK) - span.base;
+    for (var k = a + thread; k < b; k += THREADS) {
+        let at = bit_of(span, lists[k] & ID_MASK);
+        if at == EMPTY {
+            atomicStore(&stray, 1u);
+        } else {
             atomicOr(&bits[at / 32u], 1u << (at % 32u));
         }
     }
     workgroupBarrier();
+    span.wide = atomicLoad(&stray) != 0u;
     var count = 0u;
     if !span.wide {
         let share = share_of(span, thread);
@@ -130,7 +168,7 @@ fn cluster_unions(
     for (var w = share.x; w < share.y; w++) {
         var word = atomicLoad(&bits[w]);
         while word != 0u {
-            unions[at] = span.base + w * 32u + countTrailingZeros(word);
+            unions[at] = word_base(span, w) + countTrailingZeros(word);
             at++;
             word &= word - 1u;
         }

@@ -71,11 +71,12 @@ pub struct UnionParams {
 }
 
 /// Words of the bitset a cluster's union is set in (`SPAN_WORDS` in
-/// `shaders/cluster_unions.wgsl`): ids spanning up to 64Ki indices, in 8 KiB of workgroup
-/// memory (of the 16 KiB every adapter gives).
+/// `shaders/cluster_unions.wgsl`): ids spanning up to 64Ki indices, or lying within 32Ki of
+/// the lowest or of the highest, in 8 KiB of workgroup memory (of the 16 KiB every adapter
+/// gives).
 pub const UNION_SPAN_WORDS: u32 = 2048;
 
-/// A cluster's count where its ids span more than the bitset (`SPAN_WIDE`): the host merges it.
+/// A cluster's count where an id falls outside the bitset (`SPAN_WIDE`): the host merges it.
 pub(crate) const SPAN_WIDE: u32 = u32::MAX;
 
 /// `TreeParams` in `shaders/bvh_build.wgsl`.

@@ -265,12 +265,12 @@ impl GpuStages {
         })
     }
 
-    /// The cluster unions' pass rebuilt with a bitset of `words` words (the shader's is
-    /// [`UNION_SPAN_WORDS`]), so that a test's small set has clusters wider than it, which
-    /// the host merges.
+    /// The cluster unions' pass rebuilt with a bitset of `words` words, rounded down to an
+    /// even number of at least 2 (the shader's is [`UNION_SPAN_WORDS`]), so that a test's
+    /// small set has clusters wider than it.
     pub fn narrow_union_span(&mut self, words: u32) -> Result<(), slosh_render::Error> {
         self.cluster_unions =
-            union_pipeline(&self.gpu, &self.unions_pipeline_layout, words.max(1))?;
+            union_pipeline(&self.gpu, &self.unions_pipeline_layout, words.max(2) & !1)?;
         Ok(())
     }
 

@@ -555,22 +555,38 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
     assert!(refused.contains("--device cpu"), "{refused}");
 }
 
-/// The words of a bitset that each cluster union's ids span (as the shader measures them).
-fn union_spans(lists: &NeighbourLists) -> Vec<u32> {
+/// How the shader takes each cluster union of `lists` with a bitset of `words` words: the
+/// clusters over one span, over the bitset's split halves, and left to the host (an id
+/// between the halves).
+fn union_kinds(lists: &NeighbourLists, words: u32) -> [usize; 3] {
     let (start, ids) = cluster_lists(&lists.lists, NEIGHBOUR_CLUSTER as usize);
-    start
-        .windows(2)
-        .filter_map(|w| {
-            let union = &ids[w[0] as usize..w[1] as usize];
-            Some((union.last()? - (union.first()? & !31)) / 32 + 1)
-        })
-        .collect()
+    let mut kinds = [0; 3];
+    for w in start.windows(2) {
+        let union = &ids[w[0] as usize..w[1] as usize];
+        let (Some(&lo), Some(&hi)) = (union.first(), union.last()) else {
+            continue;
+        };
+        let base = lo & !31;
+        let half = words / 2;
+        let high_base = (hi & !31).saturating_sub((half - 1) * 32);
+        kinds[if (hi - base) / 32 < words {
+            0
+        } else if union
+            .iter()
+            .all(|&id| id < base + half * 32 || id >= high_base)
+        {
+            1
+        } else {
+            2
+        }] += 1;
+    }
+    kinds
 }
 
-/// Clusters whose ids span more than the shader's bitset are merged on the host, in their
-/// place among the GPU's: with a bitset as wide as the median cluster's span, a 3000-point
-/// sphere's clusters are some narrow and some wide, and the unions are those of the lists
-/// either way.
+/// Clusters whose ids span more than the shader's bitset are taken by its halves, or where an
+/// id falls between them, merged on the host in their place among the GPU's: with a bitset
+/// narrowed so that a 3000-point sphere has clusters of all three kinds, the unions are those
+/// of the lists.
 #[test]
 fn clusters_wider_than_the_bitset_are_merged_in_their_place() {
     let Some(mut narrow) = gpu_search() else {
@@ -580,23 +596,21 @@ fn clusters_wider_than_the_bitset_are_merged_in_their_place() {
     assert!(case.morton);
     let link2 = |_: usize| case.link2;
     let request = case.request(&link2);
-    let mut spans = union_spans(
-        &KdSearch
-            .index(&case.points)
-            .unwrap()
-            .lists(request)
-            .unwrap(),
-    );
-    spans.sort_unstable();
-    let words = spans[spans.len() / 2];
+    let cpu = KdSearch
+        .index(&case.points)
+        .unwrap()
+        .lists(request)
+        .unwrap();
+    let words = (2..64u32)
+        .map(|w| 2 * w)
+        .find(|&w| union_kinds(&cpu, w).iter().all(|&k| k > 0))
+        .expect("a bitset width with clusters of all three kinds");
     narrow.narrow_union_span(words).unwrap();
     let lists = narrow.index(&case.points).unwrap().lists(request).unwrap();
     check_unions("a narrow bitset", &lists, true);
-    let spans = union_spans(&lists);
-    let wide = spans.iter().filter(|&&s| s > words).count();
+    let kinds = union_kinds(&lists, words);
     assert!(
-        wide > 0 && wide < spans.len(),
-        "{wide} of {} clusters wider than {words} words: both kinds must occur",
-        spans.len()
+        kinds.iter().all(|&k| k > 0),
+        "one span, split, host: {kinds:?} with {words} words"
     );
 }
