@@ -62,6 +62,9 @@ impl SortedPoints {
 
     /// The sorted position of each caller's index (the inverse of `order`).
     pub fn rank(&self) -> Vec<u32> {
+        if self.identity {
+            return self.order.clone();
+        }
         let mut rank = vec![0u32; self.len()];
         for (t, &i) in self.order.iter().enumerate() {
             rank[i as usize] = t as u32;

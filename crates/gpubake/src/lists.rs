@@ -18,6 +18,9 @@ use crate::unions::{CLUSTER, UnionBatch, Unions};
 /// (point, neighbour) within the link distance.
 type Link = (u32, u32);
 
+/// Reaches sampled for the median that sizes the grid's cells.
+const MEDIAN_SAMPLE: usize = 1 << 16;
+
 /// List words are allocated in multiples of this many (16 MB).
 const WORDS_GRANULE: usize = 4 << 20;
 
@@ -78,8 +81,14 @@ pub(crate) fn lists(
         None => Vec::new(),
     };
     // Cells about half the typical reach wide: a query visits some 5³ cells.
+    // (Of an evenly strided sample: the grid only decides how fast the passes run, and a
+    // million-point selection took milliseconds of one thread.)
     let median = {
-        let mut r = reach.clone();
+        let mut r: Vec<f32> = reach
+            .iter()
+            .step_by(n.div_ceil(MEDIAN_SAMPLE).max(1))
+            .copied()
+            .collect();
         let mid = r.len() / 2;
         *r.select_nth_unstable_by(mid, f32::total_cmp).1
     };
@@ -161,6 +170,7 @@ pub(crate) fn lists(
     // coarser until none is left: each grid's level, cell table and points.
     let mut coarser: Vec<(u32, Pooled, Vec<u32>)> = Vec::new();
     let mut deferred: Vec<u32> = (0..n as u32)
+        .into_par_iter()
         .filter(|&t| cuts[t as usize][3] == DEFERRED)
         .collect();
     let mut coarse_level = level;
@@ -183,18 +193,18 @@ pub(crate) fn lists(
     }
 
     // Offsets in sorted order.
-    let mut start = vec![0u64; n + 1];
-    for t in 0..n {
-        start[t + 1] = start[t] + u64::from(cuts[t][2]);
-    }
-    let total = start[n];
+    let total: u64 = cuts.par_iter().map(|c| u64::from(c[2])).sum();
     if total > u64::from(u32::MAX) {
         return Err(gpu_error(format!(
             "{total} neighbours in all; lists hold at most {} (32-bit offsets)",
             u32::MAX
         )));
     }
-    let start: Vec<u32> = start.iter().map(|&s| s as u32).collect();
+    let mut start = Vec::with_capacity(n + 1);
+    start.push(0u32);
+    for c in &cuts {
+        start.push(start[start.len() - 1] + c[2]);
+    }
     let start_buffer = storage(&search.memory, "list starts", &start)?;
     parts.lap("neighbour lists: cut and offsets");
     let fit_inputs = request

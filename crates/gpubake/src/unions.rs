@@ -1,7 +1,8 @@
 //! The union of the lists of each of the bake's clusters, made on the GPU from each batch of
 //! lists while it is there (`shaders/cluster_unions.wgsl`): the sections store those unions,
 //! which the host otherwise merged from every point's list (at 1M points, most of the
-//! sections stage). A cluster whose ids span more than the shader's bitset is merged here.
+//! sections stage). A cluster with an id outside the shader's bitset (its span, or its halves
+//! where the ids span more) is merged here.
 
 use rayon::prelude::*;
 use slosh_mls::{Neighbours, RunUnions, SurfaceError, cluster_union};
@@ -17,7 +18,7 @@ pub(crate) const CLUSTER: usize = slosh_mls::NEIGHBOUR_CLUSTER as usize;
 pub(crate) struct Unions {
     /// Each cluster's union's length (0 for a wide one, whose ids are not among `ids`).
     counts: Vec<u32>,
-    /// The clusters whose ids span more than the bitset.
+    /// The clusters with an id outside the bitset.
     wide: Vec<usize>,
     ids: Vec<u32>,
 }
@@ -135,7 +136,7 @@ impl Unions {
             }
             return RunUnions::whole(CLUSTER, n, start, ids);
         }
-        // The wide clusters' unions merged here (in parallel: some 8 % of a Morton-ordered
+        // The wide clusters' unions merged here (in parallel: under 1 % of a Morton-ordered
         // step's clusters), each in its place.
         let merged: Vec<Vec<u32>> = wide
             .par_iter()
