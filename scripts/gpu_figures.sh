@@ -3,7 +3,7 @@
 # in parts that each fit one 10-minute command on a GPU host with 16 cores. Reports and
 # printed output go to OUT; series are written under /tmp and reused.
 #
-#   scripts/gpu_figures.sh OUT scrub|scale|bake|before
+#   scripts/gpu_figures.sh OUT scrub|scale|bake|bake-before|before
 #
 # slosh is $SLOSH, else .dev/slosh, else the one on PATH. Where the repo holds .gl and .whl
 # (scripts/gpu_prepare.sh makes them), the loaders are unpacked and pysplashsurf installed
@@ -18,17 +18,19 @@
 #        case at 1M with the GPU bake.
 # bake:  `bench bake` 100k and 1M with the GPU column, 64 steps of 1M through the batch,
 #        one 4M step baked on the GPU with its device memory sampled every 50 ms.
+# bake-before: `bench bake` at 1M and two 4M steps through `slosh bake --device gpu`, the
+#        baseline binary $BEFORE and slosh alternated, twice each.
 # before: the baseline binary $BEFORE (the one an issue's "now" column came from) on this
 #        card: `bench gpu` alternated with slosh (before, after, before, after), and its
 #        `bench scrub` of the scrub and scale parts' 100k, 1M and 4M series.
 set -euo pipefail
 # OUT and $SLOSH are the caller's paths; the rest is the repo's.
 out=$(readlink -m "${1:?OUT}")
-part=${2:?scrub, scale, bake or before}
+part=${2:?scrub, scale, bake, bake-before or before}
 case $part in
-scrub | scale | bake | before) ;;
+scrub | scale | bake | bake-before | before) ;;
 *)
-    echo "unknown part '$part': scrub, scale, bake or before" >&2
+    echo "unknown part '$part': scrub, scale, bake, bake-before or before" >&2
     exit 2
     ;;
 esac
@@ -98,6 +100,25 @@ bake)
         kill "$sampler"
         echo "bake-4m: device memory used, MiB: idle $(head -1 "$out/bake-4m-memory.txt"), peak $(sort -n "$out/bake-4m-memory.txt" | tail -1)"
     fi
+    ;;
+bake-before)
+    [ -x "${BEFORE:-}" ] || { echo "bake-before: BEFORE names no binary" >&2; exit 2; }
+    # The GPU bake's stages, this binary against the baseline on the same card, alternated:
+    # `bench bake` at 1M (its GPU table and the stages still on the CPU), then two 4M steps
+    # through `slosh bake` (the second warm).
+    [ -e $tmp/slosh-s4m2/sphere.case ] ||
+        "$slosh" gen sphere --points $p4m --steps 2 --out $tmp/slosh-s4m2 > /dev/null
+    for round in 1 2; do
+        for side in before after; do
+            bin=$slosh
+            [ $side = before ] && bin=$BEFORE
+            BIN=$bin run bake-$side-$round bench bake --points $p1m --runs 2 --threads $threads \
+                --series 0 --out "$out/bake-$side-$round.md"
+            rm -rf $tmp/slosh-c4m2
+            BIN=$bin run bake-4m-$side-$round bake $tmp/slosh-s4m2/sphere.case \
+                --out $tmp/slosh-c4m2 --device gpu
+        done
+    done
     ;;
 before)
     [ -x "${BEFORE:-}" ] || { echo "before: BEFORE names no binary" >&2; exit 2; }

@@ -235,7 +235,7 @@ pub(crate) fn lists(
         None
     };
     let host_links = components.is_none();
-    let mut union_seconds = 0.0;
+    let (mut union_seconds, mut component_seconds) = (0.0, 0.0);
     let mut first = 0;
     while first < n {
         let writing = std::time::Instant::now();
@@ -317,6 +317,7 @@ pub(crate) fn lists(
             .map_err(gpu_error)?;
         read_seconds += reading.elapsed().as_secs_f64();
         if let Some(c) = &components {
+            let joining = std::time::Instant::now();
             c.join(
                 index,
                 &start_buffer,
@@ -324,6 +325,7 @@ pub(crate) fn lists(
                 start[first],
                 (first, last),
             )?;
+            component_seconds += joining.elapsed().as_secs_f64();
         }
         if let Some(u) = &mut unions {
             let merging = std::time::Instant::now();
@@ -345,7 +347,7 @@ pub(crate) fn lists(
     let components = components
         .map(|c| c.finish(index, &start_buffer, &no_lists))
         .transpose()?;
-    let component_seconds = joining.elapsed().as_secs_f64();
+    component_seconds += joining.elapsed().as_secs_f64();
 
     // Links out, the marks cleared in place, and each list's reach, piece by piece (in
     // sorted order). A cut list reaches as far as its farthest point in f64 (`lists.rs` in
