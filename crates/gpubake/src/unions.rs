@@ -5,7 +5,7 @@
 //! where the ids span more) is merged here.
 
 use rayon::prelude::*;
-use slosh_mls::{Neighbours, RunUnions, SurfaceError, cluster_union};
+use slosh_mls::{Neighbours, RunUnions, SurfaceError, cluster_union, csr_pieces};
 
 use crate::dispatch::{bind, gpu_error, output, storage, uniform};
 use crate::index::GpuIndex;
@@ -13,6 +13,9 @@ use crate::layout::{SPAN_WIDE, UnionParams};
 
 /// Points per cluster: the bake's.
 pub(crate) const CLUSTER: usize = slosh_mls::NEIGHBOUR_CLUSTER as usize;
+
+/// Clusters per parallel copy of the unions into place.
+const UNIONS_PER_COPY: usize = 1024;
 
 /// The unions made so far, batch by batch.
 pub(crate) struct Unions {
@@ -128,16 +131,25 @@ impl Unions {
         if counts.len() != n.div_ceil(CLUSTER) {
             return None;
         }
-        let mut start = Vec::with_capacity(counts.len() + 1);
-        start.push(0u32);
-        if wide.is_empty() {
-            for &c in &counts {
+        // CSR offsets of per-cluster counts.
+        let offsets = |counts: &[u32]| -> Option<Vec<u32>> {
+            let mut start = Vec::with_capacity(counts.len() + 1);
+            start.push(0u32);
+            for &c in counts {
                 start.push(start[start.len() - 1].checked_add(c)?);
             }
-            return RunUnions::whole(CLUSTER, n, start, ids);
+            Some(start)
+        };
+        if wide.is_empty() {
+            return RunUnions::whole(CLUSTER, n, offsets(&counts)?, ids);
+        }
+        // Where each cluster's ids lie among the GPU's (a wide one's: none).
+        let from = offsets(&counts)?;
+        if from[from.len() - 1] as usize != ids.len() {
+            return None;
         }
         // The wide clusters' unions merged here (in parallel: under 1 % of a Morton-ordered
-        // step's clusters), each in its place.
+        // step's clusters), each then copied into its place.
         let merged: Vec<Vec<u32>> = wide
             .par_iter()
             .map(|&c| {
@@ -149,21 +161,21 @@ impl Unions {
         for (&c, m) in wide.iter().zip(&merged) {
             counts[c] = u32::try_from(m.len()).ok()?;
         }
-        let mut all = Vec::with_capacity(ids.len() + merged.iter().map(Vec::len).sum::<usize>());
-        let (mut from, mut next_wide) = (0usize, wide.iter().zip(&merged).peekable());
-        for (c, &count) in counts.iter().enumerate() {
-            match next_wide.peek() {
-                Some(&(&w, m)) if w == c => {
-                    all.extend_from_slice(m);
-                    next_wide.next();
+        let start = offsets(&counts)?;
+        // Copied into place by blocks of clusters in parallel.
+        let mut all = vec![0u32; start[start.len() - 1] as usize];
+        csr_pieces(&start, &mut all, UNIONS_PER_COPY)
+            .into_par_iter()
+            .for_each(|(clusters, piece)| {
+                let base = start[clusters.start] as usize;
+                for c in clusters {
+                    let out = &mut piece[start[c] as usize - base..start[c + 1] as usize - base];
+                    match wide.binary_search(&c) {
+                        Ok(w) => out.copy_from_slice(&merged[w]),
+                        Err(_) => out.copy_from_slice(&ids[from[c] as usize..from[c + 1] as usize]),
+                    }
                 }
-                _ => {
-                    all.extend_from_slice(&ids[from..from + count as usize]);
-                    from += count as usize;
-                }
-            }
-            start.push(start[start.len() - 1].checked_add(count)?);
-        }
+            });
         RunUnions::whole(CLUSTER, n, start, all)
     }
 }
