@@ -45,7 +45,8 @@ impl Components {
         )
     }
 
-    /// Each point's component, named by its smallest index (waits for the GPU).
+    /// Each point's component, named by its smallest index (waits for the GPU). The flatten
+    /// pass reads no lists; `list_start` and `lists` fill the layout's bindings.
     pub(crate) fn finish(
         self,
         index: &GpuIndex<'_>,

@@ -126,14 +126,20 @@ pub(crate) fn uniform<T: bytemuck::Pod>(gpu: &Gpu, params: &T) -> wgpu::Buffer {
 /// Workgroups along x and y for `count` threads, and the threads per row
 /// (`SearchParams::row_threads`).
 pub(crate) fn groups(gpu: &Gpu, count: u32) -> (u32, u32, u32) {
-    let groups = count.div_ceil(WORKGROUP).max(1);
+    let (x, y) = workgroup_grid(gpu, count.div_ceil(WORKGROUP));
+    (x, y, x * WORKGROUP)
+}
+
+/// Workgroups along x and y for `groups` workgroups (at least one), x within the device's
+/// limit per dimension.
+pub(crate) fn workgroup_grid(gpu: &Gpu, groups: u32) -> (u32, u32) {
     let max = gpu
         .device
         .limits()
         .max_compute_workgroups_per_dimension
         .max(1);
-    let x = groups.min(max);
-    (x, groups.div_ceil(x), x * WORKGROUP)
+    let x = groups.clamp(1, max);
+    (x, groups.max(1).div_ceil(x))
 }
 
 /// A pass's start and end timestamps, where the device can write them.

@@ -7,7 +7,7 @@
 use rayon::prelude::*;
 use slosh_mls::{Neighbours, RunUnions, SurfaceError, cluster_union, csr_pieces};
 
-use crate::dispatch::{bind, gpu_error, output, storage, uniform};
+use crate::dispatch::{bind, gpu_error, output, storage, uniform, workgroup_grid};
 use crate::index::GpuIndex;
 use crate::layout::{SPAN_WIDE, UnionParams};
 
@@ -58,7 +58,9 @@ impl Unions {
         if clusters == 0 {
             return Ok(());
         }
-        let (x, y, row_groups) = cluster_groups(gpu, clusters as u32);
+        // One workgroup per cluster.
+        let (x, y) = workgroup_grid(gpu, clusters as u32);
+        let row_groups = x;
         let params = |write: u32| {
             uniform(
                 gpu,
@@ -178,15 +180,4 @@ impl Unions {
             });
         RunUnions::whole(CLUSTER, n, start, all)
     }
-}
-
-/// Workgroups along x and y for one workgroup per cluster, and the workgroups per row.
-fn cluster_groups(gpu: &slosh_render::Gpu, clusters: u32) -> (u32, u32, u32) {
-    let max = gpu
-        .device
-        .limits()
-        .max_compute_workgroups_per_dimension
-        .max(1);
-    let x = clusters.clamp(1, max);
-    (x, clusters.div_ceil(x), x)
 }
