@@ -28,6 +28,12 @@
 @group(0) @binding(9) var<storage, read_write> lists_out: array<u32>;
 // With flag 8, the sorted positions of the dispatch's points (else first + k).
 @group(0) @binding(11) var<storage, read> todo: array<u32>;
+// With FLAG_PAIRS, (the caller's index of the point, the member's word) for each member within
+// `band` of its list's reach (of the cut's distance where the cap cut it) or marked FAR_BIT:
+// what the host measures a list's reach on where it reads no lists back. Slots past the
+// buffer's end are counted but not written (the host then reads the lists).
+@group(0) @binding(12) var<storage, read_write> pairs: array<vec2<u32>>;
+@group(0) @binding(13) var<storage, read_write> pair_count: array<atomic<u32>>;
 
 const ALL: u32 = 0xffffffffu;
 // cut[t].w of a point whose reach spans more cells than MOST_CELLS: left to a coarser grid, so
@@ -55,6 +61,8 @@ var<private> own_link2: f32;
 var<private> cut_key: u32;
 // Members at or above this key are marked FAR_BIT (ALL: the list was not cut).
 var<private> near_key: u32;
+// Members at or above this key are appended to the pairs (ALL: none are).
+var<private> pair_key: u32;
 var<private> cut_id: u32;
 var<private> digits: array<u32, 16>;
 var<private> select_prefix: u32;
@@ -132,6 +140,12 @@ fn visit(mode: u32, j: u32) {
             }
             if key >= near_key {
                 word |= FAR_BIT;
+            }
+            if key >= pair_key {
+                let slot = atomicAdd(&pair_count[0], 1u);
+                if slot < arrayLength(&pairs) {
+                    pairs[slot] = vec2<u32>(centre_id, word);
+                }
             }
             lists_out[out_at] = word;
             out_at += 1u;
@@ -381,6 +395,16 @@ fn write_lists(@builtin(global_invocation_id) gid: vec3<u32>) {
     near_key = ALL;
     if (cut[t].w & 1u) != 0u {
         near_key = bitcast<u32>(bitcast<f32>(cut_key) * (1.0 - NEAR_CUT));
+    }
+    pair_key = ALL;
+    if (params.flags & FLAG_PAIRS) != 0u {
+        // The list reaches its reach, or where the cap cut it, the cut's distance.
+        var far = sqrt(reach2);
+        if (cut[t].w & 1u) != 0u {
+            far = sqrt(bitcast<f32>(cut_key));
+        }
+        let inner = max(far - params.band, 0.0);
+        pair_key = min(bitcast<u32>(inner * inner), near_key);
     }
     let first = list_start[t] - params.out_base;
     out_at = first;

@@ -14,7 +14,9 @@ struct SearchParams {
     side: u32,
     // nearest: how many per point; lists: the cap.
     wanted: u32,
-    // 1: data normals, 2: links, 4: the caller's points came in Morton order.
+    // 1: data normals, 2: links, 4: the caller's points came in Morton order, 8: the points
+    // are todo's, 16 (FLAG_PAIRS): lists: each member near its list's reach is appended to
+    // the pairs.
     flags: u32,
     // The first output slot of this dispatch (lists).
     out_base: u32,
@@ -24,7 +26,8 @@ struct SearchParams {
     margin: f32,
     // nearest: the most shells of cells a point searches before it is left to a coarser grid.
     shells: u32,
-    _pad0: u32,
+    // lists, with FLAG_PAIRS: how near its list's reach (or cut) a member is appended.
+    band: f32,
     _pad1: u32,
     _pad2: u32,
 };

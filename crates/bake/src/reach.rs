@@ -11,6 +11,12 @@ use slosh_cache::stored_radius;
 /// much again. Five times that.
 pub(crate) const REACH_SLACK: f64 = 1e-6;
 
+/// How near its reach a list member must lie, in f64, to be measured: one farther in lies
+/// more than [`REACH_SLACK`] inside the reach in f32 too, where it cannot raise the stored
+/// reach. A bake's GPU search keeps only those of each list
+/// (`slosh_mls::KeptLists::NearReach`). Four times the slack.
+pub(crate) const NEAR_REACH_BAND: f64 = 4.0 * REACH_SLACK;
+
 /// The smallest f32 at or above `reach` whose square is at or above the list's farthest
 /// squared f32 distance, `far2` (asked only where it can matter: the f32 distances exceed
 /// `reach` by at most [`REACH_SLACK`], so where the half float the point stores lies that

@@ -178,7 +178,13 @@ fn gpu_sections(
     parts.lap("sections: balls");
     // Neighbour lists shared per cluster of consecutive (Morton-ordered) points; a reach
     // rounded up to f32 keeps every stored list within its distance filter.
-    let (cluster_start, cluster_ids) = surface.cluster_lists(NEIGHBOUR_CLUSTER as usize);
+    let (cluster_start, cluster_ids) =
+        surface
+            .cluster_lists(NEIGHBOUR_CLUSTER as usize)
+            .map_err(|source| BakeError::Surface {
+                step: input.index,
+                source,
+            })?;
     let (cluster_base, cluster_words) =
         candidates::pack(&cluster_start, &cluster_ids, NEIGHBOUR_CLUSTER).ok_or_else(|| {
             input_err(format!(
@@ -202,7 +208,8 @@ fn gpu_sections(
         .map(|i| {
             let r = stored_reach(surface.reach[i], || {
                 surface
-                    .neighbours_of(i)
+                    .neighbours
+                    .farthest_of(i)
                     .iter()
                     .map(|&j| (stored[j as usize] - stored[i]).length_squared())
                     .fold(0.0f32, f32::max)
@@ -572,6 +579,7 @@ fn bake_parts(
             normals.as_deref(),
             &params.mls,
             &search,
+            Some(crate::reach::NEAR_REACH_BAND),
             start_bvh,
         )
         .map_err(|source| BakeError::Surface { step, source })?;

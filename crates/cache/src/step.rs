@@ -2,8 +2,8 @@
 //! reference tracer needs to trace straight from a cache.
 
 use slosh_mls::{
-    Ball, BallFit, Camera, ClusterCandidates, FitStatus, Neighbours, NormalsMode, Params, Poly,
-    Sphere, Surface, SurfaceParams, SurfaceParts, TraceHit, V3,
+    Ball, BallFit, Camera, ClusterCandidates, FitStatus, KeptLists, Neighbours, NormalsMode,
+    Params, Poly, Sphere, Surface, SurfaceParams, SurfaceParts, TraceHit, V3,
 };
 
 use crate::ball_state::{BALLS_PER_STATE_WORD, BallBits, StoredBall, h_of};
@@ -240,9 +240,11 @@ impl LoadedStep {
             h: header.smoothing_length as f32,
             spacing: header.spacing as f32,
             offset: header.surface_offset as f32,
-            neighbours: Neighbours::from_csr(neighbour_start, neighbours).ok_or_else(|| {
-                invalid("the expanded neighbour lists are not a CSR index".into())
-            })?,
+            neighbours: KeptLists::Whole(
+                Neighbours::from_csr(neighbour_start, neighbours).ok_or_else(|| {
+                    invalid("the expanded neighbour lists are not a CSR index".into())
+                })?,
+            ),
             reach,
             capped: header.stats.capped as usize,
             run_unions: None,

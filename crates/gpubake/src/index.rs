@@ -22,6 +22,8 @@ pub(crate) struct Dispatch<'b> {
     pub out_base: u32,
     /// `SearchParams::shells` (the nearest-points pass).
     pub shells: u32,
+    /// `SearchParams::band` (the lists pass, with `FLAG_PAIRS`).
+    pub band: f32,
     /// The pass's own buffers, by binding.
     pub buffers: &'b [(u32, &'b wgpu::Buffer)],
 }
@@ -72,7 +74,7 @@ impl GpuIndex<'_> {
                 row_threads,
                 margin: self.margin as f32,
                 shells: dispatch.shells,
-                _pad0: 0,
+                band: dispatch.band,
                 _pad1: 0,
                 _pad2: 0,
             },

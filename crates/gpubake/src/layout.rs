@@ -25,7 +25,8 @@ pub struct SearchParams {
     pub row_threads: u32,
     pub margin: f32,
     pub shells: u32,
-    pub _pad0: u32,
+    /// With [`FLAG_PAIRS`]: how near its list's reach (or the cut) a member is appended.
+    pub band: f32,
     pub _pad1: u32,
     pub _pad2: u32,
 }
@@ -113,6 +114,11 @@ pub(crate) const FLAG_SORTED: u32 = 4;
 /// `SearchParams::flags`: the dispatch's points are the `todo` list's (the nearest-points pass).
 pub(crate) const FLAG_TODO: u32 = 8;
 
+/// `SearchParams::flags`: the lists pass appends each member within `band` of its list's
+/// reach, or of the cut where the cap cut the list, with every member it marks
+/// [`FAR_BIT`], to the pairs (`FLAG_PAIRS` in `shaders/lists.wgsl`).
+pub(crate) const FLAG_PAIRS: u32 = 16;
+
 /// `cut[t].w` of a point the lists pass left to a coarser grid (`DEFERRED` in
 /// `shaders/lists.wgsl`).
 pub(crate) const DEFERRED: u32 = u32::MAX;
@@ -138,7 +144,8 @@ pub(crate) const NEAR_CUT: f32 = 1e-5;
 fn list_word_consts() -> String {
     format!(
         "const LINK_BIT: u32 = {LINK_BIT}u;\nconst FAR_BIT: u32 = {FAR_BIT}u;\n\
-         const ID_MASK: u32 = {ID_MASK}u;\nconst NEAR_CUT: f32 = {NEAR_CUT:e};\n"
+         const ID_MASK: u32 = {ID_MASK}u;\nconst NEAR_CUT: f32 = {NEAR_CUT:e};\n\
+         const FLAG_PAIRS: u32 = {FLAG_PAIRS}u;\n"
     )
 }
 

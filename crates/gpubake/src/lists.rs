@@ -4,14 +4,16 @@
 
 use rayon::prelude::*;
 use slosh_mls::{
-    InitialFit, ListRequest, NeighbourLists, Neighbours, SurfaceError, csr_pieces, distance2,
+    InitialFit, KeptLists, ListRequest, NeighbourLists, Neighbours, SurfaceError, csr_pieces,
+    distance2,
 };
 
 use crate::components::Components;
 use crate::dispatch::{Pooled, gpu_error, output, storage};
 use crate::index::{Dispatch, GpuIndex};
 use crate::layout::{
-    DEFERRED, FAR_BIT, FLAG_LINKS, FLAG_NORMALS, FLAG_SORTED, FLAG_TODO, ID_MASK, LINK_BIT,
+    DEFERRED, FAR_BIT, FLAG_LINKS, FLAG_NORMALS, FLAG_PAIRS, FLAG_SORTED, FLAG_TODO, ID_MASK,
+    LINK_BIT,
 };
 use crate::unions::{CLUSTER, UnionBatch, Unions};
 
@@ -26,6 +28,15 @@ const WORDS_GRANULE: usize = 4 << 20;
 
 /// The most points of one dispatch over a list of points.
 const MAX_TODO: usize = 1 << 20;
+
+/// Room for pairs (`FLAG_PAIRS`) per point of a batch: a list has some 0.1 members near its
+/// reach on a surface; a cut list, the point the cut fell on (most of a surface's lists at the
+/// default cap) and rarely another. Where more come (lattices, whose distances tie), the
+/// batch's lists are read back instead.
+const PAIRS_PER_POINT: usize = 2;
+
+/// Room for pairs of a batch, at least.
+const PAIRS_LEAST: usize = 1 << 12;
 
 /// Points per piece of the lists' assembly (a task, and a piece of the links): the CPU lists
 /// stage's blocks, whose links the spray joins piece by piece in parallel.
@@ -104,6 +115,10 @@ pub(crate) fn lists(
         )));
     }
     let cut = output(&search.memory, "list cuts", cut_bytes);
+    let (no_pairs, no_pair_count) = (
+        output(&search.memory, "no pairs", 16),
+        output(&search.memory, "no pair count", 16),
+    );
     parts.lap("neighbour lists: inputs");
     // One dispatch of the cut or the write pass: points first.. (or `todo`'s) on the grid of
     // `level`.
@@ -117,11 +132,17 @@ pub(crate) fn lists(
         out_base: u32,
         list_start: &'p wgpu::Buffer,
         lists_out: &'p wgpu::Buffer,
+        /// With FLAG_PAIRS: the pairs and their count.
+        pairs: Option<(&'p wgpu::Buffer, &'p wgpu::Buffer, f32)>,
     }
     let pass = |p: Pass<'_>| {
         let todo = match p.todo {
             Some(t) => storage(&search.memory, "lists todo", t)?,
             None => output(&search.memory, "no todo", 16),
+        };
+        let (pairs, pair_count, band) = match p.pairs {
+            Some((pairs, count, band)) => (pairs, count, band),
+            None => (&*no_pairs, &*no_pair_count, 0.0),
         };
         index.submit(Dispatch {
             pipeline: p.pipeline,
@@ -131,9 +152,12 @@ pub(crate) fn lists(
             first: p.first,
             count: p.count,
             wanted: cap,
-            flags: flags | if p.todo.is_some() { FLAG_TODO } else { 0 },
+            flags: flags
+                | if p.todo.is_some() { FLAG_TODO } else { 0 }
+                | if p.pairs.is_some() { FLAG_PAIRS } else { 0 },
             out_base: p.out_base,
             shells: 0,
+            band,
             buffers: &[
                 (4, &reach_buffer),
                 (5, &normals_buffer),
@@ -142,6 +166,8 @@ pub(crate) fn lists(
                 (8, p.list_start),
                 (9, p.lists_out),
                 (11, &todo),
+                (12, pairs),
+                (13, pair_count),
             ],
         })
     };
@@ -162,6 +188,7 @@ pub(crate) fn lists(
             out_base: 0,
             list_start: &no_starts,
             lists_out: &no_lists,
+            pairs: None,
         })
     };
     cut_pass(level, &starts, None)?;
@@ -215,30 +242,15 @@ pub(crate) fn lists(
     let (mut write_seconds, mut read_seconds) = (0.0, 0.0);
     let mut sorted_fits: Vec<Option<InitialFit>> = Vec::new();
     let mut fit_seconds = 0.0;
-    // Batches of consecutive points whose lists fit one output.
+    // Batches of consecutive points whose lists fit one output, and of whole clusters where
+    // every batch can be.
     let limit_ids = (search.output_limit() / 4).max(cap as u64);
     // A batch's fits take 64 bytes a point.
     let limit_points = (search.output_limit() / 64).max(1) as usize;
-    // In whole 16 MB steps, so that the next step's lists (of a slightly other length) find
-    // this one's memory free rather than fault in fresh pages.
-    let mut words: Vec<u32> = Vec::with_capacity((total as usize).next_multiple_of(WORDS_GRANULE));
-    crate::host_memory::advise_huge_pages(&mut words);
-    // The bake's cluster unions, made where the points came in spatial order (each cluster
-    // is consecutive points here too) and every batch holds whole clusters.
-    let mut unions = sorted.identity.then(|| Unions::new(n));
-    // The spray's components joined on the GPU where the lists are, but for points in
-    // another order (whose roots would be named by sorted positions): then the host joins the
-    // links it reads.
-    let components = if sorted.identity && flags & FLAG_LINKS != 0 {
-        Some(Components::new(index)?)
-    } else {
-        None
-    };
-    let host_links = components.is_none();
-    let (mut union_seconds, mut component_seconds) = (0.0, 0.0);
+    let mut batches: Vec<(usize, usize)> = Vec::new();
+    let mut whole_clusters = true;
     let mut first = 0;
     while first < n {
-        let writing = std::time::Instant::now();
         let mut last = first + 1;
         while last < n
             && last - first < limit_points
@@ -249,11 +261,54 @@ pub(crate) fn lists(
         if last < n {
             match last - last % CLUSTER {
                 whole if whole > first => last = whole,
-                _ => unions = None,
+                _ => whole_clusters = false,
             }
         }
+        batches.push((first, last));
+        first = last;
+    }
+    // The bake's cluster unions, made where the points came in spatial order (each cluster
+    // is consecutive points here too) and every batch holds whole clusters.
+    let mut unions = (sorted.identity && whole_clusters).then(|| Unions::new(n));
+    // The spray's components joined on the GPU where the lists are, but for points in
+    // another order (whose roots would be named by sorted positions): then the host joins the
+    // links it reads.
+    let components = if sorted.identity && flags & FLAG_LINKS != 0 {
+        Some(Components::new(index)?)
+    } else {
+        None
+    };
+    let host_links = components.is_none() && flags & FLAG_LINKS != 0;
+    // Where the unions, fits and links are all made here, the lists themselves need not come
+    // back: only each list's members near its reach, which the caller measures, and those
+    // the cut's reach is measured on (`ListRequest::near_reach_band`).
+    let band = request
+        .near_reach_band
+        .filter(|_| unions.is_some() && fit_inputs.is_some() && !host_links);
+    // (caller's index, word) of each member near its list's reach, where `band` is set.
+    let mut near: Vec<[u32; 2]> = Vec::new();
+    // In whole 16 MB steps, so that the next step's lists (of a slightly other length) find
+    // this one's memory free rather than fault in fresh pages.
+    let mut words: Vec<u32> = Vec::new();
+    if band.is_none() {
+        words.reserve_exact((total as usize).next_multiple_of(WORDS_GRANULE));
+        crate::host_memory::advise_huge_pages(&mut words);
+    }
+    let (mut union_seconds, mut component_seconds) = (0.0, 0.0);
+    for &(first, last) in &batches {
+        let writing = std::time::Instant::now();
         let count = u64::from(start[last] - start[first]);
         let lists_out = output(&search.memory, "lists", count * 4);
+        let room = (last - first)
+            .saturating_mul(PAIRS_PER_POINT)
+            .max(PAIRS_LEAST);
+        let pair_buffers = band.map(|b| {
+            (
+                output(&search.memory, "near pairs", room as u64 * 8),
+                output(&search.memory, "near pair count", 16),
+                b as f32,
+            )
+        });
         // The batch's last write, which the fits wait for.
         let mut written = None;
         if count > 0 {
@@ -269,6 +324,7 @@ pub(crate) fn lists(
                     out_base,
                     list_start: &start_buffer,
                     lists_out: &lists_out,
+                    pairs: pair_buffers.as_ref().map(|(p, c, b)| (&**p, &**c, *b)),
                 })
             };
             written = Some(write(level, &starts, first, last - first, None)?);
@@ -311,10 +367,29 @@ pub(crate) fn lists(
         }
         let reading = std::time::Instant::now();
         write_seconds += (reading - writing).as_secs_f64();
-        search
-            .readback
-            .read_into(gpu, &lists_out, count * 4, &mut words)
-            .map_err(gpu_error)?;
+        match &pair_buffers {
+            None => search
+                .readback
+                .read_into(gpu, &lists_out, count * 4, &mut words)
+                .map_err(gpu_error)?,
+            Some((pairs, pair_count, _)) => {
+                let found = search.read_back::<u32>(pair_count, 4)?[0] as usize;
+                if found <= room {
+                    near.extend(search.read_back::<[u32; 2]>(pairs, found as u64 * 8)?);
+                } else {
+                    // More than the room: every member of the batch's lists, which holds
+                    // those near the reach.
+                    let batch: Vec<u32> = search.read_back(&lists_out, count * 4)?;
+                    let base = start[first];
+                    for t in first..last {
+                        let i = order[t];
+                        let list =
+                            &batch[(start[t] - base) as usize..(start[t + 1] - base) as usize];
+                        near.extend(list.iter().map(|&w| [i, w]));
+                    }
+                }
+            }
+        }
         read_seconds += reading.elapsed().as_secs_f64();
         if let Some(c) = &components {
             let joining = std::time::Instant::now();
@@ -332,6 +407,7 @@ pub(crate) fn lists(
             u.add(
                 index,
                 UnionBatch {
+                    start: &start,
                     list_start: &start_buffer,
                     lists: &lists_out,
                     list_base: start[first],
@@ -341,19 +417,12 @@ pub(crate) fn lists(
             )?;
             union_seconds += merging.elapsed().as_secs_f64();
         }
-        first = last;
     }
     let joining = std::time::Instant::now();
     let components = components
         .map(|c| c.finish(index, &start_buffer, &no_lists))
         .transpose()?;
     component_seconds += joining.elapsed().as_secs_f64();
-
-    // Links out, the marks cleared in place, and each list's reach, piece by piece (in
-    // sorted order). A cut list reaches as far as its farthest point in f64 (`lists.rs` in
-    // slosh-mls): the point the cut fell on, which the list keeps unless its normal opposes,
-    // or a member marked near the cut (only those could lie farther, where two distances tie
-    // within f32; `NEAR_CUT`).
     parts.extend(&[
         (
             "neighbour lists: write",
@@ -364,70 +433,134 @@ pub(crate) fn lists(
         ("neighbour lists: spray components", component_seconds),
     ]);
     let points = index.points;
-    let pieces: Vec<(Vec<Link>, Vec<f64>)> = csr_pieces(&start, &mut words, POINTS_PER_PIECE)
-        .into_par_iter()
-        .map(|(range, piece)| {
-            let base = start[range.start] as usize;
-            let mut links = Vec::new();
-            let mut reach = Vec::with_capacity(range.len());
-            for t in range {
-                let (c, i) = (cuts[t], order[t] as usize);
-                let cut = c[3] & 1 != 0;
-                let mut far = if cut {
-                    distance2(points[i], points[c[1] as usize])
-                } else {
-                    0.0
-                };
-                for w in &mut piece[start[t] as usize - base..start[t + 1] as usize - base] {
-                    // Most words carry no mark: they are read, not written.
-                    if *w & !ID_MASK == 0 {
-                        continue;
-                    }
-                    let j = *w & ID_MASK;
-                    if host_links && *w & LINK_BIT != 0 {
-                        links.push((order[t], j));
-                    }
-                    if *w & FAR_BIT != 0 {
-                        far = far.max(distance2(points[i], points[j as usize]));
-                    }
-                    *w = j;
-                }
-                reach.push(if cut {
-                    far.sqrt().next_up().next_up()
-                } else {
-                    request.reach[i]
-                });
+    // A list's reach: as asked, or where the cap cut it, as far as its farthest point in f64
+    // (`lists.rs` in slosh-mls): the point the cut fell on, which the list keeps unless its
+    // normal opposes, or a member marked near the cut (only those could lie farther, where
+    // two distances tie within f32; `NEAR_CUT`). `members` holds those marked, and may hold
+    // more.
+    let reach_of = |t: usize, members: &[u32]| -> f64 {
+        let (c, i) = (cuts[t], order[t] as usize);
+        if c[3] & 1 == 0 {
+            return request.reach[i];
+        }
+        let far = members
+            .iter()
+            .filter(|&&w| w & FAR_BIT != 0)
+            .map(|&w| distance2(points[i], points[(w & ID_MASK) as usize]))
+            .fold(distance2(points[i], points[c[1] as usize]), f64::max);
+        far.sqrt().next_up().next_up()
+    };
+    let capped = cuts.par_iter().filter(|c| c[3] & 1 != 0).count();
+    let (lists, reach_out, links) = match band {
+        Some(band) => {
+            // Each point's near members (CSR in the caller's order); reaches in sorted order.
+            let mut near_start = vec![0u32; n + 1];
+            for &[i, _] in &near {
+                near_start[i as usize + 1] += 1;
             }
-            (links, reach)
-        })
-        .collect();
-    let (links, by_sorted): (Vec<Vec<Link>>, Vec<Vec<f64>>) = pieces.into_iter().unzip();
-    let reach_out = sorted.unsort(by_sorted.concat());
+            for i in 0..n {
+                near_start[i + 1] += near_start[i];
+            }
+            let mut at = near_start.clone();
+            let mut ids = vec![0u32; near.len()];
+            for &[i, w] in &near {
+                ids[at[i as usize] as usize] = w;
+                at[i as usize] += 1;
+            }
+            let of = |i: usize| &ids[near_start[i] as usize..near_start[i + 1] as usize];
+            let by_sorted: Vec<f64> = (0..n)
+                .into_par_iter()
+                .map(|t| reach_of(t, of(order[t] as usize)))
+                .collect();
+            // Each point's in index order, as lists are (they came in the order the GPU's
+            // threads appended them).
+            csr_pieces(&near_start, &mut ids, POINTS_PER_PIECE)
+                .into_par_iter()
+                .for_each(|(range, piece)| {
+                    let base = near_start[range.start] as usize;
+                    for i in range {
+                        let members = &mut piece
+                            [near_start[i] as usize - base..near_start[i + 1] as usize - base];
+                        for w in members.iter_mut() {
+                            *w &= ID_MASK;
+                        }
+                        members.sort_unstable();
+                    }
+                });
+            let members = Neighbours::from_csr(near_start, ids)
+                .ok_or_else(|| gpu_error("the near members do not match their counts"))?;
+            (
+                KeptLists::NearReach { band, members },
+                sorted.unsort(by_sorted),
+                Vec::new(),
+            )
+        }
+        None => {
+            // Links out, the marks cleared in place, and each list's reach, piece by piece
+            // (in sorted order).
+            let pieces: Vec<(Vec<Link>, Vec<f64>)> =
+                csr_pieces(&start, &mut words, POINTS_PER_PIECE)
+                    .into_par_iter()
+                    .map(|(range, piece)| {
+                        let base = start[range.start] as usize;
+                        let mut links = Vec::new();
+                        let mut reach = Vec::with_capacity(range.len());
+                        for t in range {
+                            let list =
+                                &mut piece[start[t] as usize - base..start[t + 1] as usize - base];
+                            reach.push(reach_of(t, list));
+                            for w in list {
+                                // Most words carry no mark: they are read, not written.
+                                if *w & !ID_MASK == 0 {
+                                    continue;
+                                }
+                                let j = *w & ID_MASK;
+                                if host_links && *w & LINK_BIT != 0 {
+                                    links.push((order[t], j));
+                                }
+                                *w = j;
+                            }
+                        }
+                        (links, reach)
+                    })
+                    .collect();
+            let (links, by_sorted): (Vec<Vec<Link>>, Vec<Vec<f64>>) = pieces.into_iter().unzip();
+            let lists = if sorted.identity {
+                Neighbours::from_csr(start, words)
+            } else {
+                // Back to the caller's order.
+                let sorted_ids = words;
+                let mut by_point = vec![0u32; n + 1];
+                for (t, &i) in order.iter().enumerate() {
+                    by_point[i as usize + 1] = start[t + 1] - start[t];
+                }
+                for i in 0..n {
+                    by_point[i + 1] += by_point[i];
+                }
+                let mut ids = vec![0u32; sorted_ids.len()];
+                for (t, &i) in order.iter().enumerate() {
+                    let from = &sorted_ids[start[t] as usize..start[t + 1] as usize];
+                    let at = by_point[i as usize] as usize;
+                    ids[at..at + from.len()].copy_from_slice(from);
+                }
+                Neighbours::from_csr(by_point, ids)
+            }
+            .ok_or_else(|| gpu_error("the lists read back do not match their counts"))?;
+            (
+                KeptLists::Whole(lists),
+                sorted.unsort(by_sorted.concat()),
+                links,
+            )
+        }
+    };
     parts.lap("neighbour lists: links and reach");
-    let capped = cuts.iter().filter(|c| c[3] & 1 != 0).count();
-    let lists = if sorted.identity {
-        Neighbours::from_csr(start, words)
-    } else {
-        // Back to the caller's order.
-        let sorted_ids = words;
-        let mut by_point = vec![0u32; n + 1];
-        for (t, &i) in order.iter().enumerate() {
-            by_point[i as usize + 1] = start[t + 1] - start[t];
-        }
-        for i in 0..n {
-            by_point[i + 1] += by_point[i];
-        }
-        let mut ids = vec![0u32; sorted_ids.len()];
-        for (t, &i) in order.iter().enumerate() {
-            let from = &sorted_ids[start[t] as usize..start[t + 1] as usize];
-            let at = by_point[i as usize] as usize;
-            ids[at..at + from.len()].copy_from_slice(from);
-        }
-        Neighbours::from_csr(by_point, ids)
-    }
-    .ok_or_else(|| gpu_error("the lists read back do not match their counts"))?;
     // (Made only where the lists are in the caller's order.)
-    let run_unions = unions.and_then(|u| u.finish(&lists));
+    let run_unions = unions.and_then(|u| u.finish(n));
+    if matches!(lists, KeptLists::NearReach { .. }) && run_unions.is_none() {
+        return Err(gpu_error(
+            "the cluster unions do not cover the points, and the lists were not read back",
+        ));
+    }
     // Fits in the caller's order.
     let fits = fit_inputs.map(|_| sorted.unsort(sorted_fits));
     parts.lap("neighbour lists: order");

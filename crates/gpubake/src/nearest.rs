@@ -62,6 +62,7 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
                 flags: if todo.is_some() { FLAG_TODO } else { 0 },
                 out_base: 0,
                 shells: SHELLS,
+                band: 0.0,
                 buffers: &[(4, &out), (5, &todo_buffer)],
             })?;
             let found: Vec<u32> = index.search.read_back(&out, bytes)?;

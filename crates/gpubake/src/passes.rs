@@ -125,6 +125,8 @@ impl GpuStages {
                     (8, false),
                     (9, true),
                     (11, false),
+                    (12, true),
+                    (13, true),
                 ],
             ]
             .concat(),

@@ -2,14 +2,14 @@
 //! lists while it is there (`shaders/cluster_unions.wgsl`): the sections store those unions,
 //! which the host otherwise merged from every point's list (at 1M points, most of the
 //! sections stage). A cluster with an id outside the shader's bitset (its span, or its halves
-//! where the ids span more) is merged here.
+//! where the ids span more) is merged here, from its members' lists alone, read back.
 
 use rayon::prelude::*;
 use slosh_mls::{Neighbours, RunUnions, SurfaceError, cluster_union, csr_pieces};
 
 use crate::dispatch::{bind, gpu_error, output, storage, uniform, workgroup_grid};
 use crate::index::GpuIndex;
-use crate::layout::{SPAN_WIDE, UnionParams};
+use crate::layout::{ID_MASK, SPAN_WIDE, UnionParams};
 
 /// Points per cluster: the bake's.
 pub(crate) const CLUSTER: usize = slosh_mls::NEIGHBOUR_CLUSTER as usize;
@@ -21,13 +21,16 @@ const UNIONS_PER_COPY: usize = 1024;
 pub(crate) struct Unions {
     /// Each cluster's union's length (0 for a wide one, whose ids are not among `ids`).
     counts: Vec<u32>,
-    /// The clusters with an id outside the bitset.
+    /// The clusters with an id outside the bitset, in order, and their unions.
     wide: Vec<usize>,
+    wide_unions: Vec<Vec<u32>>,
     ids: Vec<u32>,
 }
 
 /// One batch of lists on the GPU: its points (whole clusters, but for the set's last).
 pub(crate) struct UnionBatch<'b> {
+    /// Where each point's list begins among all lists, on the host and on the GPU.
+    pub start: &'b [u32],
     pub list_start: &'b wgpu::Buffer,
     pub lists: &'b wgpu::Buffer,
     pub list_base: u32,
@@ -40,6 +43,7 @@ impl Unions {
         Unions {
             counts: Vec::with_capacity(points.div_ceil(CLUSTER)),
             wide: Vec::new(),
+            wide_unions: Vec::new(),
             ids: Vec::new(),
         }
     }
@@ -100,9 +104,10 @@ impl Unions {
         let mut batch_counts: Vec<u32> = search.read_back(&counts, count_bytes)?;
         let mut starts = Vec::with_capacity(clusters);
         let mut total = 0u64;
+        let mut wide = Vec::new();
         for (k, c) in batch_counts.iter_mut().enumerate() {
             if *c == SPAN_WIDE {
-                self.wide.push(first_cluster + k);
+                wide.push(first_cluster + k);
                 *c = 0;
             }
             starts.push(u32::try_from(total).map_err(|_| gpu_error("cluster unions too long"))?);
@@ -117,17 +122,77 @@ impl Unions {
                 .read_into(gpu, &unions, total * 4, &mut self.ids)
                 .map_err(gpu_error)?;
         }
+        self.merge_wide(index, &batch, &wide)?;
         self.counts.extend_from_slice(&batch_counts);
         Ok(())
     }
 
-    /// The unions of clusters of [`CLUSTER`] points, the wide ones merged from `lists` (their
-    /// marks cleared).
-    pub(crate) fn finish(self, lists: &Neighbours) -> Option<RunUnions> {
-        let n = lists.len();
+    /// The unions of `batch`'s `wide` clusters, merged here from their members' lists (read
+    /// back together, their marks cleared), in parallel: under 1 % of a Morton-ordered step's
+    /// clusters.
+    fn merge_wide(
+        &mut self,
+        index: &GpuIndex<'_>,
+        batch: &UnionBatch<'_>,
+        wide: &[usize],
+    ) -> Result<(), SurfaceError> {
+        if wide.is_empty() {
+            return Ok(());
+        }
+        let n = index.sorted.len();
+        let points = |c: usize| c * CLUSTER..((c + 1) * CLUSTER).min(n);
+        let start = batch.start;
+        let ranges: Vec<(u64, u64)> = wide
+            .iter()
+            .map(|&c| {
+                let p = points(c);
+                let from = u64::from(start[p.start] - batch.list_base);
+                (from * 4, u64::from(start[p.end] - start[p.start]) * 4)
+            })
+            .collect();
+        let words: Vec<u32> = index
+            .search
+            .readback
+            .read_ranges(index.search.gpu(), batch.lists, &ranges)
+            .map_err(gpu_error)?;
+        // Where each cluster's words begin among those read.
+        let mut at = Vec::with_capacity(wide.len() + 1);
+        at.push(0usize);
+        for r in &ranges {
+            at.push(at[at.len() - 1] + (r.1 / 4) as usize);
+        }
+        let merged: Vec<Option<Vec<u32>>> = wide
+            .par_iter()
+            .enumerate()
+            .map(|(w, &c)| {
+                let p = points(c);
+                let base = start[p.start];
+                let local: Vec<u32> = start[p.start..=p.end].iter().map(|&s| s - base).collect();
+                let ids: Vec<u32> = words[at[w]..at[w + 1]]
+                    .iter()
+                    .map(|&x| x & ID_MASK)
+                    .collect();
+                let lists = Neighbours::from_csr(local, ids)?;
+                let mut out = Vec::new();
+                cluster_union(&lists, 0..p.len(), &mut out);
+                Some(out)
+            })
+            .collect();
+        for (&c, m) in wide.iter().zip(merged) {
+            let m =
+                m.ok_or_else(|| gpu_error("a wide cluster's lists do not match their counts"))?;
+            self.wide.push(c);
+            self.wide_unions.push(m);
+        }
+        Ok(())
+    }
+
+    /// The unions of the `n` points' clusters of [`CLUSTER`] points.
+    pub(crate) fn finish(self, n: usize) -> Option<RunUnions> {
         let Unions {
             mut counts,
             wide,
+            wide_unions: merged,
             ids,
         } = self;
         if counts.len() != n.div_ceil(CLUSTER) {
@@ -150,16 +215,7 @@ impl Unions {
         if from[from.len() - 1] as usize != ids.len() {
             return None;
         }
-        // The wide clusters' unions merged here (in parallel: under 1 % of a Morton-ordered
-        // step's clusters), each then copied into its place.
-        let merged: Vec<Vec<u32>> = wide
-            .par_iter()
-            .map(|&c| {
-                let mut out = Vec::new();
-                cluster_union(lists, c * CLUSTER..((c + 1) * CLUSTER).min(n), &mut out);
-                out
-            })
-            .collect();
+        // The wide clusters' unions, each copied into its place.
         for (&c, m) in wide.iter().zip(&merged) {
             counts[c] = u32::try_from(m.len()).ok()?;
         }

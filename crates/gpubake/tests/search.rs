@@ -8,8 +8,8 @@ use std::sync::Arc;
 
 use slosh_gpubake::GpuStages;
 use slosh_mls::{
-    KdSearch, ListRequest, NEIGHBOUR_CLUSTER, NeighbourLists, NeighbourSearch, cluster_lists,
-    component_roots, morton_order,
+    KdSearch, ListRequest, NEIGHBOUR_CLUSTER, NeighbourLists, NeighbourSearch, Neighbours,
+    cluster_lists, component_roots, morton_order,
 };
 use slosh_render::Gpu;
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
@@ -46,6 +46,11 @@ fn unions_csr(lists: &NeighbourLists) -> Option<(Vec<u32>, Vec<u32>)> {
     })
 }
 
+/// Every list a search kept (each test here asks for them all).
+fn every_list(lists: &NeighbourLists) -> &Neighbours {
+    lists.lists.whole().expect("every list kept")
+}
+
 /// The GPU's cluster unions are the unions of its own lists (`slosh_mls::cluster_lists`), made
 /// wherever the points came in Morton order, and only there.
 fn check_unions(name: &str, gpu: &NeighbourLists, morton: bool) {
@@ -54,7 +59,7 @@ fn check_unions(name: &str, gpu: &NeighbourLists, morton: bool) {
             assert!(morton, "{name}: unions of points not in Morton order");
             assert_eq!(
                 unions,
-                cluster_lists(&gpu.lists, NEIGHBOUR_CLUSTER as usize),
+                cluster_lists(every_list(gpu), NEIGHBOUR_CLUSTER as usize),
                 "{name}: cluster unions"
             );
         }
@@ -87,6 +92,7 @@ impl Case {
             normals: Some(&self.normals),
             link_distance2: Some(link2),
             fits: None,
+            near_reach_band: None,
         }
     }
 }
@@ -162,7 +168,7 @@ fn lattice_case() -> Case {
 /// Where the lists of point i differ, each point in only one of them ties: its distance with
 /// the reach, with the CPU's cut (where the cap cut), or its normal is perpendicular.
 fn differences_tie(case: &Case, i: usize, cpu: &NeighbourLists, gpu: &NeighbourLists) -> usize {
-    let (a, b) = (cpu.lists.of(i), gpu.lists.of(i));
+    let (a, b) = (every_list(cpu).of(i), every_list(gpu).of(i));
     let p = case.points[i];
     let cut2 = cpu.reach[i].powi(2);
     let mut differing = 0;
@@ -272,7 +278,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
             gpu_index.lists(request).unwrap(),
         );
         check_unions(&case.name, &gpu, case.morton);
-        let entries: usize = (0..n).map(|i| cpu.lists.of(i).len()).sum();
+        let entries: usize = (0..n).map(|i| every_list(&cpu).of(i).len()).sum();
         let differing: usize = (0..n).map(|i| differences_tie(case, i, &cpu, &gpu)).sum();
         // Ties within 1e-6 are rare in generated data (exact ties, as in the lattice, are
         // broken alike).
@@ -288,10 +294,10 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
             let (c, g) = (cpu.reach[i], gpu.reach[i]);
             // (Where distances tie in f32 only, the point each cut fell on may differ, and
             // with it the reach, by the tie.)
-            if cpu.lists.of(i) == gpu.lists.of(i) && !case.tied_in_f32 {
+            if every_list(&cpu).of(i) == every_list(&gpu).of(i) && !case.tied_in_f32 {
                 assert_eq!(g, c, "{}: point {i}'s reach", case.name);
             }
-            for &j in gpu.lists.of(i) {
+            for &j in every_list(&gpu).of(i) {
                 assert!(d2(case.points[i], case.points[j as usize]) <= g * g);
             }
         }
@@ -335,7 +341,7 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
             for &(i, j) in a.iter().filter(|l| b.binary_search(l).is_err()) {
                 let (i, j) = (i as usize, j as usize);
                 let d = d2(case.points[i], case.points[j]);
-                let lists_differ = cpu.lists.of(i) != gpu.lists.of(i);
+                let lists_differ = every_list(&cpu).of(i) != every_list(&gpu).of(i);
                 assert!(
                     lists_differ || near(d, case.link2),
                     "{}: link ({i}, {j}) found by one search only (d² {d})",
@@ -380,7 +386,7 @@ fn the_search_params_mirror_the_wgsl_layout() {
                 row_threads,
                 margin,
                 shells,
-                _pad0,
+                band,
                 _pad1,
                 _pad2
             ]
@@ -478,6 +484,7 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
             degree: 2,
             normals: slosh_mls::NormalsMode::Mean,
         }),
+        near_reach_band: None,
     };
     let cpu = KdSearch.index(&points).unwrap().lists(request).unwrap();
     let before = whole.gpu_seconds();
@@ -486,13 +493,17 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
         small_index.lists(request).unwrap(),
         whole_index.lists(request).unwrap(),
     );
-    let entries: usize = (0..n).map(|i| cpu.lists.of(i).len()).sum();
+    let entries: usize = (0..n).map(|i| every_list(&cpu).of(i).len()).sum();
     assert!(
         entries * 4 > 4 << 16,
         "the lists must need several batches ({entries} ids)"
     );
     for i in 0..n {
-        assert_eq!(batched.lists.of(i), cpu.lists.of(i), "point {i}");
+        assert_eq!(
+            every_list(&batched).of(i),
+            every_list(&cpu).of(i),
+            "point {i}"
+        );
     }
     check_unions("batched", &batched, true);
     assert_eq!(
@@ -555,11 +566,112 @@ fn batches_of_bounded_output_give_what_one_dispatch_gives() {
     assert!(refused.contains("--device cpu"), "{refused}");
 }
 
+/// Where the caller keeps of each list only its members near the reach (a bake:
+/// `ListRequest::near_reach_band`), no list comes back: each point keeps every member of its
+/// list within the band of the reach it records (the cut's distance, where the cap cut it),
+/// and only members of its list; the reaches, unions, spray components and fits are those of
+/// the same search keeping every list. With a band wider than every list the members are the
+/// lists themselves (a batch's room for them overflows, and its lists are read back instead).
+/// Over many batches too (bindings of 64 KiB), and with duplicates and noise.
+#[test]
+fn lists_kept_near_their_reach_measure_the_same_reaches() {
+    let Some(mut gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
+        return;
+    };
+    gpu.limit_bindings(1 << 16);
+    let small = GpuStages::new(Arc::new(gpu)).unwrap();
+    let full = gpu_search().unwrap();
+    let hard = HardCases {
+        noise: 0.1,
+        duplicates: 0.02,
+        flip_normals: 0.05,
+        ..HardCases::default()
+    };
+    for case in [
+        scene_case(SceneKind::Sphere, 3000, HardCases::default(), false),
+        scene_case(SceneKind::Wave, 3000, hard, false),
+    ] {
+        assert!(case.morton, "{}", case.name);
+        let link2 = |_: usize| case.link2;
+        let h = |_: usize| case.link2.sqrt();
+        let every_request = ListRequest {
+            fits: Some(slosh_mls::FitRequest {
+                h: &h,
+                degree: 2,
+                normals: slosh_mls::NormalsMode::Mean,
+            }),
+            ..case.request(&link2)
+        };
+        let median_reach = {
+            let mut r = case.reach.clone();
+            r.sort_by(f64::total_cmp);
+            r[r.len() / 2]
+        };
+        for (search, name) in [(&small, "64 KiB bindings"), (&full, "one batch")] {
+            let index = search.index(&case.points).unwrap();
+            let every = index.lists(every_request).unwrap();
+            let lists = every_list(&every);
+            let n = case.points.len();
+            for band in [0.002 * median_reach, 1e30] {
+                let near = index
+                    .lists(ListRequest {
+                        near_reach_band: Some(band),
+                        ..every_request
+                    })
+                    .unwrap();
+                let what = format!("{}, {name}, band {band:e}", case.name);
+                let slosh_mls::KeptLists::NearReach { members, .. } = &near.lists else {
+                    panic!("{what}: every list kept");
+                };
+                assert_eq!(near.reach, every.reach, "{what}: reaches");
+                assert_eq!(unions_csr(&near), unions_csr(&every), "{what}: unions");
+                assert!(near.run_unions.is_some(), "{what}: no unions");
+                assert_eq!(near.components, every.components, "{what}: components");
+                assert_eq!(near.fits, every.fits, "{what}: fits");
+                assert_eq!(near.capped, every.capped, "{what}: capped");
+                let mut kept = 0;
+                for i in 0..n {
+                    let (list, mine) = (lists.of(i), members.of(i));
+                    if band > 1.0 {
+                        assert_eq!(mine, list, "{what}: point {i}");
+                        continue;
+                    }
+                    assert!(mine.is_sorted(), "{what}: point {i}: {mine:?}");
+                    for j in mine {
+                        assert!(
+                            list.binary_search(j).is_ok(),
+                            "{what}: {i}: {j} not a member"
+                        );
+                    }
+                    // Clear of the band's edge: f32 decides there.
+                    let inner = near.reach[i] - 0.5 * band;
+                    for &j in list {
+                        if d2(case.points[i], case.points[j as usize]).sqrt() >= inner {
+                            assert!(
+                                mine.contains(&j),
+                                "{what}: {i}: {j} near the reach, not kept"
+                            );
+                        }
+                    }
+                    kept += mine.len();
+                }
+                if band < 1.0 {
+                    assert!(
+                        kept > 0 && kept * 4 < lists.total(),
+                        "{what}: {kept} of {} members kept",
+                        lists.total()
+                    );
+                }
+            }
+        }
+    }
+}
+
 /// How the shader takes each cluster union of `lists` with a bitset of `words` words: the
 /// clusters over one span, over the bitset's split halves, and left to the host (an id
 /// between the halves).
 fn union_kinds(lists: &NeighbourLists, words: u32) -> [usize; 3] {
-    let (start, ids) = cluster_lists(&lists.lists, NEIGHBOUR_CLUSTER as usize);
+    let (start, ids) = cluster_lists(every_list(lists), NEIGHBOUR_CLUSTER as usize);
     let mut kinds = [0; 3];
     for w in start.windows(2) {
         let union = &ids[w[0] as usize..w[1] as usize];

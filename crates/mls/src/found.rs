@@ -13,12 +13,56 @@ pub struct InitialFit {
     pub degraded: bool,
 }
 
+/// What a search or a build kept of each point's neighbour list.
+#[derive(Debug, Clone, PartialEq)]
+pub enum KeptLists {
+    /// Every list.
+    Whole(Neighbours),
+    /// Only each list's members within `band` of the reach it records (of its cut's distance,
+    /// where the cap cut it), and those the cut's reach is measured on: what the reach a
+    /// cache stores is measured on, where the lists themselves are in the cluster unions
+    /// (`ListRequest::near_reach_band`). Each point's in index order.
+    NearReach { band: f64, members: Neighbours },
+}
+
+impl KeptLists {
+    /// Every list, where they were kept.
+    pub fn whole(&self) -> Option<&Neighbours> {
+        match self {
+            KeptLists::Whole(lists) => Some(lists),
+            KeptLists::NearReach { .. } => None,
+        }
+    }
+
+    /// The members of point i's list that may lie farthest from it: every member, or those
+    /// within the band of its reach. Whatever lies farther, in any precision within the
+    /// band, is among them.
+    pub fn farthest_of(&self, i: usize) -> &[u32] {
+        match self {
+            KeptLists::Whole(lists) => lists.of(i),
+            KeptLists::NearReach { members, .. } => members.of(i),
+        }
+    }
+
+    /// How many points have a list.
+    pub fn len(&self) -> usize {
+        match self {
+            KeptLists::Whole(lists) => lists.len(),
+            KeptLists::NearReach { members, .. } => members.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
 /// Every point's neighbour list (CSR), the reach each list records, how many lists the cap
 /// cut, the union of each run's lists where the runs were consecutive indices, and the links
 /// asked for (per run).
 #[derive(Debug)]
 pub struct NeighbourLists {
-    pub lists: Neighbours,
+    pub lists: KeptLists,
     pub reach: Vec<f64>,
     pub capped: usize,
     pub run_unions: Option<RunUnions>,

@@ -35,7 +35,7 @@ pub use clusters::{
     ClusterCandidates, NEIGHBOUR_CLUSTER, cluster_lists, cluster_union, expand_one,
 };
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
-pub use found::{InitialFit, NeighbourLists};
+pub use found::{InitialFit, KeptLists, NeighbourLists};
 pub use frame::LocalFrame;
 pub use geometry::{bounds, dominant_axis};
 pub use grid::BallIndex;

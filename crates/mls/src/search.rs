@@ -47,6 +47,11 @@ pub struct ListRequest<'a> {
     /// The initial fits, which a search makes only where it can make them beside the lists
     /// (then `NeighbourLists::fits`); the build fits the rest itself.
     pub fits: Option<FitRequest<'a>>,
+    /// Where set, a search that makes the run unions, the fits and the links' components
+    /// itself may keep of each list only the members within this distance of its reach
+    /// ([`KeptLists::NearReach`](crate::KeptLists)), rather than every list: a bake's, which
+    /// stores the unions and measures each list's reach on those members alone.
+    pub near_reach_band: Option<f64>,
 }
 
 impl std::fmt::Debug for ListRequest<'_> {
@@ -57,6 +62,7 @@ impl std::fmt::Debug for ListRequest<'_> {
             .field("normals", &self.normals.is_some())
             .field("links", &self.link_distance2.is_some())
             .field("fits", &self.fits.map(|f| f.degree))
+            .field("near_reach_band", &self.near_reach_band)
             .finish()
     }
 }

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 pub use crate::error::SurfaceError;
 use crate::fit::FitStatus;
-use crate::found::NeighbourLists;
+use crate::found::{KeptLists, NeighbourLists};
 use crate::geometry::bounds;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit_with};
@@ -106,8 +106,9 @@ pub struct SurfaceParts<T> {
     /// How far outside the MLS surface the drawn surface lies, along its normal
     /// (`SurfaceParams::offset` particle radii).
     pub offset: T,
-    /// Every point's neighbour list: point i's is `neighbours.of(i)`.
-    pub neighbours: Neighbours,
+    /// Every point's neighbour list (point i's is `neighbours_of(i)`), or where a bake's search
+    /// kept only the cluster unions (`run_unions`), each list's members near its reach.
+    pub neighbours: KeptLists,
     /// How far each point's neighbour list reaches: ρ_i + support·h_i, or the distance of the
     /// farthest neighbour kept where the cap cut the list.
     pub reach: Vec<T>,
@@ -168,19 +169,22 @@ impl<T: Real> SurfaceParts<T> {
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
     ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
-        Self::build_with(points, normals, params, &KdSearch, |_| {})
+        Self::build_with(points, normals, params, &KdSearch, None, |_| {})
     }
 
     /// [`SurfaceParts::build`], running `beside` on the points, radii and spray as soon as
     /// the droplets are found, at the same time as the initial fits: work that needs those but
     /// not the fits (a bake's BVH) takes the cores the fits leave idle instead of waiting for
-    /// them. The neighbours are found by `search`.
+    /// them. The neighbours are found by `search`; with `near_reach_band`, it may keep only
+    /// the cluster unions and each list's members within that of its reach
+    /// (`ListRequest::near_reach_band`): parts for a cache, not for tracing.
     #[allow(clippy::type_complexity)]
     pub fn build_with(
         points: &[[f64; 3]],
         normals: Option<&[[f64; 3]]>,
         params: &SurfaceParams,
         search: &dyn NeighbourSearch,
+        near_reach_band: Option<f64>,
         beside: impl FnOnce(BesideFits<'_, T>) + Send,
     ) -> Result<(SurfaceParts<T>, Vec<(&'static str, f64)>), SurfaceError> {
         if points.len() < 2 {
@@ -326,8 +330,19 @@ impl<T: Real> SurfaceParts<T> {
                 degree: params.degree,
                 normals: params.normals,
             }),
+            near_reach_band,
         })?;
         drop(index);
+        // The fits from every list, where the search made none.
+        let lists_to_fit = match (&searched_fits, neighbours.whole()) {
+            (Some(_), _) => None,
+            (None, Some(lists)) => Some(lists),
+            (None, None) => {
+                return Err(SurfaceError::Index(
+                    "the search kept neither every neighbour list nor the initial fits".into(),
+                ));
+            }
+        };
         clock.lap("neighbour lists");
         // Fits made beside the lists count as fits.
         if let Some(lap) = clock.laps.last_mut() {
@@ -414,7 +429,8 @@ impl<T: Real> SurfaceParts<T> {
                 .map_init(
                     || (Vec::new(), Vec::new(), Vec::new()),
                     |(np, nn, weights), i| {
-                        gather(&pts, unit_nrm.as_deref(), neighbours.of(i), np, nn);
+                        let list = lists_to_fit.map_or(&[][..], |lists| lists.of(i));
+                        gather(&pts, unit_nrm.as_deref(), list, np, nn);
                         let centre = pts[i];
                         // Without data normals the plane faces away from the set's centre.
                         let toward = centre * T::c(2.0);
@@ -505,8 +521,10 @@ impl<T: Real> SurfaceParts<T> {
             h: T::c(0.0),
             spacing: T::c(0.0),
             offset: T::c(0.0),
-            neighbours: Neighbours::from_csr(vec![0], Vec::new())
-                .unwrap_or_else(|| unreachable!("one offset of 0 over no ids is a CSR index")),
+            neighbours: KeptLists::Whole(
+                Neighbours::from_csr(vec![0], Vec::new())
+                    .unwrap_or_else(|| unreachable!("one offset of 0 over no ids is a CSR index")),
+            ),
             reach: Vec::new(),
             capped: 0,
             run_unions: None,
@@ -518,29 +536,40 @@ impl<T: Real> SurfaceParts<T> {
         }
     }
 
+    /// Point i's neighbour list; empty where the build kept only the members near each
+    /// list's reach (a bake's parts, which no [`Surface`] is made from: `from_parts` refuses
+    /// them).
     pub fn neighbours_of(&self, i: usize) -> &[u32] {
-        self.neighbours.of(i)
+        self.neighbours.whole().map_or(&[], |lists| lists.of(i))
     }
 
     /// The union of the lists of each cluster of `size` consecutive points (CSR): the runs'
     /// unions themselves where the build kept them for runs of `size` (the GPU's, for the
     /// bake's clusters), merged from them where `size` is a multiple of their run, else from
-    /// every point's list.
-    pub fn cluster_lists(&self, size: usize) -> (Cow<'_, [u32]>, Cow<'_, [u32]>) {
+    /// every point's list; an error where there are neither (parts that kept only the members
+    /// near each list's reach, but unions of other runs).
+    #[allow(clippy::type_complexity)]
+    pub fn cluster_lists(
+        &self,
+        size: usize,
+    ) -> Result<(Cow<'_, [u32]>, Cow<'_, [u32]>), SurfaceError> {
         let whole = self.run_unions.as_ref().filter(|u| u.run() == size);
         if let Some((start, ids)) = whole.and_then(RunUnions::as_one) {
-            return (Cow::Borrowed(start), Cow::Borrowed(ids));
+            return Ok((Cow::Borrowed(start), Cow::Borrowed(ids)));
         }
-        match &self.run_unions {
-            Some(unions) if size > 0 && size.is_multiple_of(unions.run()) => {
-                let (start, ids) = crate::clusters::cluster_lists_from_runs(unions, size);
-                (Cow::Owned(start), Cow::Owned(ids))
+        let (start, ids) = match (&self.run_unions, self.neighbours.whole()) {
+            (Some(unions), _) if size > 0 && size.is_multiple_of(unions.run()) => {
+                crate::clusters::cluster_lists_from_runs(unions, size)
             }
-            _ => {
-                let (start, ids) = crate::clusters::cluster_lists(&self.neighbours, size);
-                (Cow::Owned(start), Cow::Owned(ids))
+            (_, Some(lists)) => crate::clusters::cluster_lists(lists, size),
+            (_, None) => {
+                return Err(SurfaceError::Parts(format!(
+                    "clusters of {size} asked of parts with neither their lists nor unions \
+                     of runs that divide {size}"
+                )));
             }
-        }
+        };
+        Ok((Cow::Owned(start), Cow::Owned(ids)))
     }
 }
 
@@ -563,13 +592,13 @@ impl<T: Real> Surface<T> {
         if parts.reach.len() != n {
             return bad(format!("{n} points but {} reaches", parts.reach.len()));
         }
-        if parts.neighbours.len() != n {
-            return bad(format!(
-                "{n} points but {} neighbour lists",
-                parts.neighbours.len()
-            ));
+        let Some(lists) = parts.neighbours.whole() else {
+            return bad("the parts kept only each list's members near its reach".into());
+        };
+        if lists.len() != n {
+            return bad(format!("{n} points but {} neighbour lists", lists.len()));
         }
-        if parts.neighbours.ids().any(|j| j as usize >= n) {
+        if lists.ids().any(|j| j as usize >= n) {
             return bad("a neighbour index is out of range".into());
         }
         if parts

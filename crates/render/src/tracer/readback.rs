@@ -70,7 +70,7 @@ impl ReadbackPool {
         source: &wgpu::Buffer,
         size: u64,
     ) -> Result<Vec<T>> {
-        self.with_staged(gpu, source, size, |bytes| {
+        self.with_staged(gpu, source, &[(0, size)], |bytes| {
             bytemuck::pod_collect_to_vec(bytes)
         })
     }
@@ -87,25 +87,56 @@ impl ReadbackPool {
         out: &mut Vec<T>,
     ) -> Result<()> {
         use rayon::prelude::*;
-        self.with_staged(gpu, source, size, |bytes| {
-            match bytemuck::try_cast_slice::<u8, T>(bytes) {
+        self.with_staged(
+            gpu,
+            source,
+            &[(0, size)],
+            |bytes| match bytemuck::try_cast_slice::<u8, T>(bytes) {
                 Ok(values) => out.par_extend(values.par_iter().copied()),
                 Err(_) => out.extend(bytemuck::pod_collect_to_vec::<u8, T>(bytes)),
-            }
+            },
+        )
+    }
+
+    /// The byte ranges (offset, size) of a `COPY_SRC` buffer, one after another, once the
+    /// work submitted before them has run (waits): one copy submission and one mapping for
+    /// all of them. Offsets and sizes are multiples of 4.
+    pub fn read_ranges<T: bytemuck::Pod>(
+        &self,
+        gpu: &Gpu,
+        source: &wgpu::Buffer,
+        ranges: &[(u64, u64)],
+    ) -> Result<Vec<T>> {
+        if ranges.iter().all(|r| r.1 == 0) {
+            return Ok(Vec::new());
+        }
+        self.with_staged(gpu, source, ranges, |bytes| {
+            bytemuck::pod_collect_to_vec(bytes)
         })
     }
 
-    /// `size` bytes of `source` copied into a pooled `MAP_READ` buffer, mapped and handed to
-    /// `take`; the buffer goes back to the pool.
+    /// The `ranges` (offset, size) of `source` copied one after another into a pooled
+    /// `MAP_READ` buffer, mapped and handed to `take`; the buffer goes back to the pool.
     fn with_staged<R>(
         &self,
         gpu: &Gpu,
         source: &wgpu::Buffer,
-        size: u64,
+        ranges: &[(u64, u64)],
         take: impl FnOnce(&[u8]) -> R,
     ) -> Result<R> {
+        let size: u64 = ranges.iter().map(|r| r.1).sum();
         let buffer = self.take(gpu, size);
-        let copied = copy_out(gpu, source, 0, &buffer, size);
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        let mut at = 0;
+        for &(offset, bytes) in ranges.iter().filter(|r| r.1 > 0) {
+            encoder.copy_buffer_to_buffer(source, offset, &buffer, at, bytes);
+            at += bytes;
+        }
+        let copied = gpu.queue.submit([encoder.finish()]);
         let out = mapped(gpu, &buffer, size, Some(copied), take);
         if out.is_ok() {
             self.shelf.put(buffer);
