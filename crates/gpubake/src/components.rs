@@ -38,7 +38,7 @@ impl Components {
     ) -> Result<(), SurfaceError> {
         self.dispatch(
             index,
-            &index.search.join_links,
+            ("spray components: join", &index.search.join_links),
             (list_start, lists),
             (first, last - first),
             list_base,
@@ -55,7 +55,7 @@ impl Components {
     ) -> Result<Vec<u32>, SurfaceError> {
         self.dispatch(
             index,
-            &index.search.flatten,
+            ("spray components: flatten", &index.search.flatten),
             (list_start, lists),
             (0, self.points),
             0,
@@ -66,7 +66,7 @@ impl Components {
     fn dispatch(
         &self,
         index: &GpuIndex<'_>,
-        pipeline: &wgpu::ComputePipeline,
+        (pass, pipeline): (&'static str, &wgpu::ComputePipeline),
         (list_start, lists): (&wgpu::Buffer, &wgpu::Buffer),
         (first, count): (usize, usize),
         list_base: u32,
@@ -91,6 +91,6 @@ impl Components {
             &search.components_layout,
             &[(0, &params), (1, list_start), (2, lists), (3, &self.parent)],
         );
-        search.run(&[(pipeline, (x, y))], &group).map(|_| ())
+        search.run(pass, &[(pipeline, (x, y))], &group).map(|_| ())
     }
 }

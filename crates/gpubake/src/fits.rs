@@ -95,7 +95,9 @@ pub(crate) fn fit_batch(
             (8, &out),
         ],
     );
-    index.search.run(&[(inputs.pipeline, (x, y))], &group)?;
+    index
+        .search
+        .run("initial fits", &[(inputs.pipeline, (x, y))], &group)?;
     let raw: Vec<[f32; 4]> = index.search.read_back(&out, bytes)?;
     Ok(raw
         .par_chunks(VEC4_PER_FIT)

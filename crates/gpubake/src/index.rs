@@ -10,6 +10,8 @@ use crate::passes::GpuStages;
 /// One dispatch of a search pass over a range of the sorted points: what it is given beyond
 /// the points and the grid.
 pub(crate) struct Dispatch<'b> {
+    /// The pass's name, under which its GPU time is counted.
+    pub pass: &'static str,
     pub pipeline: &'b wgpu::ComputePipeline,
     pub layout: &'b wgpu::BindGroupLayout,
     pub level: u32,
@@ -89,6 +91,7 @@ impl GpuIndex<'_> {
         let entries: Vec<(u32, &wgpu::Buffer)> =
             grid.iter().chain(dispatch.buffers).copied().collect();
         let group = bind(gpu, dispatch.layout, &entries);
-        self.search.run(&[(dispatch.pipeline, (x, y))], &group)
+        self.search
+            .run(dispatch.pass, &[(dispatch.pipeline, (x, y))], &group)
     }
 }

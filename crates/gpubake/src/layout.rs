@@ -25,7 +25,7 @@ pub struct SearchParams {
     pub row_threads: u32,
     pub margin: f32,
     pub shells: u32,
-    /// With [`FLAG_PAIRS`]: how near its list's reach (or the cut) a member is appended.
+    /// With `FLAG_PAIRS`: how near its list's reach (or the cut) a member is appended.
     pub band: f32,
     pub _pad1: u32,
     pub _pad2: u32,

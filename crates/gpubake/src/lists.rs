@@ -123,6 +123,7 @@ pub(crate) fn lists(
     // One dispatch of the cut or the write pass: points first.. (or `todo`'s) on the grid of
     // `level`.
     struct Pass<'p> {
+        pass: &'static str,
         pipeline: &'p wgpu::ComputePipeline,
         level: u32,
         starts: &'p wgpu::Buffer,
@@ -145,6 +146,7 @@ pub(crate) fn lists(
             None => (&*no_pairs, &*no_pair_count, 0.0),
         };
         index.submit(Dispatch {
+            pass: p.pass,
             pipeline: p.pipeline,
             layout: &search.lists_layout,
             level: p.level,
@@ -179,6 +181,7 @@ pub(crate) fn lists(
     );
     let cut_pass = |level: u32, starts: &wgpu::Buffer, todo: Option<&[u32]>| {
         pass(Pass {
+            pass: "lists: cut",
             pipeline: &search.cut,
             level,
             starts,
@@ -315,6 +318,7 @@ pub(crate) fn lists(
             let out_base = start[first];
             let write = |level, starts, first, count, todo| {
                 pass(Pass {
+                    pass: "lists: write",
                     pipeline: &search.write,
                     level,
                     starts,

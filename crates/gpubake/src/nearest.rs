@@ -52,6 +52,7 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
                 None => output(&index.search.memory, "no todo", 16),
             };
             index.submit(Dispatch {
+                pass: "nearest points",
                 pipeline: &index.search.nearest,
                 layout: &index.search.nearest_layout,
                 level,

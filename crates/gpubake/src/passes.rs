@@ -1,7 +1,7 @@
 //! The search passes, compiled once for a device and shared by every step in flight.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use slosh_render::Gpu;
 
@@ -45,8 +45,10 @@ pub struct GpuStages {
     pub(crate) unions_layout: wgpu::BindGroupLayout,
     unions_pipeline_layout: wgpu::PipelineLayout,
     pub(crate) cluster_unions: wgpu::ComputePipeline,
-    /// GPU nanoseconds of every pass run so far (where the device has timestamps).
+    /// GPU nanoseconds of every pass run so far (where the device has timestamps), in all
+    /// and by the pass's name.
     gpu_nanos: AtomicU64,
+    gpu_nanos_by_pass: Mutex<Vec<(&'static str, u64)>>,
     /// Buffers the large read-backs (lists, nearest points, fits, nodes) reuse.
     pub(crate) readback: slosh_render::ReadbackPool,
     /// The passes' inputs and outputs, kept from step to step (`dispatch::Pooled`), and the
@@ -257,6 +259,7 @@ impl GpuStages {
             unions_pipeline_layout,
             cluster_unions,
             gpu_nanos: AtomicU64::new(0),
+            gpu_nanos_by_pass: Mutex::new(Vec::new()),
             readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT),
             memory: PassMemory {
                 gpu: gpu.clone(),
@@ -285,11 +288,23 @@ impl GpuStages {
             .then(|| self.gpu_nanos.load(Ordering::Relaxed) as f64 * 1e-9)
     }
 
+    /// [`GpuStages::gpu_seconds`] by pass, in the order the passes first ran: read before
+    /// and after a bake for where its GPU time went. Empty where the device has no
+    /// timestamps.
+    pub fn gpu_seconds_by_pass(&self) -> Vec<(&'static str, f64)> {
+        self.gpu_nanos_by_pass.lock().map_or(Vec::new(), |by| {
+            by.iter()
+                .map(|&(pass, ns)| (pass, ns as f64 * 1e-9))
+                .collect()
+        })
+    }
+
     /// Records `dispatches` over `group` in one pass and submits them; where the device has
-    /// timestamps, waits for them and adds their GPU time to [`GpuStages::gpu_seconds`].
-    /// Returns the submission, for a caller that waits for it.
+    /// timestamps, waits for them and adds their GPU time to [`GpuStages::gpu_seconds`],
+    /// under `pass` too. Returns the submission, for a caller that waits for it.
     pub(crate) fn run(
         &self,
+        pass: &'static str,
         dispatches: &[(&wgpu::ComputePipeline, (u32, u32))],
         group: &wgpu::BindGroup,
     ) -> Result<wgpu::SubmissionIndex, slosh_mls::SurfaceError> {
@@ -303,9 +318,14 @@ impl GpuStages {
         record(&mut encoder, dispatches, group, stamps.as_ref());
         let submitted = gpu.queue.submit([encoder.finish()]);
         if let Some(stamps) = stamps {
-            let seconds = stamps.seconds(gpu)?;
-            self.gpu_nanos
-                .fetch_add((seconds * 1e9).round() as u64, Ordering::Relaxed);
+            let nanos = (stamps.seconds(gpu)? * 1e9).round() as u64;
+            self.gpu_nanos.fetch_add(nanos, Ordering::Relaxed);
+            if let Ok(mut by) = self.gpu_nanos_by_pass.lock() {
+                match by.iter_mut().find(|(p, _)| *p == pass) {
+                    Some((_, total)) => *total += nanos,
+                    None => by.push((pass, nanos)),
+                }
+            }
         }
         Ok(submitted)
     }

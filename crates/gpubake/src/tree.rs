@@ -95,6 +95,7 @@ impl GpuStages {
             ],
         );
         self.run(
+            "bvh: links and depths",
             &[(&self.link_nodes, (x, y)), (&self.measure_depths, (x, y))],
             &group,
         )
@@ -117,7 +118,8 @@ impl GpuStages {
                 dispatches.push((&self.next_depth, (1, 1)));
             }
         }
-        self.run(&dispatches, &group).map_err(fault)?;
+        self.run("bvh: nodes and boxes", &dispatches, &group)
+            .map_err(fault)?;
         let nodes: Vec<TreeNode> = self.read_back(&nodes, node_bytes).map_err(fault)?;
         let nodes = nodes
             .into_par_iter()

@@ -98,7 +98,11 @@ impl Unions {
                     (5, unions),
                 ],
             );
-            search.run(&[(&search.cluster_unions, (x, y))], &group)
+            search.run(
+                "cluster unions",
+                &[(&search.cluster_unions, (x, y))],
+                &group,
+            )
         };
         pass(0, &no_starts, &no_unions)?;
         let mut batch_counts: Vec<u32> = search.read_back(&counts, count_bytes)?;

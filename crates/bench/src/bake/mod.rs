@@ -195,6 +195,8 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
         let mut last_baked = None;
         let mut gpu_runs: Vec<TimedStep> = Vec::new();
         let mut gpu_times: Vec<f64> = Vec::new();
+        // Each run's GPU time by pass.
+        let mut gpu_pass_runs: Vec<Vec<(String, f64)>> = Vec::new();
         // The size's first GPU step, apart from the runs: it makes the pools' buffers for a
         // step of this size (device memory, host memory the read backs map), which a
         // series' later steps find made.
@@ -214,11 +216,23 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             encoded = step.encoded;
             last_baked = Some(step.baked);
             if let Ok(gpu) = &args.gpu {
-                let before = gpu.gpu_seconds();
+                let (before, passes_before) = (gpu.gpu_seconds(), gpu.gpu_seconds_by_pass());
                 gpu_runs.push(bake_and_encode(&inp, &params, &gpu.clone().stages())?);
                 if let (Some(a), Some(b)) = (before, gpu.gpu_seconds()) {
                     gpu_times.push(b - a);
                 }
+                gpu_pass_runs.push(
+                    gpu.gpu_seconds_by_pass()
+                        .into_iter()
+                        .map(|(pass, after)| {
+                            let was = passes_before
+                                .iter()
+                                .find(|p| p.0 == pass)
+                                .map_or(0.0, |p| p.1);
+                            (pass.to_string(), after - was)
+                        })
+                        .collect(),
+                );
             }
         }
         let Some(baked) = last_baked else {
@@ -281,6 +295,19 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             }),
             list_parts: parts(GPU_STAGES[1]),
             section_parts: parts("sections"),
+            gpu_passes: gpu_pass_runs.last().map_or(Vec::new(), |last| {
+                last.iter()
+                    .map(|(pass, _)| {
+                        let of_pass = |run: &Vec<(String, f64)>| {
+                            run.iter().find(|p| &p.0 == pass).map_or(0.0, |p| p.1)
+                        };
+                        (
+                            pass.clone(),
+                            median(gpu_pass_runs.iter().map(of_pass).collect()),
+                        )
+                    })
+                    .collect()
+            }),
         });
         if let Some(g) = &gpu {
             gpu_one_step.push((n, g.total));

@@ -57,6 +57,9 @@ pub struct GpuBakeRow {
     pub list_parts: Vec<(String, f64)>,
     /// The sections by part ("sections: …"), in their order.
     pub section_parts: Vec<(String, f64)>,
+    /// The GPU time by pass (timestamp queries), in the order the passes first ran; empty
+    /// where the device has no timestamps.
+    pub gpu_passes: Vec<(String, f64)>,
 }
 
 /// One size's stored bytes: the file, and each section's stored and raw bytes.
@@ -267,6 +270,14 @@ impl BakeReport {
              bytes copied out and the fields):",
             &rows,
             |g| &g.section_parts,
+        );
+        stage_table(
+            &mut md,
+            "The GPU time by pass (timestamp queries, medians of the same runs; *lists: cut* \
+             where the cap cuts each list, *lists: write* the lists written, *initial fits* \
+             fitted where the lists are, *cluster unions* counted then written):",
+            &rows,
+            |g| &g.gpu_passes,
         );
         md.push('\n');
         md
