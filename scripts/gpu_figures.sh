@@ -3,7 +3,7 @@
 # in parts that each fit one 10-minute command on a GPU host with 16 cores. Reports and
 # printed output go to OUT; series are written under /tmp and reused.
 #
-#   scripts/gpu_figures.sh OUT scrub|scale|bake|bake-before|before
+#   scripts/gpu_figures.sh OUT scrub|scale|raw|bake|bake-before|before
 #
 # slosh is $SLOSH, else .dev/slosh, else the one on PATH. Where the repo holds .gl and .whl
 # (scripts/gpu_prepare.sh makes them), the loaders are unpacked and pysplashsurf installed
@@ -16,6 +16,7 @@
 # scrub: `bench scrub` 100k and 1M (page cache), `bench gpu` (table 4.6, 100k and 1M).
 # scale: `bench scrub` 4M, 500 steps of 1M resident (8 distinct shapes), the raw EnSight
 #        case at 1M with the GPU bake.
+# raw:   the scale part's raw EnSight case alone (1M, baked on the GPU as played).
 # bake:  `bench bake` 100k and 1M with the GPU column, 64 steps of 1M through the batch,
 #        one 4M step baked on the GPU with its device memory sampled every 50 ms.
 # bake-before: `bench bake` at 1M and two 4M steps through `slosh bake --device gpu`, the
@@ -26,11 +27,11 @@
 set -euo pipefail
 # OUT and $SLOSH are the caller's paths; the rest is the repo's.
 out=$(readlink -m "${1:?OUT}")
-part=${2:?scrub, scale, bake, bake-before or before}
+part=${2:?scrub, scale, raw, bake, bake-before or before}
 case $part in
-scrub | scale | bake | bake-before | before) ;;
+scrub | scale | raw | bake | bake-before | before) ;;
 *)
-    echo "unknown part '$part': scrub, scale, bake, bake-before or before" >&2
+    echo "unknown part '$part': scrub, scale, raw, bake, bake-before or before" >&2
     exit 2
     ;;
 esac
@@ -67,6 +68,11 @@ run() {
     local TIMEFORMAT="$name: %R s wall"
     { time "$bin" "$@"; } 2>&1 | tee "$out/$name.txt"
 }
+# The raw EnSight case at 1M, baked on the GPU as the timeline needs each step.
+run_raw() {
+    run scrub-raw bench scrub --points $p1m --steps 24 --jumps 30 --raw-case \
+        --raw-case-gpu --dir $tmp/slosh-sd --out "$out/scrub-raw.md"
+}
 case $part in
 scrub)
     run scrub bench scrub --points $p100k,$p1m --dir $tmp/slosh-sd --cold --out "$out/scrub.md"
@@ -79,8 +85,10 @@ scale)
     # The resident jumps fill a pool that holds the whole series first.
     run scrub-resident bench scrub --points $p1m --steps $resident --distinct 8 \
         --jumps 100 --dir $tmp/slosh-sd --out "$out/scrub-resident.md"
-    run scrub-raw bench scrub --points $p1m --steps 24 --jumps 30 --raw-case \
-        --raw-case-gpu --dir $tmp/slosh-sd --out "$out/scrub-raw.md"
+    run_raw
+    ;;
+raw)
+    run_raw
     ;;
 bake)
     run bake bench bake --points $p100k,$p1m --runs 3 --threads $threads --series 0 \

@@ -201,6 +201,8 @@ impl<T: Real> SurfaceParts<T> {
         }
         let n = points.len();
         let mut clock = StageClock::start();
+        // The kNN stage by part, after it.
+        let mut knn_parts = StageClock::start();
         let (lo, hi) = bounds(points);
         let origin = [
             0.5 * (lo[0] + hi[0]),
@@ -216,7 +218,9 @@ impl<T: Real> SurfaceParts<T> {
         let mut unit_normals: Option<Vec<Option<[f64; 3]>>> =
             normals.map(|ns| ns.par_iter().map(|n| unit(*n)).collect());
 
+        knn_parts.lap("kd-tree and radii (kNN): points");
         let index = search.index(&rel)?;
+        knn_parts.lap("kd-tree and radii (kNN): index");
         let k = params.k.min(n - 1);
         // One query serves the radii (the k-th) and, with normals, the orientation check.
         let orient_with = if unit_normals.is_some() {
@@ -226,6 +230,7 @@ impl<T: Real> SurfaceParts<T> {
         };
         let k_query = NonZero::new(k.max(orient_with) + 1).ok_or(SurfaceError::BadK)?;
         let nearest_ids = index.nearest(k_query)?;
+        knn_parts.lap("kd-tree and radii (kNN): nearest");
         let queried: Vec<(f64, f64, Around, f64)> = nearest_ids
             .par_chunks(k_query.get())
             .enumerate()
@@ -244,7 +249,9 @@ impl<T: Real> SurfaceParts<T> {
         let mut radii: Vec<f64> = queried.par_iter().map(|q| q.0).collect();
         let nearest: Vec<f64> = queried.par_iter().map(|q| q.1).collect();
         let spacing = nearest.iter().sum::<f64>() / n as f64;
+        knn_parts.lap("kd-tree and radii (kNN): radii");
         clock.lap("kd-tree and radii (kNN)");
+        clock.extend(&knn_parts.laps);
         let orientation = match unit_normals.as_mut() {
             Some(ns) => {
                 let around: Vec<Around> = queried.par_iter().map(|q| q.2).collect();
@@ -253,6 +260,7 @@ impl<T: Real> SurfaceParts<T> {
             None => OrientationRepair::default(),
         };
         clock.lap("orientation");
+        let reaches_start = std::time::Instant::now();
         let mean = radii.iter().sum::<f64>() / n as f64;
         // Coincident points give ρ = 0: keep every ball a tenth of the mean radius at least.
         let floor = 0.1 * mean;
@@ -308,6 +316,8 @@ impl<T: Real> SurfaceParts<T> {
             .into_par_iter()
             .map(|i| radii[i] + params.support * ball_h(i))
             .collect();
+        // h and each list's reach, from the radii.
+        let reaches_seconds = reaches_start.elapsed().as_secs_f64();
         let NeighbourLists {
             lists: neighbours,
             reach,
@@ -349,6 +359,7 @@ impl<T: Real> SurfaceParts<T> {
             lap.1 = (lap.1 - searched_fit_seconds).max(0.0);
         }
         // The search's parts of it, after it (their sum is within the lap and the fits).
+        clock.extend(&[("neighbour lists: reaches", reaches_seconds)]);
         clock.extend(&list_parts);
 
         // Spray first, from the lists alone and on every core: the fits do not need it, but the

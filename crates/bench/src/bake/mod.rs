@@ -293,6 +293,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             first_list_parts: gpu_first.as_ref().map_or(Vec::new(), |f| {
                 parts_in(&f.stages, GPU_STAGES[1], |_, seconds| seconds)
             }),
+            knn_parts: parts(GPU_STAGES[0]),
             list_parts: parts(GPU_STAGES[1]),
             section_parts: parts("sections"),
             gpu_passes: gpu_pass_runs.last().map_or(Vec::new(), |last| {

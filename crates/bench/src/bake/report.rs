@@ -53,6 +53,8 @@ pub struct GpuBakeRow {
     pub cpu_bvh: f64,
     /// The GPU bake's stages that ran on the CPU, by name, in its order.
     pub on_cpu: Vec<(String, f64)>,
+    /// The kNN and radii by part ("kd-tree and radii (kNN): …"), in their order.
+    pub knn_parts: Vec<(String, f64)>,
     /// The GPU's neighbour lists by part ("neighbour lists: …"), in its order.
     pub list_parts: Vec<(String, f64)>,
     /// The sections by part ("sections: …"), in their order.
@@ -249,8 +251,16 @@ impl BakeReport {
         );
         stage_table(
             &mut md,
+            "The GPU bake's kNN and radii by part (wall time, medians of the same runs; \
+             *points* the points recentred, *index* sorted into cells and uploaded, *nearest* \
+             the nearest points found and read back, *radii* their distances in f64):",
+            &rows,
+            |g| &g.knn_parts,
+        );
+        stage_table(
+            &mut md,
             "The GPU bake's neighbour lists by part (wall time, medians of the same runs; \
-             *write* is the passes until the lists are on the GPU, the initial fits taken out, \
+             *reaches* h and each list's reach from the radii, *write* is the passes until the lists are on the GPU, the initial fits taken out, \
              *read back* the lists copied to the host, *links and reach* their marks taken out \
              on the CPU):",
             &rows,
