@@ -166,18 +166,14 @@ impl SortedPoints {
             .unwrap_or(1)
     }
 
-    /// Where each cell's points begin (2^(3·level) + 1 entries, by the cells' Morton codes).
+    /// Where each cell's points begin (2^(3·level) + 1 entries, by the cells' Morton codes),
+    /// from the sorted codes.
     pub fn cell_starts(&self, level: u32) -> Vec<u32> {
         let shift = 3 * (MortonGrid::BITS - level);
-        let cells = 1usize << (3 * level);
-        let mut start = vec![0u32; cells + 1];
-        for &code in &self.codes {
-            start[(code >> shift) as usize + 1] += 1;
-        }
-        for c in 0..cells {
-            start[c + 1] += start[c];
-        }
-        start
+        let codes = &self.codes;
+        crate::csr::sorted_starts(codes.len(), 1 << (3 * level), |i| {
+            (codes[i] >> shift) as usize
+        })
     }
 
     /// Occupied cells at `level`, counted one level at a time (the reference the one-pass
@@ -230,5 +226,35 @@ mod tests {
             occupied[MortonGrid::BITS as usize] < points.len(),
             "duplicates share cells"
         );
+    }
+
+    /// Each cell's start from the blocks' searches and walks is a count of the points in the
+    /// cells before it, at every level a grid uses (blocks of cells empty, full and shared),
+    /// on the same points.
+    #[test]
+    fn cell_starts_count_the_points_of_the_cells_before() {
+        let mut x = 11u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut points: Vec<[f64; 3]> =
+            (0..20000).map(|_| [next(), next(), 0.1 * next()]).collect();
+        points.extend_from_within(0..500);
+        points.push([1e3, -1e3, 5.0]);
+        let sorted = SortedPoints::new(&points);
+        for level in 1..=7 {
+            let shift = 3 * (MortonGrid::BITS - level);
+            let mut want = vec![0u32; (1usize << (3 * level)) + 1];
+            for &code in &sorted.codes {
+                want[(code >> shift) as usize + 1] += 1;
+            }
+            for c in 1..want.len() {
+                want[c] += want[c - 1];
+            }
+            assert_eq!(sorted.cell_starts(level), want, "level {level}");
+        }
     }
 }

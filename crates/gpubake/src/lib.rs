@@ -11,6 +11,7 @@
 
 mod cells;
 mod components;
+mod csr;
 mod dispatch;
 mod fits;
 mod host_memory;

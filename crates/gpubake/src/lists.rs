@@ -457,40 +457,18 @@ pub(crate) fn lists(
     let capped = cuts.par_iter().filter(|c| c[3] & 1 != 0).count();
     let (lists, reach_out, links) = match band {
         Some(band) => {
-            // Each point's near members (CSR in the caller's order); reaches in sorted order.
-            let mut near_start = vec![0u32; n + 1];
-            for &[i, _] in &near {
-                near_start[i as usize + 1] += 1;
-            }
-            for i in 0..n {
-                near_start[i + 1] += near_start[i];
-            }
-            let mut at = near_start.clone();
-            let mut ids = vec![0u32; near.len()];
-            for &[i, w] in &near {
-                ids[at[i as usize] as usize] = w;
-                at[i as usize] += 1;
-            }
+            // Each point's near members (CSR in the caller's order, each point's in index
+            // order: they came in the order the GPU's threads appended them); reaches in
+            // sorted order.
+            near.par_sort_unstable_by_key(|&[i, w]| (i, w & ID_MASK));
+            let near_start = crate::csr::sorted_starts(near.len(), n, |k| near[k][0] as usize);
+            let mut ids: Vec<u32> = near.par_iter().map(|p| p[1]).collect();
             let of = |i: usize| &ids[near_start[i] as usize..near_start[i + 1] as usize];
             let by_sorted: Vec<f64> = (0..n)
                 .into_par_iter()
                 .map(|t| reach_of(t, of(order[t] as usize)))
                 .collect();
-            // Each point's in index order, as lists are (they came in the order the GPU's
-            // threads appended them).
-            csr_pieces(&near_start, &mut ids, POINTS_PER_PIECE)
-                .into_par_iter()
-                .for_each(|(range, piece)| {
-                    let base = near_start[range.start] as usize;
-                    for i in range {
-                        let members = &mut piece
-                            [near_start[i] as usize - base..near_start[i + 1] as usize - base];
-                        for w in members.iter_mut() {
-                            *w &= ID_MASK;
-                        }
-                        members.sort_unstable();
-                    }
-                });
+            ids.par_iter_mut().for_each(|w| *w &= ID_MASK);
             let members = Neighbours::from_csr(near_start, ids)
                 .ok_or_else(|| gpu_error("the near members do not match their counts"))?;
             (

@@ -358,8 +358,9 @@ impl GpuStages {
     }
 
     /// `bytes` of `source` copied out, once the work submitted before has run. Reads of a
-    /// megabyte or more go through the pool of read-back buffers.
-    pub(crate) fn read_back<T: bytemuck::Pod>(
+    /// megabyte or more go through the pool of read-back buffers, copied out by every thread
+    /// (one thread's copy of a 1M step's fits, 64 MB, took tens of milliseconds).
+    pub(crate) fn read_back<T: bytemuck::Pod + Send + Sync>(
         &self,
         source: &wgpu::Buffer,
         bytes: u64,
@@ -368,7 +369,10 @@ impl GpuStages {
             return Ok(Vec::new());
         }
         if bytes >= POOLED_READ_BYTES {
-            self.readback.read(&self.gpu, source, bytes)
+            let mut out = Vec::new();
+            self.readback
+                .read_into(&self.gpu, source, bytes, &mut out)
+                .map(|()| out)
         } else {
             slosh_render::read_storage(&self.gpu, source, bytes)
         }

@@ -134,11 +134,25 @@ impl StagingPool {
         let size = (bytes.len() as u64).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
         let staging = self.take(gpu, size);
         {
-            let mut view = staging
-                .slice(..size)
-                .get_mapped_range_mut()
-                .map_err(|e| crate::Error::Readback(e.to_string()))?;
-            view.slice(..bytes.len()).copy_from_slice(bytes);
+            use rayon::prelude::*;
+            // Copied by every thread, a mapped piece each: one thread's copy of a step's
+            // positions (tens of megabytes) took milliseconds of every bake's step.
+            let views = bytes
+                .chunks(UPLOAD_PIECE)
+                .enumerate()
+                .map(|(k, piece)| {
+                    let at = (k * UPLOAD_PIECE) as u64;
+                    let end = at + (piece.len() as u64).next_multiple_of(4);
+                    staging
+                        .slice(at..end)
+                        .get_mapped_range_mut()
+                        .map_err(|e| crate::Error::Readback(e.to_string()))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            views
+                .into_par_iter()
+                .zip(bytes.par_chunks(UPLOAD_PIECE))
+                .for_each(|(mut to, from)| to.slice(..from.len()).copy_from_slice(from));
         }
         staging.unmap();
         let mut encoder = gpu
@@ -169,6 +183,9 @@ impl StagingPool {
         });
     }
 }
+
+/// Bytes of an upload each thread copies at a time.
+const UPLOAD_PIECE: usize = 1 << 20;
 
 /// A mapped `MAP_WRITE | COPY_SRC` buffer of at least `size` bytes, in whole granules.
 fn new_staging(device: &wgpu::Device, size: u64) -> wgpu::Buffer {

@@ -1373,4 +1373,10 @@ fn pooled_read_backs_return_the_buffers_bytes() {
     assert_eq!(&out[1..1025], &values[..1024]);
     assert_eq!(&out[1025..], &values[..2]);
     assert_eq!(pool.kept(), 1, "one buffer reused, none added");
+    // Ranges one after another, an empty one among them.
+    let ranges: Vec<u32> = pool
+        .read_ranges(gpu, &source, &[(4096, 8), (100, 0), (0, 16)])
+        .unwrap();
+    assert_eq!(ranges, [&values[1024..1026], &values[..4]].concat());
+    assert_eq!(pool.kept(), 1, "the same buffer again");
 }
