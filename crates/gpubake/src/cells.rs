@@ -198,20 +198,28 @@ impl SortedPoints {
 mod tests {
     use super::*;
 
-    /// The one-pass count against a count per level, on points that fill some cells, share
-    /// others (duplicates) and lie far apart (an outlier).
-    #[test]
-    fn occupied_cells_at_every_level_match_a_count_per_level() {
-        let mut x = 7u64;
+    /// `count` points scattered over a flat box (by a xorshift from `seed`), the first 500 of
+    /// them again (duplicates share cells) and one far from the rest (an outlier).
+    fn scattered(seed: u64, count: usize) -> Vec<[f64; 3]> {
+        let mut x = seed;
         let mut next = move || {
             x ^= x << 13;
             x ^= x >> 7;
             x ^= x << 17;
             (x >> 11) as f64 / (1u64 << 53) as f64
         };
-        let mut points: Vec<[f64; 3]> = (0..5000).map(|_| [next(), next(), 0.1 * next()]).collect();
+        let mut points: Vec<[f64; 3]> =
+            (0..count).map(|_| [next(), next(), 0.1 * next()]).collect();
         points.extend_from_within(0..500);
         points.push([1e3, -1e3, 5.0]);
+        points
+    }
+
+    /// The one-pass count against a count per level, on points that fill some cells, share
+    /// others (duplicates) and lie far apart (an outlier).
+    #[test]
+    fn occupied_cells_at_every_level_match_a_count_per_level() {
+        let points = scattered(7, 5000);
         let sorted = SortedPoints::new(&points);
         let occupied = sorted.occupied_cells();
         for level in 0..=MortonGrid::BITS {
@@ -228,23 +236,11 @@ mod tests {
         );
     }
 
-    /// Each cell's start from the blocks' searches and walks is a count of the points in the
-    /// cells before it, at every level a grid uses (blocks of cells empty, full and shared),
-    /// on the same points.
+    /// Each cell's start, from the sorted codes, is a count of the points in the cells before
+    /// it, at every level a grid uses (cells empty, full and shared by duplicates).
     #[test]
     fn cell_starts_count_the_points_of_the_cells_before() {
-        let mut x = 11u64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let mut points: Vec<[f64; 3]> =
-            (0..20000).map(|_| [next(), next(), 0.1 * next()]).collect();
-        points.extend_from_within(0..500);
-        points.push([1e3, -1e3, 5.0]);
-        let sorted = SortedPoints::new(&points);
+        let sorted = SortedPoints::new(&scattered(11, 20000));
         for level in 1..=7 {
             let shift = 3 * (MortonGrid::BITS - level);
             let mut want = vec![0u32; (1usize << (3 * level)) + 1];
