@@ -57,12 +57,23 @@ pub(crate) struct BatchLists<'b> {
     pub list_base: u32,
 }
 
-/// The fits of a batch's points, in sorted order (waits for the GPU).
+/// Where a batch's fits spent their wall time: waiting for the GPU, and reading them back
+/// into [`InitialFit`]s.
+#[derive(Debug, Default, Clone, Copy)]
+pub(crate) struct FitSeconds {
+    pub gpu: f64,
+    pub read_back: f64,
+}
+
+/// The fits of a batch's points, in sorted order (waits for the GPU), and where the time
+/// went (added to `seconds`).
 pub(crate) fn fit_batch(
     index: &GpuIndex<'_>,
     inputs: &FitInputs<'_>,
     batch: BatchLists<'_>,
+    seconds: &mut FitSeconds,
 ) -> Result<Vec<Option<InitialFit>>, SurfaceError> {
+    let start = std::time::Instant::now();
     let gpu = index.search.gpu();
     let bytes = (batch.count * VEC4_PER_FIT * 16) as u64;
     let out = output(&index.search.memory, "initial fits", bytes);
@@ -95,11 +106,14 @@ pub(crate) fn fit_batch(
             (8, &out),
         ],
     );
-    index
+    let submitted = index
         .search
         .run("initial fits", &[(inputs.pipeline, (x, y))], &group)?;
+    gpu.wait_for(submitted).map_err(gpu_error)?;
+    let reading = std::time::Instant::now();
+    seconds.gpu += (reading - start).as_secs_f64();
     let raw: Vec<[f32; 4]> = index.search.read_back(&out, bytes)?;
-    Ok(raw
+    let fits = raw
         .par_chunks(VEC4_PER_FIT)
         .map(|v| {
             let status = v[0][3];
@@ -118,5 +132,7 @@ pub(crate) fn fit_batch(
                 }
             })
         })
-        .collect())
+        .collect();
+    seconds.read_back += reading.elapsed().as_secs_f64();
+    Ok(fits)
 }

@@ -245,6 +245,7 @@ pub(crate) fn lists(
     let (mut write_seconds, mut read_seconds) = (0.0, 0.0);
     let mut sorted_fits: Vec<Option<InitialFit>> = Vec::new();
     let mut fit_seconds = 0.0;
+    let mut fit_parts = crate::fits::FitSeconds::default();
     // Batches of consecutive points whose lists fit one output, and of whole clusters where
     // every batch can be.
     let limit_ids = (search.output_limit() / 4).max(cap as u64);
@@ -366,6 +367,7 @@ pub(crate) fn lists(
                     count: last - first,
                     list_base: start[first],
                 },
+                &mut fit_parts,
             )?);
             fit_seconds += fitting.elapsed().as_secs_f64();
         }
@@ -436,6 +438,12 @@ pub(crate) fn lists(
         ("neighbour lists: cluster unions", union_seconds),
         ("neighbour lists: spray components", component_seconds),
     ]);
+    if fit_inputs.is_some() {
+        parts.extend(&[
+            ("initial fits: on the GPU", fit_parts.gpu),
+            ("initial fits: read back", fit_parts.read_back),
+        ]);
+    }
     let points = index.points;
     // A list's reach: as asked, or where the cap cut it, as far as its farthest point in f64
     // (`lists.rs` in slosh-mls): the point the cut fell on, which the list keeps unless its

@@ -23,7 +23,7 @@ use crate::runs::RunUnions;
 use crate::search::{FitRequest, KdSearch, ListRequest, NeighbourSearch};
 use crate::spray::{Sphere, droplets};
 use crate::support::{DataNormals, NormalsMode};
-use crate::timing::StageClock;
+use crate::timing::{StageClock, stage_part};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SurfaceParams {
@@ -360,6 +360,10 @@ impl<T: Real> SurfaceParts<T> {
         }
         // The search's parts of it, after it (their sum is within the lap and the fits).
         clock.extend(&[("neighbour lists: reaches", reaches_seconds)]);
+        // The fits' parts go after the fits' own lap.
+        let (fit_parts, list_parts): (Vec<_>, Vec<_>) = list_parts
+            .into_iter()
+            .partition(|(name, _)| stage_part(name).is_some_and(|(s, _)| s == "initial fits"));
         clock.extend(&list_parts);
 
         // Spray first, from the lists alone and on every core: the fits do not need it, but the
@@ -390,6 +394,8 @@ impl<T: Real> SurfaceParts<T> {
             normals: params.normals,
             h_factor: T::one(),
         };
+        // The search's fits made balls: a part of the fits' lap, where the search fitted.
+        let balls_seconds = std::sync::atomic::AtomicU64::new(0);
         let initial_fits = || -> (Vec<Ball<T>>, Vec<BallFit>) {
             let ball = |i: usize, normal, poly| Ball {
                 centre: pts[i],
@@ -406,7 +412,8 @@ impl<T: Real> SurfaceParts<T> {
             };
             if let Some(fits) = &searched_fits {
                 // The search's fits (in f32), as the balls hold them.
-                return (0..n)
+                let converting = std::time::Instant::now();
+                let made = (0..n)
                     .into_par_iter()
                     .map(|i| match fits[i] {
                         Some(f) => {
@@ -428,6 +435,11 @@ impl<T: Real> SurfaceParts<T> {
                         None => unfitted(i),
                     })
                     .unzip();
+                balls_seconds.store(
+                    converting.elapsed().as_secs_f64().to_bits(),
+                    std::sync::atomic::Ordering::Relaxed,
+                );
+                return made;
             }
             // Each normal normalised once here, not once for every list it is in.
             let unit_nrm: Option<Vec<V3<T>>> = nrm.as_ref().map(|ns| {
@@ -488,10 +500,13 @@ impl<T: Real> SurfaceParts<T> {
         for &(i, d) in &droplet_of {
             ball_fits[i as usize] = BallFit::Droplet(d);
         }
-        clock.extend(&[
-            ("initial fits", fits_seconds),
-            ("droplets", droplets_seconds),
-        ]);
+        clock.extend(&[("initial fits", fits_seconds)]);
+        clock.extend(&fit_parts);
+        if searched_fits.is_some() {
+            let seconds = f64::from_bits(balls_seconds.into_inner());
+            clock.extend(&[("initial fits: balls", seconds)]);
+        }
+        clock.extend(&[("droplets", droplets_seconds)]);
         let parts = SurfaceParts {
             origin,
             points: pts,

@@ -295,6 +295,7 @@ pub fn run(args: &Settings) -> Result<BakeReport> {
             }),
             knn_parts: parts(GPU_STAGES[0]),
             list_parts: parts(GPU_STAGES[1]),
+            fit_parts: parts(GPU_STAGES[2]),
             section_parts: parts("sections"),
             gpu_passes: gpu_pass_runs.last().map_or(Vec::new(), |last| {
                 last.iter()

@@ -57,6 +57,8 @@ pub struct GpuBakeRow {
     pub knn_parts: Vec<(String, f64)>,
     /// The GPU's neighbour lists by part ("neighbour lists: …"), in its order.
     pub list_parts: Vec<(String, f64)>,
+    /// The initial fits by part ("initial fits: …"), in their order.
+    pub fit_parts: Vec<(String, f64)>,
     /// The sections by part ("sections: …"), in their order.
     pub section_parts: Vec<(String, f64)>,
     /// The GPU time by pass (timestamp queries), in the order the passes first ran; empty
@@ -271,6 +273,14 @@ impl BakeReport {
             "The same parts in each size's first step (one run):",
             &rows,
             |g| &g.first_list_parts,
+        );
+        stage_table(
+            &mut md,
+            "The GPU bake's initial fits by part (wall time, medians of the same runs; *on \
+             the GPU* from the lists written until the fits are done, *read back* the fits \
+             copied to the host, *balls* made from them, beside the BVH's leaves):",
+            &rows,
+            |g| &g.fit_parts,
         );
         stage_table(
             &mut md,
