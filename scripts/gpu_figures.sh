@@ -3,7 +3,7 @@
 # in parts that each fit one 10-minute command on a GPU host with 16 cores. Reports and
 # printed output go to OUT; series are written under /tmp and reused.
 #
-#   scripts/gpu_figures.sh OUT scrub|scale|raw|bake|bake-before|before
+#   scripts/gpu_figures.sh OUT scrub|scale|raw|bake|bake-before|before|series
 #
 # slosh is $SLOSH, else .dev/slosh, else the one on PATH. Where the repo holds .gl and .whl
 # (scripts/gpu_prepare.sh makes them), the loaders are unpacked and pysplashsurf installed
@@ -21,17 +21,19 @@
 #        one 4M step baked on the GPU with its device memory sampled every 50 ms.
 # bake-before: `bench bake` at 1M and two 4M steps through `slosh bake --device gpu`, the
 #        baseline binary $BEFORE and slosh alternated, twice each.
+# series: 64 steps of 1M through `slosh bake --device gpu` at 4, 8, 12 and 16 jobs, with the
+#        CPU seconds they took (the baseline $BEFORE at 8 jobs too, where set).
 # before: the baseline binary $BEFORE (the one an issue's "now" column came from) on this
 #        card: `bench gpu` alternated with slosh (before, after, before, after), and its
 #        `bench scrub` of the scrub and scale parts' 100k, 1M and 4M series.
 set -euo pipefail
 # OUT and $SLOSH are the caller's paths; the rest is the repo's.
 out=$(readlink -m "${1:?OUT}")
-part=${2:?scrub, scale, raw, bake, bake-before or before}
+part=${2:?scrub, scale, raw, bake, bake-before, before or series}
 case $part in
-scrub | scale | raw | bake | bake-before | before) ;;
+scrub | scale | raw | bake | bake-before | before | series) ;;
 *)
-    echo "unknown part '$part': scrub, scale, raw, bake, bake-before or before" >&2
+    echo "unknown part '$part': scrub, scale, raw, bake, bake-before, before or series" >&2
     exit 2
     ;;
 esac
@@ -56,8 +58,10 @@ fi
 # Sizes: the issues' own, or SMALL ones for a check of the script here.
 if [ -n "${SMALL:-}" ]; then
     p100k=2000 p1m=5000 p4m=10000 resident=24 threads=2 series=4 tmp=/tmp/slosh-small
+    series_jobs="1 2"
 else
     p100k=100000 p1m=1000000 p4m=4000000 resident=500 threads=16 series=64 tmp=/tmp
+    series_jobs="4 8 12 16"
 fi
 # run NAME ARGS: slosh ARGS, its output to OUT/NAME.txt; with BIN set, that binary instead.
 run() {
@@ -126,6 +130,21 @@ bake-before)
             BIN=$bin run bake-4m-$side-$round bake $tmp/slosh-s4m2/sphere.case \
                 --out $tmp/slosh-c4m2 --device gpu
         done
+    done
+    ;;
+series)
+    [ -e $tmp/slosh-s64/sphere.case ] ||
+        "$slosh" gen sphere --points $p1m --steps $series --out $tmp/slosh-s64 > /dev/null
+    runs=()
+    for jobs in $series_jobs; do runs+=("$slosh $jobs"); done
+    [ -n "${BEFORE:-}" ] && runs+=("$BEFORE 8")
+    for r in "${runs[@]}"; do
+        read -r bin jobs <<< "$r"
+        rm -rf $tmp/slosh-c64
+        TIMEFORMAT="series, $(basename "$bin"), $jobs jobs: %R s wall, %U s user, %S s system"
+        { time "$bin" bake $tmp/slosh-s64/sphere.case --out $tmp/slosh-c64 --device gpu \
+            --jobs "$jobs" > "$out/series-$(basename "$bin")-$jobs.txt" 2>&1; } 2>&1 |
+            tee -a "$out/series.txt"
     done
     ;;
 before)
