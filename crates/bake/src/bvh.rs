@@ -83,9 +83,9 @@ impl Group {
 }
 
 /// `items` grouped greedily in order after `out`'s last group (which they may join): each
-/// item joins the open group where it fits, else opens the next. With `stop_at`, returns the
-/// position in `items` of the first item that opens a group `stop_at` says is known (not
-/// grouped); else `items.len()`.
+/// item joins the open group where it fits, else opens the next. Stops before the first item
+/// that would open a group where `stop_at` says one is known already, and returns its
+/// position in `items` (it and those after it not grouped); else `items.len()`.
 fn group_greedily(
     items: &[(u32, [f64; 3], f64)],
     out: &mut Vec<Group>,

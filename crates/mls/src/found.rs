@@ -77,6 +77,7 @@ pub struct NeighbourLists {
     pub fits: Option<Vec<Option<InitialFit>>>,
     pub fit_seconds: f64,
     /// Where the search's own time went, by part ("neighbour lists: …", seconds), for the
-    /// bake's stage laps after its "neighbour lists"; empty where the search does not say.
+    /// bake's stage laps after its "neighbour lists", and the fits' parts ("initial fits: …")
+    /// where it made them, which go after the fits' lap; empty where the search does not say.
     pub parts: Vec<(&'static str, f64)>,
 }
