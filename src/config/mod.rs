@@ -237,19 +237,18 @@ fn bake_stages(
         crate::cli::BakeDevice::Gpu => gpu_stages()?,
         crate::cli::BakeDevice::Auto if adapter.is_some() => gpu_stages()?,
         crate::cli::BakeDevice::Auto => {
-            // Adapters are listed before one is opened: most machines without a GPU have
-            // none, or only a software one.
+            // Adapters are listed before one is opened (once: the one opened comes from
+            // the same list): most machines without a GPU have none, or only a software one.
             let is_gpu = |info: &wgpu::AdapterInfo| {
                 matches!(
                     info.device_type,
                     wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
                 )
             };
-            let found = k < slosh_gpubake::NEAREST_MAX
-                && slosh_render::adapters()
-                    .iter()
-                    .any(|a| is_gpu(&a.get_info()));
-            match found.then(|| slosh_render::Gpu::new(adapter)) {
+            let listed = (k < slosh_gpubake::NEAREST_MAX)
+                .then(slosh_render::Adapters::list)
+                .filter(|listed| listed.infos().iter().any(is_gpu));
+            match listed.map(|listed| slosh_render::Gpu::from_adapters(listed, adapter)) {
                 Some(Ok(gpu)) if is_gpu(&gpu.info) => {
                     let name = gpu.describe();
                     // A GPU whose passes will not build is said, not passed over in silence:

@@ -704,9 +704,9 @@ fn the_default_device_is_a_gpu_where_one_is_found() {
         &["sphere", "--points", "2000", "--steps", "1"],
     );
     let case = dir.path().join("case/sphere.case");
-    let gpu_found = slosh_render::adapters().iter().any(|a| {
+    let gpu_found = slosh_render::Adapters::list().infos().iter().any(|info| {
         matches!(
-            a.get_info().device_type,
+            info.device_type,
             wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
         )
     });

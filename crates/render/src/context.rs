@@ -35,16 +35,27 @@ pub struct Gpu {
     binding_limit: u64,
 }
 
-/// The Vulkan adapters wgpu can see (the tracer binds more storage buffers than GL allows).
-pub fn adapters() -> Vec<wgpu::Adapter> {
-    instance_and_adapters().1
+/// The Vulkan adapters wgpu can see (the tracer binds more storage buffers than GL allows),
+/// with the instance that found them: listed once, looked at, then one opened
+/// ([`Gpu::from_adapters`]) without listing them again.
+#[derive(Debug)]
+pub struct Adapters {
+    instance: wgpu::Instance,
+    adapters: Vec<wgpu::Adapter>,
 }
 
-fn instance_and_adapters() -> (wgpu::Instance, Vec<wgpu::Adapter>) {
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
-    (instance, adapters)
+impl Adapters {
+    pub fn list() -> Adapters {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
+        Adapters { instance, adapters }
+    }
+
+    /// What each adapter is, in the order listed.
+    pub fn infos(&self) -> Vec<wgpu::AdapterInfo> {
+        self.adapters.iter().map(wgpu::Adapter::get_info).collect()
+    }
 }
 
 fn describe(info: &wgpu::AdapterInfo) -> String {
@@ -58,7 +69,15 @@ impl Gpu {
     /// Opens the first adapter whose name contains `name` (case-insensitive), or the best one:
     /// a discrete GPU before an integrated one before a software rasteriser.
     pub fn new(name: Option<&str>) -> Result<Gpu> {
-        let (instance, mut candidates) = instance_and_adapters();
+        Gpu::from_adapters(Adapters::list(), name)
+    }
+
+    /// [`Gpu::new`] among adapters listed already.
+    pub fn from_adapters(listed: Adapters, name: Option<&str>) -> Result<Gpu> {
+        let Adapters {
+            instance,
+            adapters: mut candidates,
+        } = listed;
         if candidates.is_empty() {
             return Err(Error::NoAdapter(
                 "wgpu found no Vulkan adapter (install a driver, e.g. mesa-vulkan-drivers for lavapipe)"

@@ -29,7 +29,7 @@ mod widen;
 pub use background::{spawn as spawn_background, wait_for_background};
 pub use buffer_shelf::BufferShelf;
 pub use colormap::Colormap;
-pub use context::{Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED, adapters};
+pub use context::{Adapters, Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED};
 pub use error::{Error, Result};
 pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, WidenSettings, status};
 pub use output::{write_frame_png, write_npy, write_rgb_png};
