@@ -434,13 +434,7 @@ mod tests {
     fn pieces_grouped_in_parallel_give_one_passs_groups() {
         // A random walk of balls of random sizes, some ids skipped, across several pieces:
         // groups run across the pieces' edges, and the walk's jumps open groups anywhere.
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = slosh_testkit::uniform(0x9e37_79b9_7f4a_7c15);
         let mut items = Vec::new();
         let mut at = [0.0f64; 3];
         let mut id = 0u32;

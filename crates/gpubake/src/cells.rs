@@ -198,16 +198,10 @@ impl SortedPoints {
 mod tests {
     use super::*;
 
-    /// `count` points scattered over a flat box (by a xorshift from `seed`), the first 500 of
-    /// them again (duplicates share cells) and one far from the rest (an outlier).
+    /// `count` points scattered over a flat box (uniform from `seed`), the first 500 of them
+    /// again (duplicates share cells) and one far from the rest (an outlier).
     fn scattered(seed: u64, count: usize) -> Vec<[f64; 3]> {
-        let mut x = seed;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = slosh_testkit::uniform(seed);
         let mut points: Vec<[f64; 3]> =
             (0..count).map(|_| [next(), next(), 0.1 * next()]).collect();
         points.extend_from_within(0..500);

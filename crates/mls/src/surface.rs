@@ -757,13 +757,7 @@ mod tests {
     /// signed, duplicated, and single values.
     #[test]
     fn quantiles_are_the_selections_over_all_values() {
-        let mut x = 5u64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = slosh_testkit::uniform(5);
         let spread: Vec<f64> = (0..200_000).map(|_| 1e-3 * (1.0 + next())).collect();
         let clustered: Vec<f64> = (0..100_000).map(|_| 0.5 + 1e-12 * next()).collect();
         let mut signed: Vec<f64> = (0..50_000).map(|_| next() - 0.5).collect();

@@ -1,14 +1,16 @@
 //! What the test suites and the bench harness share, defined once: a scene's step as bake
 //! input, a scene's surface written as an EnSight case, a step baked into an in-memory cache file, the cameras that frame a point set, the
-//! mask of silhouette pixels that comparisons leave out, and the rule for a test that cannot
-//! run here (skipped with a message, except under `CI=true`).
+//! mask of silhouette pixels that comparisons leave out, a seeded uniform stream, and the rule
+//! for a test that cannot run here (skipped with a message, except under `CI=true`).
 
 use std::path::{Path, PathBuf};
 
 mod exact;
+mod uniform;
 pub mod wgsl;
 
 pub use exact::bake_exact_and_stored;
+pub use uniform::uniform;
 
 use slosh_bake::{BakeError, BakeParams, StepInput, bake_step};
 use slosh_cache::{CacheFile, encode_step};
