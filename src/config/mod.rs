@@ -455,12 +455,22 @@ impl BakeConfig {
             );
         }
         let steps = a.steps.as_deref().map(parse_step_range).transpose()?;
+        let stages = bake_stages(
+            a.settings.select.device,
+            a.adapter.as_deref(),
+            a.settings.fit.degree,
+            a.settings.fit.k,
+        )?;
         let (jobs, jobs_chosen) = match a.jobs {
             Some(jobs) => (jobs, None),
             None => {
                 let points = first_step_points(&input, steps.map_or(0, |(f, _)| f));
-                let (jobs, why) =
-                    slosh_bake::default_jobs(cores, slosh_bake::available_memory(), points);
+                let (jobs, why) = slosh_bake::default_jobs(
+                    cores,
+                    slosh_bake::available_memory(),
+                    points,
+                    stages.device_memory,
+                );
                 (jobs, Some(why))
             }
         };
@@ -479,12 +489,7 @@ impl BakeConfig {
                     .transpose()?
                     .unwrap_or(slosh_bake::Shard::WHOLE),
                 params,
-                stages: bake_stages(
-                    a.settings.select.device,
-                    a.adapter.as_deref(),
-                    a.settings.fit.degree,
-                    a.settings.fit.k,
-                )?,
+                stages,
             },
             quiet: a.quiet,
             jobs_chosen,

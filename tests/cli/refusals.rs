@@ -2,7 +2,7 @@
 
 use std::process::Command;
 
-use crate::util::{bake_case, generate, slosh};
+use crate::util::{bake_case, generate, in_ci, slosh};
 
 /// A closed or full stdout never panics a command: a reader that went away is fine (exit 0,
 /// the work done), a full device is an error after the work (issue 14, item 7).
@@ -108,7 +108,7 @@ fn a_k_beyond_the_gpu_search_is_refused_up_front() {
 }
 
 /// Without `--jobs`, the bake says how many steps it bakes at once and why: from the cores
-/// and the memory the first step needs.
+/// and the memory the first step needs, on the host and, baking on a device, there.
 #[test]
 fn the_jobs_default_comes_from_cores_and_memory() {
     let dir = tempfile::tempdir().unwrap();
@@ -124,6 +124,16 @@ fn the_jobs_default_comes_from_cores_and_memory() {
     assert!(out.contains(&expected), "{out}");
     assert!(out.contains("a step of 500 points needs about"), "{out}");
     assert!(out.contains("baked 2 steps"), "{out}");
+    // On a device, one job per core (lavapipe here: its heap is the host's memory).
+    let (ok, out, err) = bake_case(&case, &dir.path().join("gpu-cache"), &["--device", "gpu"]);
+    if !ok && !in_ci() && err.contains("adapter") {
+        eprintln!("skipping the device's default: {err}");
+        return;
+    }
+    assert!(ok, "{err}");
+    let expected = format!("baking {cores} steps at once ({cores} cores, one step per core");
+    assert!(out.contains(&expected), "{out}");
+    assert!(out.contains("of the device's"), "{out}");
 }
 
 /// Render settings without a meaning, or that would destroy the input, are refused by name

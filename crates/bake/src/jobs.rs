@@ -20,34 +20,67 @@ pub fn available_memory() -> Option<u64> {
 const BAKE_BYTES_PER_POINT: u64 = 2048;
 const BAKE_BASE_BYTES: u64 = 64 << 20;
 
-/// Steps baked at once by default, each on its share of the cores (`BatchOptions::threads`):
-/// half the cores (a step is parallel inside, but not all of it, and its reading and writing
-/// are serial: on the 16-core H200 host a series of eight 1M-point steps took 13.4 s with 2
-/// jobs, 11.3 s with 4 and 10.4 s with 8), no more than three quarters of the memory
-/// available hold, at least one.
+/// Peak device memory of a GPU bake per point of the step, measured: a 4M-point sphere step
+/// peaked at 2332 MiB on the H200 (`nvidia-smi`, the driver's context included), some
+/// 610 bytes per point; with headroom, over a base for the context and the passes.
+const DEVICE_BYTES_PER_POINT: u64 = 768;
+const DEVICE_BASE_BYTES: u64 = 256 << 20;
+
+/// Steps baked at once by default, each on its share of the cores (`BatchOptions::threads`),
+/// at least one:
+/// - on the CPU, half the cores: a step is parallel inside, but not all of it, and its
+///   reading and writing are serial (on the 16-core H200 host a series of eight 1M-point
+///   steps took 13.4 s with 2 jobs, 11.3 s with 4 and 10.4 s with 8);
+/// - where the stages run on a device (`device_memory`, its bytes), one per core: each step
+///   waits for the device part of its time, and another step's host work fills the wait (64
+///   steps of 1M on the H200 host: 4.95 steps/s with 4 jobs, 5.48-5.92 with 8, 6.14 with 12,
+///   6.27 with 16); and no more than half the device's memory holds, the rest left to the
+///   driver and to a player on the same device;
+///
+/// and no more than three quarters of the memory available hold.
 pub fn default_jobs(
     cores: usize,
     available: Option<u64>,
     points: Option<usize>,
+    device_memory: Option<u64>,
 ) -> (usize, String) {
-    let by_cores = (cores / 2).max(1);
+    let by_cores = match device_memory {
+        Some(_) => cores.max(1),
+        None => (cores / 2).max(1),
+    };
     let per_job = points.map(|p| BAKE_BASE_BYTES + p as u64 * BAKE_BYTES_PER_POINT);
     let by_memory = match (available, per_job) {
         (Some(a), Some(j)) => ((a / 4 * 3) / j).max(1) as usize,
         _ => usize::MAX,
     };
-    let jobs = by_cores.min(by_memory);
-    let memory = match (available, per_job, points) {
-        (Some(a), Some(j), Some(p)) => format!(
-            "; a step of {p} points needs about {:.2} GB, {:.1} GB available",
-            j as f64 / 1e9,
-            a as f64 / 1e9
-        ),
-        _ => String::new(),
+    let per_device_job = points.map(|p| DEVICE_BASE_BYTES + p as u64 * DEVICE_BYTES_PER_POINT);
+    let by_device = match (device_memory, per_device_job) {
+        (Some(d), Some(j)) => ((d / 2) / j).max(1) as usize,
+        _ => usize::MAX,
     };
+    let jobs = by_cores.min(by_memory).min(by_device);
+    let gb = |bytes: u64| bytes as f64 / 1e9;
+    let mut why = format!(
+        "{cores} cores{}",
+        if device_memory.is_some() {
+            ", one step per core on the device"
+        } else {
+            ""
+        }
+    );
+    if let (Some(a), Some(j), Some(p)) = (available, per_job, points) {
+        why += &format!(
+            "; a step of {p} points needs about {:.2} GB, {:.1} GB available",
+            gb(j),
+            gb(a)
+        );
+    }
+    if let (Some(d), Some(j)) = (device_memory, per_device_job) {
+        why += &format!("; about {:.2} GB of the device's {:.1} GB", gb(j), gb(d));
+    }
     (
         jobs,
-        format!("baking {jobs} steps at once ({cores} cores{memory}; --jobs sets it)"),
+        format!("baking {jobs} steps at once ({why}; --jobs sets it)"),
     )
 }
 
@@ -57,14 +90,44 @@ mod tests {
 
     #[test]
     fn jobs_default_to_half_the_cores_within_memory() {
-        assert_eq!(default_jobs(2, Some(24 << 30), Some(100_000)).0, 1);
-        assert_eq!(default_jobs(16, Some(128 << 30), Some(1_000_000)).0, 8);
-        assert_eq!(default_jobs(64, None, None).0, 32);
+        assert_eq!(default_jobs(2, Some(24 << 30), Some(100_000), None).0, 1);
+        assert_eq!(
+            default_jobs(16, Some(128 << 30), Some(1_000_000), None).0,
+            8
+        );
+        assert_eq!(default_jobs(64, None, None, None).0, 32);
         // 12 GiB available, a 1M-point step needs about 2.1 GB: four at a time.
-        assert_eq!(default_jobs(16, Some(12 << 30), Some(1_000_000)).0, 4);
+        assert_eq!(default_jobs(16, Some(12 << 30), Some(1_000_000), None).0, 4);
         // 4 GiB available, a 1M-point step needs about 2.1 GB: one at a time.
-        let (jobs, why) = default_jobs(64, Some(4 << 30), Some(1_000_000));
+        let (jobs, why) = default_jobs(64, Some(4 << 30), Some(1_000_000), None);
         assert_eq!(jobs, 1, "{why}");
         assert!(why.contains("1000000 points"), "{why}");
+    }
+
+    #[test]
+    fn device_jobs_take_every_core_within_half_the_device() {
+        // The H200 host: 16 cores, 141 GB on the device; 1M points need about 1 GB there.
+        let (jobs, why) = default_jobs(16, Some(128 << 30), Some(1_000_000), Some(141 << 30));
+        assert_eq!(jobs, 16, "{why}");
+        assert!(why.contains("of the device's"), "{why}");
+        // An 8 GiB card: half of it holds four steps of 1M points (about 1.04 GB each).
+        assert_eq!(
+            default_jobs(16, Some(64 << 30), Some(1_000_000), Some(8 << 30)).0,
+            4
+        );
+        // and one of 4M points (3.33 GB); at least one whatever the step.
+        assert_eq!(
+            default_jobs(16, Some(64 << 30), Some(4_000_000), Some(8 << 30)).0,
+            1
+        );
+        assert_eq!(
+            default_jobs(16, Some(64 << 30), Some(40_000_000), Some(8 << 30)).0,
+            1
+        );
+        // Host memory still bounds them: 12 GiB available hold four 1M-point steps.
+        assert_eq!(
+            default_jobs(16, Some(12 << 30), Some(1_000_000), Some(141 << 30)).0,
+            4
+        );
     }
 }

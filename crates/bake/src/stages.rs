@@ -14,6 +14,9 @@ pub struct Stages {
     pub search: Arc<dyn NeighbourSearch>,
     /// Links each step's BVH leaves into a tree.
     pub tree: Arc<dyn TreeBuild>,
+    /// Bytes of memory of the device the stages run on, where they run on one and it says:
+    /// each step in flight holds its buffers there ([`crate::default_jobs`]).
+    pub device_memory: Option<u64>,
 }
 
 impl Stages {
@@ -22,6 +25,7 @@ impl Stages {
         Stages {
             search: Arc::new(KdSearch),
             tree: Arc::new(PlocTree),
+            device_memory: None,
         }
     }
 

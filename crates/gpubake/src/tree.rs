@@ -22,6 +22,7 @@ impl GpuStages {
     /// This device's stages as a bake takes them: its neighbour search and its tree.
     pub fn stages(self: Arc<Self>) -> Stages {
         Stages {
+            device_memory: self.gpu.device_memory(),
             search: self.clone(),
             tree: self,
         }

@@ -596,8 +596,12 @@ fn scaling_and_series(
                 scene,
                 steps: args.series,
             };
-            let (jobs, _) =
-                slosh_bake::default_jobs(cores, slosh_bake::available_memory(), Some(n));
+            let (jobs, _) = slosh_bake::default_jobs(
+                cores,
+                slosh_bake::available_memory(),
+                Some(n),
+                stages.device_memory,
+            );
             let dir = tempfile::tempdir()?;
             let opts = BatchOptions {
                 out: dir.path().to_path_buf(),
