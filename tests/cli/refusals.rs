@@ -124,14 +124,18 @@ fn the_jobs_default_comes_from_cores_and_memory() {
     assert!(out.contains(&expected), "{out}");
     assert!(out.contains("a step of 500 points needs about"), "{out}");
     assert!(out.contains("baked 2 steps"), "{out}");
-    // On a device, one job per core (lavapipe here: its heap is the host's memory).
+    // On a device, three jobs for every two cores (lavapipe here: its heap is the host's
+    // memory).
     let (ok, out, err) = bake_case(&case, &dir.path().join("gpu-cache"), &["--device", "gpu"]);
     if !ok && !in_ci() && err.contains("adapter") {
         eprintln!("skipping the device's default: {err}");
         return;
     }
     assert!(ok, "{err}");
-    let expected = format!("baking {cores} steps at once ({cores} cores, one step per core");
+    let expected = format!(
+        "baking {} steps at once ({cores} cores, three steps for every two cores",
+        (cores * 3 / 2).max(1)
+    );
     assert!(out.contains(&expected), "{out}");
     assert!(out.contains("of the device's"), "{out}");
 }
