@@ -111,8 +111,9 @@ mod tests {
         // The H200 host: 16 cores, 141 GB on the device; 1M points need about 1 GB there.
         let (jobs, why) = default_jobs(16, Some(128 << 30), Some(1_000_000), Some(141 << 30));
         assert_eq!(jobs, 24, "{why}");
-        assert_eq!(default_jobs(1, None, None, Some(8 << 30)).0, 1);
         assert!(why.contains("of the device's"), "{why}");
+        // One core: one job.
+        assert_eq!(default_jobs(1, None, None, Some(8 << 30)).0, 1);
         // An 8 GiB card: half of it holds four steps of 1M points (about 1.04 GB each).
         assert_eq!(
             default_jobs(16, Some(64 << 30), Some(1_000_000), Some(8 << 30)).0,
