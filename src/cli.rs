@@ -531,8 +531,9 @@ pub struct BakeArgs {
     /// Steps to bake: A..B (B excluded), A..=B (B included) or N, e.g. 0..50.
     #[arg(long)]
     pub steps: Option<String>,
-    /// Steps baked at once (each is also parallel inside). Default: half the cores,
-    /// within three quarters of the memory available, for the first step's size.
+    /// Steps baked at once (each is also parallel inside). Default: half the cores (three
+    /// for every two cores where the stages run on a GPU, within half its memory), within
+    /// three quarters of the memory available, for the first step's size.
     #[arg(long)]
     pub jobs: Option<usize>,
     /// Bake only shard I of N (0-based), e.g. 2/8 for task 2 of a job array, or `slurm`: this
