@@ -80,9 +80,10 @@ pub fn default_jobs(
     if let (Some(d), Some(j)) = (device_memory, per_device_job) {
         why += &format!("; about {:.2} GB of the device's {:.1} GB", gb(j), gb(d));
     }
+    // "Up to": the batch takes no more jobs than it has steps.
     (
         jobs,
-        format!("baking {jobs} steps at once ({why}; --jobs sets it)"),
+        format!("baking up to {jobs} steps at once ({why}; --jobs sets it)"),
     )
 }
 
