@@ -394,9 +394,9 @@ impl<T: Real> SurfaceParts<T> {
             normals: params.normals,
             h_factor: T::one(),
         };
-        // The search's fits made balls: a part of the fits' lap, where the search fitted.
-        let balls_seconds = std::sync::atomic::AtomicU64::new(0);
-        let initial_fits = || -> (Vec<Ball<T>>, Vec<BallFit>) {
+        // The balls and their fits, and where the search fitted, the seconds its fits took
+        // to become balls (a part of the fits' lap).
+        let initial_fits = || -> (Vec<Ball<T>>, Vec<BallFit>, Option<f64>) {
             let ball = |i: usize, normal, poly| Ball {
                 centre: pts[i],
                 radius: T::c(radii[i]),
@@ -413,7 +413,7 @@ impl<T: Real> SurfaceParts<T> {
             if let Some(fits) = &searched_fits {
                 // The search's fits (in f32), as the balls hold them.
                 let converting = std::time::Instant::now();
-                let made = (0..n)
+                let (balls, fits): (Vec<Ball<T>>, Vec<BallFit>) = (0..n)
                     .into_par_iter()
                     .map(|i| match fits[i] {
                         Some(f) => {
@@ -435,11 +435,7 @@ impl<T: Real> SurfaceParts<T> {
                         None => unfitted(i),
                     })
                     .unzip();
-                balls_seconds.store(
-                    converting.elapsed().as_secs_f64().to_bits(),
-                    std::sync::atomic::Ordering::Relaxed,
-                );
-                return made;
+                return (balls, fits, Some(converting.elapsed().as_secs_f64()));
             }
             // Each normal normalised once here, not once for every list it is in.
             let unit_nrm: Option<Vec<V3<T>>> = nrm.as_ref().map(|ns| {
@@ -447,7 +443,7 @@ impl<T: Real> SurfaceParts<T> {
                     .map(|n| n.normalized().unwrap_or(V3::zero()))
                     .collect()
             });
-            (0..n)
+            let (balls, fits): (Vec<Ball<T>>, Vec<BallFit>) = (0..n)
                 .into_par_iter()
                 .map_init(
                     || (Vec::new(), Vec::new(), Vec::new()),
@@ -474,17 +470,19 @@ impl<T: Real> SurfaceParts<T> {
                         }
                     },
                 )
-                .unzip()
+                .unzip();
+            (balls, fits, None)
         };
         // The fits, and beside them the caller's work on the spray (a bake's BVH): obvhs leaves
         // cores idle that the fits take.
-        let ((balls, mut ball_fits, fits_seconds), ()) = rayon::join(
+        let ((balls, mut ball_fits, balls_seconds, fits_seconds), ()) = rayon::join(
             || {
                 // From before the conversions above, which only the fits wait for.
-                let (balls, fits) = initial_fits();
+                let (balls, fits, balls_seconds) = initial_fits();
                 (
                     balls,
                     fits,
+                    balls_seconds,
                     fits_start.elapsed().as_secs_f64() + searched_fit_seconds,
                 )
             },
@@ -502,8 +500,7 @@ impl<T: Real> SurfaceParts<T> {
         }
         clock.extend(&[("initial fits", fits_seconds)]);
         clock.extend(&fit_parts);
-        if searched_fits.is_some() {
-            let seconds = f64::from_bits(balls_seconds.into_inner());
+        if let Some(seconds) = balls_seconds {
             clock.extend(&[("initial fits: balls", seconds)]);
         }
         clock.extend(&[("droplets", droplets_seconds)]);
