@@ -21,7 +21,7 @@
 #        one 4M step baked on the GPU with its device memory sampled every 50 ms.
 # bake-before: `bench bake` at 1M and two 4M steps through `slosh bake --device gpu`, the
 #        baseline binary $BEFORE and slosh alternated, twice each.
-# series: 64 steps of 1M through `slosh bake --device gpu` at 4, 8, 12 and 16 jobs, with the
+# series: 64 steps of 1M through `slosh bake --device gpu` at 8, 16, 24 and 32 jobs, with the
 #        CPU seconds they took (the baseline $BEFORE at 8 jobs too, where set).
 # before: the baseline binary $BEFORE (the one an issue's "now" column came from) on this
 #        card: `bench gpu` alternated with slosh (before, after, before, after), and its
@@ -61,7 +61,7 @@ if [ -n "${SMALL:-}" ]; then
     series_jobs="1 2"
 else
     p100k=100000 p1m=1000000 p4m=4000000 resident=500 threads=16 series=64 tmp=/tmp
-    series_jobs="4 8 12 16"
+    series_jobs="8 16 24 32"
 fi
 # run NAME ARGS: slosh ARGS, its output to OUT/NAME.txt; with BIN set, that binary instead.
 run() {
