@@ -10,6 +10,7 @@ use crate::batch::{
     BatchOptions, StepOutcome, StepSource, bake_one, plan, prepare_dir, series_key,
 };
 use crate::claim::Claim;
+use crate::urgency::{Pools, Urgency};
 use crate::withdrawable::Withdrawn;
 
 /// A cache directory held for one series, whose steps are baked on request.
@@ -18,6 +19,9 @@ pub struct OnDemand {
     opts: BatchOptions,
     key: SeriesKey,
     steps: Vec<(usize, f64)>,
+    /// Where [`OnDemand::bake_as`] bakes: a waited-for step, and steps ahead at a lower
+    /// priority, on `opts.threads` threads each.
+    pools: Pools,
     _claim: Claim,
 }
 
@@ -42,11 +46,13 @@ impl OnDemand {
         let key = series_key(source.as_ref(), &opts);
         let steps = plan(source.as_ref(), &opts);
         let claim = prepare_dir(&opts.out, &steps, &key)?;
+        let pools = Pools::new(opts.threads);
         Ok(OnDemand {
             source,
             opts,
             key,
             steps,
+            pools,
             _claim: claim,
         })
     }
@@ -101,6 +107,13 @@ impl OnDemand {
     /// holder baking the same step (in this process or another) is waited for.
     pub fn bake(&self, index: usize) -> StepOutcome {
         self.bake_unless_withdrawn(index, &|| false)
+    }
+
+    /// [`OnDemand::bake_unless_withdrawn`] on the pool for `urgency` instead of the calling
+    /// thread's: a step someone waits for takes the cores from the steps baked ahead.
+    pub fn bake_as(&self, index: usize, urgency: Urgency, withdrawn: Withdrawn<'_>) -> StepOutcome {
+        self.pools
+            .install(urgency, || self.bake_unless_withdrawn(index, withdrawn))
     }
 
     /// [`OnDemand::bake`], given up (a failed outcome, nothing written) once `withdrawn`

@@ -12,12 +12,14 @@ use std::time::Instant;
 /// Where steps come from: a cache directory, or an instrumented stand-in in tests.
 pub trait StepLoader: Send + Sync + 'static {
     type Step: Send + 'static;
-    /// Loads step `index`; the error names the file and what is wrong with it. A load may
-    /// ask `withdrawn` as it goes and give up (with any error) once it says `true`: nobody
-    /// wants the step any more.
+    /// Loads step `index`; the error names the file and what is wrong with it. `waited` says
+    /// that the frame loop waits for it (the step an urgent request asked for first), so it
+    /// may take resources from the loads ahead. A load may ask `withdrawn` as it goes and give
+    /// up (with any error) once it says `true`: nobody wants the step any more.
     fn load(
         &self,
         index: usize,
+        waited: bool,
         withdrawn: &(dyn Fn() -> bool + Sync),
     ) -> Result<Self::Step, String>;
 }
@@ -38,6 +40,8 @@ struct Queue {
     in_flight: HashSet<usize>,
     /// Loads in flight that an urgent request withdrew.
     withdrawn: HashSet<usize>,
+    /// The step the last urgent request asked for first, until a plain request.
+    waited: Option<usize>,
     generation: u64,
     shutdown: bool,
 }
@@ -80,7 +84,12 @@ impl<T: Send + 'static> Prefetcher<T> {
     /// Replaces the queue with `wanted`, in order of priority, skipping steps being loaded
     /// now. Returns the new generation; loads queued before it are dropped unstarted.
     pub fn request(&self, wanted: impl IntoIterator<Item = usize>) -> u64 {
+        self.replace(wanted, None)
+    }
+
+    fn replace(&self, wanted: impl IntoIterator<Item = usize>, waited: Option<usize>) -> u64 {
         let mut q = self.shared.lock();
+        q.waited = waited;
         let mut seen = HashSet::new();
         let waiting: VecDeque<usize> = wanted
             .into_iter()
@@ -95,9 +104,10 @@ impl<T: Send + 'static> Prefetcher<T> {
     }
 
     /// [`Prefetcher::request`], and every load in flight that `wanted` does not hold is
-    /// withdrawn: its result, if it gives up, is dropped unseen.
+    /// withdrawn: its result, if it gives up, is dropped unseen. The first of `wanted` loads
+    /// as waited for.
     pub fn request_urgent(&self, wanted: &[usize]) -> u64 {
-        let generation = self.request(wanted.iter().copied());
+        let generation = self.replace(wanted.iter().copied(), wanted.first().copied());
         let mut q = self.shared.lock();
         let stale: Vec<usize> = q
             .in_flight
@@ -156,7 +166,7 @@ impl<T> Drop for Prefetcher<T> {
 
 fn worker<S: StepLoader>(shared: &Shared, source: &S, tx: &Sender<Loaded<S::Step>>) {
     loop {
-        let (index, generation) = {
+        let (index, generation, waited) = {
             let mut q = shared.lock();
             loop {
                 if q.shutdown {
@@ -164,14 +174,14 @@ fn worker<S: StepLoader>(shared: &Shared, source: &S, tx: &Sender<Loaded<S::Step
                 }
                 if let Some(index) = q.waiting.pop_front() {
                     q.in_flight.insert(index);
-                    break (index, q.generation);
+                    break (index, q.generation, q.waited == Some(index));
                 }
                 q = shared.wake.wait(q).unwrap_or_else(PoisonError::into_inner);
             }
         };
         let start = Instant::now();
         let withdrawn = || shared.lock().withdrawn.contains(&index);
-        let result = source.load(index, &withdrawn);
+        let result = source.load(index, waited, &withdrawn);
         if result.is_err() && withdrawn() {
             let mut q = shared.lock();
             q.in_flight.remove(&index);
@@ -208,6 +218,8 @@ mod tests {
         loads: Mutex<Vec<usize>>,
         /// Loads that found themselves withdrawn when let go.
         gave_up: Mutex<Vec<usize>>,
+        /// Loads told that the frame loop waits for them.
+        waited: Mutex<Vec<usize>>,
         started: Mutex<SyncSender<usize>>,
         go: Mutex<Receiver<()>>,
     }
@@ -217,12 +229,19 @@ mod tests {
         fn load(
             &self,
             index: usize,
+            waited: bool,
             withdrawn: &(dyn Fn() -> bool + Sync),
         ) -> Result<usize, String> {
             self.loads
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner)
                 .push(index);
+            if waited {
+                self.waited
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push(index);
+            }
             let _ = self
                 .started
                 .lock()
@@ -253,6 +272,7 @@ mod tests {
         let source = Arc::new(Gated {
             loads: Mutex::new(Vec::new()),
             gave_up: Mutex::new(Vec::new()),
+            waited: Mutex::new(Vec::new()),
             started: Mutex::new(started_tx),
             go: Mutex::new(go_rx),
         });
@@ -340,6 +360,14 @@ mod tests {
             std::thread::yield_now();
         }
         assert!(prefetch.poll().is_empty());
+        // Only the urgent request's first step loaded as waited for; 1, still wanted, keeps
+        // the plain request's standing.
+        let waited = source
+            .waited
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
+        assert_eq!(waited, vec![40]);
     }
 
     #[test]

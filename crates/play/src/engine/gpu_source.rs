@@ -61,6 +61,7 @@ impl StepLoader for GpuSource {
     fn load(
         &self,
         index: usize,
+        waited: bool,
         withdrawn: &(dyn Fn() -> bool + Sync),
     ) -> Result<Prepared, String> {
         let path = self
@@ -73,9 +74,12 @@ impl StepLoader for GpuSource {
             if withdrawn() {
                 return Err("withdrawn".into());
             }
-            if let slosh_bake::StepOutcome::Failed(why) =
-                bake.bake_unless_withdrawn(index, withdrawn)
-            {
+            let urgency = if waited {
+                slosh_bake::Urgency::Waited
+            } else {
+                slosh_bake::Urgency::Ahead
+            };
+            if let slosh_bake::StepOutcome::Failed(why) = bake.bake_as(index, urgency, withdrawn) {
                 return Err(format!("step {index} did not bake: {why}"));
             }
         }
