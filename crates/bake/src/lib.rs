@@ -39,5 +39,5 @@ pub use step::{
     BakeError, BakedStep, bake_step, bake_step_parts, bake_step_parts_with,
     bake_step_unless_withdrawn, bake_step_with,
 };
-pub use urgency::{AHEAD_NICENESS, Urgency};
+pub use urgency::Urgency;
 pub use withdrawable::Withdrawn;

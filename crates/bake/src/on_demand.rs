@@ -3,6 +3,7 @@
 //! plays at once and its steps stay baked for the next run.
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use slosh_cache::{SeriesKey, step_file_name};
 
@@ -20,8 +21,9 @@ pub struct OnDemand {
     key: SeriesKey,
     steps: Vec<(usize, f64)>,
     /// Where [`OnDemand::bake_as`] bakes: a waited-for step, and steps ahead at a lower
-    /// priority, on `opts.threads` threads each.
-    pools: Pools,
+    /// priority, on `opts.threads` threads each; made at its first call (`render` and the
+    /// batch never make them).
+    pools: OnceLock<Pools>,
     _claim: Claim,
 }
 
@@ -46,13 +48,12 @@ impl OnDemand {
         let key = series_key(source.as_ref(), &opts);
         let steps = plan(source.as_ref(), &opts);
         let claim = prepare_dir(&opts.out, &steps, &key)?;
-        let pools = Pools::new(opts.threads);
         Ok(OnDemand {
             source,
             opts,
             key,
             steps,
-            pools,
+            pools: OnceLock::new(),
             _claim: claim,
         })
     }
@@ -113,6 +114,7 @@ impl OnDemand {
     /// thread's: a step someone waits for takes the cores from the steps baked ahead.
     pub fn bake_as(&self, index: usize, urgency: Urgency, withdrawn: Withdrawn<'_>) -> StepOutcome {
         self.pools
+            .get_or_init(|| Pools::new(self.opts.threads))
             .install(urgency, || self.bake_unless_withdrawn(index, withdrawn))
     }
 

@@ -16,7 +16,7 @@ pub enum Urgency {
 
 /// How much lower the priority of the pool that bakes ahead is (nice, added to the
 /// process's): at 10 the kernel weighs a thread 110 against 1024 at the process's own.
-pub const AHEAD_NICENESS: i32 = 10;
+pub(crate) const AHEAD_NICENESS: i32 = 10;
 
 /// A pool for each urgency, of `threads` threads each.
 pub(crate) struct Pools {
