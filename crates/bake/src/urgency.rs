@@ -19,24 +19,10 @@ pub enum Urgency {
 pub(crate) const AHEAD_NICENESS: i32 = 10;
 
 /// A pool for each urgency, of `threads` threads each.
+#[derive(Debug)]
 pub(crate) struct Pools {
     waited: Option<ThreadPool>,
     ahead: Option<ThreadPool>,
-}
-
-impl std::fmt::Debug for Pools {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Pools")
-            .field(
-                "waited",
-                &self.waited.as_ref().map(ThreadPool::current_num_threads),
-            )
-            .field(
-                "ahead",
-                &self.ahead.as_ref().map(ThreadPool::current_num_threads),
-            )
-            .finish()
-    }
 }
 
 impl Pools {
