@@ -17,15 +17,85 @@ static ALLOCATOR: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 /// `metadata_thp:always` advise its memory for transparent huge pages (the kernels here give
 /// them only where asked), 512 times fewer faults and TLB entries.
 ///
-/// Freed pages go back to the system after jemalloc's own 10 s: steps in flight reuse them
-/// long before. Never handing them back (`dirty_decay_ms:-1`) saved a few more faults but
-/// let each arena keep its own: three 4M-point CPU steps on 2 cores peaked at 12.9 GB against
-/// 5.7 GB with the decay (glibc: 6.9 GB), beyond what the jobs' memory estimate allows.
+/// Freed pages go back to the system after jemalloc's own 10 s, purged a little at a time
+/// from the moment they are freed. Never handing them back (`dirty_decay_ms:-1`) let each
+/// arena keep its own in the CPU bake, whose steps allocate on every thread: three 4M-point
+/// CPU steps on 2 cores peaked at 12.9 GB against 5.7 GB with the decay (glibc: 6.9 GB),
+/// beyond what the jobs' memory estimate allows. A bake whose stages run on a GPU keeps them
+/// ([`keep_freed_pages`]).
 ///
 /// The crate prefixes jemalloc's symbols (it does not replace `malloc`), hence the name.
 #[cfg(unix)]
 #[unsafe(export_name = "_rjem_malloc_conf")]
 pub static MALLOC_CONF: Option<&'static u8> = Some(&b"thp:always,metadata_thp:always\0"[0]);
+
+/// Stops jemalloc handing freed pages back to the system from now on, in every arena, those
+/// made later too: for a bake whose stages run on a GPU. There the decay had the kernel
+/// fault and zero the pages again: a series of 64 steps of 1M points on a 16-core H100 host
+/// made 1.6 million page faults and spent 26-28 s in the kernel against 8-10 s without it,
+/// and a 4M-point step took a sixth longer. Its peak memory grows by a fifth or less (the
+/// series 15.6-15.8 GB against 18.6-19.1, within the jobs' estimate of 2.1 GB a step in
+/// flight; the 4M step 3.8 GB against 4.2): most of a step's time is on one thread, whose
+/// arena reuses what it freed (`docs/results-bake.md`, stop 57).
+pub fn keep_freed_pages() -> Result<(), String> {
+    #[cfg(unix)]
+    {
+        for name in ["arenas.dirty_decay_ms", "arenas.muzzy_decay_ms"] {
+            jemalloc::write(name, -1isize)?;
+        }
+        let narenas: u32 = jemalloc::read("arenas.narenas")?;
+        for i in 0..narenas {
+            // Arenas not made yet take the defaults just set.
+            if !jemalloc::read::<bool>(&format!("arena.{i}.initialized"))? {
+                continue;
+            }
+            for decay in ["dirty_decay_ms", "muzzy_decay_ms"] {
+                jemalloc::write(&format!("arena.{i}.{decay}"), -1isize)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// jemalloc's control interface (`mallctl`), by name.
+#[cfg(unix)]
+mod jemalloc {
+    use std::ffi::{CString, c_void};
+
+    fn call<T>(name: &str, old: Option<&mut T>, new: Option<&mut T>) -> Result<(), String> {
+        let c_name = CString::new(name).map_err(|e| format!("mallctl name {name:?}: {e}"))?;
+        let mut len = size_of::<T>();
+        let (old_ptr, old_len) = match old {
+            Some(v) => ((v as *mut T).cast::<c_void>(), &mut len as *mut usize),
+            None => (std::ptr::null_mut(), std::ptr::null_mut()),
+        };
+        let (new_ptr, new_len) = match new {
+            Some(v) => ((v as *mut T).cast::<c_void>(), size_of::<T>()),
+            None => (std::ptr::null_mut(), 0),
+        };
+        // SAFETY: both values are `T`s of the sizes mallctl is told, the type `name` has.
+        let status = unsafe {
+            tikv_jemalloc_sys::mallctl(c_name.as_ptr(), old_ptr, old_len, new_ptr, new_len)
+        };
+        if status == 0 {
+            Ok(())
+        } else {
+            Err(format!("jemalloc's {name}: error {status}"))
+        }
+    }
+
+    /// The value of `name`, which has type `T`.
+    pub(super) fn read<T: Default>(name: &str) -> Result<T, String> {
+        let mut value = T::default();
+        call(name, Some(&mut value), None)?;
+        Ok(value)
+    }
+
+    /// Sets `name`, which has type `T`.
+    pub(super) fn write<T>(name: &str, mut value: T) -> Result<(), String> {
+        call(name, None, Some(&mut value))
+    }
+}
 
 /// Keeps memory that the C libraries free (zstd's contexts, a software Vulkan driver's
 /// buffers), which glibc's `malloc` serves, in the process for reuse too. glibc maps every
@@ -52,32 +122,40 @@ const THREAD_HEAP_BYTES: i32 = 64 << 20;
 
 #[cfg(all(test, unix))]
 mod tests {
-    use std::ffi::{CStr, c_char, c_void};
+    use std::ffi::{CStr, c_char};
 
-    /// Reads jemalloc's option `name` into `value`, of the option's own type.
-    fn read<T>(name: &CStr, value: &mut T) {
-        let mut len = size_of::<T>();
-        // SAFETY: `value` is a `T` of `len` bytes, the size mallctl is told; nothing is written.
-        let status = unsafe {
-            tikv_jemalloc_sys::mallctl(
-                name.as_ptr(),
-                (value as *mut T).cast::<c_void>(),
-                &mut len,
-                std::ptr::null_mut(),
-                0,
-            )
-        };
-        assert_eq!(status, 0, "mallctl({name:?}) failed: {status}");
-    }
+    use super::jemalloc::read;
 
-    fn text(name: &CStr) -> String {
-        let mut value: *const c_char = std::ptr::null();
-        read(name, &mut value);
-        assert!(!value.is_null(), "{name:?} has no value");
+    fn text(name: &str) -> String {
+        let value: Option<&'static c_char> = read(name).expect("a readable option");
+        let value = value.unwrap_or_else(|| panic!("{name:?} has no value"));
         // SAFETY: jemalloc returns a pointer to one of its static, NUL-terminated option names.
         unsafe { CStr::from_ptr(value) }
             .to_string_lossy()
             .into_owned()
+    }
+
+    /// After [`super::keep_freed_pages`], the arenas made before and after it keep freed
+    /// pages; the options read at start-up are unchanged.
+    #[test]
+    fn a_gpu_bake_keeps_freed_pages() {
+        super::keep_freed_pages().expect("the decays set");
+        let made_after = std::thread::spawn(|| {
+            let held = vec![1u8; 1 << 20];
+            let arena: u32 = read("thread.arena").expect("the thread's arena");
+            drop(held);
+            arena
+        })
+        .join()
+        .expect("the thread ran");
+        for arena in [0, made_after] {
+            for decay in ["dirty_decay_ms", "muzzy_decay_ms"] {
+                let ms: isize = read(&format!("arena.{arena}.{decay}")).expect("the arena's decay");
+                assert_eq!(ms, -1, "arena {arena}'s {decay}");
+            }
+        }
+        let ms: isize = read("opt.dirty_decay_ms").expect("the option");
+        assert_eq!(ms, 10_000);
     }
 
     /// The options are [`super::MALLOC_CONF`]'s, not jemalloc's defaults (huge pages left
@@ -86,12 +164,11 @@ mod tests {
     /// linger after that), as [`super::MALLOC_CONF`] says.
     #[test]
     fn jemalloc_reads_the_options() {
-        for (name, want) in [(c"opt.dirty_decay_ms", 10_000), (c"opt.muzzy_decay_ms", 0)] {
-            let mut ms: isize = -2;
-            read(name, &mut ms);
+        for (name, want) in [("opt.dirty_decay_ms", 10_000), ("opt.muzzy_decay_ms", 0)] {
+            let ms: isize = read(name).expect("the option");
             assert_eq!(ms, want, "{name:?}");
         }
-        assert_eq!(text(c"opt.thp"), "always");
-        assert_eq!(text(c"opt.metadata_thp"), "always");
+        assert_eq!(text("opt.thp"), "always");
+        assert_eq!(text("opt.metadata_thp"), "always");
     }
 }
