@@ -111,13 +111,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     if !cfg.quiet {
         say!("stages: {}", cfg.options.stages.describe());
     }
-    // Stages on a device (as `default_jobs` tells them): freed pages stay in the process
-    // (`machine::keep_freed_pages` says what that saved and cost).
-    if opts.stages.device_memory.is_some()
-        && let Err(e) = crate::machine::keep_freed_pages()
-    {
-        eprintln!("freed memory goes back to the system as before: {e}");
-    }
+    crate::machine::keep_freed_pages_on_a_device(&opts.stages);
     let bar = if cfg.quiet {
         ProgressBar::hidden()
     } else {

@@ -30,10 +30,11 @@ static ALLOCATOR: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 pub static MALLOC_CONF: Option<&'static u8> = Some(&b"thp:always,metadata_thp:always\0"[0]);
 
 /// Stops jemalloc handing freed pages back to the system from now on, in every arena, those
-/// made later too: for a bake whose stages run on a GPU. There the decay had the kernel
-/// fault and zero the pages again: a series of 64 steps of 1M points on a 16-core H100 host
-/// made 1.6 million page faults and spent 26-28 s in the kernel against 8-10 s without it,
-/// and a 4M-point step took a sixth longer. Its peak memory grows by a fifth or less (the
+/// made later too: for a bake whose stages run on a GPU, and a raw case played so. There the
+/// decay had the kernel fault and zero the pages again: a series of 64 steps of 1M points on
+/// a 16-core H100 host made 1.6 million page faults and spent 26-33 s in the kernel against
+/// 8-11 s without it, and a raw case of 1M points played 18-34 % slower in order (58-68 s
+/// against 12-13 s in the kernel; its peak memory 5.2-5.3 GB against 6.9). Its peak memory grows by a fifth or less (the
 /// series 15.6-15.8 GB against 18.6-19.1, within the jobs' estimate of 2.1 GB a step in
 /// flight; the 4M step 3.8 GB against 4.2): most of a step's time is on one thread, whose
 /// arena reuses what it freed (`docs/results-bake.md`, stop 57).
@@ -55,6 +56,16 @@ pub fn keep_freed_pages() -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// [`keep_freed_pages`] where `stages` run on a device (as `slosh_bake::default_jobs` tells
+/// them: the bake's, or a raw case's as it plays), or a line on stderr where jemalloc refuses.
+pub fn keep_freed_pages_on_a_device(stages: &slosh_bake::Stages) {
+    if stages.device_memory.is_some()
+        && let Err(e) = keep_freed_pages()
+    {
+        eprintln!("freed memory goes back to the system as before: {e}");
+    }
 }
 
 /// jemalloc's control interface (`mallctl`), by name.

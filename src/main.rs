@@ -79,6 +79,11 @@ fn run_bench(command: cli::BenchCommand) -> Result<()> {
         }
         BenchCommand::Scrub(a) => {
             let settings = bench::scrub(&a)?;
+            // The raw case on the GPU measures the player as it plays one.
+            if settings.raw_case && settings.raw_case_gpu {
+                machine::keep_freed_pages()
+                    .map_err(|e| anyhow::anyhow!("--raw-case-gpu: keeping freed memory: {e}"))?;
+            }
             written(&settings.out, &scrub::run(&settings)?, true)
         }
     }

@@ -47,6 +47,7 @@ pub fn open(
         quiet: true,
     };
     let cfg = BakeConfig::from_args(&args)?;
+    crate::machine::keep_freed_pages_on_a_device(&cfg.options.stages);
     let BakeInput::Case(case_data) = cfg.input else {
         bail!(
             "{}: a point cloud is one step: bake it with `slosh bake {} --out DIR` and play DIR",

@@ -221,7 +221,7 @@ impl Report for ScrubReport {
         if !self.raw_cases.is_empty() {
             let _ = writeln!(
                 md,
-                "## Raw EnSight, baked as played\n\nThe same sphere written as an EnSight 6 binary case with its normals, played by the engine with no bake first (`slosh play CASE.case`): each step is baked by the loader that first needs it (its neighbours and initial fits found where the table says: `--raw-case-gpu` puts them on the engine's GPU), into an emptied cache directory. Sequential: playback from step 0 with nothing baked; jumps: to steps not baked yet. *One step*: reading it from the case, and reading and baking it into its file, alone on all cores (medians of 3).\n"
+                "## Raw EnSight, baked as played\n\nThe same sphere written as an EnSight 6 binary case with its normals, played by the engine with no bake first (`slosh play CASE.case`): each step is baked by the loader that first needs it (its neighbours and initial fits found where the table says: `--raw-case-gpu` puts them on the engine's GPU, and then the process keeps the memory it frees for the rest of the run, as `slosh play CASE.case` does where it bakes on a GPU), into an emptied cache directory. Sequential: playback from step 0 with nothing baked; jumps: to steps not baked yet. *One step*: reading it from the case, and reading and baking it into its file, alone on all cores (medians of 3).\n"
             );
             let _ = writeln!(
                 md,
