@@ -162,6 +162,15 @@ pub fn nearest_source() -> String {
     )
 }
 
+/// The orientation votes' module: entry point `orient_votes`.
+pub fn orient_votes_source() -> String {
+    format!(
+        "{}{GRID_WGSL}{}",
+        slosh_mls::vote_word_wgsl(),
+        include_str!("../../../shaders/orient_votes.wgsl")
+    )
+}
+
 /// The lists module: entry points `cut_lists` and `write_lists`.
 pub fn lists_source() -> String {
     format!(

@@ -19,6 +19,7 @@ mod index;
 mod layout;
 mod lists;
 mod nearest;
+mod orient;
 mod passes;
 mod search;
 mod tree;
@@ -27,6 +28,6 @@ mod unions;
 pub use layout::{
     ComponentParams, FitSettings, NEAREST_MAX, SearchParams, TreeNode, TreeParams,
     UNION_SPAN_WORDS, UnionParams, components_source, fits_source, lists_source, nearest_source,
-    tree_source, unions_source,
+    orient_votes_source, tree_source, unions_source,
 };
 pub use passes::GpuStages;

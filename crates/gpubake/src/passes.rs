@@ -7,8 +7,8 @@ use slosh_render::Gpu;
 
 use crate::dispatch::{PassMemory, Stamps, gpu_error, layout, record};
 use crate::layout::{
-    UNION_SPAN_WORDS, components_source, fits_source, lists_source, nearest_source, tree_source,
-    unions_source,
+    UNION_SPAN_WORDS, components_source, fits_source, lists_source, nearest_source,
+    orient_votes_source, tree_source, unions_source,
 };
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
@@ -23,6 +23,9 @@ pub struct GpuStages {
     pub(crate) gpu: Arc<Gpu>,
     pub(crate) nearest_layout: wgpu::BindGroupLayout,
     pub(crate) nearest: wgpu::ComputePipeline,
+    /// `shaders/orient_votes.wgsl`'s layout and pass.
+    pub(crate) orient_layout: wgpu::BindGroupLayout,
+    pub(crate) orient_votes: wgpu::ComputePipeline,
     pub(crate) lists_layout: wgpu::BindGroupLayout,
     pub(crate) cut: wgpu::ComputePipeline,
     pub(crate) write: wgpu::ComputePipeline,
@@ -182,6 +185,20 @@ impl GpuStages {
             "write_lists",
             &[],
         )?;
+        // The points (binding 1 and 10), the votes (4), each point's nearest (5), the normals.
+        let orient_layout = layout(
+            &gpu,
+            "orientation votes",
+            &[(1, false), (10, false), (4, true), (5, false), (6, false)],
+        );
+        let orient_votes = slosh_render::checked_pipeline(
+            &gpu,
+            &pipeline_layout(&orient_layout),
+            "orient_votes",
+            orient_votes_source(),
+            "orient_votes",
+            &[],
+        )?;
         let tree_layout = layout(
             &gpu,
             "bvh build",
@@ -240,6 +257,8 @@ impl GpuStages {
         Ok(GpuStages {
             nearest_layout,
             nearest,
+            orient_layout,
+            orient_votes,
             lists_layout,
             cut,
             write,

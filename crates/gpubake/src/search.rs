@@ -3,7 +3,7 @@
 
 use std::num::NonZero;
 
-use slosh_mls::{ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
+use slosh_mls::{Around, ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
 
 use crate::cells::SortedPoints;
 use crate::dispatch::{gpu_error, guarded, storage};
@@ -70,6 +70,18 @@ impl PointIndex for GpuIndex<'_> {
         guarded(
             self.search.gpu(),
             || crate::lists::lists(self, request),
+            gpu_error,
+        )
+    }
+
+    fn orientation_votes(
+        &self,
+        around: &[Around],
+        normals: &[Option<[f64; 3]>],
+    ) -> Result<Option<Vec<u32>>, SurfaceError> {
+        guarded(
+            self.search.gpu(),
+            || crate::orient::orientation_votes(self, around, normals),
             gpu_error,
         )
     }

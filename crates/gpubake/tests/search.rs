@@ -367,9 +367,13 @@ fn gpu_neighbours_equal_the_k_d_trees_where_no_distances_tie() {
 
 #[test]
 fn the_search_params_mirror_the_wgsl_layout() {
-    use slosh_gpubake::{SearchParams, lists_source, nearest_source};
+    use slosh_gpubake::{SearchParams, lists_source, nearest_source, orient_votes_source};
     use slosh_testkit::check_layout;
-    for (name, source) in [("nearest", nearest_source()), ("lists", lists_source())] {
+    for (name, source) in [
+        ("nearest", nearest_source()),
+        ("lists", lists_source()),
+        ("orientation votes", orient_votes_source()),
+    ] {
         let module = slosh_testkit::wgsl::validate(name, &source);
         check_layout!(
             &module,

@@ -46,7 +46,10 @@ pub use intersect::{
 pub use lists::distance2;
 pub use neighbours::{Neighbours, csr_pieces};
 pub use order::{MortonGrid, morton_keys, morton_order};
-pub use orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
+pub use orient::{
+    Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation, vote_word,
+    vote_word_wgsl,
+};
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
 pub use roots::{eval as eval_cubic, first_root_in, quadratic_roots};

@@ -27,6 +27,43 @@ const PATCH_WEIGHT: f64 = 0.75;
 const PATCH_FRACTION: f64 = 0.25;
 const PATCH_MINORITY: f64 = 0.5;
 
+/// A point's first-pass votes as a word, where another implementation cast them (a GPU's,
+/// `PointIndex::orientation_votes`): its patch edges in the low [`ORIENT_NEIGHBOURS`] bits
+/// (bit k: its k-th neighbour), and the bits below. One source for the shader that writes
+/// them (`shaders/orient_votes.wgsl`).
+pub mod vote_word {
+    /// Its neighbours reverse its normal.
+    pub const REVERSE: u32 = 1 << 16;
+    /// One of its patch edges joins contradicting normals.
+    pub const CONTRADICTED: u32 = 1 << 17;
+    /// Rounding could have decided something: the caller casts this point's votes itself.
+    pub const RECAST: u32 = 1 << 18;
+    /// How near a tangent weight may lie to 0 or to the patch weight, and a dot product of
+    /// two unit normals to 0, before rounding could decide it: the f32 offsets (split
+    /// positions) and normals lie within about 1e-6 of f64's, relatively, and the weight is
+    /// a few operations on them; a hundred times that.
+    pub const WEIGHT_MARGIN: f32 = 1e-4;
+    /// How near the reversal threshold a vote may lie (its ORIENT_NEIGHBOURS weights each
+    /// within [`WEIGHT_MARGIN`]'s error, summed in f32) before rounding could decide it.
+    pub const VOTE_MARGIN: f32 = 1e-2;
+}
+
+/// The constants the shader of first-pass votes takes from here, as WGSL.
+pub fn vote_word_wgsl() -> String {
+    format!(
+        "const ORIENT_NEIGHBOURS: u32 = {ORIENT_NEIGHBOURS}u;\nconst NO_POINT: u32 = {NO_POINT}u;\n\
+         const PATCH_WEIGHT: f32 = {PATCH_WEIGHT:?};\nconst REVERSE_BELOW: f32 = {REVERSE_BELOW:?};\n\
+         const VOTE_REVERSE: u32 = {}u;\nconst VOTE_CONTRADICTED: u32 = {}u;\n\
+         const VOTE_RECAST: u32 = {}u;\nconst WEIGHT_MARGIN: f32 = {:e};\n\
+         const VOTE_MARGIN: f32 = {:e};\n",
+        vote_word::REVERSE,
+        vote_word::CONTRADICTED,
+        vote_word::RECAST,
+        vote_word::WEIGHT_MARGIN,
+        vote_word::VOTE_MARGIN,
+    )
+}
+
 /// What the repair changed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct OrientationRepair {
@@ -87,11 +124,15 @@ impl Edges<'_> {
     }
 }
 
-/// Repairs `normals` (unit or `None`) of `points`, given each point's nearest neighbours.
+/// Repairs `normals` (unit or `None`) of `points`, given each point's nearest neighbours and,
+/// where another implementation cast them, the first pass's votes ([`vote_word`]): those not
+/// marked [`vote_word::RECAST`] are taken as they are, the others cast here. The result is
+/// the same either way.
 pub fn repair_orientation(
     points: &[[f64; 3]],
     normals: &mut [Option<[f64; 3]>],
     nearest: &[Around],
+    first_votes: Option<&[u32]>,
 ) -> OrientationRepair {
     let n = points.len();
     let original: Vec<Option<[f64; 3]>> = normals.par_iter().copied().collect();
@@ -104,46 +145,82 @@ pub fn repair_orientation(
     // found by the first pass beside its votes: the weights come from the original normals,
     // which no pass changes, and a second sweep over every edge took as long as the votes.
     let mut strong: Vec<u32> = Vec::new();
+    // Whether a patch edge joins contradicting normals, where the first pass's votes came
+    // with it and reversed none: the patch step need not sweep the edges to find out.
+    let mut known_contradicted = None;
+    let mut reversed_any = false;
     for pass in 0..PASSES {
         let current: &[Option<[f64; 3]>] = normals;
-        let voted: Vec<(bool, u32)> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let Some(ni) = current[i] else {
-                    return (false, 0);
-                };
-                let (mut vote, mut total, mut mask) = (0.0, 0.0, 0u32);
-                for (k, j, w) in edges.slots(i) {
-                    if w >= PATCH_WEIGHT {
-                        mask |= 1 << k;
-                    }
-                    if let Some(nj) = current[j as usize] {
-                        vote += w * dot(ni, nj).signum();
-                        total += w;
-                    }
+        let cast = |i: usize| -> (bool, u32) {
+            let Some(ni) = current[i] else {
+                return (false, 0);
+            };
+            let (mut vote, mut total, mut mask) = (0.0, 0.0, 0u32);
+            for (k, j, w) in edges.slots(i) {
+                if w >= PATCH_WEIGHT {
+                    mask |= 1 << k;
                 }
-                (total > 0.0 && vote < -REVERSE_BELOW * total, mask)
-            })
-            .collect();
-        let (reverse, masks): (Vec<bool>, Vec<u32>) = voted.into_par_iter().unzip();
+                if let Some(nj) = current[j as usize] {
+                    vote += w * dot(ni, nj).signum();
+                    total += w;
+                }
+            }
+            (total > 0.0 && vote < -REVERSE_BELOW * total, mask)
+        };
+        let given = first_votes.filter(|v| pass == 0 && v.len() == n);
+        let (reverse, masks): (Vec<bool>, Vec<u32>) = match given {
+            Some(words) => {
+                // A point cast here may have a contradicted patch edge the word does not say.
+                let recast_any = words.par_iter().any(|w| w & vote_word::RECAST != 0);
+                if !recast_any {
+                    known_contradicted =
+                        Some(words.par_iter().any(|w| w & vote_word::CONTRADICTED != 0));
+                }
+                words
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, &w)| {
+                        if w & vote_word::RECAST != 0 {
+                            cast(i)
+                        } else {
+                            (
+                                w & vote_word::REVERSE != 0,
+                                w & ((1 << ORIENT_NEIGHBOURS) - 1),
+                            )
+                        }
+                    })
+                    .unzip()
+            }
+            None => (0..n).into_par_iter().map(cast).unzip(),
+        };
         if pass == 0 {
             strong = masks;
         }
-        if !reverse.iter().any(|&r| r) {
+        if !reverse.par_iter().any(|&r| r) {
             break;
         }
+        reversed_any = true;
         for (normal, r) in normals.iter_mut().zip(reverse) {
             if r {
                 *normal = normal.map(neg);
             }
         }
     }
-    let (patches, points_in) = reverse_contradicted_patches(normals, &edges, &strong);
-    let flipped_points = normals
-        .par_iter()
-        .zip(&original)
-        .filter(|(now, was)| matches!((now, was), (Some(a), Some(b)) if dot(*a, *b) < 0.0))
-        .count();
+    if reversed_any {
+        known_contradicted = None;
+    }
+    let (patches, points_in) =
+        reverse_contradicted_patches(normals, &edges, &strong, known_contradicted);
+    // Nothing reversed leaves every normal as it came.
+    let flipped_points = if reversed_any || patches > 0 {
+        normals
+            .par_iter()
+            .zip(&original)
+            .filter(|(now, was)| matches!((now, was), (Some(a), Some(b)) if dot(*a, *b) < 0.0))
+            .count()
+    } else {
+        0
+    };
     OrientationRepair {
         flipped_points,
         flipped_patches: patches,
@@ -153,11 +230,13 @@ pub fn repair_orientation(
 
 /// Patches: points joined by tangent edges whose normals agree. A patch of at most
 /// `PATCH_FRACTION` of the points whose border edges all contradict it is reversed. `strong`:
-/// each point's patch edges (bit k: its k-th neighbour's).
+/// each point's patch edges (bit k: its k-th neighbour's); `contradicted`, whether one of
+/// them joins contradicting normals, where that is known already.
 fn reverse_contradicted_patches(
     normals: &mut [Option<[f64; 3]>],
     edges: &Edges,
     strong: &[u32],
+    contradicted: Option<bool>,
 ) -> (usize, usize) {
     let n = normals.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
@@ -181,9 +260,11 @@ fn reverse_contradicted_patches(
     // Agreeing patch edges join patches, so a patch's border is made of contradicting ones:
     // where no patch edge contradicts, no patch has a border and none is reversed.
     let current: &[Option<[f64; 3]>] = normals;
-    let contradicted = (0..n)
-        .into_par_iter()
-        .any(|i| strong_of(i).any(|j| !agree(current, i, j as usize)));
+    let contradicted = contradicted.unwrap_or_else(|| {
+        (0..n)
+            .into_par_iter()
+            .any(|i| strong_of(i).any(|j| !agree(current, i, j as usize)))
+    });
     if !contradicted {
         return (0, 0);
     }
@@ -286,7 +367,7 @@ mod tests {
         for &i in &patch {
             normals[i] = Some([0.0, 0.0, -1.0]);
         }
-        let repair = repair_orientation(&points, &mut normals, &nearest);
+        let repair = repair_orientation(&points, &mut normals, &nearest, None);
         assert!(normals.iter().all(|n| *n == Some([0.0, 0.0, 1.0])));
         assert_eq!(repair.flipped_points, singles.len() + patch.len());
         // Votes wear the patch down from its corners; what is left goes back whole.

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use crate::error::SurfaceError;
 use crate::found::NeighbourLists;
 use crate::lists::neighbour_lists;
+use crate::orient::Around;
 use crate::support::NormalsMode;
 
 /// The initial fits a search may compute with the lists, where the lists already sit where it
@@ -77,6 +78,17 @@ pub trait PointIndex {
     /// cut by index, minus opposing normals, in index order), the reach each records, and the
     /// links asked for.
     fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError>;
+
+    /// The orientation check's first-pass votes (`orient.rs`, [`crate::vote_word`]) of every
+    /// point, given its nearest (`around`) and the unit normals, where this index casts them
+    /// itself (a GPU's); `None` where it leaves them to `repair_orientation`.
+    fn orientation_votes(
+        &self,
+        _around: &[Around],
+        _normals: &[Option<[f64; 3]>],
+    ) -> Result<Option<Vec<u32>>, SurfaceError> {
+        Ok(None)
+    }
 }
 
 /// A way to search point sets for neighbours, shared by the steps a bake has in flight.

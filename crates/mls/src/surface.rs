@@ -255,7 +255,8 @@ impl<T: Real> SurfaceParts<T> {
         let orientation = match unit_normals.as_mut() {
             Some(ns) => {
                 let around: Vec<Around> = queried.par_iter().map(|q| q.2).collect();
-                repair_orientation(&rel, ns, &around)
+                let votes = index.orientation_votes(&around, ns)?;
+                repair_orientation(&rel, ns, &around, votes.as_deref())
             }
             None => OrientationRepair::default(),
         };

@@ -1,0 +1,77 @@
+//! The orientation check's first-pass votes on the GPU (`shaders/orient_votes.wgsl`): every
+//! point's tangent weights and agreements with its nearest in f32, each point whose outcome
+//! rounding could have decided marked for the host to cast again in f64
+//! (`slosh_mls::vote_word`), so that the repair comes out as the CPU's.
+
+use rayon::prelude::*;
+use slosh_mls::{Around, SurfaceError};
+
+use crate::dispatch::{bind, groups, output, storage, uniform};
+use crate::index::GpuIndex;
+use crate::layout::SearchParams;
+
+/// The votes of every point of `index`, given its nearest (`around`) and unit normals; `None`
+/// where the caller's order is not the GPU's (Morton) order, which a bake's always is, or the
+/// neighbours take more than one binding.
+pub(crate) fn orientation_votes(
+    index: &GpuIndex<'_>,
+    around: &[Around],
+    normals: &[Option<[f64; 3]>],
+) -> Result<Option<Vec<u32>>, SurfaceError> {
+    let n = around.len();
+    let search = index.search;
+    let gpu = search.gpu();
+    let around_bytes = size_of_val(around) as u64;
+    if !index.sorted.identity
+        || normals.len() != n
+        || index.points.len() != n
+        || n == 0
+        || around_bytes > gpu.max_binding()
+    {
+        return Ok(None);
+    }
+    let unit: Vec<[f32; 4]> = normals
+        .par_iter()
+        .map(|v| v.map_or([0.0; 4], |v| [v[0] as f32, v[1] as f32, v[2] as f32, 1.0]))
+        .collect();
+    let neighbours = storage(&search.memory, "orientation neighbours", around)?;
+    let unit = storage(&search.memory, "orientation normals", &unit)?;
+    let votes = output(&search.memory, "orientation votes", n as u64 * 4);
+    let (x, y, row_threads) = groups(gpu, n as u32);
+    let params = uniform(
+        gpu,
+        &SearchParams {
+            lo: [0.0; 4],
+            count: n as u32,
+            first: 0,
+            side: 1,
+            wanted: 0,
+            flags: 0,
+            out_base: 0,
+            row_threads,
+            margin: 0.0,
+            shells: 0,
+            band: 0.0,
+            _pad1: 0,
+            _pad2: 0,
+        },
+    );
+    let group = bind(
+        gpu,
+        &search.orient_layout,
+        &[
+            (0, &params),
+            (1, &index.positions),
+            (10, &index.residuals),
+            (4, &votes),
+            (5, &neighbours),
+            (6, &unit),
+        ],
+    );
+    search.run(
+        "orientation votes",
+        &[(&search.orient_votes, (x, y))],
+        &group,
+    )?;
+    search.read_back(&votes, n as u64 * 4).map(Some)
+}

@@ -1,0 +1,160 @@
+#![allow(clippy::unwrap_used)]
+//! The orientation check's first-pass votes cast on the GPU (`shaders/orient_votes.wgsl`)
+//! against the CPU's (`slosh_mls::repair_orientation`, the reference): the same repaired
+//! normals and the same counts, on clean, reversed, sheet-like and degenerate normals, with
+//! most votes taken from the GPU and those rounding could decide cast again on the host.
+
+use std::num::NonZero;
+use std::sync::Arc;
+
+use slosh_gpubake::GpuStages;
+use slosh_mls::{
+    Around, NO_POINT, NeighbourSearch, ORIENT_NEIGHBOURS, morton_order, repair_orientation,
+    vote_word,
+};
+use slosh_render::Gpu;
+use slosh_testkit::{adapter, gpu_or_skip};
+
+/// A small xorshift, so the cases are the same on every run.
+struct Random(u64);
+
+impl Random {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn unit(v: [f64; 3]) -> [f64; 3] {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|c| c / l)
+}
+
+/// A jittered sphere of `n` points (Fibonacci), with its outward normals tilted a little.
+fn sphere(n: usize, random: &mut Random) -> (Vec<[f64; 3]>, Normals) {
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let phi = i as f64 * 2.399_963_229_728_653;
+            let r = (1.0 - z * z).sqrt();
+            let p = [r * phi.cos(), r * phi.sin(), z];
+            let jitter = 1.0 + 0.01 * (random.next() - 0.5);
+            let tilt = [
+                0.1 * (random.next() - 0.5),
+                0.1 * (random.next() - 0.5),
+                0.0,
+            ];
+            (
+                p.map(|c| c * jitter),
+                Some(unit([p[0] + tilt[0], p[1] + tilt[1], p[2] + tilt[2]])),
+            )
+        })
+        .unzip()
+}
+
+/// Unit normals, or none.
+type Normals = Vec<Option<[f64; 3]>>;
+
+/// The cases: (name, points in Morton order, their normals).
+fn cases() -> Vec<(&'static str, Vec<[f64; 3]>, Normals)> {
+    let mut random = Random(0x9e37_79b9_7f4a_7c15);
+    let mut out = Vec::new();
+    let (points, normals) = sphere(20_000, &mut random);
+    out.push(("clean sphere", points.clone(), normals.clone()));
+    // A sixth reversed one by one, and a cap reversed whole.
+    let reversed: Normals = points
+        .iter()
+        .zip(&normals)
+        .map(|(p, n)| {
+            let flip = p[2] > 0.93 || random.next() < 0.16;
+            n.map(|v| if flip { v.map(|c| -c) } else { v })
+        })
+        .collect();
+    out.push(("reversed singly and a cap", points.clone(), reversed));
+    // Two faces of a thin sheet, each with its own outward normal; some normals missing, and
+    // points written twice (coincident, which f32 cannot tell from f64's near ones).
+    let mut sheet_points = Vec::new();
+    let mut sheet_normals = Vec::new();
+    for i in 0..6_000 {
+        let (x, y) = ((i % 80) as f64 * 0.01, (i / 80) as f64 * 0.01);
+        for (z, nz) in [(0.0, -1.0), (0.004, 1.0)] {
+            sheet_points.push([x + 0.002 * random.next(), y + 0.002 * random.next(), z]);
+            sheet_normals.push((i % 37 != 0).then_some([0.0, 0.0, nz]));
+        }
+    }
+    for k in 0..200 {
+        sheet_points.push(sheet_points[k * 7]);
+        sheet_normals.push(sheet_normals[k * 7]);
+    }
+    out.push(("thin sheet, gaps and twins", sheet_points, sheet_normals));
+    out.into_iter()
+        .map(|(name, points, normals)| {
+            let order = morton_order(&points);
+            let points: Vec<[f64; 3]> = order.iter().map(|&i| points[i as usize]).collect();
+            let normals = order.iter().map(|&i| normals[i as usize]).collect();
+            (name, points, normals)
+        })
+        .collect()
+}
+
+#[test]
+fn gpu_votes_repair_the_normals_as_the_cpu_does() {
+    let Some(gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
+        return;
+    };
+    let search = GpuStages::new(Arc::new(gpu)).expect("the search passes compile");
+    let mut reversals = 0;
+    for (name, points, normals) in cases() {
+        let index = search.index(&points).unwrap();
+        // As the surface's build gathers them: the nearest but the point itself.
+        let count = ORIENT_NEIGHBOURS + 1;
+        let nearest = index.nearest(NonZero::new(count).unwrap()).unwrap();
+        let around: Vec<Around> = nearest
+            .chunks(count)
+            .enumerate()
+            .map(|(i, nn)| {
+                let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
+                let others = nn.iter().copied().filter(|&j| j as usize != i);
+                for (slot, j) in around.iter_mut().zip(others) {
+                    *slot = j;
+                }
+                around
+            })
+            .collect();
+        let votes = index
+            .orientation_votes(&around, &normals)
+            .unwrap()
+            .expect("points in Morton order: the GPU casts the votes");
+        let recast = votes
+            .iter()
+            .filter(|&&w| w & vote_word::RECAST != 0)
+            .count();
+        assert!(
+            recast * 20 < votes.len(),
+            "{name}: {recast} of {} votes left to the host",
+            votes.len()
+        );
+        let (mut cpu, mut gpu) = (normals.clone(), normals.clone());
+        let by_cpu = repair_orientation(&points, &mut cpu, &around, None);
+        let by_gpu = repair_orientation(&points, &mut gpu, &around, Some(&votes));
+        assert_eq!(by_gpu, by_cpu, "{name}");
+        let bits = |ns: &[Option<[f64; 3]>]| -> Vec<Option<[u64; 3]>> {
+            ns.iter().map(|n| n.map(|v| v.map(f64::to_bits))).collect()
+        };
+        assert!(
+            bits(&gpu) == bits(&cpu),
+            "{name}: the repaired normals differ"
+        );
+        reversals += by_cpu.flipped_points;
+        eprintln!(
+            "{name}: {by_cpu:?}, {recast} of {} votes cast again",
+            votes.len()
+        );
+    }
+    assert!(
+        reversals > 1000,
+        "the cases must reverse normals ({reversals})"
+    );
+}

@@ -1,0 +1,85 @@
+// The orientation check's first-pass votes (crates/mls/src/orient.rs, `repair_orientation`)
+// of every point on the GPU (crates/gpubake/src/orient.rs): each neighbour with a normal
+// counts its tangent weight, 1 − (n·d)²/|d|², for or against the point's normal by the sign
+// of their normals' dot product; a neighbour within 60° of the tangent plane is a patch edge.
+// In f32, so every test that rounding could have decided (a weight near 0 or the patch
+// weight, a dot product near 0, a vote near the threshold, coincident points) marks the point
+// VOTE_RECAST, and the host casts its votes in f64. The constants are prepended from Rust
+// (`slosh_mls::vote_word_wgsl`), after the grid's module.
+
+// Each point's votes (slosh_mls::vote_word): patch edges in the low ORIENT_NEIGHBOURS bits.
+@group(0) @binding(4) var<storage, read_write> votes: array<u32>;
+// Each point's ORIENT_NEIGHBOURS nearest, itself excluded, nearest first (NO_POINT where
+// there are fewer), by the caller's index, which is the sorted position here.
+@group(0) @binding(5) var<storage, read> around: array<u32>;
+// Each point's unit normal as f32, w 1; all zero where it has none.
+@group(0) @binding(6) var<storage, read> normals: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = thread_index(gid);
+    if i >= params.count {
+        return;
+    }
+    let own = normals[i];
+    // No normal: no votes and no edges.
+    if own.w == 0.0 {
+        votes[i] = 0u;
+        return;
+    }
+    let p = positions[i].xyz;
+    let p_low = residuals[i].xyz;
+    var vote = 0.0;
+    var total = 0.0;
+    var word = 0u;
+    for (var k = 0u; k < ORIENT_NEIGHBOURS; k += 1u) {
+        let j = around[i * ORIENT_NEIGHBOURS + k];
+        if j == NO_POINT {
+            continue;
+        }
+        let other = normals[j];
+        if other.w == 0.0 {
+            continue;
+        }
+        let d = difference(p, p_low, j);
+        let dd = dot(d, d);
+        // Points that coincide in f32 may not in f64.
+        if dd <= 0.0 {
+            word |= VOTE_RECAST;
+            continue;
+        }
+        let along = dot(own.xyz, d);
+        let w = 1.0 - along * along / dd;
+        if w <= WEIGHT_MARGIN {
+            // Along the normal: no edge, unless f64 would find a sliver of weight.
+            if w > -WEIGHT_MARGIN {
+                word |= VOTE_RECAST;
+            }
+            continue;
+        }
+        if abs(w - PATCH_WEIGHT) <= WEIGHT_MARGIN {
+            word |= VOTE_RECAST;
+        }
+        let agreement = dot(own.xyz, other.xyz);
+        if abs(agreement) <= WEIGHT_MARGIN {
+            word |= VOTE_RECAST;
+        }
+        if w >= PATCH_WEIGHT {
+            word |= 1u << k;
+            if agreement < 0.0 {
+                word |= VOTE_CONTRADICTED;
+            }
+        }
+        vote += w * sign(agreement);
+        total += w;
+    }
+    if total > 0.0 {
+        if vote < -REVERSE_BELOW * total {
+            word |= VOTE_REVERSE;
+        }
+        if abs(vote + REVERSE_BELOW * total) <= VOTE_MARGIN {
+            word |= VOTE_RECAST;
+        }
+    }
+    votes[i] = word;
+}
