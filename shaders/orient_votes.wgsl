@@ -7,24 +7,26 @@
 // VOTE_RECAST, and the host casts its votes in f64. The constants are prepended from Rust
 // (`slosh_mls::vote_word_wgsl`), after the grid's module.
 
-// Each point's votes (slosh_mls::vote_word): patch edges in the low ORIENT_NEIGHBOURS bits.
+// The votes (slosh_mls::vote_word) of the dispatch's points, from sorted position
+// params.first: patch edges in the low ORIENT_NEIGHBOURS bits.
 @group(0) @binding(4) var<storage, read_write> votes: array<u32>;
-// Each point's ORIENT_NEIGHBOURS nearest, itself excluded, nearest first (NO_POINT where
-// there are fewer), by the caller's index, which is the sorted position here.
+// The dispatch's points' ORIENT_NEIGHBOURS nearest each, itself excluded, nearest first
+// (NO_POINT where there are fewer), by the caller's index, which is the sorted position here.
 @group(0) @binding(5) var<storage, read> around: array<u32>;
 // Each point's unit normal as f32, w 1; all zero where it has none.
 @group(0) @binding(6) var<storage, read> normals: array<vec4<f32>>;
 
 @compute @workgroup_size(64)
 fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let i = thread_index(gid);
-    if i >= params.count {
+    let k_point = thread_index(gid);
+    if k_point >= params.count {
         return;
     }
+    let i = params.first + k_point;
     let own = normals[i];
     // No normal: no votes and no edges.
     if own.w == 0.0 {
-        votes[i] = 0u;
+        votes[k_point] = 0u;
         return;
     }
     let p = positions[i].xyz;
@@ -33,7 +35,7 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
     var total = 0.0;
     var word = 0u;
     for (var k = 0u; k < ORIENT_NEIGHBOURS; k += 1u) {
-        let j = around[i * ORIENT_NEIGHBOURS + k];
+        let j = around[k_point * ORIENT_NEIGHBOURS + k];
         if j == NO_POINT {
             continue;
         }
@@ -81,5 +83,5 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
             word |= VOTE_RECAST;
         }
     }
-    votes[i] = word;
+    votes[k_point] = word;
 }

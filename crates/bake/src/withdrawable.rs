@@ -4,7 +4,7 @@
 
 use std::num::NonZero;
 
-use slosh_mls::{ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
+use slosh_mls::{Around, ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
 
 /// Asked before each search: `true` ends the bake with [`SurfaceError::Withdrawn`].
 pub type Withdrawn<'w> = &'w (dyn Fn() -> bool + Sync);
@@ -65,5 +65,14 @@ impl PointIndex for WithdrawableIndex<'_> {
     fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError> {
         self.search.check()?;
         self.inner.lists(request)
+    }
+
+    fn orientation_votes(
+        &self,
+        around: &[Around],
+        normals: &[Option<[f64; 3]>],
+    ) -> Result<Option<Vec<u32>>, SurfaceError> {
+        self.search.check()?;
+        self.inner.orientation_votes(around, normals)
     }
 }

@@ -11,8 +11,8 @@ use crate::index::GpuIndex;
 use crate::layout::SearchParams;
 
 /// The votes of every point of `index`, given its nearest (`around`) and unit normals; `None`
-/// where the caller's order is not the GPU's (Morton) order, which a bake's always is, or the
-/// neighbours take more than one binding.
+/// where the caller's order is not the GPU's (Morton) order, which a bake's always is.
+/// Dispatched in batches whose neighbours fit one binding.
 pub(crate) fn orientation_votes(
     index: &GpuIndex<'_>,
     around: &[Around],
@@ -21,12 +21,12 @@ pub(crate) fn orientation_votes(
     let n = around.len();
     let search = index.search;
     let gpu = search.gpu();
-    let around_bytes = size_of_val(around) as u64;
+    let unit_bytes = n as u64 * 16;
     if !index.sorted.identity
         || normals.len() != n
         || index.points.len() != n
         || n == 0
-        || around_bytes > gpu.max_binding()
+        || unit_bytes > gpu.max_binding()
     {
         return Ok(None);
     }
@@ -34,44 +34,54 @@ pub(crate) fn orientation_votes(
         .par_iter()
         .map(|v| v.map_or([0.0; 4], |v| [v[0] as f32, v[1] as f32, v[2] as f32, 1.0]))
         .collect();
-    let neighbours = storage(&search.memory, "orientation neighbours", around)?;
     let unit = storage(&search.memory, "orientation normals", &unit)?;
-    let votes = output(&search.memory, "orientation votes", n as u64 * 4);
-    let (x, y, row_threads) = groups(gpu, n as u32);
-    let params = uniform(
-        gpu,
-        &SearchParams {
-            lo: [0.0; 4],
-            count: n as u32,
-            first: 0,
-            side: 1,
-            wanted: 0,
-            flags: 0,
-            out_base: 0,
-            row_threads,
-            margin: 0.0,
-            shells: 0,
-            band: 0.0,
-            _pad1: 0,
-            _pad2: 0,
-        },
-    );
-    let group = bind(
-        gpu,
-        &search.orient_layout,
-        &[
-            (0, &params),
-            (1, &index.positions),
-            (10, &index.residuals),
-            (4, &votes),
-            (5, &neighbours),
-            (6, &unit),
-        ],
-    );
-    search.run(
-        "orientation votes",
-        &[(&search.orient_votes, (x, y))],
-        &group,
-    )?;
-    search.read_back(&votes, n as u64 * 4).map(Some)
+    let per_batch = (search.output_limit() / size_of::<Around>() as u64).max(1) as usize;
+    let mut votes: Vec<u32> = Vec::with_capacity(n);
+    for first in (0..n).step_by(per_batch) {
+        let len = per_batch.min(n - first);
+        let neighbours = storage(
+            &search.memory,
+            "orientation neighbours",
+            &around[first..first + len],
+        )?;
+        let out = output(&search.memory, "orientation votes", len as u64 * 4);
+        let (x, y, row_threads) = groups(gpu, len as u32);
+        let params = uniform(
+            gpu,
+            &SearchParams {
+                lo: [0.0; 4],
+                count: len as u32,
+                first: first as u32,
+                side: 1,
+                wanted: 0,
+                flags: 0,
+                out_base: 0,
+                row_threads,
+                margin: 0.0,
+                shells: 0,
+                band: 0.0,
+                _pad1: 0,
+                _pad2: 0,
+            },
+        );
+        let group = bind(
+            gpu,
+            &search.orient_layout,
+            &[
+                (0, &params),
+                (1, &index.positions),
+                (10, &index.residuals),
+                (4, &out),
+                (5, &neighbours),
+                (6, &unit),
+            ],
+        );
+        search.run(
+            "orientation votes",
+            &[(&search.orient_votes, (x, y))],
+            &group,
+        )?;
+        votes.extend(search.read_back::<u32>(&out, len as u64 * 4)?);
+    }
+    Ok(Some(votes))
 }

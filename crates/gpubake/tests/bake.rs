@@ -36,6 +36,19 @@ fn bake(
         None => bake_step_parts(input, params),
     }
     .unwrap_or_else(|e| panic!("{name}: {e}"));
+    // The bake orders its points as the GPU's search does, which then casts the orientation
+    // check's first votes itself.
+    let cast_by_the_search = baked
+        .header
+        .stats
+        .stage_seconds
+        .iter()
+        .any(|(part, _)| part == slosh_mls::ORIENTATION_VOTES_CAST_BY_THE_SEARCH);
+    assert_eq!(
+        cast_by_the_search,
+        stages.is_some() && parts.normals.is_some(),
+        "{name}: the orientation votes were cast by the GPU's search"
+    );
     let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
     let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new(name), bytes)).unwrap();
     file.verify()

@@ -37,7 +37,7 @@ pub use clusters::{
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use found::{InitialFit, KeptLists, NeighbourLists};
 pub use frame::LocalFrame;
-pub use geometry::{bounds, dominant_axis};
+pub use geometry::{bounds, dominant_axis, recentred};
 pub use grid::BallIndex;
 pub use intersect::{
     Ball, BallHit, HitStatus, InitialHit, Params, Ray, initial_fit, initial_hit, intersect_ball,
@@ -61,7 +61,8 @@ pub use support::{
     weight,
 };
 pub use surface::{
-    BallFit, BesideFits, Surface, SurfaceError, SurfaceParams, SurfaceParts, half_precision,
+    BallFit, BesideFits, ORIENTATION_VOTES_CAST_BY_THE_SEARCH, Surface, SurfaceError,
+    SurfaceParams, SurfaceParts, half_precision,
 };
 pub use timing::{StageClock, stage_part};
 pub use tracer::{Camera, CameraBasis, MAX_CANDIDATES, TraceHit};

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 pub use crate::error::SurfaceError;
 use crate::fit::FitStatus;
 use crate::found::{KeptLists, NeighbourLists};
-use crate::geometry::bounds;
+use crate::geometry::recentred;
 use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit_with};
 use crate::lists::distance2;
@@ -203,18 +203,9 @@ impl<T: Real> SurfaceParts<T> {
         let mut clock = StageClock::start();
         // The kNN stage by part, after it.
         let mut knn_parts = StageClock::start();
-        let (lo, hi) = bounds(points);
-        let origin = [
-            0.5 * (lo[0] + hi[0]),
-            0.5 * (lo[1] + hi[1]),
-            0.5 * (lo[2] + hi[2]),
-        ];
         // Per-point maps run in parallel throughout: at 1M points a serial one is milliseconds
         // that every other thread waits for.
-        let rel: Vec<[f64; 3]> = points
-            .par_iter()
-            .map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]])
-            .collect();
+        let (rel, origin) = recentred(points);
         let mut unit_normals: Option<Vec<Option<[f64; 3]>>> =
             normals.map(|ns| ns.par_iter().map(|n| unit(*n)).collect());
 
@@ -252,15 +243,20 @@ impl<T: Real> SurfaceParts<T> {
         knn_parts.lap("kd-tree and radii (kNN): radii");
         clock.lap("kd-tree and radii (kNN)");
         clock.extend(&knn_parts.laps);
+        let mut orientation_parts = StageClock::start();
         let orientation = match unit_normals.as_mut() {
             Some(ns) => {
                 let around: Vec<Around> = queried.par_iter().map(|q| q.2).collect();
                 let votes = index.orientation_votes(&around, ns)?;
+                if votes.is_some() {
+                    orientation_parts.lap(ORIENTATION_VOTES_CAST_BY_THE_SEARCH);
+                }
                 repair_orientation(&rel, ns, &around, votes.as_deref())
             }
             None => OrientationRepair::default(),
         };
         clock.lap("orientation");
+        clock.extend(&orientation_parts.laps);
         let reaches_start = std::time::Instant::now();
         let mean = radii.iter().sum::<f64>() / n as f64;
         // Coincident points give ρ = 0: keep every ball a tenth of the mean radius at least.
@@ -679,6 +675,10 @@ fn unit(n: [f64; 3]) -> Option<[f64; 3]> {
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     (len.is_finite() && len > 1e-12).then(|| [n[0] / len, n[1] / len, n[2] / len])
 }
+
+/// The orientation stage's part where the index cast the first votes itself
+/// (`PointIndex::orientation_votes`): gathering the neighbours and casting them.
+pub const ORIENTATION_VOTES_CAST_BY_THE_SEARCH: &str = "orientation: votes cast by the search";
 
 /// `h` at half-float precision: the nearest normal half float (2⁻¹⁴ to 65504), so that a
 /// cache stores every smoothing length exactly as a half float (format 8; format 9: the
