@@ -505,10 +505,8 @@ fn bake_parts(
     let local: Vec<[f64; 3]> = world.par_iter().map(|p| transform.to_local(*p)).collect();
     clock.lap("recentre");
 
-    // 3. Spatial order, carried through every per-point array below: by the Morton codes of
-    // the coordinates the surface's build recentres them to, so that the GPU's search, which
-    // orders them so, finds them in its order (no sort, no permutation of its results).
-    let order = slosh_mls::morton_order(&slosh_mls::recentred(&local).0);
+    // 3. Spatial order, carried through every per-point array below.
+    let order = slosh_mls::morton_order(&local);
     let local = permute(&local, &order);
     let source_index: Vec<u32> = order.par_iter().map(|&o| kept[o as usize]).collect();
     let normals: Option<Vec<[f64; 3]>> = match &params.normals {

@@ -17,9 +17,8 @@ pub fn bounds<'a>(points: impl IntoIterator<Item = &'a [f64; 3]>) -> ([f64; 3], 
 }
 
 /// `points` moved so that their bounding box is centred on the origin (coordinates near zero
-/// keep the most bits), and the centre they were moved by. The surface's build works in
-/// these coordinates; a caller that orders points by their Morton codes in them gives the
-/// GPU's search points already in its order.
+/// keep the most bits), and the centre they were moved by: the coordinates the surface's
+/// build works in.
 pub fn recentred(points: &[[f64; 3]]) -> (Vec<[f64; 3]>, [f64; 3]) {
     let (lo, hi) = bounds(points);
     let origin = [
