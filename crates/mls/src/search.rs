@@ -81,14 +81,13 @@ pub trait PointIndex {
 
     /// The orientation check's first-pass votes (`orient.rs`, [`crate::vote_word`]) of every
     /// point, given its nearest (`around`) and the unit normals, where this index casts them
-    /// itself (a GPU's); `None` where it leaves them to `repair_orientation`.
+    /// itself (a GPU's); `None` where it leaves them to `repair_orientation`. No default: an
+    /// index that wraps another passes them on.
     fn orientation_votes(
         &self,
-        _around: &[Around],
-        _normals: &[Option<[f64; 3]>],
-    ) -> Result<Option<Vec<u32>>, SurfaceError> {
-        Ok(None)
-    }
+        around: &[Around],
+        normals: &[Option<[f64; 3]>],
+    ) -> Result<Option<Vec<u32>>, SurfaceError>;
 }
 
 /// A way to search point sets for neighbours, shared by the steps a bake has in flight.
@@ -159,5 +158,14 @@ impl PointIndex for KdIndex<'_> {
             request.normals,
             request.link_distance2,
         ))
+    }
+
+    /// The k-d tree leaves them to `repair_orientation`, which casts them in f64 itself.
+    fn orientation_votes(
+        &self,
+        _around: &[Around],
+        _normals: &[Option<[f64; 3]>],
+    ) -> Result<Option<Vec<u32>>, SurfaceError> {
+        Ok(None)
     }
 }
