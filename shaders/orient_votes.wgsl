@@ -5,7 +5,7 @@
 // In f32, so every test that rounding could have decided (a weight near 0 or the patch
 // weight, a dot product near 0, a vote near the threshold, coincident points) marks the point
 // VOTE_RECAST, and the host casts its votes in f64. The constants are prepended from Rust
-// (`slosh_mls::vote_word_wgsl`), after the grid's module.
+// (`slosh_mls::vote_word_wgsl`), then the grid's module (neighbour_grid.wgsl).
 
 // The votes (slosh_mls::vote_word) of the dispatch's points, from sorted position
 // params.first: patch edges in the low ORIENT_NEIGHBOURS bits.

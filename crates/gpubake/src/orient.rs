@@ -30,11 +30,12 @@ pub(crate) fn orientation_votes(
     {
         return Ok(None);
     }
-    let unit: Vec<[f32; 4]> = normals
+    // w 1 for a normal, all zero for none (`shaders/orient_votes.wgsl`).
+    let as_f32: Vec<[f32; 4]> = normals
         .par_iter()
         .map(|v| v.map_or([0.0; 4], |v| [v[0] as f32, v[1] as f32, v[2] as f32, 1.0]))
         .collect();
-    let unit = storage(&search.memory, "orientation normals", &unit)?;
+    let normals_on_gpu = storage(&search.memory, "orientation normals", &as_f32)?;
     let per_batch = (search.output_limit() / size_of::<Around>() as u64).max(1) as usize;
     let mut votes: Vec<u32> = Vec::with_capacity(n);
     for first in (0..n).step_by(per_batch) {
@@ -73,7 +74,7 @@ pub(crate) fn orientation_votes(
                 (10, &index.residuals),
                 (4, &out),
                 (5, &neighbours),
-                (6, &unit),
+                (6, &normals_on_gpu),
             ],
         );
         search.run(
