@@ -49,20 +49,12 @@ pub(crate) fn orientation_votes(
         let (x, y, row_threads) = groups(gpu, len as u32);
         let params = uniform(
             gpu,
+            // The pass reads no grid: its other fields stay zero.
             &SearchParams {
-                lo: [0.0; 4],
                 count: len as u32,
                 first: first as u32,
-                side: 1,
-                wanted: 0,
-                flags: 0,
-                out_base: 0,
                 row_threads,
-                margin: 0.0,
-                shells: 0,
-                band: 0.0,
-                _pad1: 0,
-                _pad2: 0,
+                ..bytemuck::Zeroable::zeroed()
             },
         );
         let group = bind(

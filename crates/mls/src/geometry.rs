@@ -19,7 +19,7 @@ pub fn bounds<'a>(points: impl IntoIterator<Item = &'a [f64; 3]>) -> ([f64; 3], 
 /// `points` moved so that their bounding box is centred on the origin (coordinates near zero
 /// keep the most bits), and the centre they were moved by: the coordinates the surface's
 /// build works in.
-pub fn recentred(points: &[[f64; 3]]) -> (Vec<[f64; 3]>, [f64; 3]) {
+pub(crate) fn recentred(points: &[[f64; 3]]) -> (Vec<[f64; 3]>, [f64; 3]) {
     let (lo, hi) = bounds(points);
     let origin = [
         0.5 * (lo[0] + hi[0]),
