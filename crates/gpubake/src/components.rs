@@ -91,6 +91,7 @@ impl Components {
             &search.components_layout,
             &[(0, &params), (1, list_start), (2, lists), (3, &self.parent)],
         );
-        search.run(pass, &[(pipeline, (x, y))], &group).map(|_| ())
+        search.run(pass, &[(pipeline, (x, y))], &group);
+        Ok(())
     }
 }

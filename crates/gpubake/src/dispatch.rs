@@ -142,54 +142,18 @@ pub(crate) fn workgroup_grid(gpu: &Gpu, groups: u32) -> (u32, u32) {
     (x, groups.max(1).div_ceil(x))
 }
 
-/// A pass's start and end timestamps, where the device can write them.
-pub(crate) struct Stamps {
-    set: wgpu::QuerySet,
-    resolved: wgpu::Buffer,
-}
-
-impl Stamps {
-    pub(crate) fn new(gpu: &Gpu) -> Option<Stamps> {
-        gpu.timestamps.then(|| Stamps {
-            set: gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("search pass times"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2,
-            }),
-            resolved: gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("search pass times"),
-                size: 16,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            }),
-        })
-    }
-
-    /// The pass's GPU seconds, once it has run (waits).
-    pub(crate) fn seconds(&self, gpu: &Gpu) -> Result<f64, slosh_mls::SurfaceError> {
-        let ticks: Vec<u64> =
-            slosh_render::read_storage(gpu, &self.resolved, 16).map_err(gpu_error)?;
-        let period_ns = f64::from(gpu.queue.get_timestamp_period());
-        Ok(ticks[1].saturating_sub(ticks[0]) as f64 * period_ns * 1e-9)
-    }
-}
-
 /// Records `dispatches` (pipeline, workgroups) of one bind group in one compute pass (wgpu
 /// orders each after the one before), timed into `stamps` where given.
 pub(crate) fn record(
     encoder: &mut wgpu::CommandEncoder,
     dispatches: &[(&wgpu::ComputePipeline, (u32, u32))],
     bind_group: &wgpu::BindGroup,
-    stamps: Option<&Stamps>,
+    stamps: Option<&crate::pass_clock::Stamps>,
 ) {
     {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("bake stage"),
-            timestamp_writes: stamps.map(|s| wgpu::ComputePassTimestampWrites {
-                query_set: &s.set,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: Some(1),
-            }),
+            timestamp_writes: stamps.map(|s| s.writes()),
         });
         pass.set_bind_group(0, bind_group, &[]);
         for &(pipeline, (x, y)) in dispatches {
@@ -198,7 +162,7 @@ pub(crate) fn record(
         }
     }
     if let Some(s) = stamps {
-        encoder.resolve_query_set(&s.set, 0..2, &s.resolved, 0);
+        s.resolve(encoder);
     }
 }
 

@@ -1,8 +1,6 @@
 //! One point set on the GPU: in Morton order, as two f32s a coordinate, with its order.
 
 use crate::cells::SortedPoints;
-use slosh_mls::SurfaceError;
-
 use crate::dispatch::{Pooled, bind, groups, uniform};
 use crate::layout::SearchParams;
 use crate::passes::GpuStages;
@@ -57,10 +55,7 @@ impl GpuIndex<'_> {
     }
 
     /// Records and submits `dispatch` ([`GpuStages::run`]); returns the submission.
-    pub(crate) fn submit(
-        &self,
-        dispatch: Dispatch<'_>,
-    ) -> Result<wgpu::SubmissionIndex, SurfaceError> {
+    pub(crate) fn submit(&self, dispatch: Dispatch<'_>) -> wgpu::SubmissionIndex {
         let gpu = self.search.gpu();
         let (x, y, row_threads) = groups(gpu, dispatch.count as u32);
         let params = uniform(

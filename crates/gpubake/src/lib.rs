@@ -20,6 +20,7 @@ mod layout;
 mod lists;
 mod nearest;
 mod orient;
+mod pass_clock;
 mod passes;
 mod search;
 mod tree;

@@ -136,7 +136,7 @@ pub(crate) fn lists(
         /// With FLAG_PAIRS: the pairs and their count.
         pairs: Option<(&'p wgpu::Buffer, &'p wgpu::Buffer, f32)>,
     }
-    let pass = |p: Pass<'_>| {
+    let pass = |p: Pass<'_>| -> Result<wgpu::SubmissionIndex, SurfaceError> {
         let todo = match p.todo {
             Some(t) => storage(&search.memory, "lists todo", t)?,
             None => output(&search.memory, "no todo", 16),
@@ -145,7 +145,7 @@ pub(crate) fn lists(
             Some((pairs, count, band)) => (pairs, count, band),
             None => (&*no_pairs, &*no_pair_count, 0.0),
         };
-        index.submit(Dispatch {
+        Ok(index.submit(Dispatch {
             pass: p.pass,
             pipeline: p.pipeline,
             layout: &search.lists_layout,
@@ -171,7 +171,7 @@ pub(crate) fn lists(
                 (12, pairs),
                 (13, pair_count),
             ],
-        })
+        }))
     };
     // The cut pass reads no offsets and writes no lists: two buffers of their own, since one
     // buffer may not be bound read-only and writable at once.
@@ -313,8 +313,6 @@ pub(crate) fn lists(
                 b as f32,
             )
         });
-        // The batch's last write, which the fits wait for.
-        let mut written = None;
         if count > 0 {
             let out_base = start[first];
             let write = |level, starts, first, count, todo| {
@@ -332,29 +330,18 @@ pub(crate) fn lists(
                     pairs: pair_buffers.as_ref().map(|(p, c, b)| (&**p, &**c, *b)),
                 })
             };
-            written = Some(write(level, &starts, first, last - first, None)?);
+            write(level, &starts, first, last - first, None)?;
             // The batch's points cut on coarser grids, each on its own.
             for (coarse_level, coarse_starts, points) in &coarser {
                 let lo = points.partition_point(|&t| (t as usize) < first);
                 let hi = points.partition_point(|&t| (t as usize) < last);
                 for todo in points[lo..hi].chunks(MAX_TODO) {
-                    written = Some(write(
-                        *coarse_level,
-                        coarse_starts,
-                        0,
-                        todo.len(),
-                        Some(todo),
-                    )?);
+                    write(*coarse_level, coarse_starts, 0, todo.len(), Some(todo))?;
                 }
             }
         }
         // Fitted where the lists are, before they are read back.
         if let Some(inputs) = &fit_inputs {
-            // The lists done first, so that the fits' time is their own (this job's lists:
-            // other jobs' later work on the device is not waited for).
-            if let Some(written) = written {
-                gpu.wait_for(written).map_err(gpu_error)?;
-            }
             let fitting = std::time::Instant::now();
             sorted_fits.extend(crate::fits::fit_batch(
                 index,
@@ -440,8 +427,8 @@ pub(crate) fn lists(
     ]);
     if fit_inputs.is_some() {
         parts.extend(&[
-            ("initial fits: on the GPU", fit_parts.gpu),
-            ("initial fits: read back", fit_parts.read_back),
+            ("initial fits: waiting for the GPU", fit_parts.gpu),
+            ("initial fits: unpacked", fit_parts.unpack),
         ]);
     }
     let points = index.points;

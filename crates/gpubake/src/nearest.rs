@@ -65,7 +65,7 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
                 shells: SHELLS,
                 band: 0.0,
                 buffers: &[(4, &out), (5, &todo_buffer)],
-            })?;
+            });
             match &todo {
                 // Consecutive points: copied out by every thread straight into place (one
                 // thread's copy of a 1M step's 68 MB took tens of milliseconds), and the few

@@ -73,7 +73,7 @@ pub(crate) fn orientation_votes(
             "orientation votes",
             &[(&search.orient_votes, (x, y))],
             &group,
-        )?;
+        );
         votes.extend(search.read_back::<u32>(&out, len as u64 * 4)?);
     }
     Ok(Some(votes))

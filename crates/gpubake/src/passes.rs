@@ -1,15 +1,15 @@
 //! The search passes, compiled once for a device and shared by every step in flight.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, OnceLock};
 
 use slosh_render::Gpu;
 
-use crate::dispatch::{PassMemory, Stamps, gpu_error, layout, record};
+use crate::dispatch::{PassMemory, gpu_error, layout, record};
 use crate::layout::{
     UNION_SPAN_WORDS, components_source, fits_source, lists_source, nearest_source,
     orient_votes_source, tree_source, unions_source,
 };
+use crate::pass_clock::PassClock;
 
 /// The bytes one dispatch's output may take, at most (with the adapter's binding limit):
 /// larger outputs go in several dispatches, so that a 4M-point step's lists (about 2 GB)
@@ -48,10 +48,8 @@ pub struct GpuStages {
     pub(crate) unions_layout: wgpu::BindGroupLayout,
     unions_pipeline_layout: wgpu::PipelineLayout,
     pub(crate) cluster_unions: wgpu::ComputePipeline,
-    /// GPU nanoseconds of every pass run so far (where the device has timestamps), in all
-    /// and by the pass's name.
-    gpu_nanos: AtomicU64,
-    gpu_nanos_by_pass: Mutex<Vec<(&'static str, u64)>>,
+    /// GPU time of every pass run so far, where the device has timestamps.
+    clock: PassClock,
     /// Buffers the large read-backs (lists, nearest points, fits, nodes) reuse.
     pub(crate) readback: slosh_render::ReadbackPool,
     /// The passes' inputs and outputs, kept from step to step (`dispatch::Pooled`), and the
@@ -277,8 +275,7 @@ impl GpuStages {
             unions_layout,
             unions_pipeline_layout,
             cluster_unions,
-            gpu_nanos: AtomicU64::new(0),
-            gpu_nanos_by_pass: Mutex::new(Vec::new()),
+            clock: PassClock::new(&gpu),
             readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT),
             memory: PassMemory {
                 gpu: gpu.clone(),
@@ -302,51 +299,42 @@ impl GpuStages {
     /// transfers and the host's work are not in it), or `None` where the device has no
     /// timestamps. Read before and after a bake for that bake's GPU time.
     pub fn gpu_seconds(&self) -> Option<f64> {
-        self.gpu
-            .timestamps
-            .then(|| self.gpu_nanos.load(Ordering::Relaxed) as f64 * 1e-9)
+        self.gpu.timestamps.then(|| {
+            self.clock.settle(&self.gpu);
+            self.clock.seconds()
+        })
     }
 
     /// [`GpuStages::gpu_seconds`] by pass, in the order the passes first ran: read before
     /// and after a bake for where its GPU time went. Empty where the device has no
     /// timestamps.
     pub fn gpu_seconds_by_pass(&self) -> Vec<(&'static str, f64)> {
-        self.gpu_nanos_by_pass.lock().map_or(Vec::new(), |by| {
-            by.iter()
-                .map(|&(pass, ns)| (pass, ns as f64 * 1e-9))
-                .collect()
-        })
+        self.clock.settle(&self.gpu);
+        self.clock.seconds_by_pass()
     }
 
-    /// Records `dispatches` over `group` in one pass and submits them; where the device has
-    /// timestamps, waits for them and adds their GPU time to [`GpuStages::gpu_seconds`],
-    /// under `pass` too. Returns the submission, for a caller that waits for it.
+    /// Records `dispatches` over `group` in one pass and submits them, timed (where the device
+    /// has timestamps) into [`GpuStages::gpu_seconds`] under `pass` without waiting. Returns
+    /// the submission, for a caller that waits for it.
     pub(crate) fn run(
         &self,
         pass: &'static str,
         dispatches: &[(&wgpu::ComputePipeline, (u32, u32))],
         group: &wgpu::BindGroup,
-    ) -> Result<wgpu::SubmissionIndex, slosh_mls::SurfaceError> {
+    ) -> wgpu::SubmissionIndex {
         let gpu = &self.gpu;
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("bake pass"),
             });
-        let stamps = Stamps::new(gpu);
+        let stamps = self.clock.stamps(gpu);
         record(&mut encoder, dispatches, group, stamps.as_ref());
         let submitted = gpu.queue.submit([encoder.finish()]);
         if let Some(stamps) = stamps {
-            let nanos = (stamps.seconds(gpu)? * 1e9).round() as u64;
-            self.gpu_nanos.fetch_add(nanos, Ordering::Relaxed);
-            if let Ok(mut by) = self.gpu_nanos_by_pass.lock() {
-                match by.iter_mut().find(|(p, _)| *p == pass) {
-                    Some((_, total)) => *total += nanos,
-                    None => by.push((pass, nanos)),
-                }
-            }
+            self.clock.submitted(pass, stamps, submitted.clone());
         }
-        Ok(submitted)
+        submitted
     }
 
     /// Compiles the initial fits for `degree` now rather than in the first step's bake (a

@@ -99,8 +99,7 @@ impl GpuStages {
             "bvh: links and depths",
             &[(&self.link_nodes, (x, y)), (&self.measure_depths, (x, y))],
             &group,
-        )
-        .map_err(fault)?;
+        );
         let deepest = self.read_back::<u32>(&state, 4).map_err(fault)?[0];
         if deepest >= TREE_MAX_DEPTH {
             return Err(format!(
@@ -119,8 +118,7 @@ impl GpuStages {
                 dispatches.push((&self.next_depth, (1, 1)));
             }
         }
-        self.run("bvh: nodes and boxes", &dispatches, &group)
-            .map_err(fault)?;
+        self.run("bvh: nodes and boxes", &dispatches, &group);
         let nodes: Vec<TreeNode> = self.read_back(&nodes, node_bytes).map_err(fault)?;
         let nodes = nodes
             .into_par_iter()

@@ -102,9 +102,9 @@ impl Unions {
                 "cluster unions",
                 &[(&search.cluster_unions, (x, y))],
                 &group,
-            )
+            );
         };
-        pass(0, &no_starts, &no_unions)?;
+        pass(0, &no_starts, &no_unions);
         let mut batch_counts: Vec<u32> = search.read_back(&counts, count_bytes)?;
         let mut starts = Vec::with_capacity(clusters);
         let mut total = 0u64;
@@ -120,7 +120,7 @@ impl Unions {
         if total > 0 {
             let union_start = storage(&search.memory, "union starts", &starts)?;
             let unions = output(&search.memory, "unions", total * 4);
-            pass(1, &union_start, &unions)?;
+            pass(1, &union_start, &unions);
             search
                 .readback
                 .read_into(gpu, &unions, total * 4, &mut self.ids)
