@@ -98,7 +98,9 @@ pub struct PlayArgs {
     /// Folder for screenshots and exported frames.
     #[arg(long, default_value = ".")]
     pub output: PathBuf,
-    /// Loader threads (default: three eighths of the cores, 2 to 6).
+    /// Loader threads (default: three eighths of the cores, 2 to 6). A raw case's loaders each
+    /// bake a step, on a share of the cores (default: what `slosh bake` would take at once, at
+    /// most half the cores).
     #[arg(long)]
     pub loaders: Option<usize>,
     /// Pause every step load this long (tests a frame loop that must not wait on loads).
@@ -169,7 +171,8 @@ pub struct ScrubBenchArgs {
     /// Seed of the jumps.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Loader threads of the engine (default: three eighths of the cores, 2 to 6).
+    /// Loader threads of the engine (default: three eighths of the cores, 2 to 6; for a raw
+    /// case, as `slosh play CASE.case` has them).
     #[arg(long)]
     pub loaders: Option<usize>,
     /// Pool size in steps for sequential playback and page-cache jumps (so that steps stream

@@ -28,7 +28,8 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(Path
         args.cache.as_deref(),
         &settings,
         args.field.as_deref(),
-        args.adapter.as_deref(),
+        // One step at a time, on every core.
+        (args.adapter.as_deref(), None),
     )?;
     let mut failed = Vec::new();
     for &step in steps {

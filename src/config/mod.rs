@@ -443,10 +443,8 @@ impl BakeConfig {
             .unwrap_or(slosh_mls::coefficient_count(a.settings.fit.degree));
         params.fields = a.settings.select.fields.clone();
         params.compression = compression;
-        // Each job holds a whole step in memory and is parallel inside: more jobs than a few
-        // per core only cost memory and threads.
         let cores = slosh_bake::cores();
-        let most_jobs = (4 * cores).max(8);
+        let most_jobs = most_jobs(cores);
         if let Some(jobs) = a.jobs
             && (jobs == 0 || jobs > most_jobs)
         {
@@ -495,6 +493,12 @@ impl BakeConfig {
             jobs_chosen,
         })
     }
+}
+
+/// The most steps a bake takes at once on `cores` cores: each job holds a whole step in
+/// memory and is parallel inside, so more than a few per core only cost memory and threads.
+pub fn most_jobs(cores: usize) -> usize {
+    (4 * cores).max(8)
 }
 
 #[cfg(test)]

@@ -20,13 +20,15 @@ pub fn default_cache(case: &Path) -> PathBuf {
 
 /// The case at `case`, held for baking into `cache` (default [`default_cache`]) with
 /// `settings` and the `shown` field (the one frames are coloured by is baked with them), on
-/// the adapter named `adapter` where the settings bake on the GPU; refused where the directory holds another series or another bake holds it.
+/// the adapter named `adapter` where the settings bake on the GPU, `jobs` steps at once
+/// (default: [`slosh_bake::viewer_jobs`] of what `slosh bake` would take); refused where the directory holds another series or
+/// another bake holds it.
 pub fn open(
     case: &Path,
     cache: Option<&Path>,
     settings: &BakeSettings,
     shown: Option<&str>,
-    adapter: Option<&str>,
+    (adapter, jobs): (Option<&str>, Option<usize>),
 ) -> Result<OnDemand> {
     let out = cache.map_or_else(|| default_cache(case), Path::to_path_buf);
     let mut settings = settings.clone();
@@ -39,14 +41,17 @@ pub fn open(
         input: case.to_path_buf(),
         out: Some(out.clone()),
         steps: None,
-        jobs: None,
+        jobs,
         shard: None,
         settings,
         adapter: adapter.map(str::to_string),
         manifest_only: false,
         quiet: true,
     };
-    let cfg = BakeConfig::from_args(&args)?;
+    let mut cfg = BakeConfig::from_args(&args)?;
+    if jobs.is_none() {
+        cfg.options.jobs = slosh_bake::viewer_jobs(cfg.options.jobs, cfg.options.threads);
+    }
     crate::machine::keep_freed_pages_on_a_device(&cfg.options.stages);
     let BakeInput::Case(case_data) = cfg.input else {
         bail!(

@@ -36,7 +36,12 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
             args.cache.as_deref(),
             &args.bake,
             args.field.as_deref(),
-            args.adapter.as_deref(),
+            // Each loader bakes a step: as many steps at once as loaders.
+            (
+                args.adapter.as_deref(),
+                args.loaders
+                    .map(|n| n.clamp(1, super::most_jobs(slosh_bake::cores()))),
+            ),
         )?;
         (bake.dir().to_path_buf(), Some(std::sync::Arc::new(bake)))
     } else {
@@ -68,6 +73,11 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
     };
     if let Some(n) = args.loaders {
         engine.loaders = n.clamp(1, 64);
+    }
+    // A raw case's loaders each bake a step: as many as its bake takes at once (`--loaders`,
+    // else as many as `slosh bake` would here).
+    if let Some(bake) = &bake {
+        engine.loaders = bake.jobs();
     }
     Ok(PlayOptions {
         dir,

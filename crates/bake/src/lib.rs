@@ -25,7 +25,7 @@ pub use bvh::{
 };
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
 pub use ensight_source::{EnsightSource, canonical_label};
-pub use jobs::{available_memory, cores, default_jobs};
+pub use jobs::{available_memory, cores, default_jobs, viewer_jobs};
 pub use on_demand::OnDemand;
 pub use params::{BAKE_REVISION, BakeParams, NormalSource, SurfaceSelect};
 pub use point_cloud::{PointCloud, PointCloudError, read_point_cloud};

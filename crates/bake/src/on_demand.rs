@@ -3,7 +3,7 @@
 //! plays at once and its steps stay baked for the next run.
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Condvar, Mutex, OnceLock, PoisonError};
 
 use slosh_cache::{SeriesKey, step_file_name};
 
@@ -20,10 +20,15 @@ pub struct OnDemand {
     opts: BatchOptions,
     key: SeriesKey,
     steps: Vec<(usize, f64)>,
-    /// Where [`OnDemand::bake_as`] bakes: a waited-for step, and steps ahead at a lower
-    /// priority, on `opts.threads` threads each; made at its first call (`render` and the
-    /// batch never make them).
+    /// Where [`OnDemand::bake_as`] bakes: a waited-for step on `opts.threads` threads, and
+    /// `opts.jobs` steps ahead at once, at a lower priority, on a share of them each; made at
+    /// its first call (`render` and the batch never make them).
     pools: OnceLock<Pools>,
+    /// Waited-for bakes running now (their step's lock held): bakes ahead pause at their next
+    /// stage while any runs, so that the step someone waits for has the device and the
+    /// cores to itself.
+    waited_running: Mutex<usize>,
+    waited_ended: Condvar,
     _claim: Claim,
 }
 
@@ -54,19 +59,22 @@ impl OnDemand {
             key,
             steps,
             pools: OnceLock::new(),
+            waited_running: Mutex::new(0),
+            waited_ended: Condvar::new(),
             _claim: claim,
         })
     }
 
     /// [`OnDemand::open`] over an EnSight case (`case`, opened from `path`), its points as
-    /// the case's variables say ([`slosh_ensight::PointSource::Auto`]), baked one step at a
-    /// time on `threads` threads by `stages`, with `params`.
+    /// the case's variables say ([`slosh_ensight::PointSource::Auto`]), baked by `stages` with
+    /// `params`: a waited-for step on `threads` threads, and `jobs` steps ahead at once
+    /// ([`OnDemand::jobs`]).
     pub fn of_case(
         case: slosh_ensight::Case,
         path: &Path,
         out: PathBuf,
         params: crate::BakeParams,
-        threads: usize,
+        (threads, jobs): (usize, usize),
         stages: crate::Stages,
     ) -> Result<OnDemand, slosh_cache::Error> {
         let source =
@@ -74,7 +82,7 @@ impl OnDemand {
         let opts = BatchOptions {
             out,
             steps: None,
-            jobs: 1,
+            jobs,
             threads,
             shard: crate::Shard::WHOLE,
             params,
@@ -86,6 +94,12 @@ impl OnDemand {
     /// (step index, time) of every step of the series, in order.
     pub fn steps(&self) -> &[(usize, f64)] {
         &self.steps
+    }
+
+    /// Steps baked ahead at once, on a share of the threads each (the bake's `--jobs`): as
+    /// many as a viewer's loaders may ask for together.
+    pub fn jobs(&self) -> usize {
+        self.opts.jobs
     }
 
     /// What every step file of the series records.
@@ -112,16 +126,53 @@ impl OnDemand {
 
     /// [`OnDemand::bake_unless_withdrawn`] on the pool for `urgency` instead of the calling
     /// thread's: a step someone waits for takes the cores from the steps baked ahead.
+    /// A step baked ahead pauses between its stages while a waited-for step bakes.
     pub fn bake_as(&self, index: usize, urgency: Urgency, withdrawn: Withdrawn<'_>) -> StepOutcome {
-        self.pools
-            .get_or_init(|| Pools::new(self.opts.threads))
-            .install(urgency, || self.bake_unless_withdrawn(index, withdrawn))
+        let pools = self
+            .pools
+            .get_or_init(|| Pools::new(self.opts.threads, self.opts.jobs));
+        match urgency {
+            Urgency::Waited => pools.install(urgency, || {
+                self.bake_locked(index, withdrawn, || WaitedRunning::start(self))
+            }),
+            Urgency::Ahead => {
+                let paused = || {
+                    self.wait_while_a_waited_step_bakes();
+                    withdrawn()
+                };
+                pools.install(urgency, || self.bake_locked(index, &paused, || ()))
+            }
+        }
+    }
+
+    fn wait_while_a_waited_step_bakes(&self) {
+        let mut running = self
+            .waited_running
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        while *running > 0 {
+            running = self
+                .waited_ended
+                .wait(running)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
     }
 
     /// [`OnDemand::bake`], given up (a failed outcome, nothing written) once `withdrawn`
     /// says so: it is asked before the read, between the bake's stages and before each
     /// neighbour search, and before the step is encoded and written.
     pub fn bake_unless_withdrawn(&self, index: usize, withdrawn: Withdrawn<'_>) -> StepOutcome {
+        self.bake_locked(index, withdrawn, || ())
+    }
+
+    /// [`OnDemand::bake_unless_withdrawn`], with `locked` called once the step's lock is held
+    /// and what it returns kept until the bake ends.
+    fn bake_locked<G>(
+        &self,
+        index: usize,
+        withdrawn: Withdrawn<'_>,
+        locked: impl FnOnce() -> G,
+    ) -> StepOutcome {
         if !self.steps.iter().any(|(i, _)| *i == index) {
             return StepOutcome::Failed(format!("step {index} is not in the series"));
         }
@@ -139,6 +190,9 @@ impl OnDemand {
             Ok(lock) => lock,
             Err(e) => return StepOutcome::Failed(e.to_string()),
         };
+        // Counted only with its lock held: a waited-for bake of a step a bake ahead holds
+        // waits for it, and that bake must not pause for the waiter.
+        let held = locked();
         let outcome = bake_one(
             self.source.as_ref(),
             index,
@@ -146,6 +200,7 @@ impl OnDemand {
             &self.key,
             withdrawn,
         );
+        drop(held);
         drop(lock);
         if matches!(outcome, StepOutcome::Baked { .. })
             && self.steps.iter().all(|(i, _)| self.path(*i).exists())
@@ -155,5 +210,34 @@ impl OnDemand {
             let _ = slosh_cache::Manifest::refresh(&self.opts.out);
         }
         outcome
+    }
+}
+
+/// One waited-for bake counted in [`OnDemand`]'s `waited_running` while it lives.
+struct WaitedRunning<'a> {
+    bake: &'a OnDemand,
+}
+
+impl<'a> WaitedRunning<'a> {
+    fn start(bake: &'a OnDemand) -> WaitedRunning<'a> {
+        *bake
+            .waited_running
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) += 1;
+        WaitedRunning { bake }
+    }
+}
+
+impl Drop for WaitedRunning<'_> {
+    fn drop(&mut self) {
+        let mut running = self
+            .bake
+            .waited_running
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        *running = running.saturating_sub(1);
+        if *running == 0 {
+            self.bake.waited_ended.notify_all();
+        }
     }
 }

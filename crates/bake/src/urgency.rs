@@ -3,6 +3,8 @@
 //! a lower scheduling priority, so the kernel gives the waited-for step the cores while
 //! both have work, and the steps ahead every core that it leaves idle.
 
+use std::sync::{Condvar, Mutex, PoisonError};
+
 use rayon::ThreadPool;
 
 /// Why a step is baked now.
@@ -18,17 +20,25 @@ pub enum Urgency {
 /// process's): at 10 the kernel weighs a thread 110 against 1024 at the process's own.
 pub(crate) const AHEAD_NICENESS: i32 = 10;
 
-/// A pool for each urgency, of `threads` threads each.
+/// The pools: one for a waited-for step, on every thread; and one for each step baked ahead
+/// at once, each on its share of the threads at the lower priority, as the batch's jobs are
+/// (`batch.rs`: steps sharing one pool spread every stage over all cores and pay for its
+/// splitting and stealing, and a thread waiting inside one step could start another).
 #[derive(Debug)]
 pub(crate) struct Pools {
     waited: Option<ThreadPool>,
-    ahead: Option<ThreadPool>,
+    /// The pools ahead that no bake holds now.
+    ahead: Mutex<Vec<ThreadPool>>,
+    ahead_given_back: Condvar,
+    /// Whether any pool ahead was made (else bakes ahead run on the caller's pool).
+    ahead_made: bool,
 }
 
 impl Pools {
-    pub(crate) fn new(threads: usize) -> Pools {
+    /// A waited-for pool of `threads` threads and `jobs` pools ahead sharing them.
+    pub(crate) fn new(threads: usize, jobs: usize) -> Pools {
         // A pool that cannot be made leaves its bakes on the caller's pool.
-        let pool = |name: &'static str, lower: bool| {
+        let pool = |name: String, threads: usize, lower: bool| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.max(1))
                 .thread_name(move |t| format!("bake-{name}-{t}"))
@@ -40,21 +50,78 @@ impl Pools {
                 .build()
                 .ok()
         };
+        let jobs = jobs.max(1);
+        let ahead: Vec<ThreadPool> = (0..jobs)
+            .filter_map(|job| {
+                let share = threads / jobs + usize::from(job < threads % jobs);
+                pool(format!("ahead-{job}"), share, true)
+            })
+            .collect();
         Pools {
-            waited: pool("waited", false),
-            ahead: pool("ahead", true),
+            waited: pool("waited".into(), threads, false),
+            ahead_made: !ahead.is_empty(),
+            ahead: Mutex::new(ahead),
+            ahead_given_back: Condvar::new(),
         }
     }
 
-    /// Runs `work` on the pool for `urgency`.
+    /// Runs `work` on the pool for `urgency`: for a step ahead, the first pool ahead that no
+    /// other bake holds (waiting for one where all are held).
     pub(crate) fn install<R: Send>(&self, urgency: Urgency, work: impl FnOnce() -> R + Send) -> R {
-        let pool = match urgency {
-            Urgency::Waited => &self.waited,
-            Urgency::Ahead => &self.ahead,
+        match urgency {
+            Urgency::Waited => match &self.waited {
+                Some(pool) => pool.install(work),
+                None => work(),
+            },
+            Urgency::Ahead if !self.ahead_made => work(),
+            Urgency::Ahead => {
+                let held = HeldPool::take(self);
+                held.pool().install(work)
+            }
+        }
+    }
+}
+
+/// A pool ahead held by one bake, given back when dropped (a bake that panics too).
+struct HeldPool<'p> {
+    pools: &'p Pools,
+    pool: Option<ThreadPool>,
+}
+
+impl<'p> HeldPool<'p> {
+    fn take(pools: &'p Pools) -> HeldPool<'p> {
+        let mut free = pools.ahead.lock().unwrap_or_else(PoisonError::into_inner);
+        let pool = loop {
+            match free.pop() {
+                Some(pool) => break pool,
+                None => {
+                    free = pools
+                        .ahead_given_back
+                        .wait(free)
+                        .unwrap_or_else(PoisonError::into_inner);
+                }
+            }
         };
-        match pool {
-            Some(pool) => pool.install(work),
-            None => work(),
+        HeldPool {
+            pools,
+            pool: Some(pool),
+        }
+    }
+
+    fn pool(&self) -> &ThreadPool {
+        self.pool.as_ref().expect("held until dropped")
+    }
+}
+
+impl Drop for HeldPool<'_> {
+    fn drop(&mut self) {
+        if let Some(pool) = self.pool.take() {
+            self.pools
+                .ahead
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(pool);
+            self.pools.ahead_given_back.notify_one();
         }
     }
 }
@@ -85,7 +152,7 @@ mod tests {
     fn steps_baked_ahead_run_at_a_lower_priority() {
         use rayon::prelude::*;
         let own = niceness();
-        let pools = Pools::new(4);
+        let pools = Pools::new(4, 2);
         let on = |urgency| -> Vec<i32> {
             pools.install(urgency, || {
                 (0..64)
@@ -100,5 +167,60 @@ mod tests {
         let expected = (own + AHEAD_NICENESS).min(19);
         assert!(on(Urgency::Ahead).iter().all(|&n| n == expected), "ahead");
         assert!(on(Urgency::Waited).iter().all(|&n| n == own), "waited");
+    }
+
+    /// Each step baked ahead at once has a pool of its own, of its share of the threads
+    /// (8 threads, 4 jobs: 2 each), and a step beyond them waits for a pool to be given back.
+    #[test]
+    fn each_step_ahead_has_a_pool_of_its_own() {
+        use std::sync::Barrier;
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let pools = Pools::new(8, 4);
+        let together = Barrier::new(4);
+        let seen: Vec<(String, usize)> = std::thread::scope(|s| {
+            let bakes: Vec<_> = (0..4)
+                .map(|_| {
+                    s.spawn(|| {
+                        pools.install(Urgency::Ahead, || {
+                            // All four hold their pools at once.
+                            together.wait();
+                            let name = std::thread::current().name().unwrap_or("").to_string();
+                            (name, rayon::current_num_threads())
+                        })
+                    })
+                })
+                .collect();
+            bakes
+                .into_iter()
+                .map(|b| b.join().expect("a bake"))
+                .collect()
+        });
+        let mut pools_seen: Vec<String> = seen
+            .iter()
+            .map(|(name, _)| {
+                name.rsplit_once('-')
+                    .map_or(name.clone(), |(p, _)| p.to_string())
+            })
+            .collect();
+        pools_seen.sort();
+        pools_seen.dedup();
+        assert_eq!(pools_seen.len(), 4, "{seen:?}");
+        assert!(seen.iter().all(|(_, threads)| *threads == 2), "{seen:?}");
+        // One pool: two bakes ahead take turns.
+        let pools = Pools::new(2, 1);
+        let (inside, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        std::thread::scope(|s| {
+            for _ in 0..2 {
+                s.spawn(|| {
+                    pools.install(Urgency::Ahead, || {
+                        let now = inside.fetch_add(1, Ordering::SeqCst) + 1;
+                        most.fetch_max(now, Ordering::SeqCst);
+                        std::thread::sleep(std::time::Duration::from_millis(100));
+                        inside.fetch_sub(1, Ordering::SeqCst);
+                    })
+                });
+            }
+        });
+        assert_eq!(most.load(Ordering::SeqCst), 1);
     }
 }

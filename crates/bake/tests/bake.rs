@@ -819,7 +819,15 @@ fn every_isolated_cluster_of_the_demo_is_closed_from_26_directions() {
 fn holder(case: &Path, cache: &Path) -> OnDemand {
     let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     let opened = slosh_ensight::Case::open(case).unwrap();
-    OnDemand::of_case(opened, case, cache.to_path_buf(), params, 1, Stages::cpu()).unwrap()
+    OnDemand::of_case(
+        opened,
+        case,
+        cache.to_path_buf(),
+        params,
+        (1, 1),
+        Stages::cpu(),
+    )
+    .unwrap()
 }
 
 /// Two holders of one raw case's directory (two players, or a player and a render) asking
@@ -853,6 +861,15 @@ fn two_holders_of_a_case_bake_a_step_once() {
         .unwrap();
 }
 
+/// A 5,000-point sphere case of two steps written in `dir`, and a holder of its cache there.
+fn small_case_holder(dir: &Path) -> (std::path::PathBuf, OnDemand) {
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 5000, 3)).unwrap();
+    let case = slosh_testkit::write_surface_case(&dir.join("case"), "sphere", &scene, 2).unwrap();
+    let cache = dir.join("cache");
+    let holder = holder(&case, &cache);
+    (cache, holder)
+}
+
 /// A viewer's bake withdrawn at any of the points where it is asked (before the read, before
 /// each neighbour search, between stages, before the write) gives up there: a failed outcome
 /// that says so, no step file and nothing left behind; the withdrawn bake asked at least
@@ -862,11 +879,7 @@ fn two_holders_of_a_case_bake_a_step_once() {
 fn a_withdrawn_on_demand_bake_gives_up_and_writes_nothing() {
     use std::sync::atomic::{AtomicUsize, Ordering};
     let dir = tempfile::tempdir().unwrap();
-    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 5000, 3)).unwrap();
-    let case =
-        slosh_testkit::write_surface_case(&dir.path().join("case"), "sphere", &scene, 2).unwrap();
-    let cache = dir.path().join("cache");
-    let holder = holder(&case, &cache);
+    let (cache, holder) = small_case_holder(dir.path());
     let step_file = cache.join(step_file_name(1));
     // How often an unwithdrawn bake asks.
     let asked = AtomicUsize::new(0);
@@ -901,6 +914,70 @@ fn a_withdrawn_on_demand_bake_gives_up_and_writes_nothing() {
     let outcome = holder.bake(1);
     assert!(matches!(outcome, StepOutcome::Baked { .. }), "{outcome:?}");
     CacheFile::open(&step_file).unwrap().verify().unwrap();
+}
+
+/// A step baked ahead waits, at its first ask, while a waited-for step bakes (the bake someone
+/// waits for has the cores and the device), and then bakes: held 300 ms inside the waited-for
+/// bake, the bake ahead has not asked once; both steps are then baked and verify.
+#[test]
+fn a_bake_ahead_pauses_while_a_waited_for_step_bakes() {
+    use slosh_bake::Urgency;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::mpsc;
+    let dir = tempfile::tempdir().unwrap();
+    let (cache, holder) = small_case_holder(dir.path());
+    let (inside_tx, inside_rx) = mpsc::channel::<()>();
+    let (release_tx, release_rx) = mpsc::channel::<()>();
+    let (inside_tx, release_rx) = (
+        std::sync::Mutex::new(inside_tx),
+        std::sync::Mutex::new(release_rx),
+    );
+    let first_ask = AtomicBool::new(true);
+    // The waited-for bake's first ask (before its read, its lock held) says it is inside and
+    // holds until released.
+    let waited_asks = || {
+        if first_ask.swap(false, Ordering::SeqCst) {
+            inside_tx.lock().unwrap().send(()).unwrap();
+            release_rx.lock().unwrap().recv().unwrap();
+        }
+        false
+    };
+    let ahead_asked = AtomicBool::new(false);
+    let ahead_asks = || {
+        ahead_asked.store(true, Ordering::SeqCst);
+        false
+    };
+    let (waited, ahead, asked_while_held) = std::thread::scope(|s| {
+        let waited = s.spawn(|| holder.bake_as(0, Urgency::Waited, &waited_asks));
+        inside_rx.recv().unwrap();
+        let ahead = s.spawn(|| holder.bake_as(1, Urgency::Ahead, &ahead_asks));
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        let asked_while_held = ahead_asked.load(Ordering::SeqCst);
+        release_tx.send(()).unwrap();
+        (
+            waited.join().unwrap(),
+            ahead.join().unwrap(),
+            asked_while_held,
+        )
+    });
+    assert!(
+        !asked_while_held,
+        "the bake ahead went on beside the waited-for one"
+    );
+    assert!(
+        ahead_asked.load(Ordering::SeqCst),
+        "the bake ahead never asked"
+    );
+    for (step, outcome) in [(0, waited), (1, ahead)] {
+        assert!(
+            matches!(outcome, StepOutcome::Baked { .. }),
+            "step {step}: {outcome:?}"
+        );
+        CacheFile::open(&cache.join(step_file_name(step)))
+            .unwrap()
+            .verify()
+            .unwrap();
+    }
 }
 
 /// Every point's stored reach holds its whole list as the GPU's expansion measures it: in

@@ -554,7 +554,33 @@ fn on_demand(case: &Path, cache: &Path) -> slosh_bake::OnDemand {
     let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     let opened = slosh_ensight::Case::open(case).unwrap();
     let cpu = slosh_bake::Stages::cpu();
-    slosh_bake::OnDemand::of_case(opened, case, cache.to_path_buf(), params, 1, cpu).unwrap()
+    slosh_bake::OnDemand::of_case(opened, case, cache.to_path_buf(), params, (1, 1), cpu).unwrap()
+}
+
+/// A raw case's engine asks for a step ahead for every loader (each bakes one, for hundreds of
+/// milliseconds): with 8 loaders whose loads take 2 s, steps 1 to 8 are all asked for once
+/// step 0 shows, where a window of the rate's half second held 4.
+#[test]
+fn a_raw_case_asks_for_a_step_ahead_for_every_loader() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let case = write_case(&dir.path().join("case"), 12);
+    let cache = dir.path().join("cache");
+    let mut engine = Engine::open_baking(
+        gpu,
+        Arc::new(on_demand(&case, &cache)),
+        EngineOptions {
+            loaders: 8,
+            load_delay: Some(Duration::from_secs(2)),
+            ..EngineOptions::default()
+        },
+    )
+    .unwrap();
+    let request = request(1);
+    show(&mut engine, &request, 0);
+    frame(&mut engine, &request);
+    let asked = engine.prefetching();
+    assert!((1..=8).all(|p| asked.contains(&p)), "asked for {asked:?}");
 }
 
 /// A raw case plays with no bake first: every step is a position from the start, a step is

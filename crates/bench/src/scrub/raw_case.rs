@@ -27,6 +27,8 @@ pub struct RawCaseReport {
     pub steps: usize,
     /// EnSight bytes of one step (geometry and normals).
     pub case_step_bytes: u64,
+    /// The engine's loaders, each baking a step at once.
+    pub loaders: usize,
     /// One step alone on all cores: reading it from the case, and reading and baking it
     /// into its file (medians of 3).
     pub read_ms: f64,
@@ -55,16 +57,33 @@ fn ensure_case(dir: &Path, points: usize, steps: usize) -> Result<std::path::Pat
     Ok(case)
 }
 
-/// The case, to be baked into `cache` (emptied first) as the engine asks, its stages run by
-/// `stages`.
-fn on_demand(case: &Path, cache: &Path, stages: &slosh_bake::Stages) -> Result<OnDemand> {
+/// The case of `points` points a step, to be baked into `cache` (emptied first) as the
+/// engine asks, its stages run by `stages`, `loaders` steps at once (default: as
+/// `slosh play CASE.case` bakes, [`slosh_bake::viewer_jobs`]).
+fn on_demand(
+    case: &Path,
+    cache: &Path,
+    points: usize,
+    stages: &slosh_bake::Stages,
+    loaders: Option<usize>,
+) -> Result<OnDemand> {
     let _ = std::fs::remove_dir_all(cache);
+    let cores = slosh_bake::cores();
+    let jobs = loaders.unwrap_or_else(|| {
+        let batch = slosh_bake::default_jobs(
+            cores,
+            slosh_bake::available_memory(),
+            Some(points),
+            stages.device_memory,
+        );
+        slosh_bake::viewer_jobs(batch.0, cores)
+    });
     Ok(OnDemand::of_case(
         slosh_ensight::Case::open(case)?,
         case,
         cache.to_path_buf(),
         series_params(),
-        slosh_bake::cores(),
+        (cores, jobs),
         stages.clone(),
     )?)
 }
@@ -94,7 +113,7 @@ pub fn measure(
     // One step alone: read, then read and bake (into a directory of its own each time).
     let (mut read_ms, mut bake_ms) = (Vec::new(), Vec::new());
     for _ in 0..3 {
-        let bake = on_demand(&case, &cache, &stages)?;
+        let bake = on_demand(&case, &cache, points, &stages, args.loaders)?;
         let source = EnsightSource::new(
             slosh_ensight::Case::open(&case)?,
             &case,
@@ -120,8 +139,9 @@ pub fn measure(
         camera_moving: false,
         frame_budget_ms: None,
     };
-    let options = || EngineOptions {
-        loaders: args.loaders.unwrap_or_else(slosh_play::default_loaders),
+    // As many loaders as steps the bake takes at once, as `slosh play CASE.case` has.
+    let options = |bake: &OnDemand| EngineOptions {
+        loaders: bake.jobs(),
         ..EngineOptions::default()
     };
     let pace = Pace {
@@ -136,11 +156,9 @@ pub fn measure(
             .map(|_| t.elapsed().as_secs_f64() * 1e3)
     };
     // Sequential playback from an empty cache.
-    let mut engine = Engine::open_baking(
-        gpu.clone(),
-        Arc::new(on_demand(&case, &cache, &stages)?),
-        options(),
-    )?;
+    let bake = Arc::new(on_demand(&case, &cache, points, &stages, args.loaders)?);
+    let loaders = options(&bake).loaders;
+    let mut engine = Engine::open_baking(gpu.clone(), bake.clone(), options(&bake))?;
     show(&mut engine, &mut request, 0)?;
     let mut sequential = Vec::new();
     let start = Instant::now();
@@ -150,11 +168,8 @@ pub fn measure(
     let sequential_steps_per_s = (steps - 1) as f64 / start.elapsed().as_secs_f64();
     drop(engine);
     // Jumps to steps not baked yet, from an empty cache again.
-    let mut engine = Engine::open_baking(
-        gpu.clone(),
-        Arc::new(on_demand(&case, &cache, &stages)?),
-        options(),
-    )?;
+    let bake = Arc::new(on_demand(&case, &cache, points, &stages, args.loaders)?);
+    let mut engine = Engine::open_baking(gpu.clone(), bake.clone(), options(&bake))?;
     show(&mut engine, &mut request, 0)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let mut jumps = Vec::new();
@@ -174,6 +189,7 @@ pub fn measure(
         points,
         steps,
         case_step_bytes,
+        loaders,
         read_ms: median(read_ms),
         bake_ms: median(bake_ms),
         sequential_steps_per_s,
