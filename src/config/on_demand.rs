@@ -21,8 +21,8 @@ pub fn default_cache(case: &Path) -> PathBuf {
 /// The case at `case`, held for baking into `cache` (default [`default_cache`]) with
 /// `settings` and the `shown` field (the one frames are coloured by is baked with them), on
 /// the adapter named `adapter` where the settings bake on the GPU, `jobs` steps at once
-/// (default: [`slosh_bake::viewer_jobs`] of what `slosh bake` would take); refused where the directory holds another series or
-/// another bake holds it.
+/// (default: [`slosh_bake::viewer_jobs`] of what `slosh bake` would take); refused where the
+/// directory holds another series or another bake holds it.
 pub fn open(
     case: &Path,
     cache: Option<&Path>,

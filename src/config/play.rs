@@ -75,7 +75,7 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
         engine.loaders = n.clamp(1, 64);
     }
     // A raw case's loaders each bake a step: as many as its bake takes at once (`--loaders`,
-    // else as many as `slosh bake` would here).
+    // else `slosh_bake::viewer_jobs`: what `slosh bake` would take, at most half the cores).
     if let Some(bake) = &bake {
         engine.loaders = bake.jobs();
     }

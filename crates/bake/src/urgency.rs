@@ -1,7 +1,8 @@
 //! Which bakes get the cores first: a step a viewer waits for (a jump) over the steps it bakes
-//! ahead of need. Both run on rayon pools of their own; the pool of steps baked ahead runs at
-//! a lower scheduling priority, so the kernel gives the waited-for step the cores while
-//! both have work, and the steps ahead every core that it leaves idle.
+//! ahead of need. A waited-for step runs on a rayon pool of every core; each step ahead on a
+//! pool of its own share of them, at a lower scheduling priority, so the kernel gives the
+//! waited-for step the cores while both have work, and the steps ahead every core that it
+//! leaves idle.
 
 use std::sync::{Condvar, Mutex, PoisonError};
 

@@ -59,7 +59,7 @@ impl Stamps {
     }
 }
 
-/// A mapping asked for and not yet read.
+/// Where a pending pass's mapping stands: asked for, done (its ticks readable), or failed.
 const MAPPING: u8 = 0;
 const MAPPED: u8 = 1;
 const FAILED: u8 = 2;
