@@ -204,7 +204,7 @@ impl Player {
         extra: &[&str],
     ) -> Player {
         let log = out.join("player.log");
-        let process = Command::new(env!("CARGO_BIN_EXE_slosh"))
+        let mut process = Command::new(env!("CARGO_BIN_EXE_slosh"))
             .args([
                 "play",
                 cache.to_str().unwrap(),
@@ -222,6 +222,13 @@ impl Player {
             .unwrap();
         let mut window = String::new();
         wait_for("the player's window", Duration::from_secs(120), || {
+            // A player that ended says why, where a window that never came only timed out.
+            if let Ok(Some(status)) = process.try_wait() {
+                let said = std::fs::read_to_string(&log).unwrap_or_default();
+                panic!(
+                    "the player ended ({status}) before its window came (its stderr is above); its log:\n{said}"
+                );
+            }
             window = display
                 .xdotool(&["search", "--name", "^slosh"])
                 .and_then(|w| w.lines().next().map(str::to_string))
