@@ -32,6 +32,12 @@ pub fn decode(word: u32) -> [f32; 3] {
     if a == i16::MIN {
         return [0.0; 3];
     }
+    on_octahedron(a, b)
+}
+
+/// The point of the unit octahedron whose coordinates are `a` and `b` steps.
+#[inline]
+fn on_octahedron(a: i16, b: i16) -> [f32; 3] {
     let (x, y) = (
         f32::from(a) * OCTAHEDRAL_STEP,
         f32::from(b) * OCTAHEDRAL_STEP,
@@ -44,6 +50,17 @@ pub fn decode(word: u32) -> [f32; 3] {
     }
 }
 
+/// The floor and ceiling of `v`, |v| at most 32767, by truncation (exact there): `floor`
+/// and `ceil` are library calls on the baseline x86-64 target.
+#[inline]
+fn floor_and_ceiling(v: f64) -> (f64, f64) {
+    let t = v as i32 as f64;
+    (
+        if t > v { t - 1.0 } else { t },
+        if t < v { t + 1.0 } else { t },
+    )
+}
+
 /// `decode(word)` normalised (zero stays zero).
 pub fn decode_unit(word: u32) -> [f32; 3] {
     let v = decode(word);
@@ -51,8 +68,8 @@ pub fn decode_unit(word: u32) -> [f32; 3] {
     if len > 0.0 { v.map(|c| c / len) } else { v }
 }
 
-fn word(a: i32, b: i32) -> u32 {
-    u32::from(a as i16 as u16) | (u32::from(b as i16 as u16) << 16)
+fn word(a: i16, b: i16) -> u32 {
+    u32::from(a as u16) | (u32::from(b as u16) << 16)
 }
 
 /// The word whose direction is nearest `n`'s (of the four codes around its projection);
@@ -70,21 +87,22 @@ pub fn encode(n: [f64; 3]) -> u32 {
     }
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     let unit = n.map(|c| c / len);
-    let (fx, fy) = (x * 32767.0, y * 32767.0);
+    let step = |v: f64| v.clamp(-32767.0, 32767.0) as i16;
+    let (fa, ca) = floor_and_ceiling(x * 32767.0);
+    let (fb, cb) = floor_and_ceiling(y * 32767.0);
+    // The four codes around the projection, each measured on its own.
+    let a = [fa, fa, ca, ca].map(step);
+    let b = [fb, cb, fb, cb].map(step);
+    let cos: [f64; 4] = std::array::from_fn(|k| {
+        // In f64: the f32 normalisation's rounding would outweigh the codes' differences.
+        let d = on_octahedron(a[k], b[k]).map(f64::from);
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        (d[0] * unit[0] + d[1] * unit[1] + d[2] * unit[2]) / len
+    });
     let mut best = (f64::NEG_INFINITY, NO_NORMAL);
-    for a in [fx.floor(), fx.ceil()] {
-        for b in [fy.floor(), fy.ceil()] {
-            let w = word(
-                a.clamp(-32767.0, 32767.0) as i32,
-                b.clamp(-32767.0, 32767.0) as i32,
-            );
-            // In f64: the f32 normalisation's rounding would outweigh the codes' differences.
-            let d = decode(w).map(f64::from);
-            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            let cos = (0..3).map(|k| d[k] * unit[k]).sum::<f64>() / len;
-            if cos > best.0 {
-                best = (cos, w);
-            }
+    for k in 0..4 {
+        if cos[k] > best.0 {
+            best = (cos[k], word(a[k], b[k]));
         }
     }
     best.1
@@ -123,6 +141,21 @@ mod tests {
             }
         }
         assert!(worst < 5e-5, "worst angle {worst}");
+    }
+
+    /// The truncating floor and ceiling are `floor` and `ceil` over the coordinates' range:
+    /// integers, halves, the neighbours of integers, signed zeros and the ends.
+    #[test]
+    fn floor_and_ceiling_by_truncation_are_exact() {
+        let mut values = vec![0.0, -0.0, 32767.0, -32767.0];
+        for i in -32767..=32767 {
+            let v = f64::from(i);
+            values.extend([v, v + 0.5, v.next_up(), v.next_down(), v + 0.999_999]);
+        }
+        for v in values.into_iter().filter(|v| v.abs() <= 32767.0) {
+            let (f, c) = floor_and_ceiling(v);
+            assert_eq!((f, c), (v.floor(), v.ceil()), "{v:e}");
+        }
     }
 
     #[test]
