@@ -57,7 +57,8 @@ fn half_at_or_above(x: f64) -> Option<half::f16> {
     // exponent is the next half up). Integer work, where rounding to nearest and stepping up
     // took 7 times as long.
     let bits = x.to_bits();
-    let exponent = (bits >> 52) - 1023 + 15;
+    // At least 1: `x` is above the smallest normal half, 2^-14.
+    let exponent = (bits >> 52) + 15 - 1023;
     let fraction = bits & ((1 << 52) - 1);
     let below = u64::from(fraction & ((1 << 42) - 1) != 0);
     let half_bits = (exponent << 10 | fraction >> 42) + below;
