@@ -157,7 +157,7 @@ pub fn measure(
     };
     // Sequential playback from an empty cache.
     let bake = Arc::new(on_demand(&case, &cache, points, &stages, args.loaders)?);
-    let loaders = options(&bake).loaders;
+    let loaders = bake.jobs();
     let mut engine = Engine::open_baking(gpu.clone(), bake.clone(), options(&bake))?;
     show(&mut engine, &mut request, 0)?;
     let mut sequential = Vec::new();
