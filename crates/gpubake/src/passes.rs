@@ -61,15 +61,26 @@ pub struct GpuStages {
 /// that is less).
 const KEPT_BUFFER_BYTES: u64 = 2 << 30;
 
-/// Staging buffers kept for the passes' inputs.
-const STAGING_BUFFERS_KEPT: usize = 8;
+/// Staging buffers kept for the passes' inputs: enough for the uploads of many jobs in
+/// flight at once (a series of 64 steps of 1M points, 24 jobs on an H100 host: 75-89 buffers
+/// made afresh with 8 kept, each zeroed by wgpu and faulted in, 14-21 with 64).
+const STAGING_BUFFERS_KEPT: usize = 64;
 
 /// Reads from this size on reuse pooled buffers; smaller ones are cheap to make.
 const POOLED_READ_BYTES: u64 = 1 << 20;
 
 /// Read-back buffers kept for reuse: as many as steps commonly read back at once, each up to
-/// [`OUTPUT_BATCH_BYTES`].
-const READBACK_BUFFERS_KEPT: usize = 3;
+/// [`OUTPUT_BATCH_BYTES`] (the series above: 181-232 made afresh with 3 kept, 19-23 with 24).
+const READBACK_BUFFERS_KEPT: usize = 24;
+
+/// The most host memory the kept staging buffers, and again the kept read-back buffers, hold:
+/// a thirty-second of the memory available (where known), at most this.
+const KEPT_HOST_BYTES: u64 = 2 << 30;
+
+/// What [`KEPT_HOST_BYTES`] allows on this machine now.
+fn kept_host_bytes() -> u64 {
+    slosh_bake::available_memory().map_or(KEPT_HOST_BYTES, |m| (m / 32).min(KEPT_HOST_BYTES))
+}
 
 /// `cluster_unions` over a bitset of `span_words` words.
 fn union_pipeline(
@@ -276,11 +287,13 @@ impl GpuStages {
             unions_pipeline_layout,
             cluster_unions,
             clock: PassClock::new(&gpu),
-            readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT),
+            readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT)
+                .within(kept_host_bytes()),
             memory: PassMemory {
                 gpu: gpu.clone(),
                 buffers,
-                staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT),
+                staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT)
+                    .within(kept_host_bytes()),
             },
             gpu,
         })

@@ -14,13 +14,15 @@ use crate::context::Gpu;
 /// Staging buffers are made in multiples of this, so that steps of similar sizes share them.
 const STAGING_GRANULE: u64 = 16 << 20;
 
-/// Buffers kept for reuse, up to a number: what [`StagingPool`] and
+/// Buffers kept for reuse, up to a number and a total size: what [`StagingPool`] and
 /// [`crate::ReadbackPool`] hold.
 #[derive(Debug, Clone)]
 pub(crate) struct Shelf {
     free: Arc<Mutex<Vec<wgpu::Buffer>>>,
     /// The most buffers kept; more are dropped when they come back.
     keep: usize,
+    /// The most bytes the kept buffers hold together.
+    keep_bytes: u64,
 }
 
 impl Shelf {
@@ -28,6 +30,15 @@ impl Shelf {
         Shelf {
             free: Arc::new(Mutex::new(Vec::new())),
             keep,
+            keep_bytes: u64::MAX,
+        }
+    }
+
+    /// The same shelf, keeping no more than `bytes` in all.
+    pub(crate) fn within(self, bytes: u64) -> Shelf {
+        Shelf {
+            keep_bytes: bytes,
+            ..self
         }
     }
 
@@ -50,10 +61,11 @@ impl Shelf {
         Some(free.swap_remove(fit))
     }
 
-    /// Keeps `buffer` unless the shelf is full.
+    /// Keeps `buffer` unless the shelf is full, by count or by bytes.
     pub(crate) fn put(&self, buffer: wgpu::Buffer) {
         let mut free = self.free.lock().unwrap_or_else(PoisonError::into_inner);
-        if free.len() < self.keep {
+        let held: u64 = free.iter().map(wgpu::Buffer::size).sum();
+        if free.len() < self.keep && held.saturating_add(buffer.size()) <= self.keep_bytes {
             free.push(buffer);
         }
     }
@@ -75,6 +87,14 @@ impl StagingPool {
             shelf: Shelf::new(keep),
             fresh: Arc::new(AtomicUsize::new(0)),
             warmed: Arc::new(AtomicBool::new(false)),
+        }
+    }
+
+    /// The same pool, keeping no more than `bytes` of buffers in all.
+    pub fn within(self, bytes: u64) -> StagingPool {
+        StagingPool {
+            shelf: self.shelf.within(bytes),
+            ..self
         }
     }
 
@@ -107,7 +127,12 @@ impl StagingPool {
     /// `size` on a thread of its own.
     fn warm(&self, gpu: &Gpu, size: u64) {
         let (device, shelf) = (gpu.device.clone(), self.shelf.clone());
-        let count = self.shelf.keep.saturating_sub(1);
+        let fit = self.shelf.keep_bytes / staging_size(size);
+        let count = self
+            .shelf
+            .keep
+            .min(usize::try_from(fit).unwrap_or(usize::MAX));
+        let count = count.saturating_sub(1);
         let spawned = crate::background::spawn("staging warm-up".into(), move || {
             for _ in 0..count {
                 let buffer = new_staging(&device, size);
@@ -187,11 +212,16 @@ impl StagingPool {
 /// Bytes of an upload each thread copies at a time.
 const UPLOAD_PIECE: usize = 1 << 20;
 
+/// The size of a staging buffer made for `size` bytes: whole granules.
+fn staging_size(size: u64) -> u64 {
+    size.max(1).next_multiple_of(STAGING_GRANULE)
+}
+
 /// A mapped `MAP_WRITE | COPY_SRC` buffer of at least `size` bytes, in whole granules.
 fn new_staging(device: &wgpu::Device, size: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("staging (pooled)"),
-        size: size.next_multiple_of(STAGING_GRANULE),
+        size: staging_size(size),
         usage: wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: true,
     })

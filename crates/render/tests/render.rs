@@ -1380,3 +1380,60 @@ fn pooled_read_backs_return_the_buffers_bytes() {
     assert_eq!(ranges, [&values[1024..1026], &values[..4]].concat());
     assert_eq!(pool.kept(), 1, "the same buffer again");
 }
+
+/// Staging and read-back pools keep no more buffers than their bytes allow: a bake's pools
+/// keep dozens for its jobs' transfers, within a share of the host's memory.
+#[test]
+fn pools_keep_no_more_than_their_bytes() {
+    use wgpu::util::DeviceExt;
+    let Some(Device { gpu, .. }) = device() else {
+        return;
+    };
+    let values = vec![7u8; 4 << 20];
+    let source = gpu
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("read-back source"),
+            contents: &values,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        });
+    // Reads of 1, 2 and 4 MB each make a buffer (none kept fits the next); 4 MB of room keeps
+    // the first two, and no bound all three.
+    let kept_after_reads = |pool: &slosh_render::ReadbackPool| {
+        for megabytes in [1u64, 2, 4] {
+            let read: Vec<u8> = pool
+                .read(gpu, &source, megabytes << 20)
+                .expect("a pooled read");
+            assert!(read.iter().all(|&b| b == 7));
+        }
+        pool.kept()
+    };
+    assert_eq!(
+        kept_after_reads(&slosh_render::ReadbackPool::new(8).within(4 << 20)),
+        2
+    );
+    assert_eq!(kept_after_reads(&slosh_render::ReadbackPool::new(8)), 3);
+    // The first upload fills a staging pool on a thread of its own with 16 MB buffers, and
+    // its own comes back once the copy is done: 48 MB holds three, no bound the pool's eight.
+    let ready_after_an_upload = |pool: &slosh_render::StagingPool| {
+        pool.upload(gpu, &values[..1 << 20], &source)
+            .expect("an upload");
+        let mut ready = Vec::new();
+        for _ in 0..100 {
+            let _ = gpu.device.poll(wgpu::PollType::Poll);
+            ready.push(pool.ready());
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        ready
+    };
+    let bounded = ready_after_an_upload(&slosh_render::StagingPool::new(8).within(48 << 20));
+    assert_eq!(bounded.iter().max(), Some(&3), "buffers ready: {bounded:?}");
+    let unbounded = ready_after_an_upload(&slosh_render::StagingPool::new(8));
+    assert_eq!(
+        unbounded.iter().max(),
+        Some(&8),
+        "buffers ready: {unbounded:?}"
+    );
+}

@@ -57,6 +57,13 @@ impl ReadbackPool {
         }
     }
 
+    /// The same pool, keeping no more than `bytes` of buffers in all.
+    pub fn within(self, bytes: u64) -> ReadbackPool {
+        ReadbackPool {
+            shelf: self.shelf.within(bytes),
+        }
+    }
+
     /// Buffers kept for the next reads.
     pub fn kept(&self) -> usize {
         self.shelf.len()
