@@ -3,6 +3,8 @@
 //! surface faces up. Meshes from graphics (the bunny) are y-up, solver output often z-up or y-up,
 //! and nothing in the files says which.
 
+use rayon::prelude::*;
+
 /// Points within this fraction of the extent from the low end belong to the base.
 const BASE_BAND: f64 = 0.03;
 /// A base point's normal points down by at least this cosine.
@@ -37,27 +39,33 @@ pub fn guess_up(points: &[[f64; 3]], normals: &[[f64; 3]]) -> Option<[f64; 3]> {
     } // A closed shape resting on a flat base: the base faces down.
     let (lo, hi) = crate::geometry::bounds(points);
     // A flat base: for each candidate up (axis, sign), the share of points in a thin band at
-    // its low end whose normals point down.
+    // its low end whose normals point down; all six counted in one pass over the points.
+    let band: [f64; 3] = std::array::from_fn(|a| BASE_BAND * (hi[a] - lo[a]));
+    let counts = points
+        .par_iter()
+        .zip(normals)
+        .fold(
+            || [0usize; 6],
+            |mut counts, (p, n)| {
+                for axis in 0..3 {
+                    if p[axis] - lo[axis] < band[axis] && -n[axis] > BASE_COSINE {
+                        counts[2 * axis] += 1;
+                    }
+                    if hi[axis] - p[axis] < band[axis] && n[axis] > BASE_COSINE {
+                        counts[2 * axis + 1] += 1;
+                    }
+                }
+                counts
+            },
+        )
+        .reduce(|| [0; 6], |a, b| std::array::from_fn(|k| a[k] + b[k]));
     let mut scores = Vec::with_capacity(6);
     for axis in 0..3 {
-        let extent = hi[axis] - lo[axis];
-        if !(extent > 0.0) {
+        if !(hi[axis] - lo[axis] > 0.0) {
             continue;
         }
-        for sign in [1.0, -1.0] {
-            let base = points
-                .iter()
-                .zip(normals)
-                .filter(|(p, n)| {
-                    let height = if sign > 0.0 {
-                        p[axis] - lo[axis]
-                    } else {
-                        hi[axis] - p[axis]
-                    };
-                    height < BASE_BAND * extent && -sign * n[axis] > BASE_COSINE
-                })
-                .count();
-            scores.push((base as f64 / points.len() as f64, axis, sign));
+        for (k, sign) in [(2 * axis, 1.0), (2 * axis + 1, -1.0)] {
+            scores.push((counts[k] as f64 / points.len() as f64, axis, sign));
         }
     }
     scores.sort_by(|a, b| b.0.total_cmp(&a.0));
