@@ -63,14 +63,14 @@ const KEPT_BUFFER_BYTES: u64 = 2 << 30;
 
 /// Staging buffers kept for the passes' inputs: enough for the uploads of many jobs in
 /// flight at once (a series of 64 steps of 1M points, 24 jobs on an H100 host: 75-89 buffers
-/// made afresh with 8 kept, each zeroed by wgpu and faulted in, 14-21 with 64).
+/// made afresh with 8 kept, each zeroed by wgpu and faulted in, 14-29 with 64).
 const STAGING_BUFFERS_KEPT: usize = 64;
 
 /// Reads from this size on reuse pooled buffers; smaller ones are cheap to make.
 const POOLED_READ_BYTES: u64 = 1 << 20;
 
 /// Read-back buffers kept for reuse: as many as steps commonly read back at once, each up to
-/// [`OUTPUT_BATCH_BYTES`] (the series above: 181-232 made afresh with 3 kept, 19-23 with 24).
+/// [`OUTPUT_BATCH_BYTES`] (the series above: 174-232 made afresh with 3 kept, 19-27 with 24).
 const READBACK_BUFFERS_KEPT: usize = 24;
 
 /// The most host memory the kept staging buffers, and again the kept read-back buffers, hold:

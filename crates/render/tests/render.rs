@@ -1417,20 +1417,29 @@ fn pools_keep_no_more_than_their_bytes() {
     assert_eq!(kept_after_reads(&slosh_render::ReadbackPool::new(8)), 3);
     // The first upload fills a staging pool on a thread of its own with 16 MB buffers, and
     // its own comes back once the copy is done: 48 MB holds three, no bound the pool's eight.
-    let ready_after_an_upload = |pool: &slosh_render::StagingPool| {
+    // Watched until it holds what is expected (or 20 s pass, on a loaded machine), and for
+    // half a second after, so that a buffer past the bound would be seen.
+    let ready_after_an_upload = |pool: &slosh_render::StagingPool, expected: usize| {
         pool.upload(gpu, &values[..1 << 20], &source)
             .expect("an upload");
         let mut ready = Vec::new();
-        for _ in 0..100 {
+        let start = std::time::Instant::now();
+        let mut since_expected = None;
+        while start.elapsed().as_secs() < 20
+            && since_expected.is_none_or(|t: std::time::Instant| t.elapsed().as_millis() < 500)
+        {
             let _ = gpu.device.poll(wgpu::PollType::Poll);
             ready.push(pool.ready());
+            if pool.ready() >= expected && since_expected.is_none() {
+                since_expected = Some(std::time::Instant::now());
+            }
             std::thread::sleep(std::time::Duration::from_millis(20));
         }
         ready
     };
-    let bounded = ready_after_an_upload(&slosh_render::StagingPool::new(8).within(48 << 20));
+    let bounded = ready_after_an_upload(&slosh_render::StagingPool::new(8).within(48 << 20), 3);
     assert_eq!(bounded.iter().max(), Some(&3), "buffers ready: {bounded:?}");
-    let unbounded = ready_after_an_upload(&slosh_render::StagingPool::new(8));
+    let unbounded = ready_after_an_upload(&slosh_render::StagingPool::new(8), 8);
     assert_eq!(
         unbounded.iter().max(),
         Some(&8),
