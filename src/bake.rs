@@ -173,7 +173,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             n => format!(" ({:.1} bytes per point)", report.bytes as f64 / n as f64),
         };
         say!(
-            "{} points, {:.1} MB written{per_point}; per-stage CPU seconds summed over steps:",
+            "{} points, {:.1} MB written{per_point}; each stage's wall seconds summed over steps:",
             report.points,
             report.bytes as f64 / 1e6,
         );
