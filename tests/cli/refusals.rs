@@ -120,9 +120,13 @@ fn the_jobs_default_comes_from_cores_and_memory() {
     let (ok, out, err) = bake_case(&case, &dir.path().join("cache"), &[]);
     assert!(ok, "{err}");
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let steps = |jobs: usize| match jobs {
+        1 => "1 step".to_string(),
+        n => format!("{n} steps"),
+    };
     let expected = format!(
-        "baking up to {} steps at once ({cores} cores",
-        (cores / 2).max(1)
+        "baking up to {} at once ({cores} cores",
+        steps((cores / 2).max(1))
     );
     assert!(out.contains(&expected), "{out}");
     assert!(out.contains("a step of 500 points needs about"), "{out}");
@@ -136,8 +140,8 @@ fn the_jobs_default_comes_from_cores_and_memory() {
     }
     assert!(ok, "{err}");
     let expected = format!(
-        "baking up to {} steps at once ({cores} cores, three steps for every two cores",
-        (cores * 3 / 2).max(1)
+        "baking up to {} at once ({cores} cores, three steps for every two cores",
+        steps((cores * 3 / 2).max(1))
     );
     assert!(out.contains(&expected), "{out}");
     assert!(out.contains("of the device's"), "{out}");

@@ -81,9 +81,10 @@ pub fn default_jobs(
         why += &format!("; about {:.2} GB of the device's {:.1} GB", gb(j), gb(d));
     }
     // "Up to": the batch takes no more jobs than it has steps.
+    let steps = if jobs == 1 { "step" } else { "steps" };
     (
         jobs,
-        format!("baking up to {jobs} steps at once ({why}; --jobs sets it)"),
+        format!("baking up to {jobs} {steps} at once ({why}; --jobs sets it)"),
     )
 }
 
