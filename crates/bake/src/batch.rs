@@ -385,7 +385,7 @@ pub fn run_batch(
     let jobs = opts.jobs.clamp(1, planned.len().max(1));
     std::thread::scope(|scope| {
         for job in 0..jobs {
-            let threads = opts.threads / jobs + usize::from(job < opts.threads % jobs);
+            let threads = crate::jobs::thread_share(opts.threads, jobs, job);
             // A pool that cannot be made leaves the job on the global pool.
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.max(1))

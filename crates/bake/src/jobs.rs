@@ -88,6 +88,14 @@ pub fn default_jobs(
     )
 }
 
+/// Job `job`'s share of `threads` split among `jobs` (the first ones take the remainder;
+/// at least one each): the threads of its own rayon pool, in a batch and for a viewer's steps
+/// ahead alike.
+pub(crate) fn thread_share(threads: usize, jobs: usize, job: usize) -> usize {
+    let jobs = jobs.max(1);
+    (threads / jobs + usize::from(job < threads % jobs)).max(1)
+}
+
 /// Steps a viewer bakes ahead at once (a raw case played: each of its loaders bakes one), of
 /// the `batch_jobs` that `slosh bake` would take: no more than half the cores, so that each
 /// step has two threads or more. A bake a viewer waits for shares the machine with the steps

@@ -54,7 +54,7 @@ impl Pools {
         let jobs = jobs.max(1);
         let ahead: Vec<ThreadPool> = (0..jobs)
             .filter_map(|job| {
-                let share = threads / jobs + usize::from(job < threads % jobs);
+                let share = crate::jobs::thread_share(threads, jobs, job);
                 pool(format!("ahead-{job}"), share, true)
             })
             .collect();

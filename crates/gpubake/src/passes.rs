@@ -263,6 +263,8 @@ impl GpuStages {
             gpu.device_memory()
                 .map_or(KEPT_BUFFER_BYTES, |m| (m / 8).min(KEPT_BUFFER_BYTES)),
         );
+        // Read once (from /proc/meminfo) for both pools.
+        let kept_host = kept_host_bytes();
         Ok(GpuStages {
             nearest_layout,
             nearest,
@@ -287,13 +289,11 @@ impl GpuStages {
             unions_pipeline_layout,
             cluster_unions,
             clock: PassClock::new(&gpu),
-            readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT)
-                .within(kept_host_bytes()),
+            readback: slosh_render::ReadbackPool::new(READBACK_BUFFERS_KEPT).within(kept_host),
             memory: PassMemory {
                 gpu: gpu.clone(),
                 buffers,
-                staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT)
-                    .within(kept_host_bytes()),
+                staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT).within(kept_host),
             },
             gpu,
         })
