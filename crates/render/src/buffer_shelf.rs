@@ -78,13 +78,18 @@ impl BufferShelf {
     }
 
     /// A buffer of at least `size` bytes and at most a sixteenth more (an eighth with
-    /// headroom): the smallest kept one, or a new one. Its bytes are what its last user left.
+    /// headroom, or what the shelf makes for `size` where that is more): the smallest kept
+    /// one, or a new one. Its bytes are what its last user left.
     pub fn take(&self, gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
+        let made = self.made_size(gpu, size);
         let most = if self.headroom {
             size + size / 8
         } else {
             size + size / 16
-        };
+        }
+        // A small buffer's rounding can pass the headroom (16 bytes are made 20): the
+        // buffer made for a size always serves that size again.
+        .max(made);
         let mut free = self.lock();
         let fit = free
             .iter()
@@ -97,15 +102,19 @@ impl BufferShelf {
         }
         drop(free);
         self.fresh.fetch_add(1, Ordering::Relaxed);
-        // Never past what one binding holds: passes bind their buffers whole.
-        let made = if self.headroom {
+        create(gpu, label, made, self.usage)
+    }
+
+    /// The bytes of a buffer made for `size`: a sixteenth more with headroom, aligned for
+    /// copies, but never past what one binding holds (passes bind their buffers whole).
+    fn made_size(&self, gpu: &Gpu, size: u64) -> u64 {
+        if self.headroom {
             (size + size / 16)
                 .min(gpu.max_binding().max(size))
                 .next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)
         } else {
             size
-        };
-        create(gpu, label, made, self.usage)
+        }
     }
 
     /// Keeps `buffer` (of the shelf's usage; others are dropped) within the limit, dropping
