@@ -34,7 +34,7 @@ pub use error::{Error, Result};
 pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, WidenSettings, status};
 pub use output::{write_frame_png, write_npy, write_rgb_png};
 pub use pass::checked_pipeline;
-pub use staging::StagingPool;
+pub use staging::{StagingPool, WarmUp};
 pub use tracer::{
     FRAME_TEXTURE_FORMAT, Frame, FrameTargets, PassTimes, PendingHit, ReadbackPool, RowSet,
     ShadeMode, TraceParams, Tracer, read_buffer, read_storage, settings,

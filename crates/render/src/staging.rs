@@ -4,10 +4,12 @@
 //! to the pool once the GPU has finished reading it: `recycle` maps it again, and wgpu
 //! completes that map only after the submitted copies, during a later device poll. The
 //! first upload of a pool fills it on a thread of its own (`warm`), so that the first
-//! uploads after a series opens do not each fault in a buffer of their own.
+//! uploads after a series opens do not each fault in a buffer of their own; the warm-up
+//! stops once the pool is dropped, for the process waits for it at exit.
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Condvar, Mutex, PoisonError, Weak};
+use std::time::{Duration, Instant};
 
 use crate::context::Gpu;
 
@@ -61,6 +63,16 @@ impl Shelf {
         Some(free.swap_remove(fit))
     }
 
+    /// The shelf without its buffers kept alive: [`WeakShelf::upgrade`] gives it back while
+    /// an owner holds it.
+    fn downgrade(&self) -> WeakShelf {
+        WeakShelf {
+            free: Arc::downgrade(&self.free),
+            keep: self.keep,
+            keep_bytes: self.keep_bytes,
+        }
+    }
+
     /// Keeps `buffer` unless the shelf is full, by count or by bytes.
     pub(crate) fn put(&self, buffer: wgpu::Buffer) {
         let mut free = self.free.lock().unwrap_or_else(PoisonError::into_inner);
@@ -68,6 +80,57 @@ impl Shelf {
         if free.len() < self.keep && held.saturating_add(buffer.size()) <= self.keep_bytes {
             free.push(buffer);
         }
+    }
+}
+
+/// A [`Shelf`] that does not keep its buffers alive: what a warm-up holds.
+struct WeakShelf {
+    free: Weak<Mutex<Vec<wgpu::Buffer>>>,
+    keep: usize,
+    keep_bytes: u64,
+}
+
+impl WeakShelf {
+    fn upgrade(&self) -> Option<Shelf> {
+        Some(Shelf {
+            free: self.free.upgrade()?,
+            keep: self.keep,
+            keep_bytes: self.keep_bytes,
+        })
+    }
+}
+
+/// What a pool's warm-up did: the buffers it made, once it has ended.
+#[derive(Debug, Default)]
+pub struct WarmUp {
+    made: AtomicUsize,
+    ended: Mutex<bool>,
+    ended_signal: Condvar,
+}
+
+impl WarmUp {
+    fn end(&self) {
+        *self.ended.lock().unwrap_or_else(PoisonError::into_inner) = true;
+        self.ended_signal.notify_all();
+    }
+
+    /// The buffers the warm-up made, once it has ended (or never started), or `None` where it
+    /// is still running after `timeout`.
+    pub fn wait(&self, timeout: Duration) -> Option<usize> {
+        let deadline = Instant::now() + timeout;
+        let mut ended = self.ended.lock().unwrap_or_else(PoisonError::into_inner);
+        while !*ended {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            ended = self
+                .ended_signal
+                .wait_timeout(ended, left)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+        Some(self.made.load(Ordering::Relaxed))
     }
 }
 
@@ -79,6 +142,7 @@ pub struct StagingPool {
     fresh: Arc<AtomicUsize>,
     /// Whether the pool was filled once (see [`StagingPool::take`]).
     warmed: Arc<AtomicBool>,
+    warm_up: Arc<WarmUp>,
 }
 
 impl StagingPool {
@@ -87,6 +151,7 @@ impl StagingPool {
             shelf: Shelf::new(keep),
             fresh: Arc::new(AtomicUsize::new(0)),
             warmed: Arc::new(AtomicBool::new(false)),
+            warm_up: Arc::default(),
         }
     }
 
@@ -108,6 +173,12 @@ impl StagingPool {
         self.shelf.len()
     }
 
+    /// What the warm-up (started by the first upload) did, to be watched after the pool is
+    /// gone.
+    pub fn warm_up(&self) -> Arc<WarmUp> {
+        self.warm_up.clone()
+    }
+
     /// A mapped `MAP_WRITE | COPY_SRC` buffer of at least `size` bytes: the smallest ready
     /// one that fits, or a new one. The first call also fills the pool on a thread of its
     /// own, with buffers an eighth larger than `size` (a series' steps are of about one
@@ -124,27 +195,35 @@ impl StagingPool {
     }
 
     /// Fills the shelf, but for the buffer the caller is about to make, with buffers of
-    /// `size` on a thread of its own.
+    /// `size` on a thread of its own, until it is full or the pool is dropped: the process
+    /// waits for the thread at exit, and a bake of one step ended long before its pool's
+    /// warm-up (a 1,000-point bake on lavapipe waited 0.6 s for it).
     fn warm(&self, gpu: &Gpu, size: u64) {
-        let (device, shelf) = (gpu.device.clone(), self.shelf.clone());
+        let (device, shelf) = (gpu.device.clone(), self.shelf.downgrade());
         let fit = self.shelf.keep_bytes / staging_size(size);
         let count = self
             .shelf
             .keep
             .min(usize::try_from(fit).unwrap_or(usize::MAX));
         let count = count.saturating_sub(1);
+        let watch = self.warm_up.clone();
         let spawned = crate::background::spawn("staging warm-up".into(), move || {
             for _ in 0..count {
+                let Some(shelf) = shelf.upgrade() else { break };
                 let buffer = new_staging(&device, size);
                 // A view that cannot be had leaves the buffer unfaulted, not unusable.
                 if let Ok(mut view) = buffer.slice(..).get_mapped_range_mut() {
                     view.slice(..).fill(0);
                 }
                 shelf.put(buffer);
+                watch.made.fetch_add(1, Ordering::Relaxed);
             }
+            watch.end();
         });
         // Without a thread the pool fills as uploads go, as it did before.
-        drop(spawned);
+        if spawned.is_err() {
+            self.warm_up.end();
+        }
     }
 
     /// `bytes` copied into the start of `target` (a `COPY_DST` buffer) through a staging

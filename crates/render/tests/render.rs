@@ -1406,6 +1406,33 @@ fn pooled_read_backs_return_the_buffers_bytes() {
     assert_eq!(pool.kept(), 1, "the same buffer again");
 }
 
+/// A staging pool's warm-up (63 buffers of 16 MB here, each zero-filled) stops once the
+/// pool is dropped, where it went on to the end: the binary waits for it at exit, and a bake
+/// of one step ended long before it.
+#[test]
+fn a_staging_warm_up_stops_when_its_pool_is_dropped() {
+    let Some(Device { gpu, .. }) = device() else {
+        return;
+    };
+    let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("upload target"),
+        size: 1 << 20,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let pool = slosh_render::StagingPool::new(64).within(64 * (16 << 20));
+    pool.upload(gpu, &vec![1u8; 1 << 20], &target)
+        .expect("an upload");
+    let warm_up = pool.warm_up();
+    drop(pool);
+    // The upload's buffer goes back to the pool (and lets go of it) once its copy is done.
+    let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+    let made = warm_up
+        .wait(std::time::Duration::from_secs(60))
+        .expect("the warm-up ended");
+    assert!(made < 63, "the warm-up made all its {made} buffers");
+}
+
 /// Staging and read-back pools keep no more buffers than their bytes allow: a bake's pools
 /// keep dozens for its jobs' transfers, within a share of the host's memory.
 #[test]
