@@ -5,7 +5,7 @@
 //! waits for them, a bounded time, before it exits.
 
 use std::sync::{Condvar, Mutex, PoisonError};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Threads started and not yet ended.
 struct Registry {
@@ -51,20 +51,12 @@ impl Registry {
     }
 
     fn wait(&self, timeout: Duration) -> usize {
-        let deadline = Instant::now() + timeout;
-        let mut live = self.lock();
-        while *live > 0 {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                break;
-            }
-            live = self
-                .ended
-                .wait_timeout(live, left)
-                .unwrap_or_else(PoisonError::into_inner)
-                .0;
-        }
-        *live
+        let live = self.lock();
+        *self
+            .ended
+            .wait_timeout_while(live, timeout, |live| *live > 0)
+            .unwrap_or_else(PoisonError::into_inner)
+            .0
     }
 }
 
@@ -96,7 +88,7 @@ mod tests {
         let held = OWN.spawn("held".into(), move || rx.recv().ok()).unwrap();
         quick.unwrap().join().unwrap();
         // The held thread keeps one live past a short wait, and no more.
-        let start = Instant::now();
+        let start = std::time::Instant::now();
         assert_eq!(OWN.wait(Duration::from_millis(300)), 1);
         assert!(start.elapsed() >= Duration::from_millis(300));
         drop(tx);

@@ -9,7 +9,7 @@
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError, Weak};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crate::context::Gpu;
 
@@ -117,20 +117,12 @@ impl WarmUp {
     /// The buffers the warm-up made, once it has ended (or never started), or `None` where it
     /// is still running after `timeout`.
     pub fn wait(&self, timeout: Duration) -> Option<usize> {
-        let deadline = Instant::now() + timeout;
-        let mut ended = self.ended.lock().unwrap_or_else(PoisonError::into_inner);
-        while !*ended {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return None;
-            }
-            ended = self
-                .ended_signal
-                .wait_timeout(ended, left)
-                .unwrap_or_else(PoisonError::into_inner)
-                .0;
-        }
-        Some(self.made.load(Ordering::Relaxed))
+        let ended = self.ended.lock().unwrap_or_else(PoisonError::into_inner);
+        let (ended, _) = self
+            .ended_signal
+            .wait_timeout_while(ended, timeout, |ended| !*ended)
+            .unwrap_or_else(PoisonError::into_inner);
+        (*ended).then(|| self.made.load(Ordering::Relaxed))
     }
 }
 
