@@ -385,10 +385,11 @@ pub fn run_batch(
     let jobs = opts.jobs.clamp(1, planned.len().max(1));
     std::thread::scope(|scope| {
         for job in 0..jobs {
+            // At least one thread each.
             let threads = crate::jobs::thread_share(opts.threads, jobs, job);
             // A pool that cannot be made leaves the job on the global pool.
             let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads.max(1))
+                .num_threads(threads)
                 .thread_name(move |t| format!("bake-{job}-{t}"))
                 .build()
                 .ok();
