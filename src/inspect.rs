@@ -118,15 +118,23 @@ fn human_file(r: &FileReport) -> String {
     for s in &h.sections {
         line(section_row(s));
     }
-    let per_point = |f: fn(&SectionEntry) -> u64| {
-        h.sections.iter().map(f).sum::<u64>() as f64 / h.points.max(1) as f64
+    let total = |f: fn(&SectionEntry) -> u64| h.sections.iter().map(f).sum::<u64>();
+    // A step without particles has bytes (headers, empty sections) but no bytes per point.
+    let sizes = match h.points {
+        0 => format!(
+            "no points: {} bytes decoded, {} stored",
+            total(|s| s.raw),
+            total(|s| s.stored)
+        ),
+        n => format!(
+            "{:.1} bytes per point decoded, {:.1} stored",
+            total(|s| s.raw) as f64 / n as f64,
+            total(|s| s.stored) as f64 / n as f64
+        ),
     };
     line(format!(
-        "           {:.1} bytes per point decoded, {:.1} stored; {} of {} clusters store runs from 32-bit starts, the rest from 16-bit offsets",
-        per_point(|s| s.raw),
-        per_point(|s| s.stored),
-        st.wide_clusters,
-        st.clusters
+        "           {sizes}; {} of {} clusters store runs from 32-bit starts, the rest from 16-bit offsets",
+        st.wide_clusters, st.clusters
     ));
     line(format!(
         "neighbours per point min {} mean {:.1} max {}; capped at {}: {} points ({:.1} %)",
@@ -438,25 +446,28 @@ fn inspect_dir(dir: &Path, args: &InspectConfig) -> Result<bool> {
                 }
                 (None, None) => "readable".into(),
             };
+            let per_point = match s.points {
+                0 => "-".to_string(),
+                n => format!("{:.1}", s.bytes as f64 / n as f64),
+            };
             o.push_str(&format!(
-                "  {:>5} {:>12.6} {:>10} {:>12} {:>9.1}  {:<16}  {status}\n",
-                s.index,
-                s.time,
-                s.points,
-                s.bytes,
-                s.bytes as f64 / s.points.max(1) as f64,
-                s.params_hash
+                "  {:>5} {:>12.6} {:>10} {:>12} {:>9}  {:<16}  {status}\n",
+                s.index, s.time, s.points, s.bytes, per_point, s.params_hash
             ));
         }
         for problem in &report.series {
             o.push_str(&format!("  SERIES: {problem}\n"));
         }
+        let per_point = match report.total_points {
+            0 => "no points".to_string(),
+            n => format!(
+                "{:.1} bytes per point",
+                report.total_bytes as f64 / n as f64
+            ),
+        };
         o.push_str(&format!(
-            "total      {} points, {} bytes ({:.1} bytes per point), {} failed\n",
-            report.total_points,
-            report.total_bytes,
-            report.total_bytes as f64 / report.total_points.max(1) as f64,
-            report.failed
+            "total      {} points, {} bytes ({per_point}), {} failed\n",
+            report.total_points, report.total_bytes, report.failed
         ));
         print(&o)?;
     }

@@ -278,6 +278,15 @@ fn empty_steps_are_valid_steps() {
         .find(|l| l.trim_start().starts_with("0 "))
         .unwrap();
     assert!(row.contains(" 0 ") && row.ends_with("verified"), "{row}");
+    // No bytes per point where there are no points: the row says "-", the step "no points".
+    let columns: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(columns[4], "-", "{row}");
+    let (ok, out, err) = slosh(&["inspect", cache.join("step-00000.slc").to_str().unwrap()]);
+    assert!(ok, "{out}{err}");
+    assert!(
+        out.contains("no points:") && !out.contains("bytes per point"),
+        "{out}"
+    );
     // Rendered: step 0 is background; the others are framed by their own extent.
     let (ok, out, err) = slosh(&[
         "render",
