@@ -383,6 +383,7 @@ pub fn run_batch(
     // splitting and stealing, where a pool per job keeps each step on its share (16 steps of
     // 1M points on the 16-core H200 host, 8 jobs: 23.1 and 21.2 s shared, 19.5 and 16.8 s).
     let jobs = opts.jobs.clamp(1, planned.len().max(1));
+    opts.stages.plan_steps_at_once(jobs);
     std::thread::scope(|scope| {
         for job in 0..jobs {
             // At least one thread each.

@@ -34,7 +34,7 @@ pub use select::{
     estimate_surface_normals_with,
 };
 pub use slosh_mls::morton_order;
-pub use stages::Stages;
+pub use stages::{Stages, StepsInFlight};
 pub use step::{
     BakeError, BakedStep, bake_step, bake_step_parts, bake_step_parts_with,
     bake_step_unless_withdrawn, bake_step_with,

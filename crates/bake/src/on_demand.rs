@@ -53,6 +53,8 @@ impl OnDemand {
         let key = series_key(source.as_ref(), &opts);
         let steps = plan(source.as_ref(), &opts);
         let claim = prepare_dir(&opts.out, &steps, &key)?;
+        // The steps baked ahead, and the one a viewer waits for.
+        opts.stages.plan_steps_at_once(opts.jobs.max(1) + 1);
         Ok(OnDemand {
             source,
             opts,

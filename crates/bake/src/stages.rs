@@ -17,6 +17,16 @@ pub struct Stages {
     /// Bytes of memory of the device the stages run on, where they run on one and it says:
     /// each step in flight holds its buffers there ([`crate::default_jobs`]).
     pub device_memory: Option<u64>,
+    /// Told how many steps a batch bakes at once, before its first, where the stages keep
+    /// memory for the steps in flight together.
+    pub in_flight: Option<Arc<dyn StepsInFlight>>,
+}
+
+/// Stages that keep memory for the steps in flight together (a device's transfer buffers),
+/// sized by how many there are.
+pub trait StepsInFlight: Send + Sync + std::fmt::Debug {
+    /// Up to `steps` steps are baked at once from now on.
+    fn steps_at_once(&self, steps: usize);
 }
 
 impl Stages {
@@ -26,6 +36,14 @@ impl Stages {
             search: Arc::new(KdSearch),
             tree: Arc::new(PlocTree),
             device_memory: None,
+            in_flight: None,
+        }
+    }
+
+    /// Tells the stages that up to `steps` steps are baked at once from now on.
+    pub fn plan_steps_at_once(&self, steps: usize) {
+        if let Some(in_flight) = &self.in_flight {
+            in_flight.steps_at_once(steps);
         }
     }
 

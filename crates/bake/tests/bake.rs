@@ -646,6 +646,50 @@ fn each_job_bakes_on_its_share_of_the_threads() {
     }
 }
 
+/// Records what the stages are told of the steps in flight.
+#[derive(Debug, Default)]
+struct ToldSteps(std::sync::Mutex<Vec<usize>>);
+
+impl StepsInFlight for ToldSteps {
+    fn steps_at_once(&self, steps: usize) {
+        self.0.lock().unwrap().push(steps);
+    }
+}
+
+/// A batch tells its stages how many steps it bakes at once (its jobs, no more than its
+/// steps) before the first, so that a device's stages keep transfer buffers for that many
+/// and no more.
+#[test]
+fn a_batch_tells_its_stages_the_steps_in_flight() {
+    for (steps, jobs, told) in [(6, 2, 2), (2, 4, 2), (1, 1, 1)] {
+        let tmp = tempfile::tempdir().unwrap();
+        let series = Series { steps, bad: None };
+        let watch = std::sync::Arc::new(ToldSteps::default());
+        let mut opts = options(tmp.path(), Shard::WHOLE);
+        opts.jobs = jobs;
+        opts.stages.in_flight = Some(watch.clone());
+        let report = run_batch(&series, &opts, &|_| {}).unwrap();
+        assert_eq!(report.baked, steps);
+        assert_eq!(
+            *watch.0.lock().unwrap(),
+            [told],
+            "{steps} steps, {jobs} jobs"
+        );
+    }
+    // A viewer's bake: the steps baked ahead, and the one waited for.
+    let tmp = tempfile::tempdir().unwrap();
+    let watch = std::sync::Arc::new(ToldSteps::default());
+    let mut opts = options(tmp.path(), Shard::WHOLE);
+    opts.jobs = 3;
+    opts.stages.in_flight = Some(watch.clone());
+    let series = Series {
+        steps: 4,
+        bad: None,
+    };
+    let _bake = OnDemand::open(Box::new(series), opts).unwrap();
+    assert_eq!(*watch.0.lock().unwrap(), [4]);
+}
+
 /// The isolated clusters of `points` (local coordinates): components of points linked within
 /// `link` of each other, all but the largest (the body), each as its members.
 fn isolated_clusters(points: &[[f32; 3]], link: f64) -> Vec<Vec<usize>> {

@@ -77,6 +77,13 @@ fn kept_buffer_bytes(gpu: &Gpu) -> u64 {
 /// made afresh with 8 kept, each zeroed by wgpu and faulted in, 14-29 with 64).
 const STAGING_BUFFERS_KEPT: usize = 64;
 
+/// Staging buffers the pool's warm-up makes for each step in flight: a step's uploads
+/// between two waits for the GPU, each holding its buffer until the GPU has read it. One
+/// job's 1M-point steps on lavapipe kept 5 in all with 3 a step, and 8 with 6: the
+/// uploads larger than the first make buffers of their own either way. 24 jobs still fill
+/// the pool ([`STAGING_BUFFERS_KEPT`]).
+const STAGING_BUFFERS_PER_STEP: usize = 3;
+
 /// Reads from this size on reuse pooled buffers; smaller ones are cheap to make.
 const POOLED_READ_BYTES: u64 = 1 << 20;
 
@@ -128,6 +135,17 @@ fn entry_points<const N: usize>(
 
 /// Bindings every pass reads: positions, original indices, cell starts, residuals.
 const GRID_BINDINGS: [(u32, bool); 4] = [(1, false), (2, false), (3, false), (10, false)];
+
+impl slosh_bake::StepsInFlight for GpuStages {
+    /// The staging pool's warm-up makes buffers for `steps` steps' uploads, not for as many
+    /// as it keeps (64, for a series' 24 jobs at once): the buffers may live in the device's
+    /// memory.
+    fn steps_at_once(&self, steps: usize) {
+        self.memory
+            .staging
+            .warm_at_most(steps.saturating_mul(STAGING_BUFFERS_PER_STEP));
+    }
+}
 
 impl GpuStages {
     /// The passes, compiled for `gpu`; an error where the adapter refuses them.

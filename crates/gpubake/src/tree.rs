@@ -24,6 +24,7 @@ impl GpuStages {
         Stages {
             device_memory: self.gpu.device_memory(),
             search: self.clone(),
+            in_flight: Some(self.clone()),
             tree: self,
         }
     }

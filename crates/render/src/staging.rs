@@ -134,6 +134,8 @@ pub struct StagingPool {
     fresh: Arc<AtomicUsize>,
     /// Whether the pool was filled once (see [`StagingPool::take`]).
     warmed: Arc<AtomicBool>,
+    /// The most buffers the warm-up makes ([`StagingPool::warm_at_most`]).
+    warm_limit: Arc<AtomicUsize>,
     warm_up: Arc<WarmUp>,
 }
 
@@ -143,8 +145,17 @@ impl StagingPool {
             shelf: Shelf::new(keep),
             fresh: Arc::new(AtomicUsize::new(0)),
             warmed: Arc::new(AtomicBool::new(false)),
+            warm_limit: Arc::new(AtomicUsize::new(usize::MAX)),
             warm_up: Arc::default(),
         }
+    }
+
+    /// Has the warm-up make at most `buffers`, the caller's own first included: as many as
+    /// the uploads in flight together, where they are few. Where the device has memory that
+    /// the host can write (a large BAR), staging buffers live in the device's memory, and a
+    /// warm-up sized for many jobs filled gigabytes of it for a bake of one step at a time.
+    pub fn warm_at_most(&self, buffers: usize) {
+        self.warm_limit.store(buffers, Ordering::Relaxed);
     }
 
     /// The same pool, keeping no more than `bytes` of buffers in all.
@@ -196,7 +207,8 @@ impl StagingPool {
         let count = self
             .shelf
             .keep
-            .min(usize::try_from(fit).unwrap_or(usize::MAX));
+            .min(usize::try_from(fit).unwrap_or(usize::MAX))
+            .min(self.warm_limit.load(Ordering::Relaxed));
         let count = count.saturating_sub(1);
         let watch = self.warm_up.clone();
         let spawned = crate::background::spawn("staging warm-up".into(), move || {

@@ -1406,6 +1406,18 @@ fn pooled_read_backs_return_the_buffers_bytes() {
     assert_eq!(pool.kept(), 1, "the same buffer again");
 }
 
+/// A buffer of 1 MB to upload into, and a staging pool that keeps 64 buffers of 16 MB.
+fn staging_pool_of_64(gpu: &Gpu) -> (wgpu::Buffer, slosh_render::StagingPool) {
+    let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("upload target"),
+        size: 1 << 20,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let pool = slosh_render::StagingPool::new(64).within(64 * (16 << 20));
+    (target, pool)
+}
+
 /// A staging pool's warm-up (63 buffers of 16 MB here, each zero-filled) stops once the
 /// pool is dropped, where it went on to the end: the binary waits for it at exit, and a bake
 /// of one step ended long before it.
@@ -1414,13 +1426,7 @@ fn a_staging_warm_up_stops_when_its_pool_is_dropped() {
     let Some(Device { gpu, .. }) = device() else {
         return;
     };
-    let target = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("upload target"),
-        size: 1 << 20,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let pool = slosh_render::StagingPool::new(64).within(64 * (16 << 20));
+    let (target, pool) = staging_pool_of_64(gpu);
     pool.upload(gpu, &vec![1u8; 1 << 20], &target)
         .expect("an upload");
     let warm_up = pool.warm_up();
@@ -1431,6 +1437,29 @@ fn a_staging_warm_up_stops_when_its_pool_is_dropped() {
         .wait(std::time::Duration::from_secs(60))
         .expect("the warm-up ended");
     assert!(made < 63, "the warm-up made all its {made} buffers");
+}
+
+/// A staging pool told how many buffers its warm-up may make makes no more: a bake of one
+/// step at a time warmed up as many as 24 jobs take (2 GB on a 128 GB host), and where the
+/// host can write the device's memory, the buffers live there.
+#[test]
+fn a_staging_warm_up_makes_no_more_than_asked() {
+    let Some(Device { gpu, .. }) = device() else {
+        return;
+    };
+    let (target, pool) = staging_pool_of_64(gpu);
+    pool.warm_at_most(3);
+    pool.upload(gpu, &vec![1u8; 1 << 20], &target)
+        .expect("an upload");
+    let made = pool
+        .warm_up()
+        .wait(std::time::Duration::from_secs(60))
+        .expect("the warm-up ended");
+    // The upload's own buffer is the third.
+    assert_eq!(made, 2, "the warm-up made {made} buffers");
+    let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+    assert_eq!(pool.ready(), 3, "the warm-up's two and the upload's, back");
+    assert_eq!(pool.fresh(), 1, "only the upload's own made afresh");
 }
 
 /// Staging and read-back pools keep no more buffers than their bytes allow: a bake's pools
