@@ -1455,11 +1455,11 @@ fn a_staging_warm_up_makes_no_more_than_asked() {
         .warm_up()
         .wait(std::time::Duration::from_secs(60))
         .expect("the warm-up ended");
-    // The upload's own buffer is the third.
+    // The upload's own buffer is the third (unless it took one the warm-up had just made).
     assert_eq!(made, 2, "the warm-up made {made} buffers");
     let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
-    assert_eq!(pool.ready(), 3, "the warm-up's two and the upload's, back");
-    assert_eq!(pool.fresh(), 1, "only the upload's own made afresh");
+    assert!(pool.fresh() <= 1, "{} made afresh", pool.fresh());
+    assert_eq!(pool.ready(), made + pool.fresh(), "every buffer back");
 }
 
 /// Staging and read-back pools keep no more buffers than their bytes allow: a bake's pools
