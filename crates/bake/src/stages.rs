@@ -17,15 +17,16 @@ pub struct Stages {
     /// Bytes of memory of the device the stages run on, where they run on one and it says:
     /// each step in flight holds its buffers there ([`crate::default_jobs`]).
     pub device_memory: Option<u64>,
-    /// Told how many steps a batch bakes at once, before its first, where the stages keep
-    /// memory for the steps in flight together.
+    /// Told how many steps a batch bakes at once, before its first step, where the stages
+    /// keep memory for the steps in flight together.
     pub in_flight: Option<Arc<dyn StepsInFlight>>,
 }
 
 /// Stages that keep memory for the steps in flight together (a device's transfer buffers),
 /// sized by how many there are.
 pub trait StepsInFlight: Send + Sync + std::fmt::Debug {
-    /// Up to `steps` steps are baked at once from now on.
+    /// Up to `steps` steps are baked at once. Told before the first step: what is sized by
+    /// it (a staging pool's warm-up) is sized once, at the first step's first upload.
     fn steps_at_once(&self, steps: usize);
 }
 
@@ -40,7 +41,7 @@ impl Stages {
         }
     }
 
-    /// Tells the stages that up to `steps` steps are baked at once from now on.
+    /// Tells the stages that up to `steps` steps are baked at once ([`StepsInFlight`]).
     pub fn plan_steps_at_once(&self, steps: usize) {
         if let Some(in_flight) = &self.in_flight {
             in_flight.steps_at_once(steps);

@@ -199,7 +199,7 @@ impl Manifest {
         });
         for ((index, path), checked) in checked {
             let CheckedStep {
-                header: h,
+                header,
                 bytes,
                 checksum: foot,
             } = match checked {
@@ -209,7 +209,7 @@ impl Manifest {
                     continue;
                 }
             };
-            let h = &h;
+            let h = &header;
             match &first {
                 None => first = Some((SeriesKey::of(h), h.bake.clone())),
                 Some((key, _)) => {

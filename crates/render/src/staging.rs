@@ -151,7 +151,8 @@ impl StagingPool {
     }
 
     /// Has the warm-up make at most `buffers`, the caller's own first included: as many as
-    /// the uploads in flight together, where they are few. Where the device has memory that
+    /// the uploads in flight together, where they are few. It runs once, at the first upload,
+    /// so a limit set after that changes nothing. Where the device has memory that
     /// the host can write (a large BAR), staging buffers live in the device's memory, and a
     /// warm-up sized for many jobs filled gigabytes of it for a bake of one step at a time.
     pub fn warm_at_most(&self, buffers: usize) {
