@@ -37,7 +37,7 @@ pub use clusters::{
 pub use fit::{Fit, FitStatus, PIVOT_TOLERANCE, fit};
 pub use found::{InitialFit, KeptLists, NeighbourLists};
 pub use frame::LocalFrame;
-pub use geometry::{bounds, dominant_axis};
+pub use geometry::{bounds, bounds_in_parallel, dominant_axis};
 pub use grid::BallIndex;
 pub use intersect::{
     Ball, BallHit, HitStatus, InitialHit, Params, Ray, initial_fit, initial_hit, intersect_ball,

@@ -27,7 +27,7 @@ impl MortonGrid {
     pub const BITS: u32 = 21;
 
     pub fn new(points: &[[f64; 3]]) -> MortonGrid {
-        let (lo, hi) = crate::geometry::bounds(points);
+        let (lo, hi) = crate::geometry::bounds_in_parallel(points);
         let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
         let scale = if extent > 0.0 {
             ((1u64 << Self::BITS) - 1) as f64 / extent

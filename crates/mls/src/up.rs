@@ -37,7 +37,7 @@ pub fn guess_up(points: &[[f64; 3]], normals: &[[f64; 3]]) -> Option<[f64; 3]> {
         let axis = crate::geometry::dominant_axis(mean);
         return Some(unit(axis, mean[axis].signum()));
     } // A closed shape resting on a flat base: the base faces down.
-    let (lo, hi) = crate::geometry::bounds(points);
+    let (lo, hi) = crate::geometry::bounds_in_parallel(points);
     // A flat base: for each candidate up (axis, sign), the share of points in a thin band at
     // its low end whose normals point down; all six counted in one pass over the points.
     let band: [f64; 3] = std::array::from_fn(|a| BASE_BAND * (hi[a] - lo[a]));
