@@ -135,76 +135,49 @@ pub fn repair_orientation(
     first_votes: Option<&[u32]>,
 ) -> OrientationRepair {
     let n = points.len();
+    let given = first_votes.filter(|v| v.len() == n);
+    // The first pass, over the normals as given. Where it reverses none and no patch edge
+    // contradicts (clean data: most steps), nothing changes, and the input's copy that the
+    // later passes weigh their edges by is never made: at 4M points its 128 MB of fresh
+    // memory took longer than the rest of the repair.
+    let (mut reverse, strong, mut known_contradicted) = {
+        let edges = Edges {
+            points,
+            original: normals,
+            nearest,
+        };
+        let (reverse, strong, known) = cast_pass(&edges, normals, given);
+        if reverse.par_iter().any(|&r| r) {
+            (reverse, strong, known)
+        } else {
+            let contradicted = known.unwrap_or_else(|| any_contradicted(normals, &edges, &strong));
+            if !contradicted {
+                return OrientationRepair::default();
+            }
+            (reverse, strong, Some(true))
+        }
+    };
     let original: Vec<Option<[f64; 3]>> = normals.par_iter().copied().collect();
     let edges = Edges {
         points,
         original: &original,
         nearest,
     };
-    // Each point's patch edges (tangent weight ≥ PATCH_WEIGHT; bit k: its k-th neighbour),
-    // found by the first pass beside its votes: the weights come from the original normals,
-    // which no pass changes, and a second sweep over every edge took as long as the votes.
-    let mut strong: Vec<u32> = Vec::new();
-    // Whether a patch edge joins contradicting normals, where the first pass's votes came
-    // with it and reversed none: the patch step need not sweep the edges to find out.
-    let mut known_contradicted = None;
     let mut reversed_any = false;
-    for pass in 0..PASSES {
-        let current: &[Option<[f64; 3]>] = normals;
-        let cast = |i: usize| -> (bool, u32) {
-            let Some(ni) = current[i] else {
-                return (false, 0);
-            };
-            let (mut vote, mut total, mut mask) = (0.0, 0.0, 0u32);
-            for (k, j, w) in edges.slots(i) {
-                if w >= PATCH_WEIGHT {
-                    mask |= 1 << k;
-                }
-                if let Some(nj) = current[j as usize] {
-                    vote += w * dot(ni, nj).signum();
-                    total += w;
-                }
-            }
-            (total > 0.0 && vote < -REVERSE_BELOW * total, mask)
-        };
-        let given = first_votes.filter(|v| pass == 0 && v.len() == n);
-        let (reverse, masks): (Vec<bool>, Vec<u32>) = match given {
-            Some(words) => {
-                // A point cast here may have a contradicted patch edge the word does not say.
-                let recast_any = words.par_iter().any(|w| w & vote_word::RECAST != 0);
-                if !recast_any {
-                    known_contradicted =
-                        Some(words.par_iter().any(|w| w & vote_word::CONTRADICTED != 0));
-                }
-                words
-                    .par_iter()
-                    .enumerate()
-                    .map(|(i, &w)| {
-                        if w & vote_word::RECAST != 0 {
-                            cast(i)
-                        } else {
-                            (
-                                w & vote_word::REVERSE != 0,
-                                w & ((1 << ORIENT_NEIGHBOURS) - 1),
-                            )
-                        }
-                    })
-                    .unzip()
-            }
-            None => (0..n).into_par_iter().map(cast).unzip(),
-        };
-        if pass == 0 {
-            strong = masks;
-        }
+    for pass in 1..=PASSES {
         if !reverse.par_iter().any(|&r| r) {
             break;
         }
         reversed_any = true;
-        for (normal, r) in normals.iter_mut().zip(reverse) {
+        for (normal, &r) in normals.iter_mut().zip(&reverse) {
             if r {
                 *normal = normal.map(neg);
             }
         }
+        if pass == PASSES {
+            break;
+        }
+        reverse = cast_pass(&edges, normals, None).0;
     }
     if reversed_any {
         known_contradicted = None;
@@ -228,6 +201,85 @@ pub fn repair_orientation(
     }
 }
 
+/// One voting pass over `current`: which normals their neighbours reverse, each point's
+/// patch edges (tangent weight ≥ `PATCH_WEIGHT`; bit k: its k-th neighbour), and, where the
+/// votes are `given` (another implementation's first pass) and cast here for none, whether a
+/// patch edge joins contradicting normals.
+fn cast_pass(
+    edges: &Edges,
+    current: &[Option<[f64; 3]>],
+    given: Option<&[u32]>,
+) -> (Vec<bool>, Vec<u32>, Option<bool>) {
+    let cast = |i: usize| -> (bool, u32) {
+        let Some(ni) = current[i] else {
+            return (false, 0);
+        };
+        let (mut vote, mut total, mut mask) = (0.0, 0.0, 0u32);
+        for (k, j, w) in edges.slots(i) {
+            if w >= PATCH_WEIGHT {
+                mask |= 1 << k;
+            }
+            if let Some(nj) = current[j as usize] {
+                vote += w * dot(ni, nj).signum();
+                total += w;
+            }
+        }
+        (total > 0.0 && vote < -REVERSE_BELOW * total, mask)
+    };
+    match given {
+        Some(words) => {
+            // A point cast here may have a contradicted patch edge the word does not say.
+            let recast_any = words.par_iter().any(|w| w & vote_word::RECAST != 0);
+            let known =
+                (!recast_any).then(|| words.par_iter().any(|w| w & vote_word::CONTRADICTED != 0));
+            let (reverse, masks) = words
+                .par_iter()
+                .enumerate()
+                .map(|(i, &w)| {
+                    if w & vote_word::RECAST != 0 {
+                        cast(i)
+                    } else {
+                        (
+                            w & vote_word::REVERSE != 0,
+                            w & ((1 << ORIENT_NEIGHBOURS) - 1),
+                        )
+                    }
+                })
+                .unzip();
+            (reverse, masks, known)
+        }
+        None => {
+            let (reverse, masks) = (0..current.len()).into_par_iter().map(cast).unzip();
+            (reverse, masks, None)
+        }
+    }
+}
+
+/// Point `i`'s patch edges: the neighbours its `strong` bits name.
+fn strong_of<'a>(edges: &'a Edges, strong: &'a [u32], i: usize) -> impl Iterator<Item = u32> + 'a {
+    let (mask, around) = (strong[i], &edges.nearest[i]);
+    (0..ORIENT_NEIGHBOURS)
+        .filter(move |k| mask >> k & 1 == 1)
+        .map(move |k| around[k])
+}
+
+/// Whether the normals at the two ends of an edge agree (a point without one agrees).
+fn agree(normals: &[Option<[f64; 3]>], i: usize, j: usize) -> bool {
+    match (normals[i], normals[j]) {
+        (Some(a), Some(b)) => dot(a, b) >= 0.0,
+        _ => true,
+    }
+}
+
+/// Whether some patch edge joins contradicting normals. Agreeing patch edges join patches, so
+/// a patch's border is made of contradicting ones: where none contradicts, no patch has a
+/// border and none is reversed.
+fn any_contradicted(normals: &[Option<[f64; 3]>], edges: &Edges, strong: &[u32]) -> bool {
+    (0..normals.len())
+        .into_par_iter()
+        .any(|i| strong_of(edges, strong, i).any(|j| !agree(normals, i, j as usize)))
+}
+
 /// Patches: points joined by tangent edges whose normals agree. A patch of at most
 /// `PATCH_FRACTION` of the points whose border edges all contradict it is reversed. `strong`:
 /// each point's patch edges (bit k: its k-th neighbour's); `contradicted`, whether one of
@@ -238,6 +290,10 @@ fn reverse_contradicted_patches(
     strong: &[u32],
     contradicted: Option<bool>,
 ) -> (usize, usize) {
+    let contradicted = contradicted.unwrap_or_else(|| any_contradicted(normals, edges, strong));
+    if !contradicted {
+        return (0, 0);
+    }
     let n = normals.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
     fn root(parent: &mut [u32], mut i: u32) -> u32 {
@@ -247,29 +303,8 @@ fn reverse_contradicted_patches(
         }
         i
     }
-    let agree = |normals: &[Option<[f64; 3]>], i: usize, j: usize| match (normals[i], normals[j]) {
-        (Some(a), Some(b)) => dot(a, b) >= 0.0,
-        _ => true,
-    };
-    let strong_of = |i: usize| {
-        let (mask, around) = (strong[i], &edges.nearest[i]);
-        (0..ORIENT_NEIGHBOURS)
-            .filter(move |k| mask >> k & 1 == 1)
-            .map(move |k| around[k])
-    };
-    // Agreeing patch edges join patches, so a patch's border is made of contradicting ones:
-    // where no patch edge contradicts, no patch has a border and none is reversed.
-    let current: &[Option<[f64; 3]>] = normals;
-    let contradicted = contradicted.unwrap_or_else(|| {
-        (0..n)
-            .into_par_iter()
-            .any(|i| strong_of(i).any(|j| !agree(current, i, j as usize)))
-    });
-    if !contradicted {
-        return (0, 0);
-    }
     for i in 0..n {
-        for j in strong_of(i) {
+        for j in strong_of(edges, strong, i) {
             if agree(normals, i, j as usize) {
                 let (a, b) = (root(&mut parent, i as u32), root(&mut parent, j));
                 if a != b {
@@ -290,7 +325,7 @@ fn reverse_contradicted_patches(
         if normals[i].is_none() {
             continue;
         }
-        for j in strong_of(i) {
+        for j in strong_of(edges, strong, i) {
             let (ri, rj) = (roots[i] as usize, roots[j as usize] as usize);
             if rj != ri {
                 let b = &mut border[ri];
@@ -330,10 +365,8 @@ fn reverse_contradicted_patches(
 mod tests {
     use super::*;
 
-    /// A plane grid with normals +z, some reversed singly and one 5×5 patch reversed.
-    #[test]
-    fn single_reversals_and_a_patch_are_repaired() {
-        let side = 40usize;
+    /// A `side`×`side` plane grid and each point's nearest (itself left out).
+    fn grid(side: usize) -> (Vec<[f64; 3]>, Vec<Around>) {
         let points: Vec<[f64; 3]> = (0..side * side)
             .map(|k| [(k % side) as f64, (k / side) as f64, 0.0])
             .collect();
@@ -358,6 +391,14 @@ mod tests {
                 around
             })
             .collect();
+        (points, nearest)
+    }
+
+    /// A plane grid with normals +z, some reversed singly and one 5×5 patch reversed.
+    #[test]
+    fn single_reversals_and_a_patch_are_repaired() {
+        let side = 40usize;
+        let (points, nearest) = grid(side);
         let mut normals: Vec<Option<[f64; 3]>> = vec![Some([0.0, 0.0, 1.0]); points.len()];
         let singles = [5 * side + 5, 20 * side + 31, 33 * side + 2];
         for &i in &singles {
@@ -372,5 +413,44 @@ mod tests {
         assert_eq!(repair.flipped_points, singles.len() + patch.len());
         // Votes wear the patch down from its corners; what is left goes back whole.
         assert_eq!(repair.flipped_patches, 1, "{repair:?}");
+    }
+
+    /// A reversed band across the grid that no vote reverses (its border points' neighbours
+    /// lie half inside): the first pass changes nothing, yet the patch step must run and
+    /// reverse the band whole; and a clean grid comes back as it was.
+    #[test]
+    fn a_patch_no_vote_reverses_is_repaired() {
+        let side = 40usize;
+        let (points, nearest) = grid(side);
+        let up = Some([0.0, 0.0, 1.0]);
+        let mut normals: Vec<Option<[f64; 3]>> = vec![up; points.len()];
+        let band: Vec<usize> = (17 * side..23 * side).collect();
+        for &i in &band {
+            normals[i] = Some([0.0, 0.0, -1.0]);
+        }
+        let edges = Edges {
+            points: &points,
+            original: &normals,
+            nearest: &nearest,
+        };
+        let (reverse, _, _) = cast_pass(&edges, &normals, None);
+        assert!(
+            !reverse.iter().any(|&r| r),
+            "the first pass reverses {} points",
+            reverse.iter().filter(|&&r| r).count()
+        );
+        let repair = repair_orientation(&points, &mut normals, &nearest, None);
+        assert!(normals.iter().all(|n| *n == up), "{repair:?}");
+        assert_eq!(
+            repair,
+            OrientationRepair {
+                flipped_points: band.len(),
+                flipped_patches: 1,
+                patch_points: band.len(),
+            }
+        );
+        let clean = repair_orientation(&points, &mut normals, &nearest, None);
+        assert_eq!(clean, OrientationRepair::default());
+        assert!(normals.iter().all(|n| *n == up));
     }
 }

@@ -222,23 +222,16 @@ impl<T: Real> SurfaceParts<T> {
         let k_query = NonZero::new(k.max(orient_with) + 1).ok_or(SurfaceError::BadK)?;
         let nearest_ids = index.nearest(k_query)?;
         knn_parts.lap("kd-tree and radii (kNN): nearest");
-        let queried: Vec<(f64, f64, Around, f64)> = nearest_ids
-            .par_chunks(k_query.get())
-            .enumerate()
-            .map(|(i, nn)| {
-                // Distances in f64 whichever search found the points.
-                let dist = |slot: usize| distance2(rel[i], rel[nn[slot] as usize]).sqrt();
-                let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
-                let others = nn.iter().copied().filter(|&j| j as usize != i);
-                for (slot, j) in around.iter_mut().zip(others.take(orient_with)) {
-                    *slot = j;
-                }
-                let second = if k_query.get() > 2 { dist(2) } else { f64::NAN };
-                (dist(k), dist(1), around, second)
-            })
-            .collect();
-        let mut radii: Vec<f64> = queried.par_iter().map(|q| q.0).collect();
-        let nearest: Vec<f64> = queried.par_iter().map(|q| q.1).collect();
+        // Distances in f64 whichever search found the points; each array made by its own pass
+        // over the ids, where one array of every point's (radius, nearest, around, second)
+        // made fresh memory that at 4M points cost more than the passes.
+        let neighbours_of = |i: usize| &nearest_ids[i * k_query.get()..][..k_query.get()];
+        let dist =
+            |i: usize, slot: usize| distance2(rel[i], rel[neighbours_of(i)[slot] as usize]).sqrt();
+        let (mut radii, nearest): (Vec<f64>, Vec<f64>) = (0..n)
+            .into_par_iter()
+            .map(|i| (dist(i, k), dist(i, 1)))
+            .unzip();
         let spacing = nearest.iter().sum::<f64>() / n as f64;
         knn_parts.lap("kd-tree and radii (kNN): radii");
         clock.lap("kd-tree and radii (kNN)");
@@ -246,7 +239,20 @@ impl<T: Real> SurfaceParts<T> {
         let mut orientation_parts = StageClock::start();
         let orientation = match unit_normals.as_mut() {
             Some(ns) => {
-                let around: Vec<Around> = queried.par_iter().map(|q| q.2).collect();
+                let around: Vec<Around> = (0..n)
+                    .into_par_iter()
+                    .map(|i| {
+                        let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
+                        let others = neighbours_of(i)
+                            .iter()
+                            .copied()
+                            .filter(|&j| j as usize != i);
+                        for (slot, j) in around.iter_mut().zip(others.take(orient_with)) {
+                            *slot = j;
+                        }
+                        around
+                    })
+                    .collect();
                 let votes = index.orientation_votes(&around, ns)?;
                 if votes.is_some() {
                     orientation_parts.lap(ORIENTATION_VOTES_CAST_BY_THE_SEARCH);
@@ -279,7 +285,16 @@ impl<T: Real> SurfaceParts<T> {
         // computed.
         let dense_spacing = match quantile(&nearest, H_QUANTILE) {
             s if s > 0.0 && (k < 2 || s < 0.5 * median_radius) => {
-                let second: Vec<f64> = queried.par_iter().map(|q| q.3).collect();
+                let second: Vec<f64> = (0..n)
+                    .into_par_iter()
+                    .map(|i| {
+                        if k_query.get() > 2 {
+                            dist(i, 2)
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect();
                 match quantile(&second, H_QUANTILE) {
                     s2 if s < 0.5 * s2 => s2,
                     _ => s,
