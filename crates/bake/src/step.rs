@@ -427,8 +427,8 @@ fn bake_parts(
     }
 
     // 1. Select: finite positions, then the surface.
-    // In parallel, as every pass over a step's points here: at 4M points a serial pass is
-    // tens of milliseconds that every other thread waits for.
+    // In parallel: at 4M points a serial pass is tens of milliseconds that every other
+    // thread waits for.
     let finite: Vec<u32> = (0..n_in as u32)
         .into_par_iter()
         .filter(|&i| input.positions[i as usize].iter().all(|c| c.is_finite()))

@@ -21,9 +21,9 @@ pub fn bounds<'a>(points: impl IntoIterator<Item = &'a [f64; 3]>) -> ([f64; 3], 
 const BOUNDS_CHUNK: usize = 1 << 14;
 
 /// [`bounds`] of a slice, its chunks' boxes found in parallel and merged: the same box, as
-/// min and max are exact in any order. A bake takes the box of a step's points three times
-/// (recentring, and the Morton grid of the CPU's and the GPU's stages), which at 4M points was
-/// tens of milliseconds on one thread while the others waited.
+/// min and max are exact in any order. A bake takes the box of a step's points four times
+/// (its recentring and the surface's, and the Morton grids of its order and the GPU's search),
+/// which at 4M points was tens of milliseconds on one thread while the others waited.
 pub fn bounds_in_parallel(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     points.par_chunks(BOUNDS_CHUNK).map(bounds).reduce(
         || bounds(&[]),

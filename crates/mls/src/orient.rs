@@ -139,7 +139,9 @@ pub fn repair_orientation(
     // The first pass, over the normals as given. Where it reverses none and no patch edge
     // contradicts (clean data: most steps), nothing changes, and the input's copy that the
     // later passes weigh their edges by is never made: at 4M points its 128 MB of fresh
-    // memory took longer than the rest of the repair.
+    // memory took longer than the rest of the repair. The first pass's patch edges serve the
+    // patch step (their weights come from the input's normals, which no pass changes), and
+    // where the votes were given, whether one of them contradicts.
     let (mut reverse, strong, mut known_contradicted) = {
         let edges = Edges {
             points,
