@@ -208,6 +208,25 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             list.join(", ")
         );
     }
+    // Dropped particles are recorded in each step's statistics (`slosh inspect`); said here
+    // too, so that a run's input damage is not found only by opening its steps.
+    if !report.non_finite.is_empty() {
+        let steps = &report.non_finite;
+        let mut list: Vec<String> = steps
+            .iter()
+            .take(20)
+            .map(|s| format!("{} ({} of {})", s.step, s.dropped, s.read))
+            .collect();
+        if steps.len() > 20 {
+            list.push(format!("… ({} in all)", steps.len()));
+        }
+        say!(
+            "particles with a non-finite coordinate were dropped in {} {}: {}",
+            steps.len(),
+            if steps.len() == 1 { "step" } else { "steps" },
+            list.join(", ")
+        );
+    }
     for (path, e) in &report.manifest_problems {
         eprintln!("manifest: left out {}: {e}", path.display());
     }

@@ -346,6 +346,11 @@ fn a_lone_particle_is_an_empty_step_and_no_finite_one_a_failure() {
         ),
         "{out}"
     );
+    // Step 2 failed, so only step 1's dropped particles are a baked step's.
+    assert!(
+        out.contains("particles with a non-finite coordinate were dropped in 1 step: 1 (2 of 3)"),
+        "{out}"
+    );
     assert!(
         err.contains("step 2: ") && err.contains("none of the 2 particles has finite coordinates"),
         "{err}"

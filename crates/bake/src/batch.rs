@@ -112,6 +112,14 @@ pub enum Event {
     Done { index: usize, outcome: StepOutcome },
 }
 
+/// A step's particles dropped for a non-finite coordinate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NonFinite {
+    pub step: usize,
+    pub dropped: u64,
+    pub read: u64,
+}
+
 #[derive(Debug, Default)]
 pub struct BatchReport {
     pub baked: usize,
@@ -122,6 +130,9 @@ pub struct BatchReport {
     /// Steps with particles baked empty, fewer than two being left after selection (one
     /// cannot be sized), in order.
     pub too_few: Vec<usize>,
+    /// Steps that dropped particles with a non-finite coordinate: the step, how many it
+    /// dropped and how many it read, in order.
+    pub non_finite: Vec<NonFinite>,
     pub points: u64,
     pub bytes: u64,
     /// Summed seconds per stage over baked steps, pipeline order; plus "write".
@@ -448,6 +459,13 @@ pub fn run_batch(
                                 } else if *points == 0 {
                                     r.too_few.push(index);
                                 }
+                                if stats.dropped_non_finite > 0 {
+                                    r.non_finite.push(NonFinite {
+                                        step: index,
+                                        dropped: stats.dropped_non_finite,
+                                        read: stats.input_points,
+                                    });
+                                }
                                 r.bytes += bytes;
                                 r.points += points;
                                 for (name, s) in &stats.stage_seconds {
@@ -470,6 +488,7 @@ pub fn run_batch(
     report.failed.sort_by_key(|(i, _)| *i);
     report.empty.sort_unstable();
     report.too_few.sort_unstable();
+    report.non_finite.sort_unstable_by_key(|s| s.step);
     // A manifest that cannot be written is reported beside the steps' own outcomes, which
     // must not be lost behind it.
     match Manifest::refresh(&opts.out) {
