@@ -210,8 +210,13 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     }
     // Dropped particles are recorded in each step's statistics (`slosh inspect`); said here
     // too, so that a run's input damage is not found only by opening its steps.
-    if !report.non_finite.is_empty() {
-        let steps = &report.non_finite;
+    for (steps, what) in [
+        (&report.non_finite, "with a non-finite coordinate"),
+        (&report.far, "far beyond the rest"),
+    ] {
+        if steps.is_empty() {
+            continue;
+        }
         let mut list: Vec<String> = steps
             .iter()
             .take(20)
@@ -221,7 +226,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             list.push(format!("… ({} in all)", steps.len()));
         }
         say!(
-            "particles with a non-finite coordinate were dropped in {} {}: {}",
+            "particles {what} were dropped in {} {}: {}",
             steps.len(),
             if steps.len() == 1 { "step" } else { "steps" },
             list.join(", ")

@@ -75,12 +75,16 @@ fn human_file(r: &FileReport) -> String {
         "source     {} step {}, time {}",
         h.source.path, h.source.step, h.source.time
     ));
+    let far = match h.stats.dropped_far {
+        0 => String::new(),
+        n => format!(", {n} far beyond the rest"),
+    };
     let too_few = match h.stats.dropped_too_few {
         0 => String::new(),
         n => format!(", {n} too few to size a surface"),
     };
     line(format!(
-        "points     {} kept of {} read ({} non-finite, {} not on the surface{too_few} dropped)",
+        "points     {} kept of {} read ({} non-finite{far}, {} not on the surface{too_few} dropped)",
         h.points, h.stats.input_points, h.stats.dropped_non_finite, h.stats.dropped_interior
     ));
     line(format!(

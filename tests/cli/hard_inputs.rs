@@ -456,3 +456,54 @@ fn particles_written_twice_with_noise_draw_a_surface() {
     // Hit pixels within 2 % of the particles written once.
     assert!(hits[1].abs_diff(hits[0]) * 50 <= hits[0], "{hits:?}");
 }
+
+/// Particles a solver parked at sentinels (1e30, −9999) are dropped as far beyond the rest,
+/// counted and named in the summary; kept, one would set the frame, and the sphere, in f32
+/// local coordinates, would round to one point (the step was baked as two droplet spheres and
+/// no fit). A droplet flung 50 sizes away stays.
+#[test]
+fn sentinel_particles_are_dropped_and_the_surface_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    gold_sphere(&run, 2);
+    let n = 500;
+    let mut points: Vec<[String; 3]> = (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let phi = i as f64 * 2.399_963_229_728_653;
+            let r = (1.0 - z * z).sqrt();
+            [r * phi.cos(), r * phi.sin(), z].map(|c| format!("{c:.6e}"))
+        })
+        .collect();
+    for p in [
+        ["1e30", "1e30", "1e30"],
+        ["-9999", "0.5", "0.5"],
+        ["100", "0", "0"],
+    ] {
+        points.push(p.map(String::from));
+    }
+    let points: Vec<[&str; 3]> = points
+        .iter()
+        .map(|p| [p[0].as_str(), p[1].as_str(), p[2].as_str()])
+        .collect();
+    write_gold_step(&run, 1, &points);
+    let cache = dir.path().join("cache");
+    let (ok, out, err) = bake_case(&run.join("sphere.case"), &cache, &["--device", "cpu"]);
+    assert!(ok, "{out}{err}");
+    assert!(
+        out.contains("particles far beyond the rest were dropped in 1 step: 1 (2 of 503)"),
+        "{out}"
+    );
+    let file = cache.join("step-00001.slc");
+    let (ok, out, err) = slosh(&["inspect", file.to_str().unwrap(), "--verify"]);
+    assert!(ok, "{out}{err}");
+    assert!(
+        out.contains(
+            "501 kept of 503 read (0 non-finite, 2 far beyond the rest, 0 not on the surface dropped)"
+        ),
+        "{out}"
+    );
+    // The sphere is fitted (the droplet at 100 is its own sphere), not lost to rounding.
+    assert!(out.contains("fits       500 full, 0 degraded"), "{out}");
+    assert!(out.contains("droplets   1 spheres from 1 points"), "{out}");
+}

@@ -112,9 +112,9 @@ pub enum Event {
     Done { index: usize, outcome: StepOutcome },
 }
 
-/// A step's particles dropped for a non-finite coordinate.
+/// A step's particles dropped for a non-finite coordinate, or as far beyond the rest.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct NonFinite {
+pub struct Dropped {
     pub step: usize,
     pub dropped: u64,
     pub read: u64,
@@ -132,7 +132,9 @@ pub struct BatchReport {
     pub too_few: Vec<usize>,
     /// Steps that dropped particles with a non-finite coordinate: the step, how many it
     /// dropped and how many it read, in order.
-    pub non_finite: Vec<NonFinite>,
+    pub non_finite: Vec<Dropped>,
+    /// Steps that dropped particles far beyond the rest (`docs/bake.md`, "Select"), so.
+    pub far: Vec<Dropped>,
     pub points: u64,
     pub bytes: u64,
     /// Summed seconds per stage over baked steps, pipeline order; plus "write".
@@ -459,12 +461,16 @@ pub fn run_batch(
                                 } else if *points == 0 {
                                     r.too_few.push(index);
                                 }
+                                let dropped = |dropped| Dropped {
+                                    step: index,
+                                    dropped,
+                                    read: stats.input_points,
+                                };
                                 if stats.dropped_non_finite > 0 {
-                                    r.non_finite.push(NonFinite {
-                                        step: index,
-                                        dropped: stats.dropped_non_finite,
-                                        read: stats.input_points,
-                                    });
+                                    r.non_finite.push(dropped(stats.dropped_non_finite));
+                                }
+                                if stats.dropped_far > 0 {
+                                    r.far.push(dropped(stats.dropped_far));
                                 }
                                 r.bytes += bytes;
                                 r.points += points;
@@ -489,6 +495,7 @@ pub fn run_batch(
     report.empty.sort_unstable();
     report.too_few.sort_unstable();
     report.non_finite.sort_unstable_by_key(|s| s.step);
+    report.far.sort_unstable_by_key(|s| s.step);
     // A manifest that cannot be written is reported beside the steps' own outcomes, which
     // must not be lost behind it.
     match Manifest::refresh(&opts.out) {

@@ -5,6 +5,7 @@ mod batch;
 mod bvh;
 mod claim;
 mod ensight_source;
+mod far;
 mod jobs;
 mod on_demand;
 mod params;
@@ -17,8 +18,8 @@ mod urgency;
 mod withdrawable;
 
 pub use batch::{
-    BatchOptions, BatchReport, Event, Shard, StepOutcome, StepSource, files_identity, is_current,
-    plan, run_batch, series_key,
+    BatchOptions, BatchReport, Dropped, Event, Shard, StepOutcome, StepSource, files_identity,
+    is_current, plan, run_batch, series_key,
 };
 pub use bvh::{
     MAX_LEAF_ITEMS, PlocTree, TreeBuild, leaves as bvh_leaves, linear as linear_bvh, linear_order,

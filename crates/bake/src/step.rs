@@ -426,7 +426,7 @@ fn bake_parts(
         ));
     }
 
-    // 1. Select: finite positions, then the surface.
+    // 1. Select: finite positions not far beyond the rest, then the surface.
     // In parallel: at 4M points a serial pass is tens of milliseconds that every other
     // thread waits for.
     let finite: Vec<u32> = (0..n_in as u32)
@@ -434,6 +434,15 @@ fn bake_parts(
         .filter(|&i| input.positions[i as usize].iter().all(|c| c.is_finite()))
         .collect();
     let dropped_non_finite = n_in - finite.len();
+    if finite.is_empty() {
+        return Err(input_err(format!(
+            "none of the {n_in} particles has finite coordinates: nothing to bake"
+        )));
+    }
+    // Before the estimate too, whose own frame a sentinel would set as well.
+    let finite_count = finite.len();
+    let finite = crate::far::without_far(&input.positions, finite);
+    let dropped_far = finite_count - finite.len();
     // The surface estimate and its normals, from all finite particles, where the selection or
     // the normals ask for it (else empty).
     let estimated: Vec<(bool, [f64; 3])> = if matches!(params.surface, SurfaceSelect::Estimate)
@@ -467,17 +476,13 @@ fn bake_parts(
         .filter_map(|(&i, &s)| s.then_some(i))
         .collect();
     let dropped_interior = finite.len() - kept.len();
-    if finite.is_empty() {
-        return Err(input_err(format!(
-            "none of the {n_in} particles has finite coordinates: nothing to bake"
-        )));
-    }
     if kept.len() < 2 {
         // One particle (an injection's first, or the only one the selection keeps) has no
         // spacing to size a sphere or a surface by: an empty step that says what it dropped.
         let stats = StepStats {
             input_points: n_in as u64,
             dropped_non_finite: dropped_non_finite as u64,
+            dropped_far: dropped_far as u64,
             dropped_interior: dropped_interior as u64,
             dropped_too_few: kept.len() as u64,
             ..StepStats::default()
@@ -641,6 +646,7 @@ fn bake_parts(
     let mut stats = StepStats {
         input_points: n_in as u64,
         dropped_non_finite: dropped_non_finite as u64,
+        dropped_far: dropped_far as u64,
         dropped_interior: dropped_interior as u64,
         capped: surface.capped as u64,
         orientation_flipped: surface.orientation.flipped_points as u64,

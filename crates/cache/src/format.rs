@@ -334,6 +334,8 @@ pub struct StepStats {
     pub input_points: u64,
     /// Dropped for non-finite coordinates.
     pub dropped_non_finite: u64,
+    /// Dropped as far beyond the rest (a solver's sentinel; `docs/bake.md`, "Select").
+    pub dropped_far: u64,
     /// Dropped as not on the surface.
     pub dropped_interior: u64,
     /// Left after selection but too few (one) to size a surface by: dropped, the step kept
