@@ -35,9 +35,13 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(Path
     for &step in steps {
         match bake.bake(step) {
             slosh_bake::StepOutcome::Baked {
-                seconds, points, ..
+                seconds,
+                points,
+                stats,
+                ..
             } => {
-                say!("baked step {step} ({points} points, {seconds:.2} s)");
+                let dropped = dropped_particles(&stats);
+                say!("baked step {step} ({points} points, {seconds:.2} s{dropped})");
             }
             slosh_bake::StepOutcome::Kept => {}
             slosh_bake::StepOutcome::Failed(why) => {
@@ -54,6 +58,24 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(Path
         );
     }
     Ok((bake.dir().to_path_buf(), failed))
+}
+
+/// The particles a step's bake dropped as damaged input, said after its line ("" for none), as
+/// the bake's summary says them.
+fn dropped_particles(stats: &slosh_cache::StepStats) -> String {
+    let parts: Vec<String> = [
+        (stats.dropped_non_finite, "with a non-finite coordinate"),
+        (stats.dropped_far, "far beyond the rest"),
+    ]
+    .into_iter()
+    .filter(|(n, _)| *n > 0)
+    .map(|(n, what)| format!("{n} {what}"))
+    .collect();
+    if parts.is_empty() {
+        String::new()
+    } else {
+        format!("; dropped {}", parts.join(" and "))
+    }
 }
 
 /// A case render's outcome: the render's, with the `unbaked` of the `asked` steps named too

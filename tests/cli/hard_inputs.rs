@@ -506,4 +506,24 @@ fn sentinel_particles_are_dropped_and_the_surface_kept() {
     // The sphere is fitted (the droplet at 100 is its own sphere), not lost to rounding.
     assert!(out.contains("fits       500 full, 0 degraded"), "{out}");
     assert!(out.contains("droplets   1 spheres from 1 points"), "{out}");
+    // A render of the raw case says so for the step it bakes.
+    let (ok, out, err) = slosh(&[
+        "render",
+        run.join("sphere.case").to_str().unwrap(),
+        "--cache",
+        dir.path().join("raw-cache").to_str().unwrap(),
+        "--cpu",
+        "--steps",
+        "1..2",
+        "--size",
+        "32x32",
+        "--out",
+        dir.path().join("f{:05}.png").to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}{err}");
+    assert!(
+        out.contains("baked step 1 (501 points, ")
+            && out.contains("; dropped 2 far beyond the rest)"),
+        "{out}"
+    );
 }
