@@ -81,7 +81,7 @@ mod tests {
         // above its top (0 in z).
         p.push([0.5, 0.5, 600.0]);
         p.push([0.5, 0.5, 400.0]);
-        p.push([50.0, -20.0, 3.0]); // a droplet flung 50 sides away
+        p.push([50.0, -20.0, 3.0]); // a droplet flung a hundred sides away
         let k = kept(&p);
         let mut expected: Vec<u32> = (0..bulk).collect();
         expected.extend([bulk + 3, bulk + 4]);

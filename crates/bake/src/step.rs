@@ -441,10 +441,11 @@ fn bake_parts(
     }
     // Before the estimate too, whose own frame a sentinel would set as well.
     let finite_count = finite.len();
+    // From here on, `finite` means finite and not far beyond the rest.
     let finite = crate::far::without_far(&input.positions, finite);
     let dropped_far = finite_count - finite.len();
-    // The surface estimate and its normals, from all finite particles, where the selection or
-    // the normals ask for it (else empty).
+    // The surface estimate and its normals, from all finite particles not far beyond the rest,
+    // where the selection or the normals ask for it (else empty).
     let estimated: Vec<(bool, [f64; 3])> = if matches!(params.surface, SurfaceSelect::Estimate)
         || matches!(params.normals, crate::params::NormalSource::Estimate)
     {
