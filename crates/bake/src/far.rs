@@ -18,21 +18,28 @@ const BULK_SAMPLE: usize = 4096;
 /// it (a run whose outflow parks many).
 const BULK_TAIL: f64 = 0.25;
 
+/// A position that this fraction of the sample holds exactly, or more, is a pile: a solver
+/// may park any number of particles at one sentinel. Piles are left out of the bulk's box,
+/// so that the rest set it however many are parked; a pile near the rest is still kept.
+const PILE: f64 = 0.01;
+
 /// `candidates` (indices into `positions`, ascending, every position finite) without the
 /// particles that lie more than [`FAR_BEYOND`] times the bulk's largest side beyond the bulk's
 /// box, in the same order. The bulk's box is the central half of each axis's coordinates over
-/// a sample of at most [`BULK_SAMPLE`] candidates.
+/// a sample of at most [`BULK_SAMPLE`] candidates, piles left out.
 pub fn without_far(positions: &[[f64; 3]], candidates: Vec<u32>) -> Vec<u32> {
     let n = candidates.len();
     if n < 2 {
         return candidates;
     }
     let stride = n.div_ceil(BULK_SAMPLE);
-    let sample: Vec<[f64; 3]> = candidates
-        .iter()
-        .step_by(stride)
-        .map(|&i| positions[i as usize])
-        .collect();
+    let sample = without_piles(
+        candidates
+            .iter()
+            .step_by(stride)
+            .map(|&i| positions[i as usize])
+            .collect(),
+    );
     let m = sample.len();
     let cut = (BULK_TAIL * (m - 1) as f64) as usize;
     let mut lo = [0.0; 3];
@@ -53,6 +60,24 @@ pub fn without_far(positions: &[[f64; 3]], candidates: Vec<u32>) -> Vec<u32> {
         return candidates;
     }
     candidates.into_par_iter().filter(|&i| near(i)).collect()
+}
+
+/// The sample without its piles ([`PILE`]); all of it where fewer than two points would be
+/// left.
+fn without_piles(mut sample: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
+    let least = ((PILE * sample.len() as f64).ceil() as usize).max(2);
+    sample.sort_unstable_by(|p, q| {
+        (p[0].total_cmp(&q[0]))
+            .then(p[1].total_cmp(&q[1]))
+            .then(p[2].total_cmp(&q[2]))
+    });
+    let rest: Vec<[f64; 3]> = sample
+        .chunk_by(|p, q| p == q)
+        .filter(|run| run.len() < least)
+        .flatten()
+        .copied()
+        .collect();
+    if rest.len() < 2 { sample } else { rest }
 }
 
 #[cfg(test)]
@@ -98,8 +123,8 @@ mod tests {
         assert_eq!(kept(&[[0.0; 3], [1e30, 0.0, 0.0]]), vec![0, 1]);
     }
 
-    /// The bulk's box is set by the central half: far particles, a fifth of a step's here,
-    /// cannot widen it enough to keep themselves.
+    /// The bulk's box is set by the central half: far particles, a fifth of a step's here and
+    /// each at its own place, cannot widen it enough to keep themselves.
     #[test]
     fn many_sentinels_are_all_dropped() {
         let mut p = grid(100, 0.01);
@@ -108,5 +133,20 @@ mod tests {
             p.push([1e6 + k as f64, -1e30, 0.0]);
         }
         assert_eq!(kept(&p).len(), bulk);
+    }
+
+    /// Parked at one sentinel, any number go: twice the bulk's count here. A pile within the
+    /// bound (coincident particles in the bulk) stays.
+    #[test]
+    fn a_pile_of_any_size_goes_where_far_and_stays_where_near() {
+        let mut p = grid(100, 0.01);
+        let bulk = p.len();
+        p.extend(std::iter::repeat_n([1e30, 1e30, 1e30], 2 * bulk));
+        assert_eq!(kept(&p).len(), bulk);
+        let mut p = grid(100, 0.01);
+        p.extend(std::iter::repeat_n([0.5, 0.5, 0.0], 3000));
+        assert_eq!(kept(&p).len(), p.len());
+        // Only a pile: nothing else sets a box, and nothing is dropped.
+        assert_eq!(kept(&[[1.0, 2.0, 3.0]; 50]).len(), 50);
     }
 }
