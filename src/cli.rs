@@ -201,6 +201,10 @@ pub struct ScrubBenchArgs {
     /// With --raw-case: find the steps' neighbours on the engine's GPU (`bake --device gpu`).
     #[arg(long)]
     pub raw_case_gpu: bool,
+    /// Only the raw EnSight cases (--raw-case without the baked series and their tables),
+    /// for a machine whose time is short.
+    #[arg(long)]
+    pub raw_case_only: bool,
 }
 
 #[derive(Debug, Args)]

@@ -102,6 +102,11 @@ pub fn gpu(a: &GpuBenchArgs) -> Result<gpu::Settings> {
 }
 
 pub fn scrub(a: &ScrubBenchArgs) -> Result<scrub::Settings> {
+    if a.raw_case_only && (a.cold || a.raw) {
+        anyhow::bail!(
+            "--raw-case-only leaves out the baked series, which --cold and --raw are about"
+        );
+    }
     Ok(scrub::Settings {
         out: a.out.clone(),
         points: a.points.clone(),
@@ -117,7 +122,8 @@ pub fn scrub(a: &ScrubBenchArgs) -> Result<scrub::Settings> {
         adapter: a.adapter.clone(),
         cold: a.cold,
         raw: a.raw,
-        raw_case: a.raw_case,
+        raw_case: a.raw_case || a.raw_case_only,
         raw_case_gpu: a.raw_case_gpu,
+        raw_case_only: a.raw_case_only,
     })
 }

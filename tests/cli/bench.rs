@@ -182,6 +182,34 @@ fn scrub_bench_streams_a_series_on_the_engine() {
     }
 }
 
+/// `slosh bench scrub --raw-case-only` with `--cold` or `--raw`, which are about the baked
+/// series it leaves out, is refused before anything runs. (What it reports is the report's
+/// own unit test.)
+#[test]
+fn scrub_bench_raw_case_only_refuses_the_series_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let md = dir.path().join("scrub.md");
+    let series = dir.path().join("series");
+    for flag in ["--cold", "--raw"] {
+        let (ok, out, err) = slosh(&[
+            "bench",
+            "scrub",
+            "--quick",
+            "--raw-case-only",
+            flag,
+            "--out",
+            md.to_str().unwrap(),
+            "--dir",
+            series.to_str().unwrap(),
+        ]);
+        assert!(
+            !ok && err.contains("--raw-case-only leaves out the baked series"),
+            "{out}{err}"
+        );
+        assert!(!md.exists() && !series.exists(), "{flag}: nothing runs");
+    }
+}
+
 /// `slosh demo --headless`: generates and bakes the series once (a second run reuses it) and
 /// renders frames, on the GPU where there is one, else with the CPU tracer.
 #[test]

@@ -60,6 +60,8 @@ pub struct Settings {
     pub raw_case: bool,
     /// The raw case's steps baked with the GPU's neighbour search, on the engine's device.
     pub raw_case_gpu: bool,
+    /// The raw cases alone: no baked series is made or measured.
+    pub raw_case_only: bool,
 }
 
 /// Percentiles of a sample, in the sample's unit.
@@ -716,6 +718,9 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
                 r.bake_ms
             );
             raw_cases.push(r);
+        }
+        if args.raw_case_only {
+            continue;
         }
         let distinct = args
             .distinct
