@@ -211,8 +211,8 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     // Dropped particles are recorded in each step's statistics (`slosh inspect`); said here
     // too, so that a run's input damage is not found only by opening its steps.
     for (steps, what) in [
-        (&report.non_finite, "with a non-finite coordinate"),
-        (&report.far, "far beyond the rest"),
+        (&report.non_finite, slosh_bake::NON_FINITE_PARTICLES),
+        (&report.far, slosh_bake::FAR_PARTICLES),
     ] {
         if steps.is_empty() {
             continue;

@@ -77,7 +77,7 @@ fn human_file(r: &FileReport) -> String {
     ));
     let far = match h.stats.dropped_far {
         0 => String::new(),
-        n => format!(", {n} far beyond the rest"),
+        n => format!(", {n} {}", slosh_bake::FAR_PARTICLES),
     };
     let too_few = match h.stats.dropped_too_few {
         0 => String::new(),

@@ -64,8 +64,8 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(Path
 /// the bake's summary says them.
 fn dropped_particles(stats: &slosh_cache::StepStats) -> String {
     let parts: Vec<String> = [
-        (stats.dropped_non_finite, "with a non-finite coordinate"),
-        (stats.dropped_far, "far beyond the rest"),
+        (stats.dropped_non_finite, slosh_bake::NON_FINITE_PARTICLES),
+        (stats.dropped_far, slosh_bake::FAR_PARTICLES),
     ]
     .into_iter()
     .filter(|(n, _)| *n > 0)

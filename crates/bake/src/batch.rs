@@ -112,6 +112,12 @@ pub enum Event {
     Done { index: usize, outcome: StepOutcome },
 }
 
+/// How reports name the particles a step drops for a non-finite coordinate
+/// (`StepStats::dropped_non_finite`).
+pub const NON_FINITE_PARTICLES: &str = "with a non-finite coordinate";
+/// How reports name the particles a step drops far beyond the rest (`StepStats::dropped_far`).
+pub const FAR_PARTICLES: &str = "far beyond the rest";
+
 /// A step's particles dropped for a non-finite coordinate, or as far beyond the rest.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Dropped {
