@@ -303,6 +303,15 @@ impl<T: Real> SurfaceParts<T> {
             s if s > 0.0 => s,
             _ => {
                 let apart: Vec<f64> = nearest.par_iter().copied().filter(|&d| d > 0.0).collect();
+                if apart.is_empty() {
+                    // Balls, h and spray spheres would all be 0 wide (a cache the verifier
+                    // rejects): say why instead.
+                    return Err(SurfaceError::Piles {
+                        points: n,
+                        positions: distinct_positions(&rel),
+                        nearest: k,
+                    });
+                }
                 quantile(&apart, H_QUANTILE)
             }
         };
@@ -712,6 +721,18 @@ const H_QUANTILE: f64 = 0.5;
 /// The largest ball radius with a global h, in dense spacings (median nearest-neighbour
 /// distances): no hit lies farther than this from its ball's particle.
 pub const MAX_BALL_SPACINGS: f64 = 2.0;
+
+/// How many distinct positions `points` hold (exactly equal coordinates are one; + 0.0 makes
+/// −0 and +0 one).
+fn distinct_positions(points: &[[f64; 3]]) -> usize {
+    let mut bits: Vec<[u64; 3]> = points
+        .par_iter()
+        .map(|p| p.map(|c| (c + 0.0).to_bits()))
+        .collect();
+    bits.par_sort_unstable();
+    bits.dedup();
+    bits.len()
+}
 
 /// The `q` quantile of `values`: the ⌊q·n⌋-th smallest, counting from 0 (for the median of
 /// an even count, the upper of the two middle values); 0 for none. The bake's rule for h

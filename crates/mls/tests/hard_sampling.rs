@@ -61,6 +61,36 @@ fn mostly_duplicated_particles_keep_their_spacing() {
     assert!(st.disagree * 100 <= st.hits, "{st:?}");
 }
 
+/// Piles only (a solver parking its particles at two places): no particle has a neighbour
+/// apart from it, so balls, h and droplet spheres would all be 0 wide. The build says so, on
+/// the CPU's search as on any other (they share this rule); one particle off the piles gives
+/// every size a positive spacing again.
+#[test]
+fn piles_alone_are_refused_with_their_count() {
+    let mut points = vec![[0.25, -1.0, 3.0]; 40];
+    points.extend(vec![[1.25, -1.0, 3.0]; 60]);
+    let params = SurfaceParams::default();
+    match SurfaceParts::<f64>::build(&points, None, &params) {
+        Err(SurfaceError::Piles {
+            points: 100,
+            positions: 2,
+            nearest,
+        }) => assert_eq!(nearest, params.k),
+        other => panic!("expected piles refused, got {:?}", other.map(|_| ())),
+    }
+    points.push([0.75, -1.0, 3.0]);
+    let (parts, _) = SurfaceParts::<f64>::build(&points, None, &params).expect("one apart");
+    assert!(parts.spacing > 0.0);
+    assert!(
+        parts.radii.iter().all(|r| *r > 0.0),
+        "a ball without a radius"
+    );
+    assert!(
+        parts.spheres.iter().all(|s| s.radius > 0.0),
+        "a sphere without a radius"
+    );
+}
+
 /// Most particles written twice and every one moved a little (noise σ 0.1 spacings): twins
 /// lie far nearer than the spacing, so the dense spacing (the median nearest distance) was a
 /// fraction of it, against which the fluid's own gaps looked like spray spread thin: every
