@@ -403,6 +403,8 @@ pub fn run_batch(
     // 1M points on the 16-core H200 host, 8 jobs: 23.1 and 21.2 s shared, 19.5 and 16.8 s).
     let jobs = opts.jobs.clamp(1, planned.len().max(1));
     opts.stages.plan_steps_at_once(jobs);
+    // Jobs still pulling steps; each that finds none left says how many go on.
+    let running = AtomicUsize::new(jobs);
     std::thread::scope(|scope| {
         for job in 0..jobs {
             // At least one thread each.
@@ -414,7 +416,7 @@ pub fn run_batch(
                 .build()
                 .ok();
             let (next, report, planned, key) = (&next, &report, &planned, &key);
-            let (step_locks, deferred) = (&step_locks, &deferred);
+            let (step_locks, deferred, running) = (&step_locks, &deferred, &running);
             scope.spawn(move || {
                 loop {
                     let k = next.fetch_add(1, Ordering::Relaxed);
@@ -424,7 +426,13 @@ pub fn run_batch(
                             let left = deferred.lock().unwrap_or_else(|p| p.into_inner()).pop();
                             match left {
                                 Some(index) => (index, true),
-                                None => break,
+                                None => {
+                                    // Memory kept for more steps goes while the others
+                                    // finish, not all at the end.
+                                    let on = running.fetch_sub(1, Ordering::AcqRel) - 1;
+                                    opts.stages.plan_steps_left(on);
+                                    break;
+                                }
                             }
                         }
                     };

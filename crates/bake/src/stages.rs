@@ -28,6 +28,12 @@ pub trait StepsInFlight: Send + Sync + std::fmt::Debug {
     /// Up to `steps` steps are baked at once. Told before the first step: what is sized by
     /// it (a staging pool's warm-up) is sized once, at the first step's first upload.
     fn steps_at_once(&self, steps: usize);
+
+    /// No step is left to start, and `steps` are still being baked (0 once the last is
+    /// done): what was kept for more steps may go, while the others finish.
+    fn steps_left(&self, steps: usize) {
+        let _ = steps;
+    }
 }
 
 impl Stages {
@@ -45,6 +51,14 @@ impl Stages {
     pub fn plan_steps_at_once(&self, steps: usize) {
         if let Some(in_flight) = &self.in_flight {
             in_flight.steps_at_once(steps);
+        }
+    }
+
+    /// Tells the stages that no step is left to start and `steps` are still being baked
+    /// ([`StepsInFlight::steps_left`]).
+    pub fn plan_steps_left(&self, steps: usize) {
+        if let Some(in_flight) = &self.in_flight {
+            in_flight.steps_left(steps);
         }
     }
 

@@ -646,19 +646,24 @@ fn each_job_bakes_on_its_share_of_the_threads() {
     }
 }
 
-/// Records what the stages are told of the steps in flight.
+/// Records what the stages are told of the steps in flight: at once, then left.
 #[derive(Debug, Default)]
-struct ToldSteps(std::sync::Mutex<Vec<usize>>);
+struct ToldSteps(std::sync::Mutex<Vec<usize>>, std::sync::Mutex<Vec<usize>>);
 
 impl StepsInFlight for ToldSteps {
     fn steps_at_once(&self, steps: usize) {
         self.0.lock().unwrap().push(steps);
     }
+
+    fn steps_left(&self, steps: usize) {
+        self.1.lock().unwrap().push(steps);
+    }
 }
 
 /// A batch tells its stages how many steps it bakes at once (its jobs, no more than its
 /// steps) before the first, so that a device's stages keep transfer buffers for that many
-/// and no more.
+/// and no more; then, as each job finds no step left, how many are still baked, down to
+/// none, so that they can let go of what they kept for more.
 #[test]
 fn a_batch_tells_its_stages_the_steps_in_flight() {
     for (steps, jobs, told) in [(6, 2, 2), (2, 4, 2), (1, 1, 1)] {
@@ -673,6 +678,13 @@ fn a_batch_tells_its_stages_the_steps_in_flight() {
         assert_eq!(
             *watch.0.lock().unwrap(),
             [told],
+            "{steps} steps, {jobs} jobs"
+        );
+        let mut left = watch.1.lock().unwrap().clone();
+        left.sort_unstable();
+        assert_eq!(
+            left,
+            (0..told).collect::<Vec<_>>(),
             "{steps} steps, {jobs} jobs"
         );
     }

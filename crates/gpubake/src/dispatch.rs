@@ -44,6 +44,10 @@ pub(crate) const PASS_BUFFER_USAGE: wgpu::BufferUsages = wgpu::BufferUsages::STO
 pub(crate) struct PassMemory {
     pub(crate) gpu: std::sync::Arc<Gpu>,
     pub(crate) buffers: slosh_render::BufferShelf,
+    /// The most bytes `buffers` keeps while every planned step is in flight.
+    pub(crate) kept_bytes: u64,
+    /// Steps baked at once, as the batch planned ([`slosh_bake::StepsInFlight`]).
+    pub(crate) planned: std::sync::atomic::AtomicUsize,
     pub(crate) staging: slosh_render::StagingPool,
 }
 

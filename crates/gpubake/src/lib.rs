@@ -31,4 +31,4 @@ pub use layout::{
     UNION_SPAN_WORDS, UnionParams, components_source, fits_source, lists_source, nearest_source,
     orient_votes_source, tree_source, unions_source,
 };
-pub use passes::GpuStages;
+pub use passes::{GpuStages, KeptBuffers};

@@ -13,7 +13,7 @@ use slosh_bake::{
 };
 use slosh_cache::{CacheFile, LoadedStep, encode_step};
 use slosh_fileio::FileBytes;
-use slosh_gpubake::GpuStages;
+use slosh_gpubake::{GpuStages, KeptBuffers};
 use slosh_mls::Params;
 use slosh_render::Gpu;
 use slosh_scenes::{HardCases, Scene, SceneKind, SceneSpec};
@@ -204,4 +204,51 @@ fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
         let name = format!("dam break {resolution}{time}");
         compare(&name, &input, &sph, &stages);
     }
+}
+
+/// The buffers a device's stages keep between steps (pass buffers, staging and read-back
+/// buffers) shrink to the share of the steps still in flight as a batch's jobs find no step
+/// left (which still holds a small step's pass buffers whole), to none after the last; a
+/// batch after it keeps them again.
+#[test]
+fn kept_buffers_go_as_the_steps_left_end() {
+    use slosh_bake::StepsInFlight;
+    let Some(gpu) = gpu_or_skip(Gpu::new(adapter().as_deref())) else {
+        return;
+    };
+    let gpu_stages = Arc::new(GpuStages::new(Arc::new(gpu)).unwrap());
+    let stages = gpu_stages.clone().stages();
+    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    let scene = Scene::new(SceneSpec::new(SceneKind::Sphere, 4000, 3)).unwrap();
+    let input = scene_step(&scene, 1, "sphere");
+    let bake_one = || {
+        bake_step_parts_with(&input, &params, &stages).unwrap();
+    };
+    gpu_stages.steps_at_once(2);
+    bake_one();
+    let kept = gpu_stages.kept();
+    assert!(
+        kept.pass_bytes > 0,
+        "a baked step leaves its pass buffers kept"
+    );
+    assert!(
+        kept.readback > 0,
+        "a baked step leaves its read-back buffers kept"
+    );
+    gpu_stages.steps_left(1);
+    assert_eq!(gpu_stages.kept().pass_bytes, kept.pass_bytes);
+    gpu_stages.steps_left(0);
+    assert_eq!(
+        gpu_stages.kept(),
+        KeptBuffers {
+            pass_bytes: 0,
+            staging: 0,
+            readback: 0
+        }
+    );
+    gpu_stages.steps_at_once(2);
+    bake_one();
+    let again = gpu_stages.kept();
+    assert_eq!(again.pass_bytes, kept.pass_bytes);
+    assert!(again.readback > 0);
 }

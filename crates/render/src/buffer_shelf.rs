@@ -57,10 +57,9 @@ impl BufferShelf {
     /// Keeps at most `bytes`; what is over goes now.
     pub fn set_limit(&self, bytes: u64) {
         self.limit.store(bytes, Ordering::Relaxed);
-        let mut free = self.lock();
-        while free.iter().map(wgpu::Buffer::size).sum::<u64>() > bytes {
-            free.remove(0);
-        }
+        let over = trim(&mut self.lock(), bytes);
+        // Freed after the lock is let go: other threads take and give buffers meanwhile.
+        drop(over);
     }
 
     /// Bytes held.
@@ -124,12 +123,24 @@ impl BufferShelf {
         if buffer.usage() != self.usage || buffer.size() > limit {
             return;
         }
-        let mut free = self.lock();
-        free.push(buffer);
-        while free.iter().map(wgpu::Buffer::size).sum::<u64>() > limit {
-            free.remove(0);
-        }
+        let over = {
+            let mut free = self.lock();
+            free.push(buffer);
+            trim(&mut free, limit)
+        };
+        drop(over);
     }
+}
+
+/// The longest-kept buffers taken off `free` until it holds at most `bytes`.
+fn trim(free: &mut Vec<wgpu::Buffer>, bytes: u64) -> Vec<wgpu::Buffer> {
+    let mut held: u64 = free.iter().map(wgpu::Buffer::size).sum();
+    let mut over = 0;
+    while held > bytes {
+        held -= free[over].size();
+        over += 1;
+    }
+    free.drain(..over).collect()
 }
 
 /// A new section buffer of `size` bytes.

@@ -23,6 +23,8 @@ pub(crate) struct Shelf {
     free: Arc<Mutex<Vec<wgpu::Buffer>>>,
     /// The most buffers kept; more are dropped when they come back.
     keep: usize,
+    /// The most kept for now, at most `keep` ([`Shelf::keep_at_most`]).
+    keep_now: Arc<AtomicUsize>,
     /// The most bytes the kept buffers hold together.
     keep_bytes: u64,
 }
@@ -32,8 +34,22 @@ impl Shelf {
         Shelf {
             free: Arc::new(Mutex::new(Vec::new())),
             keep,
+            keep_now: Arc::new(AtomicUsize::new(keep)),
             keep_bytes: u64::MAX,
         }
+    }
+
+    /// Keeps at most `buffers` (never more than it was made to keep) from now on; the
+    /// longest-kept of those over go now, freed after the lock is let go.
+    pub(crate) fn keep_at_most(&self, buffers: usize) {
+        let buffers = buffers.min(self.keep);
+        self.keep_now.store(buffers, Ordering::Relaxed);
+        let over: Vec<wgpu::Buffer> = {
+            let mut free = self.free.lock().unwrap_or_else(PoisonError::into_inner);
+            let over = free.len().saturating_sub(buffers);
+            free.drain(..over).collect()
+        };
+        drop(over);
     }
 
     /// The same shelf, keeping no more than `bytes` in all.
@@ -69,16 +85,22 @@ impl Shelf {
         WeakShelf {
             free: Arc::downgrade(&self.free),
             keep: self.keep,
+            keep_now: self.keep_now.clone(),
             keep_bytes: self.keep_bytes,
         }
     }
 
-    /// Keeps `buffer` unless the shelf is full, by count or by bytes.
+    /// Keeps `buffer` unless the shelf is full, by count or by bytes; else it is freed after
+    /// the lock is let go.
     pub(crate) fn put(&self, buffer: wgpu::Buffer) {
         let mut free = self.free.lock().unwrap_or_else(PoisonError::into_inner);
         let held: u64 = free.iter().map(wgpu::Buffer::size).sum();
-        if free.len() < self.keep && held.saturating_add(buffer.size()) <= self.keep_bytes {
+        let keep = self.keep.min(self.keep_now.load(Ordering::Relaxed));
+        if free.len() < keep && held.saturating_add(buffer.size()) <= self.keep_bytes {
             free.push(buffer);
+        } else {
+            drop(free);
+            drop(buffer);
         }
     }
 }
@@ -87,6 +109,7 @@ impl Shelf {
 struct WeakShelf {
     free: Weak<Mutex<Vec<wgpu::Buffer>>>,
     keep: usize,
+    keep_now: Arc<AtomicUsize>,
     keep_bytes: u64,
 }
 
@@ -95,6 +118,7 @@ impl WeakShelf {
         Some(Shelf {
             free: self.free.upgrade()?,
             keep: self.keep,
+            keep_now: self.keep_now.clone(),
             keep_bytes: self.keep_bytes,
         })
     }
@@ -157,6 +181,12 @@ impl StagingPool {
     /// warm-up sized for many jobs filled gigabytes of it for a bake of one step at a time.
     pub fn warm_at_most(&self, buffers: usize) {
         self.warm_limit.store(buffers, Ordering::Relaxed);
+    }
+
+    /// Keeps at most `buffers` ready from now on (never more than it was made to keep);
+    /// those over go now.
+    pub fn keep_at_most(&self, buffers: usize) {
+        self.shelf.keep_at_most(buffers);
     }
 
     /// The same pool, keeping no more than `bytes` of buffers in all.

@@ -64,6 +64,12 @@ impl ReadbackPool {
         }
     }
 
+    /// Keeps at most `buffers` for the next reads from now on (never more than it was made
+    /// to keep); those over go now.
+    pub fn keep_at_most(&self, buffers: usize) {
+        self.shelf.keep_at_most(buffers);
+    }
+
     /// Buffers kept for the next reads.
     pub fn kept(&self) -> usize {
         self.shelf.len()
