@@ -50,9 +50,9 @@ impl StepSource for CloudSource<'_> {
 pub fn manifest_only(dir: &std::path::Path) -> Result<()> {
     let (manifest, problems) = Manifest::refresh(dir)?;
     say!(
-        "wrote {} ({} steps)",
+        "wrote {} ({})",
         dir.join(slosh_cache::MANIFEST_NAME).display(),
-        manifest.steps.len()
+        steps(manifest.steps.len())
     );
     for (path, e) in &problems {
         eprintln!("left out {}: {e}", path.display());
@@ -159,8 +159,8 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         .map(|(_, s)| s)
         .sum();
     say!(
-        "baked {} steps, kept {} already current, {} failed, into {} in {:.2} s",
-        report.baked,
+        "baked {}, kept {} already current, {} failed, into {} in {:.2} s",
+        steps(report.baked),
         report.kept,
         report.failed.len(),
         opts.out.display(),
@@ -188,47 +188,57 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             );
         }
     }
-    for (steps, what) in [
-        (&report.empty, "hold no particles"),
+    // What the steps do, said of one and of several.
+    for (listed, what) in [
+        (
+            &report.empty,
+            ["holds", "hold"].map(|v| format!("{v} no particles")),
+        ),
         (
             &report.too_few,
-            "keep fewer than two particles after selection (too few to size a surface)",
+            ["keeps", "keep"].map(|v| {
+                format!("{v} fewer than two particles after selection (too few to size a surface)")
+            }),
         ),
     ] {
-        if steps.is_empty() {
+        if listed.is_empty() {
             continue;
         }
-        let mut list: Vec<String> = steps.iter().take(20).map(|i| i.to_string()).collect();
-        if steps.len() > 20 {
-            list.push(format!("… ({} in all)", steps.len()));
+        let mut list: Vec<String> = listed.iter().take(20).map(|i| i.to_string()).collect();
+        if listed.len() > 20 {
+            list.push(format!("… ({} in all)", listed.len()));
         }
+        let (what, baked) = if listed.len() == 1 {
+            (&what[0], "was baked as an empty step")
+        } else {
+            (&what[1], "were baked as empty steps")
+        };
         say!(
-            "{} steps {what} and were baked as empty steps: {}",
-            steps.len(),
+            "{} {what} and {baked}: {}",
+            steps(listed.len()),
             list.join(", ")
         );
     }
     // Dropped particles are recorded in each step's statistics (`slosh inspect`); said here
     // too, so that a run's input damage is not found only by opening its steps.
-    for (steps, what) in [
+    for (listed, what) in [
         (&report.non_finite, slosh_bake::NON_FINITE_PARTICLES),
         (&report.far, slosh_bake::FAR_PARTICLES),
     ] {
-        if steps.is_empty() {
+        if listed.is_empty() {
             continue;
         }
-        let mut list: Vec<String> = steps
+        let mut list: Vec<String> = listed
             .iter()
             .take(20)
             .map(|s| format!("{} ({} of {})", s.step, s.dropped, s.read))
             .collect();
-        if steps.len() > 20 {
-            list.push(format!("… ({} in all)", steps.len()));
+        if listed.len() > 20 {
+            list.push(format!("… ({} in all)", listed.len()));
         }
         say!(
-            "particles {what} were dropped in {} {}: {}",
-            steps.len(),
-            if steps.len() == 1 { "step" } else { "steps" },
+            "particles {what} were dropped in {}: {}",
+            steps(listed.len()),
             list.join(", ")
         );
     }
@@ -258,9 +268,9 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             list.push(format!("… ({} in all)", report.failed.len()));
         }
         bail!(
-            "{} of {} steps failed: {}{}",
+            "{} of {} failed: {}{}",
             report.failed.len(),
-            report.baked + report.kept + report.failed.len(),
+            steps(report.baked + report.kept + report.failed.len()),
             list.join(", "),
             if report.manifest_error.is_some() {
                 "; and the manifest was not written"
@@ -273,4 +283,13 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         bail!("the manifest was not written");
     }
     Ok(())
+}
+
+/// "1 step", "N steps".
+fn steps(n: usize) -> String {
+    if n == 1 {
+        "1 step".into()
+    } else {
+        format!("{n} steps")
+    }
 }

@@ -63,19 +63,8 @@ pub fn bake_case(args: &crate::cli::RenderArgs, steps: &[usize]) -> Result<(Path
 /// The particles a step's bake dropped as damaged input, said after its line ("" for none), as
 /// the bake's summary says them.
 fn dropped_particles(stats: &slosh_cache::StepStats) -> String {
-    let parts: Vec<String> = [
-        (stats.dropped_non_finite, slosh_bake::NON_FINITE_PARTICLES),
-        (stats.dropped_far, slosh_bake::FAR_PARTICLES),
-    ]
-    .into_iter()
-    .filter(|(n, _)| *n > 0)
-    .map(|(n, what)| format!("{n} {what}"))
-    .collect();
-    if parts.is_empty() {
-        String::new()
-    } else {
-        format!("; dropped {}", parts.join(" and "))
-    }
+    slosh_bake::dropped_input(stats.dropped_non_finite, stats.dropped_far)
+        .map_or(String::new(), |dropped| format!("; dropped {dropped}"))
 }
 
 /// A case render's outcome: the render's, with the `unbaked` of the `asked` steps named too

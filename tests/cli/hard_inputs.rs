@@ -268,7 +268,7 @@ fn empty_steps_are_valid_steps() {
         "{out}"
     );
     assert!(
-        out.contains("1 steps hold no particles and were baked as empty steps: 0"),
+        out.contains("1 step holds no particles and was baked as an empty step: 0"),
         "{out}"
     );
     let (ok, out, err) = slosh(&["inspect", cache.to_str().unwrap(), "--verify"]);

@@ -387,7 +387,7 @@ fn steps_read_the_same_everywhere() {
     let (ok, out, _) = baked("1..=3");
     assert!(ok && out.contains("baked 3 steps"), "{out}");
     let (ok, out, _) = baked("3");
-    assert!(ok && out.contains("baked 1 steps"), "{out}");
+    assert!(ok && out.contains("baked 1 step,"), "{out}");
     let (ok, out, _) = baked("2..2");
     assert!(!ok && out.contains("the range is empty"), "{out}");
     let (ok, out, _) = baked("50..60");

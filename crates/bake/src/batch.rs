@@ -118,6 +118,17 @@ pub const NON_FINITE_PARTICLES: &str = "with a non-finite coordinate";
 /// How reports name the particles a step drops far beyond the rest (`StepStats::dropped_far`).
 pub const FAR_PARTICLES: &str = "far beyond the rest";
 
+/// The particles a step dropped as damaged input, as reports name them ("10 with a
+/// non-finite coordinate and 2 far beyond the rest"); `None` where it dropped none.
+pub fn dropped_input(non_finite: u64, far: u64) -> Option<String> {
+    let parts: Vec<String> = [(non_finite, NON_FINITE_PARTICLES), (far, FAR_PARTICLES)]
+        .into_iter()
+        .filter(|(n, _)| *n > 0)
+        .map(|(n, what)| format!("{n} {what}"))
+        .collect();
+    (!parts.is_empty()).then(|| parts.join(" and "))
+}
+
 /// A step's particles dropped for a non-finite coordinate, or as far beyond the rest.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Dropped {

@@ -19,7 +19,8 @@ mod withdrawable;
 
 pub use batch::{
     BatchOptions, BatchReport, Dropped, Event, FAR_PARTICLES, NON_FINITE_PARTICLES, Shard,
-    StepOutcome, StepSource, files_identity, is_current, plan, run_batch, series_key,
+    StepOutcome, StepSource, dropped_input, files_identity, is_current, plan, run_batch,
+    series_key,
 };
 pub use bvh::{
     MAX_LEAF_ITEMS, PlocTree, TreeBuild, leaves as bvh_leaves, linear as linear_bvh, linear_order,

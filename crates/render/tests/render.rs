@@ -1527,3 +1527,23 @@ fn pools_keep_no_more_than_their_bytes() {
         "buffers ready: {unbounded:?}"
     );
 }
+
+/// The particles a step's bake dropped (one non-finite, one far beyond the rest) come through
+/// to what a viewer knows of the step, which the player's status bar shows.
+#[test]
+fn a_steps_info_carries_the_particles_its_bake_dropped() {
+    let mut input = input_of(&SceneSpec::new(SceneKind::Sphere, 2000, 7));
+    input.positions.extend([[1e30; 3], [f64::NAN, 0.0, 0.0]]);
+    if let Some(normals) = &mut input.normals {
+        normals.extend([[0.0, 0.0, 1.0]; 2]);
+    }
+    assert!(input.fields.is_empty() && input.surface_flags.is_none());
+    let params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    let file = slosh_testkit::bake_in_memory(&input, &params, Path::new("dropped.slc")).unwrap();
+    let host = slosh_render::HostStep::read(&file, None).unwrap();
+    assert_eq!(host.info.point_count, 2000);
+    assert_eq!(
+        (host.info.dropped_non_finite, host.info.dropped_far),
+        (1, 1)
+    );
+}

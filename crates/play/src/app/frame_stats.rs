@@ -123,8 +123,11 @@ impl FrameStats {
             (Some(s), false) => format!(" · step {}", index(s)),
             (None, _) => " · nothing resident yet".into(),
         };
+        let dropped = engine.shown_step().map_or(String::new(), |(_, step)| {
+            dropped_note(step.info.dropped_non_finite, step.info.dropped_far)
+        });
         format!(
-            "frame {:.1} ms · trace {} · upload {:.1} ms · {} / {} steps resident · {:.2} / {:.2} GiB{progress}{quality}{shown} · {} frames",
+            "frame {:.1} ms · trace {} · upload {:.1} ms · {} / {} steps resident · {:.2} / {:.2} GiB{progress}{quality}{shown}{dropped} · {} frames",
             self.frame_ms,
             self.trace_ms.map_or("–".into(), |t| format!("{t:.2} ms")),
             self.upload_ms,
@@ -134,5 +137,31 @@ impl FrameStats {
             gib(engine.budget()),
             self.frames,
         )
+    }
+}
+
+/// What the bake dropped from the step on screen, where it dropped any: input damage is
+/// seen where the step is looked at, not only by `slosh inspect`.
+fn dropped_note(non_finite: u64, far: u64) -> String {
+    slosh_bake::dropped_input(non_finite, far)
+        .map_or(String::new(), |dropped| format!(" · dropped {dropped}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::dropped_note;
+
+    #[test]
+    fn the_status_bar_names_what_the_bake_dropped_only_where_it_dropped_any() {
+        assert_eq!(dropped_note(0, 0), "");
+        assert_eq!(
+            dropped_note(10, 0),
+            " · dropped 10 with a non-finite coordinate"
+        );
+        assert_eq!(dropped_note(0, 2), " · dropped 2 far beyond the rest");
+        assert_eq!(
+            dropped_note(10, 2),
+            " · dropped 10 with a non-finite coordinate and 2 far beyond the rest"
+        );
     }
 }

@@ -52,6 +52,10 @@ pub struct StepInfo {
     pub spacing: f64,
     /// How far outside the MLS surface the drawn surface lies, in local units.
     pub surface_offset: f32,
+    /// Particles the bake dropped from its input: with a non-finite coordinate, and far
+    /// beyond the rest (the header's statistics).
+    pub dropped_non_finite: u64,
+    pub dropped_far: u64,
 }
 
 impl StepInfo {
@@ -323,6 +327,8 @@ impl<'a> HostStep<'a> {
             bounds: header.bounds,
             spacing: header.spacing * header.transform.scale,
             surface_offset: header.surface_offset as f32,
+            dropped_non_finite: header.stats.dropped_non_finite,
+            dropped_far: header.stats.dropped_far,
         };
         let candidate_words = count(names::CLUSTER_NEIGHBOURS);
         let stored_bytes = entries.iter().flatten().map(|e| e.stored).sum::<u64>()
