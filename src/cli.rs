@@ -179,7 +179,8 @@ pub struct ScrubBenchArgs {
     /// rather than stay resident).
     #[arg(long, default_value_t = 16)]
     pub pool_steps: u64,
-    /// Where the series are written (reused when already there with the same shape).
+    /// Where the series are written (reused when already there with the same shape; one run
+    /// at a time holds it).
     #[arg(long)]
     pub dir: Option<PathBuf>,
     /// A tiny series and frame (checks the harness; lavapipe-friendly).

@@ -90,6 +90,29 @@ fn sph_dam_break_stays_close_to_splashsurf() {
     }
 }
 
+/// `slosh bench scrub --quick FLAGS --out MD --dir SERIES`: (success, stdout, stderr), or
+/// `None` where no adapter was found outside CI (the benchmark is skipped there).
+fn quick_scrub(
+    flags: &[&str],
+    md: &std::path::Path,
+    series: &std::path::Path,
+) -> Option<(bool, String, String)> {
+    let mut args = vec!["bench", "scrub", "--quick"];
+    args.extend_from_slice(flags);
+    args.extend([
+        "--out",
+        md.to_str().unwrap(),
+        "--dir",
+        series.to_str().unwrap(),
+    ]);
+    let (ok, out, err) = slosh(&args);
+    if !ok && !in_ci() && err.contains("adapter") {
+        eprintln!("skipping the scrub benchmark: {err}");
+        return None;
+    }
+    Some((ok, out, err))
+}
+
 /// `slosh bench scrub --quick`: the engine streams a small baked series on the adapter there
 /// is (lavapipe in CI), and the report holds every table with measured, positive figures.
 #[test]
@@ -97,20 +120,9 @@ fn scrub_bench_streams_a_series_on_the_engine() {
     let dir = tempfile::tempdir().unwrap();
     let md = dir.path().join("scrub.md");
     let series = dir.path().join("series");
-    let (ok, out, err) = slosh(&[
-        "bench",
-        "scrub",
-        "--quick",
-        "--raw-case",
-        "--out",
-        md.to_str().unwrap(),
-        "--dir",
-        series.to_str().unwrap(),
-    ]);
-    if !ok && !in_ci() && err.contains("adapter") {
-        eprintln!("skipping the scrub benchmark: {err}");
+    let Some((ok, out, err)) = quick_scrub(&["--raw-case"], &md, &series) else {
         return;
-    }
+    };
     assert!(ok, "{out}{err}");
     let report = std::fs::read_to_string(&md).unwrap();
     let rows: Vec<Vec<&str>> = report
@@ -191,23 +203,40 @@ fn scrub_bench_raw_case_only_refuses_the_series_flags() {
     let md = dir.path().join("scrub.md");
     let series = dir.path().join("series");
     for flag in ["--cold", "--raw"] {
-        let (ok, out, err) = slosh(&[
-            "bench",
-            "scrub",
-            "--quick",
-            "--raw-case-only",
-            flag,
-            "--out",
-            md.to_str().unwrap(),
-            "--dir",
-            series.to_str().unwrap(),
-        ]);
+        let (ok, out, err) = quick_scrub(&["--raw-case-only", flag], &md, &series)
+            .expect("refused before any adapter is looked for");
         assert!(
             !ok && err.contains("--raw-case-only leaves out the baked series"),
             "{out}{err}"
         );
         assert!(!md.exists() && !series.exists(), "{flag}: nothing runs");
     }
+}
+
+/// `slosh bench scrub` holds its folder: a second run there (which would empty the raw
+/// case's cache, and rewrite the series, under the first) is refused at once, with the folder
+/// and the way out named.
+#[test]
+fn scrub_bench_refuses_a_folder_another_run_holds() {
+    let dir = tempfile::tempdir().unwrap();
+    let series = dir.path().join("series");
+    std::fs::create_dir_all(&series).unwrap();
+    // Held here as the other run would hold it: the lock file's first byte.
+    let locks = slosh_fileio::RangeLocks::open(&series.join(".scrub.lock")).unwrap();
+    let _held = locks.try_lock(0).unwrap().expect("free before the run");
+    let md = dir.path().join("scrub.md");
+    let Some((ok, out, err)) = quick_scrub(&["--raw-case-only"], &md, &series) else {
+        return;
+    };
+    assert!(
+        !ok && err.contains("another `slosh bench scrub` is running there now")
+            && err.contains(series.to_str().unwrap())
+            && err.contains("--dir"),
+        "{out}{err}"
+    );
+    assert!(!md.exists(), "no report");
+    let left: Vec<_> = std::fs::read_dir(&series).unwrap().collect();
+    assert_eq!(left.len(), 1, "only the lock file: {left:?}");
 }
 
 /// `slosh demo --headless`: generates and bakes the series once (a second run reuses it) and

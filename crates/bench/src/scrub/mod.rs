@@ -659,6 +659,9 @@ fn resident_jumps(
 /// series would leave none to pick.
 const MIN_STEPS: usize = 8;
 
+/// The lock file a run holds in its folder.
+const SCRUB_LOCK: &str = ".scrub.lock";
+
 pub fn run(args: &Settings) -> Result<ScrubReport> {
     let size = if args.quick { (160, 100) } else { args.size };
     let counts: Vec<usize> = match (&args.points[..], args.quick) {
@@ -703,6 +706,22 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
         .dir
         .clone()
         .unwrap_or_else(|| std::env::temp_dir().join("slosh-scrub"));
+    // Held to the end: a second run on the same folder would empty the raw case's cache, and
+    // rewrite the series, under this one.
+    std::fs::create_dir_all(&root).with_context(|| format!("{}", root.display()))?;
+    let lock_path = root.join(SCRUB_LOCK);
+    let locks = slosh_fileio::RangeLocks::open(&lock_path)
+        .with_context(|| format!("{}", lock_path.display()))?;
+    let Some(_held) = locks
+        .try_lock(0)
+        .with_context(|| format!("{}", lock_path.display()))?
+    else {
+        bail!(
+            "{}: another `slosh bench scrub` is running there now; give this one a folder of \
+             its own with --dir",
+            root.display()
+        );
+    };
     let mut reports = Vec::new();
     let mut raw_cases = Vec::new();
     for points in counts {
