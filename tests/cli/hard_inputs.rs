@@ -250,6 +250,30 @@ fn write_gold_step(run: &Path, index: usize, points: &[[&str; 3]]) {
     }
 }
 
+/// A step whose particles lie in two piles (a solver parking them at two places) fails with
+/// what it is and the file it came from; the steps around it bake.
+#[test]
+fn a_step_of_two_piles_fails_by_name_and_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    gold_sphere(&run, 3);
+    let mut piles = vec![["0.25", "0.5", "0.5"]; 30];
+    piles.extend(vec![["1.25", "0.5", "0.5"]; 40]);
+    write_gold_step(&run, 1, &piles);
+    let (ok, out, err) = bake_case(&run.join("sphere.case"), &dir.path().join("cache"), &[]);
+    assert!(!ok, "{out}");
+    assert!(
+        out.contains("baked 2 steps") && out.contains("1 failed"),
+        "{out}"
+    );
+    let expected = format!(
+        "step 1: {}: all 70 points lie in piles of coincident points (2 distinct positions)",
+        run.join("sphere.geo00001").display()
+    );
+    assert!(err.contains(&expected), "{err}");
+    assert!(!err.contains("no positive radius"), "{err}");
+}
+
 /// Item 16: a step without particles (a Lagrangian run before its first injection: a point
 /// part of no elements) is a valid step: baked as empty, verified, reported in the summary
 /// and by `inspect`, rendered as background, and the series framed by its other steps.

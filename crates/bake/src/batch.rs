@@ -34,6 +34,12 @@ pub trait StepSource: Sync {
         let _ = index;
         None
     }
+    /// The file step `index`'s particles are read from, for messages about them (a case's
+    /// step numbers need not be its files'); `None` where there is no one file to name.
+    fn particle_file(&self, index: usize) -> Option<PathBuf> {
+        let _ = index;
+        None
+    }
 }
 
 /// The identity of a set of input files: their paths, sizes and modification times, hashed.
@@ -238,8 +244,14 @@ pub(crate) fn bake_one(
     input.identity = identity;
     let baked = match bake_step_unless_withdrawn(&input, &opts.params, &opts.stages, withdrawn) {
         Ok(b) => b,
-        // The report names the step; the error's own "step N:" would say it twice.
-        Err(e) => return StepOutcome::Failed(e.problem()),
+        // The report names the step; the error's own "step N:" would say it twice. The
+        // particles' file, as a read error names its file.
+        Err(e) => {
+            return StepOutcome::Failed(match source.particle_file(index) {
+                Some(file) => format!("{}: {}", file.display(), e.problem()),
+                None => e.problem(),
+            });
+        }
     };
     drop(input);
     if let Some(outcome) = withdrawn_now() {

@@ -85,6 +85,14 @@ impl StepSource for EnsightSource {
         })
     }
 
+    /// The measured file where the case has one (particles there), else the geometry.
+    fn particle_file(&self, index: usize) -> Option<std::path::PathBuf> {
+        match self.case.measured_file(index).ok()? {
+            Some(measured) => Some(measured.path),
+            None => Some(self.case.model_file(index).ok()??.path),
+        }
+    }
+
     /// The case file, the step's geometry or measured file and its variable files.
     fn identity(&self, index: usize) -> Option<String> {
         let mut files = vec![self.case.path().to_path_buf()];
