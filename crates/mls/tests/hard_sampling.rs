@@ -45,14 +45,7 @@ fn mostly_duplicated_particles_keep_their_spacing() {
     s.hard.duplicates = 0.7;
     let sc = scene(s);
     let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
-    assert!(
-        surface.radii.iter().all(|r| *r > 0.0),
-        "a ball without a radius"
-    );
-    assert!(
-        surface.spheres.iter().all(|s| s.radius > 0.0),
-        "a sphere without a radius"
-    );
+    assert_every_ball_and_sphere_sized(&surface);
     let st = default_render_stats(&sc, &surface);
     eprintln!("70 % duplicated: {st:?}");
     assert_eq!(st.non_finite, 0);
@@ -81,6 +74,11 @@ fn piles_alone_are_refused_with_their_count() {
     points.push([0.75, -1.0, 3.0]);
     let (parts, _) = SurfaceParts::<f64>::build(&points, None, &params).expect("one apart");
     assert!(parts.spacing > 0.0);
+    assert_every_ball_and_sphere_sized(&parts);
+}
+
+/// Every ball and every droplet sphere has a positive radius.
+fn assert_every_ball_and_sphere_sized(parts: &SurfaceParts<f64>) {
     assert!(
         parts.radii.iter().all(|r| *r > 0.0),
         "a ball without a radius"

@@ -699,15 +699,13 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
         steps,
         ..args.clone()
     };
-    let gpu = Arc::new(Gpu::new(args.adapter.as_deref())?);
-    let cores = slosh_bake::cores();
-    say!("scrub benchmark on {} ({cores} cores)", gpu.describe());
     let root = args
         .dir
         .clone()
         .unwrap_or_else(|| std::env::temp_dir().join("slosh-scrub"));
     // Held to the end: a second run on the same folder would empty the raw case's cache, and
-    // rewrite the series, under this one.
+    // rewrite the series, under this one. Taken before the device is, so that a refusal costs
+    // nothing.
     std::fs::create_dir_all(&root).with_context(|| format!("{}", root.display()))?;
     let lock_path = root.join(SCRUB_LOCK);
     let locks = slosh_fileio::RangeLocks::open(&lock_path)
@@ -722,6 +720,9 @@ pub fn run(args: &Settings) -> Result<ScrubReport> {
             root.display()
         );
     };
+    let gpu = Arc::new(Gpu::new(args.adapter.as_deref())?);
+    let cores = slosh_bake::cores();
+    say!("scrub benchmark on {} ({cores} cores)", gpu.describe());
     let mut reports = Vec::new();
     let mut raw_cases = Vec::new();
     for points in counts {
