@@ -254,33 +254,59 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     if report.failed.len() > SHOWN {
         eprintln!("… and {} more failed steps", report.failed.len() - SHOWN);
     }
+    for &i in report.gone.iter().take(SHOWN) {
+        eprintln!(
+            "step {i}: {} was gone or damaged when the manifest was rebuilt (deleted, moved or \
+             changed while the bake ran), so the manifest leaves it out",
+            opts.out.join(slosh_cache::step_file_name(i)).display()
+        );
+    }
+    if report.gone.len() > SHOWN {
+        eprintln!("… and {} more steps gone", report.gone.len() - SHOWN);
+    }
     if let Some(e) = &report.manifest_error {
         eprintln!("manifest: {e}");
     }
-    if !report.failed.is_empty() {
-        let mut list: Vec<String> = report
-            .failed
-            .iter()
-            .take(SHOWN)
-            .map(|(i, _)| i.to_string())
-            .collect();
-        if report.failed.len() > SHOWN {
-            list.push(format!("… ({} in all)", report.failed.len()));
+    let listed = |indices: &mut dyn Iterator<Item = usize>, count: usize| {
+        let mut list: Vec<String> = indices.take(SHOWN).map(|i| i.to_string()).collect();
+        if count > SHOWN {
+            list.push(format!("… ({count} in all)"));
         }
-        bail!(
-            "{} of {} failed: {}{}",
+        list.join(", ")
+    };
+    // Each way the run fell short, in one line; none is hidden behind another.
+    let mut short = Vec::new();
+    if !report.failed.is_empty() {
+        short.push(format!(
+            "{} of {} failed: {}",
             report.failed.len(),
             steps(report.baked + report.kept + report.failed.len()),
-            list.join(", "),
-            if report.manifest_error.is_some() {
-                "; and the manifest was not written"
+            listed(
+                &mut report.failed.iter().map(|(i, _)| *i),
+                report.failed.len()
+            )
+        ));
+    }
+    if !report.gone.is_empty() {
+        short.push(format!(
+            "{} this run baked or kept {} gone from {} when the manifest was rebuilt: {}; bake \
+             again to restore {}",
+            steps(report.gone.len()),
+            if report.gone.len() == 1 {
+                "was"
             } else {
-                ""
-            }
-        );
+                "were"
+            },
+            opts.out.display(),
+            listed(&mut report.gone.iter().copied(), report.gone.len()),
+            if report.gone.len() == 1 { "it" } else { "them" }
+        ));
     }
     if report.manifest_error.is_some() {
-        bail!("the manifest was not written");
+        short.push("the manifest was not written".into());
+    }
+    if !short.is_empty() {
+        bail!("{}", short.join("; and "));
     }
     Ok(())
 }

@@ -167,6 +167,11 @@ pub struct BatchReport {
     pub manifest_problems: Vec<(PathBuf, String)>,
     /// Why the manifest could not be rebuilt or written, if it could not.
     pub manifest_error: Option<String>,
+    /// Steps this run baked or found current that the rebuilt manifest does not hold, in
+    /// order: their files were deleted, moved or damaged while the run went on.
+    pub gone: Vec<usize>,
+    /// Steps this run baked or found current, in order.
+    done: Vec<usize>,
 }
 
 /// The steps of the series, every shard's: the source's steps that `--steps` selects.
@@ -521,6 +526,9 @@ pub fn run_batch(
                             StepOutcome::Kept => r.kept += 1,
                             StepOutcome::Failed(e) => r.failed.push((index, e.clone())),
                         }
+                        if !matches!(outcome, StepOutcome::Failed(_)) {
+                            r.done.push(index);
+                        }
                     }
                     progress(Event::Done { index, outcome });
                 }
@@ -536,10 +544,21 @@ pub fn run_batch(
     // A manifest that cannot be written is reported beside the steps' own outcomes, which
     // must not be lost behind it.
     match Manifest::refresh(&opts.out) {
-        Ok((_, problems)) => {
+        Ok((manifest, problems)) => {
             report.manifest_problems = problems
                 .into_iter()
                 .map(|(p, e)| (p, e.to_string()))
+                .collect();
+            // A step file gone between its write and the manifest would otherwise leave a
+            // run that says it baked every step and a manifest without them.
+            let held: std::collections::HashSet<usize> =
+                manifest.steps.iter().map(|s| s.index).collect();
+            report.done.sort_unstable();
+            report.gone = report
+                .done
+                .iter()
+                .copied()
+                .filter(|i| !held.contains(i))
                 .collect();
         }
         Err(e) => report.manifest_error = Some(e.to_string()),

@@ -646,6 +646,64 @@ fn each_job_bakes_on_its_share_of_the_threads() {
     }
 }
 
+/// A series whose reads damage step files the batch wrote before: reading step 2 deletes
+/// step 0's file, reading step 3 cuts step 1's to 100 bytes.
+struct Vandal {
+    out: std::path::PathBuf,
+}
+
+impl StepSource for Vandal {
+    fn source_path(&self) -> String {
+        "vandal".into()
+    }
+    fn steps(&self) -> Vec<(usize, f64)> {
+        (0..4).map(|i| (i, i as f64)).collect()
+    }
+    fn read(&self, index: usize) -> Result<StepInput, String> {
+        let file = |i| self.out.join(step_file_name(i));
+        match index {
+            2 => std::fs::remove_file(file(0)).unwrap(),
+            3 => std::fs::File::options()
+                .write(true)
+                .open(file(1))
+                .and_then(|f| f.set_len(100))
+                .unwrap(),
+            _ => {}
+        }
+        Ok(scene_input(SceneKind::Sphere, 200, index).1)
+    }
+}
+
+/// Step files deleted or damaged after the batch wrote them, before its manifest, are
+/// reported as gone (the manifest leaves them out); the next run bakes them again.
+#[test]
+fn steps_gone_before_the_manifest_are_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let source = Vandal {
+        out: tmp.path().to_path_buf(),
+    };
+    // One job: the steps go in order, so each is written before the read that damages it.
+    let mut opts = options(tmp.path(), Shard::WHOLE);
+    opts.jobs = 1;
+    let report = run_batch(&source, &opts, &|_| {}).unwrap();
+    assert_eq!((report.baked, report.failed.len()), (4, 0));
+    assert_eq!(report.gone, [0, 1]);
+    assert_eq!(report.manifest_problems.len(), 1, "the cut file");
+    let held: Vec<usize> = Manifest::read(tmp.path())
+        .unwrap()
+        .steps
+        .iter()
+        .map(|s| s.index)
+        .collect();
+    assert_eq!(held, [2, 3]);
+    // Steps 2 and 3 are current, so not read again: nothing is damaged, and 0 and 1 are
+    // baked again.
+    let report = run_batch(&source, &opts, &|_| {}).unwrap();
+    assert_eq!((report.baked, report.kept), (2, 2));
+    assert_eq!(report.gone, [] as [usize; 0]);
+    assert_eq!(Manifest::read(tmp.path()).unwrap().steps.len(), 4);
+}
+
 /// Records what the stages are told of the steps in flight: at once, then left.
 #[derive(Debug, Default)]
 struct ToldSteps(std::sync::Mutex<Vec<usize>>, std::sync::Mutex<Vec<usize>>);
