@@ -10,9 +10,12 @@
 // The votes (slosh_mls::vote_word) of the dispatch's points, from sorted position
 // params.first: patch edges in the low ORIENT_NEIGHBOURS bits.
 @group(0) @binding(4) var<storage, read_write> votes: array<u32>;
-// The dispatch's points' ORIENT_NEIGHBOURS nearest each, itself excluded, nearest first
-// (NO_POINT where there are fewer), by the caller's index, which is the sorted position here.
-@group(0) @binding(5) var<storage, read> around: array<u32>;
+// The dispatch's points' nearest as the nearest-points pass (nearest.wgsl) wrote them:
+// params.wanted ids each, nearest first, by the caller's index, which is the sorted position
+// here; the point itself among them or not. A point's neighbours for the check are its first
+// ORIENT_NEIGHBOURS others. UNFINISHED (NO_POINT's value) first: the pass left the point to a
+// coarser grid, whose ids only the host has.
+@group(0) @binding(5) var<storage, read> nearest_ids: array<u32>;
 // Each point's unit normal as f32, w 1; all zero where it has none.
 @group(0) @binding(6) var<storage, read> normals: array<vec4<f32>>;
 
@@ -29,13 +32,24 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
         votes[k_point] = 0u;
         return;
     }
+    let base = k_point * params.wanted;
+    if nearest_ids[base] == NO_POINT {
+        votes[k_point] = VOTE_RECAST;
+        return;
+    }
     let p = positions[i].xyz;
     let p_low = residuals[i].xyz;
     var vote = 0.0;
     var total = 0.0;
     var word = 0u;
-    for (var k = 0u; k < ORIENT_NEIGHBOURS; k += 1u) {
-        let j = around[k_point * ORIENT_NEIGHBOURS + k];
+    // k: the slot among the point's others, which names its patch edge's bit.
+    var k = 0u;
+    for (var s = 0u; s < params.wanted && k < ORIENT_NEIGHBOURS; s += 1u) {
+        let j = nearest_ids[base + s];
+        if j == i {
+            continue;
+        }
+        k += 1u;
         if j == NO_POINT {
             continue;
         }
@@ -67,7 +81,7 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
             word |= VOTE_RECAST;
         }
         if w >= PATCH_WEIGHT {
-            word |= 1u << k;
+            word |= 1u << (k - 1u);
             if agreement < 0.0 {
                 word |= VOTE_CONTRADICTED;
             }

@@ -4,7 +4,9 @@
 
 use std::num::NonZero;
 
-use slosh_mls::{Around, ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
+use slosh_mls::{
+    ListRequest, NearestIds, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError,
+};
 
 /// Asked before each search: `true` ends the bake with [`SurfaceError::Withdrawn`].
 pub type Withdrawn<'w> = &'w (dyn Fn() -> bool + Sync);
@@ -69,10 +71,10 @@ impl PointIndex for WithdrawableIndex<'_> {
 
     fn orientation_votes(
         &self,
-        around: &[Around],
+        nearest: NearestIds<'_>,
         normals: &[Option<[f64; 3]>],
     ) -> Result<Option<Vec<u32>>, SurfaceError> {
         self.search.check()?;
-        self.inner.orientation_votes(around, normals)
+        self.inner.orientation_votes(nearest, normals)
     }
 }

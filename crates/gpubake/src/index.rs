@@ -40,6 +40,27 @@ pub(crate) struct GpuIndex<'a> {
     /// Added to every reach when the shaders pick cells: far above the f32 rounding of a
     /// cell's bounds.
     pub margin: f64,
+    /// The last nearest-points query's ids where the pass wrote them, for the orientation
+    /// votes (which read them in place) and no later: the lists let them go.
+    pub kept_nearest: std::sync::Mutex<Option<KeptNearest>>,
+}
+
+/// A nearest-points query's ids on the GPU, in sorted order, `wanted` a point: each batch's
+/// buffer with its first sorted point and its points. A point the batch's shells left
+/// unfinished (`UNFINISHED` first) was found on a coarser grid, and only the host has its ids.
+pub(crate) struct KeptNearest {
+    pub wanted: usize,
+    pub batches: Vec<(usize, usize, Pooled)>,
+}
+
+impl GpuIndex<'_> {
+    /// Lets the kept nearest ids go, returning them.
+    pub(crate) fn take_kept_nearest(&self) -> Option<KeptNearest> {
+        self.kept_nearest
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take()
+    }
 }
 
 impl GpuIndex<'_> {

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use slosh_mls::SurfaceError;
 
 use crate::dispatch::{gpu_error, output, storage};
-use crate::index::{Dispatch, GpuIndex};
+use crate::index::{Dispatch, GpuIndex, KeptNearest};
 use crate::layout::{FLAG_TODO, NEAREST_MAX, UNFINISHED};
 
 /// Points per occupied cell the nearest-points grid aims at.
@@ -35,6 +35,10 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
     // Every point first; then those the shells did not satisfy (outliers far from the rest),
     // on grids of cells four times wider, until a grid of two cells a side visits them all.
     let mut todo: Option<Vec<u32>> = None;
+    // The first round's buffers, every point's ids in sorted order, kept for the orientation
+    // votes where the sorted order is the caller's (a bake's always is).
+    let mut kept = Vec::new();
+    drop(index.take_kept_nearest());
     loop {
         let starts = storage(
             &index.search.memory,
@@ -85,6 +89,9 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
                         .map(|k| (first + k) as u32)
                         .collect();
                     unfinished.extend(more);
+                    if sorted.identity {
+                        kept.push((first, len, out));
+                    }
                 }
                 Some(t) => {
                     let found: Vec<u32> = index.search.read_back(&out, bytes)?;
@@ -112,6 +119,10 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
         todo = Some(unfinished);
     }
     if sorted.identity {
+        *index.kept_nearest.lock().unwrap_or_else(|p| p.into_inner()) = Some(KeptNearest {
+            wanted: count,
+            batches: kept,
+        });
         return Ok(sorted_ids);
     }
     // Point i's at [i·count, (i + 1)·count): sorted position t holds point order[t]'s.

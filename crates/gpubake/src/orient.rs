@@ -4,25 +4,35 @@
 //! (`slosh_mls::vote_word`), so that the repair comes out as the CPU's.
 
 use rayon::prelude::*;
-use slosh_mls::{Around, SurfaceError};
+use slosh_mls::{NearestIds, ORIENT_NEIGHBOURS, SurfaceError};
 
 use crate::dispatch::{bind, groups, output, storage, uniform};
 use crate::index::GpuIndex;
 use crate::layout::SearchParams;
 
-/// The votes of every point of `index`, given its nearest (`around`) and unit normals; `None`
-/// where the caller's order is not the GPU's (Morton) order, which a bake's always is.
-/// Dispatched in batches whose neighbours fit one binding.
+/// The votes of every point of `index`, given its nearest and unit normals, read from the
+/// ids its nearest-points pass left on the GPU; `None` where there are none to read (the
+/// caller's order is not the GPU's Morton order, which a bake's always is, or `nearest` is
+/// not the pass's last query) or where the check takes fewer neighbours than the shader
+/// does (all others of a point, up to [`ORIENT_NEIGHBOURS`]). Uploading the ids again was
+/// 64 bytes a point from host memory made for it.
 pub(crate) fn orientation_votes(
     index: &GpuIndex<'_>,
-    around: &[Around],
+    nearest: NearestIds<'_>,
     normals: &[Option<[f64; 3]>],
 ) -> Result<Option<Vec<u32>>, SurfaceError> {
-    let n = around.len();
+    let n = nearest.len();
     let search = index.search;
     let gpu = search.gpu();
     let unit_bytes = n as u64 * 16;
-    if !index.sorted.identity
+    let Some(kept) = index
+        .take_kept_nearest()
+        .filter(|k| k.wanted == nearest.stride())
+    else {
+        return Ok(None);
+    };
+    let takes_all = nearest.take() == ORIENT_NEIGHBOURS || nearest.take() + 1 >= kept.wanted;
+    if !takes_all
         || normals.len() != n
         || index.points.len() != n
         || n == 0
@@ -36,15 +46,9 @@ pub(crate) fn orientation_votes(
         .map(|v| v.map_or([0.0; 4], |v| [v[0] as f32, v[1] as f32, v[2] as f32, 1.0]))
         .collect();
     let normals_on_gpu = storage(&search.memory, "orientation normals", &as_f32)?;
-    let per_batch = (search.output_limit() / size_of::<Around>() as u64).max(1) as usize;
     let mut votes: Vec<u32> = Vec::with_capacity(n);
-    for first in (0..n).step_by(per_batch) {
-        let len = per_batch.min(n - first);
-        let neighbours = storage(
-            &search.memory,
-            "orientation neighbours",
-            &around[first..first + len],
-        )?;
+    for (first, len, ids) in &kept.batches {
+        let (first, len) = (*first, *len);
         let out = output(&search.memory, "orientation votes", len as u64 * 4);
         let (x, y, row_threads) = groups(gpu, len as u32);
         let params = uniform(
@@ -53,6 +57,7 @@ pub(crate) fn orientation_votes(
             &SearchParams {
                 count: len as u32,
                 first: first as u32,
+                wanted: kept.wanted as u32,
                 row_threads,
                 ..bytemuck::Zeroable::zeroed()
             },
@@ -65,7 +70,7 @@ pub(crate) fn orientation_votes(
                 (1, &index.positions),
                 (10, &index.residuals),
                 (4, &out),
-                (5, &neighbours),
+                (5, ids),
                 (6, &normals_on_gpu),
             ],
         );
@@ -75,6 +80,9 @@ pub(crate) fn orientation_votes(
             &group,
         );
         votes.extend(search.read_back::<u32>(&out, len as u64 * 4)?);
+    }
+    if votes.len() != n {
+        return Ok(None);
     }
     Ok(Some(votes))
 }

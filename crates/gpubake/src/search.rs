@@ -3,7 +3,9 @@
 
 use std::num::NonZero;
 
-use slosh_mls::{Around, ListRequest, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError};
+use slosh_mls::{
+    ListRequest, NearestIds, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError,
+};
 
 use crate::cells::SortedPoints;
 use crate::dispatch::{gpu_error, guarded, storage};
@@ -47,6 +49,7 @@ impl NeighbourSearch for GpuStages {
                     residuals,
                     original,
                     margin,
+                    kept_nearest: Default::default(),
                 })
             },
         )
@@ -67,6 +70,8 @@ impl PointIndex for GpuIndex<'_> {
     }
 
     fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError> {
+        // The lists' buffers need the room.
+        drop(self.take_kept_nearest());
         guarded(
             self.search.gpu(),
             || crate::lists::lists(self, request),
@@ -76,12 +81,12 @@ impl PointIndex for GpuIndex<'_> {
 
     fn orientation_votes(
         &self,
-        around: &[Around],
+        nearest: NearestIds<'_>,
         normals: &[Option<[f64; 3]>],
     ) -> Result<Option<Vec<u32>>, SurfaceError> {
         guarded(
             self.search.gpu(),
-            || crate::orient::orientation_votes(self, around, normals),
+            || crate::orient::orientation_votes(self, nearest, normals),
             gpu_error,
         )
     }

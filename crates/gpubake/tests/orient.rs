@@ -9,8 +9,7 @@ use std::sync::Arc;
 
 use slosh_gpubake::GpuStages;
 use slosh_mls::{
-    Around, NO_POINT, NeighbourSearch, ORIENT_NEIGHBOURS, morton_order, repair_orientation,
-    vote_word,
+    NearestIds, NeighbourSearch, ORIENT_NEIGHBOURS, morton_order, repair_orientation, vote_word,
 };
 use slosh_render::Gpu;
 use slosh_testkit::{adapter, gpu_or_skip};
@@ -89,6 +88,15 @@ fn cases() -> Vec<(&'static str, Vec<[f64; 3]>, Normals)> {
         sheet_normals.push(sheet_normals[k * 7]);
     }
     out.push(("thin sheet, gaps and twins", sheet_points, sheet_normals));
+    // Stragglers far from a sphere: the nearest pass leaves some of them to coarser grids,
+    // whose ids only the host has, so the host casts their votes.
+    let (mut far_points, mut far_normals) = sphere(5_000, &mut random);
+    for k in 0..40 {
+        let at = [30.0 + 2.0 * random.next(), -20.0, 10.0 * random.next()];
+        far_points.push(at);
+        far_normals.push(Some(unit([1.0, random.next(), (k % 3) as f64 - 1.0])));
+    }
+    out.push(("sphere and far stragglers", far_points, far_normals));
     out.into_iter()
         .map(|(name, points, normals)| {
             let order = morton_order(&points);
@@ -111,34 +119,39 @@ fn gpu_votes_repair_the_normals_as_the_cpu_does() {
         // As the surface's build gathers them: the nearest but the point itself.
         let count = ORIENT_NEIGHBOURS + 1;
         let nearest = index.nearest(NonZero::new(count).unwrap()).unwrap();
-        let around: Vec<Around> = nearest
-            .chunks(count)
-            .enumerate()
-            .map(|(i, nn)| {
-                let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
-                let others = nn.iter().copied().filter(|&j| j as usize != i);
-                for (slot, j) in around.iter_mut().zip(others) {
-                    *slot = j;
-                }
-                around
-            })
-            .collect();
+        let nearest = NearestIds::new(&nearest, count, ORIENT_NEIGHBOURS);
         let votes = index
-            .orientation_votes(&around, &normals)
+            .orientation_votes(nearest, &normals)
             .unwrap()
             .expect("points in Morton order: the GPU casts the votes");
+        assert!(
+            index
+                .orientation_votes(nearest, &normals)
+                .unwrap()
+                .is_none(),
+            "{name}: the pass's ids go with the votes"
+        );
         let recast = votes
             .iter()
             .filter(|&&w| w & vote_word::RECAST != 0)
             .count();
+        // Stragglers the pass left to coarser grids carry nothing but the mark.
+        let left: usize = (0..points.len())
+            .filter(|&i| points[i][0] > 10.0 && votes[i] == vote_word::RECAST)
+            .count();
+        assert_eq!(
+            left > 0,
+            name == "sphere and far stragglers",
+            "{name}: {left} votes left to the host whole"
+        );
         assert!(
             recast * 20 < votes.len(),
             "{name}: {recast} of {} votes left to the host",
             votes.len()
         );
         let (mut cpu, mut gpu) = (normals.clone(), normals.clone());
-        let by_cpu = repair_orientation(&points, &mut cpu, &around, None);
-        let by_gpu = repair_orientation(&points, &mut gpu, &around, Some(&votes));
+        let by_cpu = repair_orientation(&points, &mut cpu, nearest, None);
+        let by_gpu = repair_orientation(&points, &mut gpu, nearest, Some(&votes));
         assert_eq!(by_gpu, by_cpu, "{name}");
         let bits = |ns: &[Option<[f64; 3]>]| -> Vec<Option<[u64; 3]>> {
             ns.iter().map(|n| n.map(|v| v.map(f64::to_bits))).collect()

@@ -98,25 +98,81 @@ fn neg(a: [f64; 3]) -> [f64; 3] {
 pub type Around = [u32; ORIENT_NEIGHBOURS];
 pub const NO_POINT: u32 = u32::MAX;
 
+/// Every point's neighbours for the check, read where a nearest query left them (`stride`
+/// ids a point, nearest first, the point itself among them or not): its first `take` others.
+/// Read in place, point by point: an array of every point's [`Around`] was 64 bytes a point
+/// of fresh memory, 256 MB at 4M points, that most steps never read again.
+#[derive(Debug, Clone, Copy)]
+pub struct NearestIds<'a> {
+    ids: &'a [u32],
+    stride: usize,
+    take: usize,
+}
+
+impl<'a> NearestIds<'a> {
+    /// `ids` holds `stride` ids a point (`stride` > 0); `take` is at most
+    /// [`ORIENT_NEIGHBOURS`].
+    pub fn new(ids: &'a [u32], stride: usize, take: usize) -> NearestIds<'a> {
+        NearestIds {
+            ids,
+            stride: stride.max(1),
+            take: take.min(ORIENT_NEIGHBOURS),
+        }
+    }
+
+    /// Points.
+    pub fn len(&self) -> usize {
+        self.ids.len() / self.stride
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Ids a point, as the query left them.
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// The most others of a point the check takes.
+    pub fn take(&self) -> usize {
+        self.take
+    }
+
+    /// Point `i`'s neighbours for the check, `NO_POINT` past the last.
+    pub fn around(&self, i: usize) -> Around {
+        let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
+        let others = self.ids[i * self.stride..][..self.stride]
+            .iter()
+            .copied()
+            .filter(|&j| j as usize != i);
+        for (slot, j) in around.iter_mut().zip(others.take(self.take)) {
+            *slot = j;
+        }
+        around
+    }
+}
+
 /// The weighted edges from each point to its neighbours that have normals, computed where
 /// they are walked rather than stored: the weight comes from the point's input normal's
 /// direction (which a reversal does not change) and the offset.
 struct Edges<'a> {
     points: &'a [[f64; 3]],
     original: &'a [Option<[f64; 3]>],
-    nearest: &'a [Around],
+    nearest: NearestIds<'a>,
 }
 
 impl Edges<'_> {
-    /// The edges with the slot of `nearest[i]` each comes from.
+    /// The edges with the slot of point `i`'s neighbours each comes from.
     fn slots(&self, i: usize) -> impl Iterator<Item = (usize, u32, f64)> + '_ {
         let own = self.original[i];
-        self.nearest[i]
-            .iter()
+        self.nearest
+            .around(i)
+            .into_iter()
             .enumerate()
-            .filter(move |&(_, &j)| own.is_some() && j != NO_POINT)
-            .filter(|&(_, &j)| self.original[j as usize].is_some())
-            .filter_map(move |(k, &j)| {
+            .filter(move |&(_, j)| own.is_some() && j != NO_POINT)
+            .filter(|&(_, j)| self.original[j as usize].is_some())
+            .filter_map(move |(k, j)| {
                 let (p, q) = (self.points[i], self.points[j as usize]);
                 let w = tangent_weight(own?, [q[0] - p[0], q[1] - p[1], q[2] - p[2]]);
                 (w > 0.0).then_some((k, j, w))
@@ -131,7 +187,7 @@ impl Edges<'_> {
 pub fn repair_orientation(
     points: &[[f64; 3]],
     normals: &mut [Option<[f64; 3]>],
-    nearest: &[Around],
+    nearest: NearestIds<'_>,
     first_votes: Option<&[u32]>,
 ) -> OrientationRepair {
     let n = points.len();
@@ -259,7 +315,7 @@ fn cast_pass(
 
 /// Point `i`'s patch edges: the neighbours its `strong` bits name.
 fn strong_of<'a>(edges: &'a Edges, strong: &'a [u32], i: usize) -> impl Iterator<Item = u32> + 'a {
-    let (mask, around) = (strong[i], &edges.nearest[i]);
+    let (mask, around) = (strong[i], edges.nearest.around(i));
     (0..ORIENT_NEIGHBOURS)
         .filter(move |k| mask >> k & 1 == 1)
         .map(move |k| around[k])
@@ -367,33 +423,47 @@ fn reverse_contradicted_patches(
 mod tests {
     use super::*;
 
-    /// A `side`×`side` plane grid and each point's nearest (itself left out).
-    fn grid(side: usize) -> (Vec<[f64; 3]>, Vec<Around>) {
+    /// Ids a point the grids' nearest queries find: the point and its check's neighbours.
+    const STRIDE: usize = ORIENT_NEIGHBOURS + 1;
+
+    /// A `side`×`side` plane grid and each point's nearest ([`STRIDE`] a point, itself
+    /// among them).
+    fn grid(side: usize) -> (Vec<[f64; 3]>, Vec<u32>) {
         let points: Vec<[f64; 3]> = (0..side * side)
             .map(|k| [(k % side) as f64, (k / side) as f64, 0.0])
             .collect();
         let tree: kiddo::ImmutableKdTree<f64, 3> =
             kiddo::ImmutableKdTree::new_from_slice(&points).unwrap();
-        let nearest: Vec<Around> = points
+        let nearest: Vec<u32> = points
             .iter()
-            .map(|p| {
-                let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
-                for (slot, r) in tree
-                    .query(p)
+            .flat_map(|p| {
+                tree.query(p)
                     .nearest_n::<kiddo::SquaredEuclidean<f64>>(
-                        std::num::NonZero::new(ORIENT_NEIGHBOURS + 1).unwrap(),
+                        std::num::NonZero::new(STRIDE).unwrap(),
                     )
                     .execute()
                     .into_iter()
-                    .skip(1)
-                    .enumerate()
-                {
-                    around[slot] = r.item;
-                }
-                around
+                    .map(|r| r.item)
             })
             .collect();
         (points, nearest)
+    }
+
+    fn view(nearest: &[u32]) -> NearestIds<'_> {
+        NearestIds::new(nearest, STRIDE, ORIENT_NEIGHBOURS)
+    }
+
+    /// A point's neighbours leave the point out wherever the query put it, keep the order,
+    /// stop at `take`, and end in `NO_POINT` where too few are left.
+    #[test]
+    fn a_points_neighbours_leave_it_out_wherever_it_lies() {
+        let ids = [7, 0, 3, 1, 5, 1, 9, 4];
+        let nearest = NearestIds::new(&ids, 4, 2);
+        assert_eq!(nearest.len(), 2);
+        assert_eq!(nearest.around(0)[..3], [7, 3, NO_POINT]);
+        assert_eq!(nearest.around(1)[..3], [5, 9, NO_POINT]);
+        let all = NearestIds::new(&ids, 4, ORIENT_NEIGHBOURS);
+        assert_eq!(all.around(1)[..4], [5, 9, 4, NO_POINT]);
     }
 
     /// A plane grid with normals +z, some reversed singly and one 5×5 patch reversed.
@@ -410,7 +480,7 @@ mod tests {
         for &i in &patch {
             normals[i] = Some([0.0, 0.0, -1.0]);
         }
-        let repair = repair_orientation(&points, &mut normals, &nearest, None);
+        let repair = repair_orientation(&points, &mut normals, view(&nearest), None);
         assert!(normals.iter().all(|n| *n == Some([0.0, 0.0, 1.0])));
         assert_eq!(repair.flipped_points, singles.len() + patch.len());
         // Votes wear the patch down from its corners; what is left goes back whole.
@@ -433,7 +503,7 @@ mod tests {
         let edges = Edges {
             points: &points,
             original: &normals,
-            nearest: &nearest,
+            nearest: view(&nearest),
         };
         let (reverse, _, _) = cast_pass(&edges, &normals, None);
         assert!(
@@ -441,7 +511,7 @@ mod tests {
             "the first pass reverses {} points",
             reverse.iter().filter(|&&r| r).count()
         );
-        let repair = repair_orientation(&points, &mut normals, &nearest, None);
+        let repair = repair_orientation(&points, &mut normals, view(&nearest), None);
         assert!(normals.iter().all(|n| *n == up), "{repair:?}");
         assert_eq!(
             repair,
@@ -451,7 +521,7 @@ mod tests {
                 patch_points: band.len(),
             }
         );
-        let clean = repair_orientation(&points, &mut normals, &nearest, None);
+        let clean = repair_orientation(&points, &mut normals, view(&nearest), None);
         assert_eq!(clean, OrientationRepair::default());
         assert!(normals.iter().all(|n| *n == up));
     }

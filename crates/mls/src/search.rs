@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::error::SurfaceError;
 use crate::found::NeighbourLists;
 use crate::lists::neighbour_lists;
-use crate::orient::Around;
+use crate::orient::NearestIds;
 use crate::support::NormalsMode;
 
 /// The initial fits a search may compute with the lists, where the lists already sit where it
@@ -80,12 +80,13 @@ pub trait PointIndex {
     fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError>;
 
     /// The orientation check's first-pass votes (`orient.rs`, [`crate::vote_word`]) of every
-    /// point, given its nearest (`around`) and the unit normals, where this index casts them
-    /// itself (a GPU's); `None` where it leaves them to `repair_orientation`. No default: an
-    /// index that wraps another passes them on.
+    /// point, given its nearest (`nearest`: the ids of this index's last [`Self::nearest`]
+    /// query) and the unit normals, where this index casts them itself (a GPU's, from the
+    /// ids where its query left them); `None` where it leaves them to `repair_orientation`.
+    /// No default: an index that wraps another passes them on.
     fn orientation_votes(
         &self,
-        around: &[Around],
+        nearest: NearestIds<'_>,
         normals: &[Option<[f64; 3]>],
     ) -> Result<Option<Vec<u32>>, SurfaceError>;
 }
@@ -163,7 +164,7 @@ impl PointIndex for KdIndex<'_> {
     /// The k-d tree leaves them to `repair_orientation`, which casts them in f64 itself.
     fn orientation_votes(
         &self,
-        _around: &[Around],
+        _nearest: NearestIds<'_>,
         _normals: &[Option<[f64; 3]>],
     ) -> Result<Option<Vec<u32>>, SurfaceError> {
         Ok(None)

@@ -16,7 +16,7 @@ use crate::grid::Grid;
 use crate::intersect::{Ball, Params, initial_fit_with};
 use crate::lists::distance2;
 use crate::neighbours::Neighbours;
-use crate::orient::{Around, NO_POINT, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
+use crate::orient::{NearestIds, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation};
 use crate::poly::Poly;
 use crate::real::{Real, V3};
 use crate::runs::RunUnions;
@@ -239,25 +239,12 @@ impl<T: Real> SurfaceParts<T> {
         let mut orientation_parts = StageClock::start();
         let orientation = match unit_normals.as_mut() {
             Some(ns) => {
-                let around: Vec<Around> = (0..n)
-                    .into_par_iter()
-                    .map(|i| {
-                        let mut around = [NO_POINT; ORIENT_NEIGHBOURS];
-                        let others = neighbours_of(i)
-                            .iter()
-                            .copied()
-                            .filter(|&j| j as usize != i);
-                        for (slot, j) in around.iter_mut().zip(others.take(orient_with)) {
-                            *slot = j;
-                        }
-                        around
-                    })
-                    .collect();
-                let votes = index.orientation_votes(&around, ns)?;
+                let nearest = NearestIds::new(&nearest_ids, k_query.get(), orient_with);
+                let votes = index.orientation_votes(nearest, ns)?;
                 if votes.is_some() {
                     orientation_parts.lap(ORIENTATION_VOTES_CAST_BY_THE_SEARCH);
                 }
-                repair_orientation(&rel, ns, &around, votes.as_deref())
+                repair_orientation(&rel, ns, nearest, votes.as_deref())
             }
             None => OrientationRepair::default(),
         };
