@@ -646,6 +646,59 @@ fn each_job_bakes_on_its_share_of_the_threads() {
     }
 }
 
+/// The verifier reads each cluster's candidates from the runs they are stored as: a list
+/// whose runs come out of order, or end past the points, is refused by its cluster, the
+/// first in cluster order.
+#[test]
+fn the_verifier_refuses_candidate_lists_out_of_order_or_past_the_points() {
+    let (_, input) = scene_input(SceneKind::Sphere, 2000, 0);
+    let p = params();
+    let baked = bake_step(&input, &p).unwrap();
+    let n = baked.header.points as usize;
+    let section = |name: &str| baked.sections.iter().position(|s| s.name == name).unwrap();
+    let words_of =
+        |k: usize| -> Vec<u32> { bytemuck::pod_collect_to_vec(&baked.sections[k].bytes) };
+    let (base, at) = (
+        words_of(section(names::CLUSTER_BASE)),
+        section(names::CLUSTER_NEIGHBOURS),
+    );
+    let words = words_of(at);
+    let verify_with = |words: &[u32]| {
+        let mut sections = baked.sections.clone();
+        sections[at].bytes = bytemuck::cast_slice(words).to_vec();
+        let bytes = encode_step(baked.header.clone(), &sections, p.compression).unwrap();
+        CacheFile::from_bytes(FileBytes::from_vec(Path::new("damaged.slc"), bytes))
+            .unwrap()
+            .verify()
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    verify_with(&words).unwrap();
+    let narrow = |c: usize| base[c] & slosh_cache::candidates::WIDE_CLUSTER == 0;
+    let end_of = |c: usize| {
+        base.get(c + 1).map_or(words.len(), |&b| {
+            (b & !slosh_cache::candidates::WIDE_CLUSTER) as usize
+        })
+    };
+    let refused = |c: usize| {
+        format!("the candidate list of cluster {c} is not sorted, distinct and in range")
+    };
+    // A narrow cluster's first two runs swapped: out of order.
+    let c = (0..base.len())
+        .find(|&c| narrow(c) && end_of(c) - base[c] as usize >= 2)
+        .unwrap();
+    let mut swapped = words.clone();
+    swapped.swap(base[c] as usize, base[c] as usize + 1);
+    assert!(verify_with(&swapped).unwrap_err().contains(&refused(c)));
+    // The last narrow cluster's last run moved to start 32767 past its first point: past
+    // the points.
+    let last = (0..base.len()).rev().find(|&c| narrow(c)).unwrap();
+    assert!(last as u32 * baked.header.neighbour_cluster + 32767 > n as u32);
+    let mut far = words.clone();
+    far[end_of(last) - 1] |= 0xffff;
+    assert!(verify_with(&far).unwrap_err().contains(&refused(last)));
+}
+
 /// A series whose reads damage step files the batch wrote before: reading step 2 deletes
 /// step 0's file, reading step 3 cuts step 1's to 100 bytes.
 struct Vandal {

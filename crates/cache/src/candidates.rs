@@ -27,30 +27,41 @@ fn narrow(j: u32, first: u32) -> Option<u32> {
         .map(u32::from)
 }
 
-/// The runs of consecutive indices of a sorted `list`: (start, length).
-fn runs_of(list: &[u32]) -> Vec<(u32, u32)> {
-    let mut runs: Vec<(u32, u32)> = Vec::new();
-    for &j in list {
-        match runs.last_mut() {
-            Some((start, len)) if u64::from(*start) + u64::from(*len) == u64::from(j) => *len += 1,
-            _ => runs.push((j, 1)),
+/// The runs of consecutive indices of a sorted `list`: (start, length), found as they are
+/// read (no list of them is made: a 1M-point step has 31k clusters).
+fn runs_of(list: &[u32]) -> impl Iterator<Item = (u32, u32)> + '_ {
+    let mut at = 0;
+    std::iter::from_fn(move || {
+        let first = *list.get(at)?;
+        let mut len = 1;
+        while list
+            .get(at + len)
+            .is_some_and(|&j| u64::from(first) + len as u64 == u64::from(j))
+        {
+            len += 1;
         }
-    }
-    runs
+        at += len;
+        Some((first, len as u32))
+    })
 }
 
-/// A narrow cluster's words for `runs`: each run cut into parts of at most [`NARROW_RUN`],
-/// one word per part; `None` where a part starts outside the narrow range of `first`.
-fn narrow_words(runs: &[(u32, u32)], first: u32) -> Option<Vec<u32>> {
-    let mut words = Vec::with_capacity(runs.len());
-    for &(mut j, mut left) in runs {
+/// Appends a narrow cluster's words for the runs of `list` to `words`: each run cut into
+/// parts of at most [`NARROW_RUN`], one word per part; `false`, with `words` as it was,
+/// where a part starts outside the narrow range of `first`.
+fn push_narrow(words: &mut Vec<u32>, list: &[u32], first: u32) -> bool {
+    let before = words.len();
+    for (mut j, mut left) in runs_of(list) {
         while left > 0 {
             let part = left.min(NARROW_RUN);
-            words.push(narrow(j, first)? | (part << 16));
+            let Some(offset) = narrow(j, first) else {
+                words.truncate(before);
+                return false;
+            };
+            words.push(offset | (part << 16));
             (j, left) = (j + part, left - part);
         }
     }
-    Some(words)
+    true
 }
 
 /// The `cluster_base` entries and words of cluster lists (`start`, CSR over `ids`, each
@@ -74,19 +85,13 @@ pub fn pack(start: &[u32], ids: &[u32], size: u32) -> Option<(Vec<u32>, Vec<u32>
             );
             let (mut counts, mut words) = (Vec::with_capacity(last - first_cluster), Vec::new());
             for c in first_cluster..last {
-                let runs = runs_of(&ids[start[c] as usize..start[c + 1] as usize]);
+                let list = &ids[start[c] as usize..start[c + 1] as usize];
                 let before = words.len();
                 let first = (c as u32).checked_mul(size)?;
-                let wide = match narrow_words(&runs, first) {
-                    Some(narrow) => {
-                        words.extend(narrow);
-                        false
-                    }
-                    None => {
-                        words.extend(runs.iter().flat_map(|&(j, len)| [j, len]));
-                        true
-                    }
-                };
+                let wide = !push_narrow(&mut words, list, first);
+                if wide {
+                    words.extend(runs_of(list).flat_map(|(j, len)| [j, len]));
+                }
                 counts.push((u32::try_from(words.len() - before).ok()?, wide));
             }
             Some((counts, words))
@@ -155,79 +160,135 @@ pub fn check_layout(start: &[u32], base: &[u32], words: usize) -> Result<(), Str
     Ok(())
 }
 
-/// The cluster lists back as 32-bit indices (CSR over `start`), or what is wrong: a layout
-/// [`check_layout`] refuses, an empty run, runs whose lengths do not add up to the cluster's
-/// candidates, or an index past u32.
-pub fn unpack(start: &[u32], base: &[u32], words: &[u32], size: u32) -> Result<Vec<u32>, String> {
-    use rayon::prelude::*;
-    check_layout(start, base, words.len())?;
-    let count = |c: usize| start[c + 1].saturating_sub(start[c]) as u64;
-    // Cluster c's runs as (first index, length).
-    let runs = |c: usize| -> Vec<(u64, u64)> {
-        let own = &words[words_of(base, c, words.len())];
-        let first = u64::from(c as u32) * u64::from(size);
-        if base[c] & WIDE_CLUSTER != 0 {
-            own.chunks_exact(2)
-                .map(|w| (u64::from(w[0]), u64::from(w[1])))
-                .collect()
+/// Cluster lists stored as runs: `cluster_start`, `cluster_base` and the words of clusters
+/// of `size` points, read where they lie.
+#[derive(Debug, Clone, Copy)]
+pub struct PackedLists<'a> {
+    pub start: &'a [u32],
+    pub base: &'a [u32],
+    pub words: &'a [u32],
+    pub size: u32,
+}
+
+impl PackedLists<'_> {
+    /// Cluster `c`'s candidates.
+    fn count(&self, c: usize) -> u64 {
+        u64::from(self.start[c + 1].saturating_sub(self.start[c]))
+    }
+
+    /// Cluster `c`'s runs as (first index, length), read from its words (a layout
+    /// [`check_layout`] accepts).
+    fn runs(&self, c: usize) -> impl Iterator<Item = (u64, u64)> + '_ {
+        let own = &self.words[words_of(self.base, c, self.words.len())];
+        let first = u64::from(c as u32) * u64::from(self.size);
+        let wide = self.base[c] & WIDE_CLUSTER != 0;
+        let (step, pairs) = if wide {
+            (2, own.len() / 2)
         } else {
-            own.iter()
-                .map(|&w| {
-                    let j = (first + u64::from(w & 0xffff)).wrapping_sub(u64::from(NARROW_BIAS));
-                    (j, u64::from(w >> 16))
-                })
-                .collect()
-        }
-    };
-    // Every cluster checked in parallel; the first in cluster order that fails is reported,
-    // as a scan would (one took most of a 4M-point verify).
-    let problem = (0..base.len()).into_par_iter().find_map_first(|c| {
-        let count = count(c);
-        let mut held = 0u64;
-        for (r, (j, len)) in runs(c).into_iter().enumerate() {
-            if len == 0 {
-                return Some(format!("cluster {c}'s run {r} is empty"));
+            (1, own.len())
+        };
+        (0..pairs).map(move |r| {
+            let w = &own[r * step..];
+            if wide {
+                (u64::from(w[0]), u64::from(w[1]))
+            } else {
+                let j = (first + u64::from(w[0] & 0xffff)).wrapping_sub(u64::from(NARROW_BIAS));
+                (j, u64::from(w[0] >> 16))
             }
-            if j.checked_add(len).is_none_or(|end| end > 1 << 32) {
-                return Some(format!("cluster {c}'s run {r} lies outside u32"));
-            }
-            if held + len > count {
-                return Some(format!(
-                    "cluster {c}'s runs hold more than its {count} candidates"
-                ));
-            }
-            held += len;
-        }
-        (held != count).then(|| format!("cluster {c}'s runs hold {held} of its {count} candidates"))
-    });
-    if let Some(problem) = problem {
-        return Err(problem);
+        })
     }
-    // Each block of clusters expanded into its own part of the output.
-    const CLUSTERS_PER_BLOCK: usize = 256;
-    let total: u64 = (0..base.len()).map(count).sum();
-    let mut out = vec![0u32; total as usize];
-    let mut parts = Vec::with_capacity(base.len().div_ceil(CLUSTERS_PER_BLOCK));
-    let mut rest = out.as_mut_slice();
-    for first in (0..base.len()).step_by(CLUSTERS_PER_BLOCK) {
-        let clusters = first..(first + CLUSTERS_PER_BLOCK).min(base.len());
-        let len: u64 = clusters.clone().map(count).sum();
-        let (part, tail) = rest.split_at_mut(len as usize);
-        parts.push((clusters, part));
-        rest = tail;
-    }
-    parts.into_par_iter().for_each(|(clusters, part)| {
-        let mut at = 0;
-        for c in clusters {
-            for (j, len) in runs(c) {
-                for (slot, id) in part[at..at + len as usize].iter_mut().zip(j..j + len) {
-                    *slot = id as u32;
+
+    /// What is wrong with the lists, if anything: a layout [`check_layout`] refuses, an empty
+    /// run, runs whose lengths do not add up to the cluster's candidates, or an index past
+    /// u32; the first cluster in cluster order that fails is named, as a scan would (clusters
+    /// are checked in parallel: one scan took most of a 4M-point verify).
+    pub fn check(&self) -> Result<(), String> {
+        use rayon::prelude::*;
+        check_layout(self.start, self.base, self.words.len())?;
+        let problem = (0..self.base.len()).into_par_iter().find_map_first(|c| {
+            let count = self.count(c);
+            let mut held = 0u64;
+            for (r, (j, len)) in self.runs(c).enumerate() {
+                if len == 0 {
+                    return Some(format!("cluster {c}'s run {r} is empty"));
                 }
-                at += len as usize;
+                if j.checked_add(len).is_none_or(|end| end > 1 << 32) {
+                    return Some(format!("cluster {c}'s run {r} lies outside u32"));
+                }
+                if held + len > count {
+                    return Some(format!(
+                        "cluster {c}'s runs hold more than its {count} candidates"
+                    ));
+                }
+                held += len;
             }
+            (held != count)
+                .then(|| format!("cluster {c}'s runs hold {held} of its {count} candidates"))
+        });
+        problem.map_or(Ok(()), Err)
+    }
+
+    /// The first cluster (in cluster order) whose candidates are not sorted, distinct and
+    /// below `points`, read from the runs of lists [`Self::check`] accepts: each run must
+    /// start past the previous one's end, and the last end at `points` or before.
+    pub fn first_unsorted(&self, points: usize) -> Option<usize> {
+        use rayon::prelude::*;
+        (0..self.base.len()).into_par_iter().find_first(|&c| {
+            let mut end: Option<u64> = None;
+            for (j, len) in self.runs(c) {
+                if end.is_some_and(|e| j < e) {
+                    return true;
+                }
+                end = Some(j + len);
+            }
+            end.is_some_and(|e| e > points as u64)
+        })
+    }
+
+    /// The lists back as 32-bit indices (CSR over `start`), or what [`Self::check`] finds
+    /// wrong.
+    pub fn unpack(&self) -> Result<Vec<u32>, String> {
+        use rayon::prelude::*;
+        self.check()?;
+        // Each block of clusters expanded into its own part of the output.
+        const CLUSTERS_PER_BLOCK: usize = 256;
+        let clusters = self.base.len();
+        let total: u64 = (0..clusters).map(|c| self.count(c)).sum();
+        let mut out = vec![0u32; total as usize];
+        let mut parts = Vec::with_capacity(clusters.div_ceil(CLUSTERS_PER_BLOCK));
+        let mut rest = out.as_mut_slice();
+        for first in (0..clusters).step_by(CLUSTERS_PER_BLOCK) {
+            let block = first..(first + CLUSTERS_PER_BLOCK).min(clusters);
+            let len: u64 = block.clone().map(|c| self.count(c)).sum();
+            let (part, tail) = rest.split_at_mut(len as usize);
+            parts.push((block, part));
+            rest = tail;
         }
-    });
-    Ok(out)
+        parts.into_par_iter().for_each(|(block, part)| {
+            let mut at = 0;
+            for c in block {
+                for (j, len) in self.runs(c) {
+                    for (slot, id) in part[at..at + len as usize].iter_mut().zip(j..j + len) {
+                        *slot = id as u32;
+                    }
+                    at += len as usize;
+                }
+            }
+        });
+        Ok(out)
+    }
+}
+
+/// The cluster lists back as 32-bit indices (CSR over `start`), or what is wrong
+/// ([`PackedLists::check`]).
+pub fn unpack(start: &[u32], base: &[u32], words: &[u32], size: u32) -> Result<Vec<u32>, String> {
+    PackedLists {
+        start,
+        base,
+        words,
+        size,
+    }
+    .unpack()
 }
 
 #[cfg(test)]
@@ -287,6 +348,43 @@ mod tests {
         // From cluster 0, the second part would start past the narrow range: wide.
         let (base, words) = pack(&[0, 70_000], &(0..70_000).collect::<Vec<_>>(), 32).unwrap();
         assert_eq!((base, words.clone()), (vec![WIDE_CLUSTER], vec![0, 70_000]));
+    }
+
+    /// The lists' order and range are read from their runs: a run that starts before the
+    /// previous one ends (out of order, or a candidate twice) or ends past the points names
+    /// its cluster, the first in cluster order.
+    #[test]
+    fn runs_out_of_order_twice_or_past_the_points_name_their_cluster() {
+        let lists: [&[u32]; 5] = [&[0, 1, 2], &[7, 9], &[3, 3], &[40, 41, 40], &[60]];
+        let pack_all = |lists: &[&[u32]]| {
+            let mut start = vec![0u32];
+            let mut ids = Vec::new();
+            for l in lists {
+                ids.extend_from_slice(l);
+                start.push(ids.len() as u32);
+            }
+            let (base, words) = pack(&start, &ids, 32).unwrap();
+            (start, base, words)
+        };
+        let first_unsorted = |lists: &[&[u32]], points: usize| {
+            let (start, base, words) = pack_all(lists);
+            let packed = PackedLists {
+                start: &start,
+                base: &base,
+                words: &words,
+                size: 32,
+            };
+            packed.check().unwrap();
+            packed.first_unsorted(points)
+        };
+        assert_eq!(first_unsorted(&lists, 100), Some(2), "a candidate twice");
+        assert_eq!(
+            first_unsorted(&[lists[0], lists[1], lists[3]], 100),
+            Some(2)
+        );
+        assert_eq!(first_unsorted(&[lists[0], lists[1], lists[4]], 60), Some(2));
+        assert_eq!(first_unsorted(&[lists[0], lists[1], lists[4]], 61), None);
+        assert_eq!(first_unsorted(&[lists[1], &[], lists[0]], 10), None);
     }
 
     /// Many clusters (packed and unpacked by blocks, in parallel): narrow and wide ones, empty

@@ -121,14 +121,32 @@ impl CacheFile {
     /// Every cluster's candidates as 32-bit indices (CSR over `cluster_start`), unpacked from
     /// their narrow or wide words (`candidates.rs`).
     pub fn cluster_candidates(&self, cluster_start: &[u32]) -> Result<Vec<u32>> {
-        let base: Vec<u32> = self.decode(names::CLUSTER_BASE)?;
-        let words: Vec<u32> = self.decode(names::CLUSTER_NEIGHBOURS)?;
-        candidates::unpack(
-            cluster_start,
-            &base,
-            &words,
-            self.header().neighbour_cluster.max(1),
-        )
+        let (base, words) = self.cluster_words()?;
+        self.with_lists(cluster_start, &base, &words, |lists| lists.unpack())
+    }
+
+    /// The `cluster_base` and `cluster_neighbours` sections, decoded.
+    pub(crate) fn cluster_words(&self) -> Result<(Vec<u32>, Vec<u32>)> {
+        Ok((
+            self.decode(names::CLUSTER_BASE)?,
+            self.decode(names::CLUSTER_NEIGHBOURS)?,
+        ))
+    }
+
+    /// `read` of the step's packed cluster lists, its complaint said of `cluster_base`.
+    pub(crate) fn with_lists<T>(
+        &self,
+        start: &[u32],
+        base: &[u32],
+        words: &[u32],
+        read: impl FnOnce(candidates::PackedLists<'_>) -> std::result::Result<T, String>,
+    ) -> Result<T> {
+        read(candidates::PackedLists {
+            start,
+            base,
+            words,
+            size: self.header().neighbour_cluster.max(1),
+        })
         .map_err(|problem| Error::Invalid {
             path: self.path().to_path_buf(),
             problem: format!("section '{}': {problem}", names::CLUSTER_BASE),
