@@ -176,6 +176,15 @@ fn a_bake_with_gpu_neighbours_draws_the_cpu_bakes_picture() {
         spec.hard = hard.clone();
         scenes.push((format!("{}, hard", kind.name()), spec));
     }
+    // A sheet written twice over in part, a fifth of its normals reversed: the nearest
+    // points tie at every duplicate, and the flips must fall alike.
+    let mut twice = SceneSpec::new(SceneKind::Sheet, 20_000, 5);
+    twice.hard = HardCases {
+        duplicates: 0.1,
+        flip_normals: 0.2,
+        ..HardCases::default()
+    };
+    scenes.push(("sheet, duplicated and reversed".into(), twice));
     for (name, spec) in scenes {
         let scene = Scene::new(spec).unwrap();
         let input = scene_step(&scene, 1, &name);
