@@ -204,10 +204,6 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         if listed.is_empty() {
             continue;
         }
-        let mut list: Vec<String> = listed.iter().take(20).map(|i| i.to_string()).collect();
-        if listed.len() > 20 {
-            list.push(format!("… ({} in all)", listed.len()));
-        }
         let (what, baked) = if listed.len() == 1 {
             (&what[0], "was baked as an empty step")
         } else {
@@ -216,7 +212,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         say!(
             "{} {what} and {baked}: {}",
             steps(listed.len()),
-            list.join(", ")
+            first_of(listed.iter().map(|i| i.to_string()))
         );
     }
     // Dropped particles are recorded in each step's statistics (`slosh inspect`); said here
@@ -228,18 +224,14 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         if listed.is_empty() {
             continue;
         }
-        let mut list: Vec<String> = listed
-            .iter()
-            .take(20)
-            .map(|s| format!("{} ({} of {})", s.step, s.dropped, s.read))
-            .collect();
-        if listed.len() > 20 {
-            list.push(format!("… ({} in all)", listed.len()));
-        }
         say!(
             "particles {what} were dropped in {}: {}",
             steps(listed.len()),
-            list.join(", ")
+            first_of(
+                listed
+                    .iter()
+                    .map(|s| format!("{} ({} of {})", s.step, s.dropped, s.read))
+            )
         );
     }
     for (path, e) in &report.manifest_problems {
@@ -247,7 +239,6 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     }
     // Every failure is said, but a long run of them is summarised (a case that promises a
     // million steps over three files must not print a million lines).
-    const SHOWN: usize = 20;
     for (i, e) in report.failed.iter().take(SHOWN) {
         eprintln!("step {i}: {e}");
     }
@@ -267,13 +258,6 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
     if let Some(e) = &report.manifest_error {
         eprintln!("manifest: {e}");
     }
-    let listed = |indices: &mut dyn Iterator<Item = usize>, count: usize| {
-        let mut list: Vec<String> = indices.take(SHOWN).map(|i| i.to_string()).collect();
-        if count > SHOWN {
-            list.push(format!("… ({count} in all)"));
-        }
-        list.join(", ")
-    };
     // Each way the run fell short, in one line; none is hidden behind another.
     let mut short = Vec::new();
     if !report.failed.is_empty() {
@@ -281,10 +265,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
             "{} of {} failed: {}",
             report.failed.len(),
             steps(report.baked + report.kept + report.failed.len()),
-            listed(
-                &mut report.failed.iter().map(|(i, _)| *i),
-                report.failed.len()
-            )
+            first_of(report.failed.iter().map(|(i, _)| i.to_string()))
         ));
     }
     if !report.gone.is_empty() {
@@ -298,7 +279,7 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
                 "were"
             },
             opts.out.display(),
-            listed(&mut report.gone.iter().copied(), report.gone.len()),
+            first_of(report.gone.iter().map(|i| i.to_string())),
             if report.gone.len() == 1 { "it" } else { "them" }
         ));
     }
@@ -309,6 +290,20 @@ pub fn run(cfg: &BakeConfig) -> Result<()> {
         bail!("{}", short.join("; and "));
     }
     Ok(())
+}
+
+/// Steps said one by one before a run's summary says the rest.
+const SHOWN: usize = 20;
+
+/// The first [`SHOWN`] of `items`, comma-separated, then how many there are in all where
+/// there are more.
+fn first_of(items: impl ExactSizeIterator<Item = String>) -> String {
+    let count = items.len();
+    let mut list: Vec<String> = items.take(SHOWN).collect();
+    if count > SHOWN {
+        list.push(format!("… ({count} in all)"));
+    }
+    list.join(", ")
 }
 
 /// "1 step", "N steps".

@@ -122,7 +122,9 @@ impl CacheFile {
     /// their narrow or wide words (`candidates.rs`).
     pub fn cluster_candidates(&self, cluster_start: &[u32]) -> Result<Vec<u32>> {
         let (base, words) = self.cluster_words()?;
-        self.with_lists(cluster_start, &base, &words, |lists| lists.unpack())
+        self.packed_lists(cluster_start, &base, &words)
+            .unpack()
+            .map_err(|problem| self.lists_error(problem))
     }
 
     /// The `cluster_base` and `cluster_neighbours` sections, decoded.
@@ -133,24 +135,28 @@ impl CacheFile {
         ))
     }
 
-    /// `read` of the step's packed cluster lists, its complaint said of `cluster_base`.
-    pub(crate) fn with_lists<T>(
+    /// The step's packed cluster lists, over its cluster offsets `start` and the sections of
+    /// [`Self::cluster_words`].
+    pub(crate) fn packed_lists<'a>(
         &self,
-        start: &[u32],
-        base: &[u32],
-        words: &[u32],
-        read: impl FnOnce(candidates::PackedLists<'_>) -> std::result::Result<T, String>,
-    ) -> Result<T> {
-        read(candidates::PackedLists {
+        start: &'a [u32],
+        base: &'a [u32],
+        words: &'a [u32],
+    ) -> candidates::PackedLists<'a> {
+        candidates::PackedLists {
             start,
             base,
             words,
             size: self.header().neighbour_cluster.max(1),
-        })
-        .map_err(|problem| Error::Invalid {
+        }
+    }
+
+    /// What is wrong with the packed cluster lists, said of `cluster_base`.
+    pub(crate) fn lists_error(&self, problem: String) -> Error {
+        Error::Invalid {
             path: self.path().to_path_buf(),
             problem: format!("section '{}': {problem}", names::CLUSTER_BASE),
-        })
+        }
     }
 
     /// Checks the `ball_cubic` section against the header: present where the bake fits

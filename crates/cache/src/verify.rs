@@ -86,8 +86,10 @@ impl CacheFile {
         // The cluster lists are checked as the runs they are stored as: expanded, a 1M-point
         // step's were 44 MB made for the check alone.
         let (base, words) = self.cluster_words().map_err(decode_err)?;
-        self.with_lists(&start, &base, &words, |lists| lists.check())
-            .map_err(decode_err)?;
+        let lists = self.packed_lists(&start, &base, &words);
+        lists
+            .check()
+            .map_err(|problem| decode_err(self.lists_error(problem)))?;
         let size = header.neighbour_cluster as usize;
         if size == 0 {
             return Err("the neighbour cluster size is 0".into());
@@ -136,9 +138,7 @@ impl CacheFile {
         if start.first() != Some(&0) || start.windows(2).any(|w| w[0] > w[1]) {
             return Err("cluster offsets are not monotone from 0 to the list length".into());
         }
-        let first_unsorted =
-            self.with_lists(&start, &base, &words, |lists| Ok(lists.first_unsorted(n)));
-        if let Some(i) = first_unsorted.map_err(decode_err)? {
+        if let Some(i) = lists.first_unsorted(n) {
             return Err(format!(
                 "the candidate list of cluster {i} is not sorted, distinct and in range"
             ));
