@@ -2,10 +2,11 @@
 // of every point on the GPU (crates/gpubake/src/orient.rs): each neighbour with a normal
 // counts its tangent weight, 1 − (n·d)²/|d|², for or against the point's normal by the sign
 // of their normals' dot product; a neighbour within 60° of the tangent plane is a patch edge.
-// In f32, so every test that rounding could have decided (a weight near 0 or the patch
-// weight, a dot product near 0, a vote near the threshold, coincident points) marks the point
-// VOTE_RECAST, and the host casts its votes in f64. The constants are prepended from Rust
-// (`slosh_mls::vote_word_wgsl`), then the grid's module (neighbour_grid.wgsl).
+// A neighbour at a nearer one's place makes no edge. In f32, so every test that rounding
+// could have decided (a weight near 0 or the patch weight, a dot product near 0, a vote near
+// the threshold, a neighbour at the point's place or at a nearer neighbour's) marks the
+// point VOTE_RECAST, and the host casts its votes in f64. The constants are prepended from
+// Rust (`slosh_mls::vote_word_wgsl`), then the grid's module (neighbour_grid.wgsl).
 
 // The votes (slosh_mls::vote_word) of the dispatch's points, from sorted position
 // params.first: patch edges in the low ORIENT_NEIGHBOURS bits.
@@ -42,6 +43,9 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
     var vote = 0.0;
     var total = 0.0;
     var word = 0u;
+    // Each slot's neighbour and squared distance, for the twins below.
+    var slot_ids: array<u32, ORIENT_NEIGHBOURS>;
+    var slot_distance2: array<f32, ORIENT_NEIGHBOURS>;
     // k: the slot among the point's others, which names its patch edge's bit.
     var k = 0u;
     for (var s = 0u; s < params.wanted && k < ORIENT_NEIGHBOURS; s += 1u) {
@@ -50,15 +54,29 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
             continue;
         }
         k += 1u;
+        slot_ids[k - 1u] = j;
         if j == NO_POINT {
             continue;
+        }
+        let d = difference(p, p_low, j);
+        let dd = dot(d, d);
+        slot_distance2[k - 1u] = dd;
+        // A neighbour at the place of a nearer one makes no edge (a particle written twice
+        // votes once). Points at one place are at one distance, in f32 too, and have one
+        // split position; points with one split position may still differ in f64, which
+        // decides.
+        for (var m = 0u; m + 1u < k; m += 1u) {
+            let nearer = slot_ids[m];
+            if nearer != NO_POINT && slot_distance2[m] == dd
+                && all(positions[nearer].xyz == positions[j].xyz)
+                && all(residuals[nearer].xyz == residuals[j].xyz) {
+                word |= VOTE_RECAST;
+            }
         }
         let other = normals[j];
         if other.w == 0.0 {
             continue;
         }
-        let d = difference(p, p_low, j);
-        let dd = dot(d, d);
         // Points that coincide in f32 may not in f64.
         if dd <= 0.0 {
             word |= VOTE_RECAST;

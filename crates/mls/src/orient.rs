@@ -155,7 +155,9 @@ impl<'a> NearestIds<'a> {
 
 /// The weighted edges from each point to its neighbours that have normals, computed where
 /// they are walked rather than stored: the weight comes from the point's input normal's
-/// direction (which a reversal does not change) and the offset.
+/// direction (which a reversal does not change) and the offset. A neighbour at the place of
+/// a nearer one (a particle written twice) is that one again: it makes no edge, where it
+/// would vote twice and crowd the point's other neighbours out of the vote.
 struct Edges<'a> {
     points: &'a [[f64; 3]],
     original: &'a [Option<[f64; 3]>],
@@ -166,17 +168,46 @@ impl Edges<'_> {
     /// The edges with the slot of point `i`'s neighbours each comes from.
     fn slots(&self, i: usize) -> impl Iterator<Item = (usize, u32, f64)> + '_ {
         let own = self.original[i];
-        self.nearest
-            .around(i)
-            .into_iter()
-            .enumerate()
-            .filter(move |&(_, j)| own.is_some() && j != NO_POINT)
-            .filter(|&(_, j)| self.original[j as usize].is_some())
-            .filter_map(move |(k, j)| {
-                let (p, q) = (self.points[i], self.points[j as usize]);
-                let w = tangent_weight(own?, [q[0] - p[0], q[1] - p[1], q[2] - p[2]]);
-                (w > 0.0).then_some((k, j, w))
-            })
+        let around = self.nearest.around(i);
+        let p = self.points[i];
+        // Each slot's squared distance. Points at one place are at one distance, and the
+        // nearest come nearest first, so a twin lies among the slots just before it at its
+        // distance (where the order came from f32 distances, an f32 tie between two places
+        // could stand between them, and then both count).
+        let mut distance2 = [f64::NAN; ORIENT_NEIGHBOURS];
+        let mut next = 0;
+        std::iter::from_fn(move || {
+            let own = own?;
+            while next < ORIENT_NEIGHBOURS {
+                let k = next;
+                next += 1;
+                let j = around[k];
+                if j == NO_POINT {
+                    continue;
+                }
+                let q = self.points[j as usize];
+                let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+                let dd = dot(d, d);
+                distance2[k] = dd;
+                let mut m = k;
+                let mut twin = false;
+                while m > 0 && distance2[m - 1] == dd {
+                    m -= 1;
+                    if self.points[around[m] as usize] == q {
+                        twin = true;
+                        break;
+                    }
+                }
+                if twin || self.original[j as usize].is_none() {
+                    continue;
+                }
+                let w = tangent_weight(own, d);
+                if w > 0.0 {
+                    return Some((k, j, w));
+                }
+            }
+            None
+        })
     }
 }
 
@@ -464,6 +495,58 @@ mod tests {
         assert_eq!(nearest.around(1)[..3], [5, 9, NO_POINT]);
         let all = NearestIds::new(&ids, 4, ORIENT_NEIGHBOURS);
         assert_eq!(all.around(1)[..4], [5, 9, 4, NO_POINT]);
+    }
+
+    /// Every point's nearest by brute force, ordered by (squared distance, index), `STRIDE`
+    /// a point, itself among them; `NO_POINT` past the last.
+    fn brute_nearest(points: &[[f64; 3]]) -> Vec<u32> {
+        let mut out = Vec::new();
+        for p in points {
+            let mut by: Vec<(f64, u32)> = points
+                .iter()
+                .enumerate()
+                .map(|(j, q)| {
+                    let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+                    (dot(d, d), j as u32)
+                })
+                .collect();
+            by.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            by.resize(STRIDE, (0.0, NO_POINT));
+            out.extend(by.iter().take(STRIDE).map(|&(_, j)| j));
+        }
+        out
+    }
+
+    /// A point with four neighbours that agree with its normal and one, nearer, that
+    /// contradicts it but was written eight times: the eight are one neighbour and vote
+    /// once, so the point keeps its normal (counted eight times, they reversed it: 4 for,
+    /// 8 against). The eight, whose other neighbours all contradict them, are reversed.
+    #[test]
+    fn a_neighbour_written_twice_votes_once() {
+        let mut points = vec![[0.0, 0.0, 0.0]];
+        let mut normals = vec![Some([0.0, 0.0, 1.0])];
+        for a in 0..4 {
+            let t = f64::from(a) * std::f64::consts::FRAC_PI_2;
+            points.push([t.cos(), t.sin(), 0.0]);
+            normals.push(Some([0.0, 0.0, 1.0]));
+        }
+        for _ in 0..8 {
+            points.push([0.6, 0.3, 0.0]);
+            normals.push(Some([0.0, 0.0, -1.0]));
+        }
+        let ids = brute_nearest(&points);
+        let edges = Edges {
+            points: &points,
+            original: &normals,
+            nearest: view(&ids),
+        };
+        assert_eq!(edges.slots(0).count(), 5, "the eight make one edge");
+        // A copy's twins lie at its own place: no edge either.
+        assert_eq!(edges.slots(5).count(), 5);
+        let (reverse, _, _) = cast_pass(&edges, &normals, None);
+        assert!(!reverse[0], "the point's vote: 4 for, 1 against");
+        assert!(reverse[5..].iter().all(|&r| r), "{reverse:?}");
+        assert!(!reverse[1..5].iter().any(|&r| r), "{reverse:?}");
     }
 
     /// A plane grid with normals +z, some reversed singly and one 5×5 patch reversed.
