@@ -45,14 +45,25 @@ pub fn keep_freed_pages() -> Result<(), String> {
             jemalloc::write(name, -1isize)?;
         }
         let narenas: u32 = jemalloc::read("arenas.narenas")?;
-        for i in 0..narenas {
-            // Arenas not made yet take the defaults just set.
-            if !jemalloc::read::<bool>(&format!("arena.{i}.initialized"))? {
-                continue;
+        // Arenas not made yet take the defaults just set. One that another thread was making
+        // meanwhile may have taken the old ones and be found made only after the pass looked
+        // at it: so passes go on until one finds no more arenas made than the one before.
+        let mut made_before = None;
+        loop {
+            let mut made = 0;
+            for i in 0..narenas {
+                if !jemalloc::read::<bool>(&format!("arena.{i}.initialized"))? {
+                    continue;
+                }
+                made += 1;
+                for decay in ["dirty_decay_ms", "muzzy_decay_ms"] {
+                    jemalloc::write(&format!("arena.{i}.{decay}"), -1isize)?;
+                }
             }
-            for decay in ["dirty_decay_ms", "muzzy_decay_ms"] {
-                jemalloc::write(&format!("arena.{i}.{decay}"), -1isize)?;
+            if made_before == Some(made) {
+                break;
             }
+            made_before = Some(made);
         }
     }
     Ok(())
