@@ -263,7 +263,9 @@ impl<T: Real> SurfaceParts<T> {
         let h = half_precision(params.h_scale * median_radius);
         // Where most particles have a twin at their place (a pile, or particles written
         // twice), the median nearest distance is 0, and every ball and spray sphere sized by
-        // it would be too: the spacing is then the median of the distances that are not.
+        // it would be too: the spacing is then the median of each point's distance to its
+        // nearest at another place (of the distances that are not 0 alone, a step whose every
+        // particle was written twice had none, and was refused as piles).
         // Where most have a twin a little apart (written twice, then moved by noise), that
         // median is a fraction of the spacing, while the second nearest distance is not:
         // below half the median second nearest distance, the spacing is that. Each point's
@@ -289,7 +291,12 @@ impl<T: Real> SurfaceParts<T> {
             }
             s if s > 0.0 => s,
             _ => {
-                let apart: Vec<f64> = nearest.par_iter().copied().filter(|&d| d > 0.0).collect();
+                // Each point's nearest at another place: the first of its nearest not at its
+                // own (a twin's distance is 0, its neighbours' are not).
+                let apart: Vec<f64> = (0..n)
+                    .into_par_iter()
+                    .filter_map(|i| (1..k_query.get()).map(|s| dist(i, s)).find(|&d| d > 0.0))
+                    .collect();
                 if apart.is_empty() {
                     // Balls, h and spray spheres would all be 0 wide (a cache the verifier
                     // rejects): say why instead.

@@ -54,6 +54,29 @@ fn mostly_duplicated_particles_keep_their_spacing() {
     assert!(st.disagree * 100 <= st.hits, "{st:?}");
 }
 
+/// Every particle written twice: no nearest distance is other than 0, so the spacing comes
+/// from each point's nearest at another place (from the distances that were not 0 alone, the
+/// build refused the step as piles of coincident points, which it is not).
+#[test]
+fn every_particle_written_twice_keeps_its_spacing() {
+    let mut s = spec(SceneKind::Sphere, 3000);
+    s.hard.duplicates = 1.0;
+    let sc = scene(s);
+    let (points, _) = sc.particles(0).surface_arrays();
+    assert_eq!(points.len(), 6000, "every particle twice");
+    let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
+    assert_every_ball_and_sphere_sized(&surface);
+    let st = default_render_stats(&sc, &surface);
+    eprintln!(
+        "every particle twice: spacing {:.4e}, {st:?}",
+        surface.spacing
+    );
+    assert_eq!(st.non_finite, 0);
+    assert!(st.hits > 150, "{st:?}");
+    assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
+    assert!(st.disagree * 100 <= st.hits, "{st:?}");
+}
+
 /// Piles only (a solver parking its particles at two places): no particle has a neighbour
 /// apart from it, so balls, h and droplet spheres would all be 0 wide. The build says so, on
 /// the CPU's search as on any other (they share this rule); one particle off the piles gives
