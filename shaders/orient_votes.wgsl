@@ -2,9 +2,9 @@
 // of every point on the GPU (crates/gpubake/src/orient.rs): each neighbour with a normal
 // counts its tangent weight, 1 − (n·d)²/|d|², for or against the point's normal by the sign
 // of their normals' dot product; a neighbour within 60° of the tangent plane is a patch edge.
-// A neighbour at a nearer one's place makes no edge. In f32, so every test that rounding
+// A neighbour at the place of one before it makes no edge. In f32, so every test that rounding
 // could have decided (a weight near 0 or the patch weight, a dot product near 0, a vote near
-// the threshold, a neighbour at the point's place or at a nearer neighbour's) marks the
+// the threshold, a neighbour at the point's place or at an earlier neighbour's) marks the
 // point VOTE_RECAST, and the host casts its votes in f64. The constants are prepended from
 // Rust (`slosh_mls::vote_word_wgsl`), then the grid's module (neighbour_grid.wgsl).
 
@@ -61,15 +61,15 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
         let d = difference(p, p_low, j);
         let dd = dot(d, d);
         slot_distance2[k - 1u] = dd;
-        // A neighbour at the place of a nearer one makes no edge (a particle written twice
+        // A neighbour at the place of one before it makes no edge (a particle written twice
         // votes once). Points at one place are at one distance, in f32 too, and have one
         // split position; points with one split position may still differ in f64, which
         // decides.
         for (var m = 0u; m + 1u < k; m += 1u) {
-            let nearer = slot_ids[m];
-            if nearer != NO_POINT && slot_distance2[m] == dd
-                && all(positions[nearer].xyz == positions[j].xyz)
-                && all(residuals[nearer].xyz == residuals[j].xyz) {
+            let before = slot_ids[m];
+            if before != NO_POINT && slot_distance2[m] == dd
+                && all(positions[before].xyz == positions[j].xyz)
+                && all(residuals[before].xyz == residuals[j].xyz) {
                 word |= VOTE_RECAST;
             }
         }

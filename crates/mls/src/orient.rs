@@ -156,7 +156,7 @@ impl<'a> NearestIds<'a> {
 /// The weighted edges from each point to its neighbours that have normals, computed where
 /// they are walked rather than stored: the weight comes from the point's input normal's
 /// direction (which a reversal does not change) and the offset. A neighbour at the place of
-/// a nearer one (a particle written twice) is that one again: it makes no edge, where it
+/// one before it (a particle written twice) is that one again: it makes no edge, where it
 /// would vote twice and crowd the point's other neighbours out of the vote.
 struct Edges<'a> {
     points: &'a [[f64; 3]],
