@@ -1,7 +1,7 @@
 // The orientation check's first-pass votes (crates/mls/src/orient.rs, `repair_orientation`)
 // of every point on the GPU (crates/gpubake/src/orient.rs): each neighbour with a normal
-// counts its tangent weight, 1 − (n·d)²/|d|², for or against the point's normal by the sign
-// of their normals' dot product; a neighbour within 60° of the tangent plane is a patch edge.
+// counts its tangent weight w = 1 − (n·d)²/|d|² to the 4th power, for or against the point's
+// normal by the sign of their normals' dot product; a neighbour within 60° of the tangent plane is a patch edge.
 // A neighbour at the place of one before it makes no edge. In f32, so every test that rounding
 // could have decided (a weight near 0 or the patch weight, a dot product near 0, a vote near
 // the threshold, a neighbour at the point's place or at an earlier neighbour's) marks the
@@ -104,8 +104,13 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
                 word |= VOTE_CONTRADICTED;
             }
         }
-        vote += w * sign(agreement);
-        total += w;
+        // Its vote weighs w to the power 2^VOTE_SQUARINGS (slosh_mls::VOTE_SQUARINGS).
+        var weight = w;
+        for (var e = 0u; e < VOTE_SQUARINGS; e += 1u) {
+            weight *= weight;
+        }
+        vote += weight * sign(agreement);
+        total += weight;
     }
     if total > 0.0 {
         if vote < -REVERSE_BELOW * total {

@@ -47,8 +47,8 @@ pub use lists::distance2;
 pub use neighbours::{Neighbours, csr_pieces};
 pub use order::{MortonGrid, morton_keys, morton_order};
 pub use orient::{
-    Around, NO_POINT, NearestIds, ORIENT_NEIGHBOURS, OrientationRepair, repair_orientation,
-    vote_word, vote_word_wgsl,
+    Around, NO_POINT, NearestIds, ORIENT_NEIGHBOURS, OrientationRepair, VOTE_SQUARINGS,
+    repair_orientation, vote_word, vote_word_wgsl,
 };
 pub use poly::{Poly, coefficient_count, monomials};
 pub use real::{Real, V3};
