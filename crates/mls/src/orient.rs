@@ -19,9 +19,10 @@ const REVERSE_BELOW: f64 = 0.2;
 /// thick, a neighbour one spacing aside lies 27° off the plane, tangent weight 0.8 but vote
 /// weight 0.41. With the tangent weight itself, such neighbours outvoted a point's own face:
 /// of a sheet's 20000 normals with 1980 reversed, 3754 ended wrong (2291 correct ones
-/// reversed); with its 4th power, 449. The 8th power left 28, but a droplet of 7 particles,
-/// whose other neighbours are far points that happen to lie near its tangent plane, then
-/// took their orientation, and its sphere was drawn 1.09 spacings behind the truth.
+/// reversed); with its 4th power, 449. The 8th power left 28, but a droplet of 7 particles
+/// was then drawn 1.09 spacings behind the truth (`sparse_droplets_give_finite_answers`,
+/// which allows 1); leaving out neighbours beyond 1.5 to 3 times the sixth one's distance
+/// did not bring it back, and why is not known.
 pub const VOTE_SQUARINGS: u32 = 2;
 /// Voting passes: each sees the repairs of the pass before (a reversed point among reversed
 /// neighbours is outvoted once they are repaired).
