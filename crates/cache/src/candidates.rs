@@ -279,21 +279,20 @@ impl PackedLists<'_> {
     }
 }
 
-/// The cluster lists back as 32-bit indices (CSR over `start`), or what is wrong
-/// ([`PackedLists::check`]).
-pub fn unpack(start: &[u32], base: &[u32], words: &[u32], size: u32) -> Result<Vec<u32>, String> {
-    PackedLists {
-        start,
-        base,
-        words,
-        size,
-    }
-    .unpack()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cluster lists back as 32-bit indices, or what is wrong ([`PackedLists::unpack`]).
+    fn unpack(start: &[u32], base: &[u32], words: &[u32], size: u32) -> Result<Vec<u32>, String> {
+        PackedLists {
+            start,
+            base,
+            words,
+            size,
+        }
+        .unpack()
+    }
 
     #[test]
     fn runs_pack_narrow_near_and_wide_far_and_come_back() {

@@ -514,24 +514,16 @@ mod tests {
         assert_eq!(all.around(1)[..4], [5, 9, 4, NO_POINT]);
     }
 
-    /// Every point's nearest by brute force, ordered by (squared distance, index), `STRIDE`
-    /// a point, itself among them; `NO_POINT` past the last.
+    /// Every point's nearest by brute force, `STRIDE` a point, itself among them; `NO_POINT`
+    /// past the last.
     fn brute_nearest(points: &[[f64; 3]]) -> Vec<u32> {
-        let mut out = Vec::new();
-        for p in points {
-            let mut by: Vec<(f64, u32)> = points
-                .iter()
-                .enumerate()
-                .map(|(j, q)| {
-                    let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
-                    (dot(d, d), j as u32)
-                })
-                .collect();
-            by.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            by.resize(STRIDE, (0.0, NO_POINT));
-            out.extend(by.iter().take(STRIDE).map(|&(_, j)| j));
-        }
-        out
+        crate::search::brute_force_nearest(points, STRIDE)
+            .into_iter()
+            .flat_map(|mut ids| {
+                ids.resize(STRIDE, NO_POINT);
+                ids
+            })
+            .collect()
     }
 
     /// A point with four neighbours that agree with its normal and one, nearer, that

@@ -198,25 +198,27 @@ impl PointIndex for KdIndex<'_> {
     }
 }
 
+/// Each point's nearest by brute force, for tests: (d², index) order, itself among them,
+/// the first `count` (all where there are fewer).
+#[cfg(test)]
+pub(crate) fn brute_force_nearest(points: &[[f64; 3]], count: usize) -> Vec<Vec<u32>> {
+    points
+        .iter()
+        .map(|p| {
+            let mut all: Vec<(f64, u32)> = points
+                .iter()
+                .enumerate()
+                .map(|(j, q)| (crate::lists::distance2(*p, *q), j as u32))
+                .collect();
+            all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            all.into_iter().take(count).map(|(_, j)| j).collect()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Each point's nearest by brute force: (d², index) order, the first `count`.
-    fn brute_force(points: &[[f64; 3]], count: usize) -> Vec<u32> {
-        points
-            .iter()
-            .flat_map(|p| {
-                let mut all: Vec<(f64, u32)> = points
-                    .iter()
-                    .enumerate()
-                    .map(|(j, q)| (crate::lists::distance2(*p, *q), j as u32))
-                    .collect();
-                all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                all.into_iter().take(count).map(|(_, j)| j)
-            })
-            .collect()
-    }
 
     /// Distances that tie, within a point's nearest and across the cut (every point written
     /// three times, on a lattice whose spacing binary holds exactly), come in index order,
@@ -232,7 +234,10 @@ mod tests {
         let index = KdSearch.index(&points).unwrap();
         for count in [1, 7, 17] {
             let found = index.nearest(NonZero::new(count).unwrap()).unwrap();
-            assert!(found == brute_force(&points, count), "{count} nearest");
+            assert!(
+                found == brute_force_nearest(&points, count).concat(),
+                "{count} nearest"
+            );
         }
     }
 }
