@@ -13,6 +13,7 @@ use slosh_cache::{
 use slosh_fileio::FileBytes;
 
 use crate::claim::STEP_LOCKS_NAME;
+use crate::device_turns::TurnOrder;
 use crate::params::BakeParams;
 use crate::select::StepInput;
 use crate::step::{BakeError, bake_step_unless_withdrawn};
@@ -228,6 +229,7 @@ pub(crate) fn bake_one(
     opts: &BatchOptions,
     key: &SeriesKey,
     withdrawn: Withdrawn<'_>,
+    order: TurnOrder,
 ) -> StepOutcome {
     let path = opts.out.join(step_file_name(index));
     let identity = source.identity(index);
@@ -247,17 +249,18 @@ pub(crate) fn bake_one(
     let read_seconds = start.elapsed().as_secs_f64();
     let mut input = input;
     input.identity = identity;
-    let baked = match bake_step_unless_withdrawn(&input, &opts.params, &opts.stages, withdrawn) {
-        Ok(b) => b,
-        // The report names the step; the error's own "step N:" would say it twice. The
-        // particles' file, as a read error names its file.
-        Err(e) => {
-            return StepOutcome::Failed(match source.particle_file(index) {
-                Some(file) => format!("{}: {}", file.display(), e.problem()),
-                None => e.problem(),
-            });
-        }
-    };
+    let baked =
+        match bake_step_unless_withdrawn(&input, &opts.params, &opts.stages, withdrawn, order) {
+            Ok(b) => b,
+            // The report names the step; the error's own "step N:" would say it twice. The
+            // particles' file, as a read error names its file.
+            Err(e) => {
+                return StepOutcome::Failed(match source.particle_file(index) {
+                    Some(file) => format!("{}: {}", file.display(), e.problem()),
+                    None => e.problem(),
+                });
+            }
+        };
     drop(input);
     if let Some(outcome) = withdrawn_now() {
         return outcome;
@@ -472,7 +475,8 @@ pub fn run_batch(
                     } else {
                         step_locks.try_lock(index as u64)
                     };
-                    let bake = || bake_one(source, index, opts, key, &|| false);
+                    let bake =
+                        || bake_one(source, index, opts, key, &|| false, TurnOrder::ahead(index));
                     let outcome = match held {
                         Ok(None) => {
                             deferred

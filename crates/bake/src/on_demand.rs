@@ -11,6 +11,7 @@ use crate::batch::{
     BatchOptions, StepOutcome, StepSource, bake_one, plan, prepare_dir, series_key,
 };
 use crate::claim::Claim;
+use crate::device_turns::TurnOrder;
 use crate::urgency::{Pools, Urgency};
 use crate::withdrawable::Withdrawn;
 
@@ -135,14 +136,18 @@ impl OnDemand {
             .get_or_init(|| Pools::new(self.opts.threads, self.opts.jobs));
         match urgency {
             Urgency::Waited => pools.install(urgency, || {
-                self.bake_locked(index, withdrawn, || WaitedRunning::start(self))
+                self.bake_locked(index, TurnOrder::waited(index), withdrawn, || {
+                    WaitedRunning::start(self)
+                })
             }),
             Urgency::Ahead => {
                 let paused = || {
                     self.wait_while_a_waited_step_bakes();
                     withdrawn()
                 };
-                pools.install(urgency, || self.bake_locked(index, &paused, || ()))
+                pools.install(urgency, || {
+                    self.bake_locked(index, TurnOrder::ahead(index), &paused, || ())
+                })
             }
         }
     }
@@ -164,7 +169,7 @@ impl OnDemand {
     /// says so: it is asked before the read, between the bake's stages and before each
     /// neighbour search, and before the step is encoded and written.
     pub fn bake_unless_withdrawn(&self, index: usize, withdrawn: Withdrawn<'_>) -> StepOutcome {
-        self.bake_locked(index, withdrawn, || ())
+        self.bake_locked(index, TurnOrder::waited(index), withdrawn, || ())
     }
 
     /// [`OnDemand::bake_unless_withdrawn`], with `locked` called once the step's lock is held
@@ -172,6 +177,7 @@ impl OnDemand {
     fn bake_locked<G>(
         &self,
         index: usize,
+        order: TurnOrder,
         withdrawn: Withdrawn<'_>,
         locked: impl FnOnce() -> G,
     ) -> StepOutcome {
@@ -201,6 +207,7 @@ impl OnDemand {
             &self.opts,
             &self.key,
             withdrawn,
+            order,
         );
         drop(held);
         drop(lock);

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use slosh_mls::{KdSearch, NeighbourSearch};
 
 use crate::bvh::{PlocTree, TreeBuild};
+use crate::device_turns::DeviceTurns;
 
 #[derive(Debug, Clone)]
 pub struct Stages {
@@ -20,6 +21,8 @@ pub struct Stages {
     /// Told how many steps a batch bakes at once, before its first step, where the stages
     /// keep memory for the steps in flight together.
     pub in_flight: Option<Arc<dyn StepsInFlight>>,
+    /// Where the steps in flight share a device: their turns on it ([`DeviceTurns`]).
+    pub turns: Option<Arc<DeviceTurns>>,
 }
 
 /// Stages that keep memory for the steps in flight together (a device's transfer buffers),
@@ -44,6 +47,7 @@ impl Stages {
             tree: Arc::new(PlocTree),
             device_memory: None,
             in_flight: None,
+            turns: None,
         }
     }
 

@@ -13,6 +13,7 @@ use slosh_mls::{
     SurfaceParts,
 };
 
+use crate::device_turns::{TurnOrder, on_device};
 use crate::params::{BakeParams, SurfaceSelect};
 use crate::reach::stored_reach;
 use crate::select::{StepInput, estimate_surface_normals_with};
@@ -379,18 +380,26 @@ pub fn bake_step_parts_with(
     params: &BakeParams,
     stages: &Stages,
 ) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
-    bake_parts(input, params, stages, &|| false)
+    bake_parts(
+        input,
+        params,
+        stages,
+        &|| false,
+        TurnOrder::waited(input.index),
+    )
 }
 
 /// [`bake_step_with`], given up with [`BakeError::Withdrawn`] once `withdrawn` says so: it
-/// is asked between stages and before each neighbour search.
+/// is asked between stages and before each neighbour search. Where the stages share a
+/// device, the step's passes wait for their turns there at `order`.
 pub fn bake_step_unless_withdrawn(
     input: &StepInput,
     params: &BakeParams,
     stages: &Stages,
     withdrawn: Withdrawn<'_>,
+    order: TurnOrder,
 ) -> Result<BakedStep, BakeError> {
-    bake_parts(input, params, stages, withdrawn).map(|(baked, _)| baked)
+    bake_parts(input, params, stages, withdrawn, order).map(|(baked, _)| baked)
 }
 
 fn bake_parts(
@@ -398,10 +407,17 @@ fn bake_parts(
     params: &BakeParams,
     stages: &Stages,
     withdrawn: Withdrawn<'_>,
+    order: TurnOrder,
 ) -> Result<(BakedStep, SurfaceParts<f64>), BakeError> {
     let search = Withdrawable {
         inner: stages.search.as_ref(),
         withdrawn,
+        turns: stages.turns.as_ref(),
+        order,
+    };
+    // The tree's passes take the step's turns on the device as the searches do.
+    let build_tree = |leaves: &[slosh_cache::BvhNode]| {
+        on_device(stages.turns.as_ref(), order, || stages.tree.build(leaves))
     };
     let mut clock = StageClock::start();
     let step = input.index;
@@ -562,7 +578,6 @@ fn bake_parts(
     // rare step where some ball has none builds it again.
     type Built = (Result<slosh_cache::Bvh, String>, f64);
     let speculative: std::sync::Mutex<Option<Built>> = Default::default();
-    let tree = stages.tree.as_ref();
     let built = rayon::scope(|scope| {
         let start_bvh = |beside: BesideFits<'_, f64>| {
             let start = std::time::Instant::now();
@@ -576,9 +591,9 @@ fn bake_parts(
                 beside.radii,
                 beside.spheres,
             );
-            let slot = &speculative;
+            let (slot, build_tree) = (&speculative, &build_tree);
             scope.spawn(move |_| {
-                let bvh = tree.build(&crate::bvh::leaves(&items));
+                let bvh = build_tree(&crate::bvh::leaves(&items));
                 if let Ok(mut slot) = slot.lock() {
                     *slot = Some((bvh, start.elapsed().as_secs_f64()));
                 }
@@ -629,7 +644,7 @@ fn bake_parts(
                 &surface.spheres,
             );
             (
-                tree.build(&crate::bvh::leaves(&items)),
+                build_tree(&crate::bvh::leaves(&items)),
                 start.elapsed().as_secs_f64(),
             )
         }

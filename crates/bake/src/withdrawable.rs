@@ -8,13 +8,18 @@ use slosh_mls::{
     ListRequest, NearestIds, NeighbourLists, NeighbourSearch, PointIndex, SurfaceError,
 };
 
+use crate::device_turns::{DeviceTurns, TurnOrder, on_device};
+
 /// Asked before each search: `true` ends the bake with [`SurfaceError::Withdrawn`].
 pub type Withdrawn<'w> = &'w (dyn Fn() -> bool + Sync);
 
-/// `inner`, asking `withdrawn` before it indexes and before each query.
+/// `inner`, asking `withdrawn` before it indexes and before each query, each run with the
+/// step's work on the device in `turns` where the stages share one.
 pub(crate) struct Withdrawable<'w> {
     pub(crate) inner: &'w dyn NeighbourSearch,
     pub(crate) withdrawn: Withdrawn<'w>,
+    pub(crate) turns: Option<&'w std::sync::Arc<DeviceTurns>>,
+    pub(crate) order: TurnOrder,
 }
 
 impl std::fmt::Debug for Withdrawable<'_> {
@@ -33,6 +38,12 @@ impl Withdrawable<'_> {
             Ok(())
         }
     }
+
+    /// `stage`, unless the bake was withdrawn, with the step's work on the device in turns.
+    fn run<R>(&self, stage: impl FnOnce() -> Result<R, SurfaceError>) -> Result<R, SurfaceError> {
+        self.check()?;
+        on_device(self.turns, self.order, stage)
+    }
 }
 
 struct WithdrawableIndex<'a> {
@@ -45,8 +56,7 @@ impl NeighbourSearch for Withdrawable<'_> {
         &'a self,
         points: &'a [[f64; 3]],
     ) -> Result<Box<dyn PointIndex + 'a>, SurfaceError> {
-        self.check()?;
-        let inner = self.inner.index(points)?;
+        let inner = self.run(|| self.inner.index(points))?;
         Ok(Box::new(WithdrawableIndex {
             inner,
             search: self,
@@ -60,13 +70,11 @@ impl NeighbourSearch for Withdrawable<'_> {
 
 impl PointIndex for WithdrawableIndex<'_> {
     fn nearest(&self, count: NonZero<usize>) -> Result<Vec<u32>, SurfaceError> {
-        self.search.check()?;
-        self.inner.nearest(count)
+        self.search.run(|| self.inner.nearest(count))
     }
 
     fn lists(&self, request: ListRequest<'_>) -> Result<NeighbourLists, SurfaceError> {
-        self.search.check()?;
-        self.inner.lists(request)
+        self.search.run(|| self.inner.lists(request))
     }
 
     fn orientation_votes(
@@ -74,7 +82,7 @@ impl PointIndex for WithdrawableIndex<'_> {
         nearest: NearestIds<'_>,
         normals: &[Option<[f64; 3]>],
     ) -> Result<Option<Vec<u32>>, SurfaceError> {
-        self.search.check()?;
-        self.inner.orientation_votes(nearest, normals)
+        self.search
+            .run(|| self.inner.orientation_votes(nearest, normals))
     }
 }

@@ -111,6 +111,7 @@ pub(crate) fn output(memory: &PassMemory, label: &str, bytes: u64) -> Pooled {
             label: Some("clear"),
         });
     encoder.clear_buffer(&buffer, 0, None);
+    slosh_bake::device_busy();
     memory.gpu.queue.submit([encoder.finish()]);
     Pooled {
         buffer,

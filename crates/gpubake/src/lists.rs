@@ -361,10 +361,7 @@ pub(crate) fn lists(
         let reading = std::time::Instant::now();
         write_seconds += (reading - writing).as_secs_f64();
         match &pair_buffers {
-            None => search
-                .readback
-                .read_into(gpu, &lists_out, count * 4, &mut words)
-                .map_err(gpu_error)?,
+            None => search.read_into(&lists_out, count * 4, &mut words)?,
             Some((pairs, pair_count, _)) => {
                 let found = search.read_back::<u32>(pair_count, 4)?[0] as usize;
                 if found <= room {

@@ -77,11 +77,7 @@ pub(crate) fn nearest(index: &GpuIndex<'_>, count: usize) -> Result<Vec<u32>, Su
                 // step on the H200's host).
                 None => {
                     let at = sorted_ids.len();
-                    index
-                        .search
-                        .readback
-                        .read_into(gpu, &out, bytes, &mut sorted_ids)
-                        .map_err(gpu_error)?;
+                    index.search.read_into(&out, bytes, &mut sorted_ids)?;
                     let found = &sorted_ids[at..];
                     let more: Vec<u32> = (0..len)
                         .into_par_iter()

@@ -415,6 +415,7 @@ impl GpuStages {
             });
         let stamps = self.clock.stamps(gpu);
         record(&mut encoder, dispatches, group, stamps.as_ref());
+        slosh_bake::device_busy();
         let submitted = gpu.queue.submit([encoder.finish()]);
         if let Some(stamps) = stamps {
             self.clock.submitted(pass, stamps, submitted.clone());
@@ -462,13 +463,27 @@ impl GpuStages {
         }
         if bytes >= POOLED_READ_BYTES {
             let mut out = Vec::new();
-            self.readback
-                .read_into(&self.gpu, source, bytes, &mut out)
-                .map(|()| out)
+            self.read_into(source, bytes, &mut out).map(|()| out)
         } else {
-            slosh_render::read_storage(&self.gpu, source, bytes)
+            slosh_bake::device_busy();
+            let read = slosh_render::read_storage(&self.gpu, source, bytes);
+            slosh_bake::device_idle();
+            read.map_err(gpu_error)
         }
-        .map_err(gpu_error)
+    }
+
+    /// `bytes` of `source` appended to `out` through the pool of read-back buffers, once the
+    /// work submitted before has run; the step's turn on the device is given back after.
+    pub(crate) fn read_into<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        source: &wgpu::Buffer,
+        bytes: u64,
+        out: &mut Vec<T>,
+    ) -> Result<(), slosh_mls::SurfaceError> {
+        slosh_bake::device_busy();
+        let read = self.readback.read_into(&self.gpu, source, bytes, out);
+        slosh_bake::device_idle();
+        read.map_err(gpu_error)
     }
 
     pub fn gpu(&self) -> &Gpu {

@@ -121,10 +121,7 @@ impl Unions {
             let union_start = storage(&search.memory, "union starts", &starts)?;
             let unions = output(&search.memory, "unions", total * 4);
             pass(1, &union_start, &unions);
-            search
-                .readback
-                .read_into(gpu, &unions, total * 4, &mut self.ids)
-                .map_err(gpu_error)?;
+            search.read_into(&unions, total * 4, &mut self.ids)?;
         }
         self.merge_wide(index, &batch, &wide)?;
         self.counts.extend_from_slice(&batch_counts);
