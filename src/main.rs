@@ -4,6 +4,7 @@
 mod bake;
 mod cli;
 mod config;
+mod cpu;
 mod generate;
 mod info;
 mod inspect;
@@ -23,6 +24,23 @@ use crate::cli::{Cli, Command};
 const BACKGROUND_GRACE: std::time::Duration = std::time::Duration::from_secs(10);
 
 fn main() -> std::process::ExitCode {
+    // Before anything else runs code built for the processor's newer instructions.
+    let missing = cpu::missing_features();
+    if !missing.is_empty() {
+        eprintln!(
+            "error: this slosh was built for x86-64-v3 processors, and this one lacks {}; \
+             build it for this one with RUSTFLAGS=\"-C target-cpu=native\" cargo build --release",
+            missing.join(", ")
+        );
+        return std::process::ExitCode::FAILURE;
+    }
+    run_checked()
+}
+
+/// [`main`] once the processor has what the build needs (kept out of `main`, whose code
+/// runs before the check).
+#[inline(never)]
+fn run_checked() -> std::process::ExitCode {
     machine::keep_freed_memory();
     let result = run(Cli::parse());
     // Threads still using the GPU (loaders, a staging warm-up) end before the process does:
