@@ -6,14 +6,16 @@ pub enum SurfaceError {
     NonFinite { index: usize, value: [f64; 3] },
     #[error("a surface needs at least 2 points, got {0}")]
     TooFew(usize),
-    /// Every point's nearest neighbours lie at its own position: nothing gives a spacing to
-    /// size a surface's balls or a droplet's sphere by.
+    /// Most points' `nearest` nearest lie at their own position (piles of coincident points
+    /// deeper than that): their radii, whose median sizes h, are 0, and nothing gives a
+    /// spacing to size a surface's balls or a droplet's sphere by.
     #[error(
-        "all {points} points lie in piles of coincident points ({positions} distinct \
-         positions), each point's {nearest} nearest at its own position: piles define no \
+        "{piled} of {points} points lie in piles of coincident points ({positions} distinct \
+         positions), each one's {nearest} nearest at its own position: piles define no \
          spacing to size a surface or a droplet by"
     )]
     Piles {
+        piled: usize,
         points: usize,
         positions: usize,
         nearest: usize,

@@ -232,6 +232,20 @@ impl<T: Real> SurfaceParts<T> {
             .into_par_iter()
             .map(|i| (dist(i, k), dist(i, 1)))
             .unzip();
+        // h is sized by the median radius: where that is 0, more than half the points have
+        // their k nearest at their own position (piles deeper than k: a particle written
+        // eight times), and h and every ball would be the floor of a half float, the whole
+        // step spray. Refused, as piles alone are, rather than baked so.
+        // (A count: the median is 0 where more radii than its rank are, none being below.)
+        let piled = radii.par_iter().filter(|&&r| r == 0.0).count();
+        if piled > quantile_rank(n, H_QUANTILE) {
+            return Err(SurfaceError::Piles {
+                piled,
+                points: n,
+                positions: distinct_positions(&rel),
+                nearest: k,
+            });
+        }
         let spacing = nearest.iter().sum::<f64>() / n as f64;
         knn_parts.lap("kd-tree and radii (kNN): radii");
         clock.lap("kd-tree and radii (kNN)");
@@ -265,7 +279,8 @@ impl<T: Real> SurfaceParts<T> {
         // twice), the median nearest distance is 0, and every ball and spray sphere sized by
         // it would be too: the spacing is then the median of each point's distance to its
         // nearest at another place (of the distances that are not 0 alone, a step whose every
-        // particle was written twice had none, and was refused as piles).
+        // particle was written twice had none, and was refused as piles). More than half
+        // the points have one (their k-th nearest, whose median is not 0, is apart).
         // Where most have a twin a little apart (written twice, then moved by noise), that
         // median is a fraction of the spacing, while the second nearest distance is not:
         // below half the median second nearest distance, the spacing is that. Each point's
@@ -297,15 +312,6 @@ impl<T: Real> SurfaceParts<T> {
                     .into_par_iter()
                     .filter_map(|i| (1..k_query.get()).map(|s| dist(i, s)).find(|&d| d > 0.0))
                     .collect();
-                if apart.is_empty() {
-                    // Balls, h and spray spheres would all be 0 wide (a cache the verifier
-                    // rejects): say why instead.
-                    return Err(SurfaceError::Piles {
-                        points: n,
-                        positions: distinct_positions(&rel),
-                        nearest: k,
-                    });
-                }
                 quantile(&apart, H_QUANTILE)
             }
         };
@@ -728,6 +734,11 @@ fn distinct_positions(points: &[[f64; 3]]) -> usize {
     bits.len()
 }
 
+/// The rank (from 0) of the `q` quantile of `n` values ([`quantile`]); `n` at least 1.
+fn quantile_rank(n: usize, q: f64) -> usize {
+    ((q * n as f64) as usize).min(n - 1)
+}
+
 /// The `q` quantile of `values`: the ⌊q·n⌋-th smallest, counting from 0 (for the median of
 /// an even count, the upper of the two middle values); 0 for none. The bake's rule for h
 /// (docs/algorithm.md), not a statistic of measurements (`slosh_bench::stats`).
@@ -740,7 +751,7 @@ fn quantile(values: &[f64], q: f64) -> f64 {
     if values.is_empty() {
         return 0.0;
     }
-    let k = ((q * values.len() as f64) as usize).min(values.len() - 1);
+    let k = quantile_rank(values.len(), q);
     // The bits `f64::total_cmp` compares, as an unsigned key in the same order.
     let key = |v: f64| {
         let bits = v.to_bits() as i64;
@@ -802,7 +813,7 @@ mod tests {
             for q in [0.0, 0.25, 0.5, 0.75, 0.999, 1.0] {
                 let mut sorted = values.clone();
                 sorted.sort_by(f64::total_cmp);
-                let k = ((q * values.len() as f64) as usize).min(values.len() - 1);
+                let k = quantile_rank(values.len(), q);
                 assert_eq!(
                     quantile(&values, q).to_bits(),
                     sorted[k].to_bits(),

@@ -77,10 +77,58 @@ fn every_particle_written_twice_keeps_its_spacing() {
     assert!(st.disagree * 100 <= st.hits, "{st:?}");
 }
 
+/// Every particle written eight times: each point's 6 nearest lie at its own place, so every
+/// radius, whose median sizes h, is 0, although each point's 16 nearest reach other places.
+/// Built, every ball and h were the floor of a half float and the whole sphere spray (2000
+/// of 2000 particles in 256 droplets); the build refuses it as piles. With fewer than half
+/// the particles so piled, the rest size h and the surface is built.
+#[test]
+fn piles_deeper_than_k_are_refused_where_most_particles_lie_in_them() {
+    let params = SurfaceParams::default();
+    let sphere = |n: usize| -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                // A Fibonacci sphere.
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let (r, phi) = ((1.0 - z * z).sqrt(), i as f64 * 2.399_963_229_728_653);
+                [r * phi.cos(), r * phi.sin(), z]
+            })
+            .collect()
+    };
+    let distinct = sphere(250);
+    let piled: Vec<[f64; 3]> = distinct.iter().flat_map(|&p| [p; 8]).collect();
+    match SurfaceParts::<f64>::build(&piled, None, &params) {
+        Err(SurfaceError::Piles {
+            piled: 2000,
+            points: 2000,
+            positions: 250,
+            nearest,
+        }) => assert_eq!(nearest, params.k),
+        other => panic!("expected piles refused, got {:?}", other.map(|_| ())),
+    }
+    // 800 piled particles (100 places) beside 1200 single ones: h comes from the single ones.
+    let mut mixed: Vec<[f64; 3]> = sphere(1300);
+    let piles: Vec<[f64; 3]> = mixed.drain(..100).flat_map(|p| [p; 8]).collect();
+    mixed.extend(piles);
+    let (parts, _) = SurfaceParts::<f64>::build(&mixed, None, &params).expect("most apart");
+    assert_every_ball_and_sphere_sized(&parts);
+    let single = SurfaceParts::<f64>::build(&sphere(1300), None, &params)
+        .expect("a sphere")
+        .0;
+    let ratio = parts.h / single.h;
+    assert!(
+        (0.9..1.1).contains(&ratio),
+        "h {} against {}",
+        parts.h,
+        single.h
+    );
+}
+
 /// Piles only (a solver parking its particles at two places): no particle has a neighbour
 /// apart from it, so balls, h and droplet spheres would all be 0 wide. The build says so, on
-/// the CPU's search as on any other (they share this rule); one particle off the piles gives
-/// every size a positive spacing again.
+/// the CPU's search as on any other (they share this rule). One particle off the piles does
+/// not size them: h would be a tenth of its radius over 101, and the step is still refused,
+/// with the piled particles counted.
 #[test]
 fn piles_alone_are_refused_with_their_count() {
     let mut points = vec![[0.25, -1.0, 3.0]; 40];
@@ -88,6 +136,7 @@ fn piles_alone_are_refused_with_their_count() {
     let params = SurfaceParams::default();
     match SurfaceParts::<f64>::build(&points, None, &params) {
         Err(SurfaceError::Piles {
+            piled: 100,
             points: 100,
             positions: 2,
             nearest,
@@ -95,9 +144,15 @@ fn piles_alone_are_refused_with_their_count() {
         other => panic!("expected piles refused, got {:?}", other.map(|_| ())),
     }
     points.push([0.75, -1.0, 3.0]);
-    let (parts, _) = SurfaceParts::<f64>::build(&points, None, &params).expect("one apart");
-    assert!(parts.spacing > 0.0);
-    assert_every_ball_and_sphere_sized(&parts);
+    match SurfaceParts::<f64>::build(&points, None, &params) {
+        Err(SurfaceError::Piles {
+            piled: 100,
+            points: 101,
+            positions: 3,
+            ..
+        }) => {}
+        other => panic!("expected piles refused, got {:?}", other.map(|_| ())),
+    }
 }
 
 /// Every ball and every droplet sphere has a positive radius.
