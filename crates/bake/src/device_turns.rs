@@ -4,9 +4,11 @@
 //! other's, so steps that reach the device together (a batch's first, or a jump among steps
 //! baked ahead) all leave it together, late, while the cores wait for them.
 //!
-//! A step holds a turn from its first submission until it has read its results back: the
-//! device's stages call [`device_busy`] before they submit and [`device_idle`] once a read
-//! is done, on the thread that [`on_device`] runs the step's stage on.
+//! A step holds a turn from its first submitted pass until it has read its results back: the
+//! device's stages call [`device_busy`] before they submit a pass and [`device_idle`] once a
+//! read is done, on the thread that [`on_device`] runs the step's stage on. Uploads take no
+//! turn: they are brief copies, and a step preparing its inputs between them would hold one
+//! while the device has nothing of it to run.
 
 use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet};
