@@ -10,9 +10,10 @@ pub enum SurfaceError {
     /// deeper than that): their radii, whose median sizes h, are 0, and nothing gives a
     /// spacing to size a surface's balls or a droplet's sphere by.
     #[error(
-        "{piled} of {points} points lie in piles of coincident points ({positions} distinct \
-         positions), each one's {nearest} nearest at its own position: piles define no \
-         spacing to size a surface or a droplet by"
+        "{} lie in piles of coincident points ({positions} distinct positions), each one's \
+         {nearest} nearest at its own position: piles define no spacing to size a surface \
+         or a droplet by",
+        of_points(*.piled, *.points)
     )]
     Piles {
         piled: usize,
@@ -29,4 +30,13 @@ pub enum SurfaceError {
     /// The caller withdrew the work (a viewer's bake of a step it no longer wants).
     #[error("withdrawn by its caller")]
     Withdrawn,
+}
+
+/// "all 70 points", or "60 of 70 points".
+fn of_points(some: usize, points: usize) -> String {
+    if some == points {
+        format!("all {points} points")
+    } else {
+        format!("{some} of {points} points")
+    }
 }
