@@ -72,7 +72,7 @@ impl DeviceTurns {
 
     /// Waits for a turn for the step at `order`: given at once where that step holds one,
     /// else once fewer than `at_once` steps hold one and no waiting step goes before it.
-    pub fn take(self: &Arc<Self>, order: TurnOrder) -> DeviceTurn {
+    pub(crate) fn take(self: &Arc<Self>, order: TurnOrder) -> DeviceTurn {
         let mut queue = self.queue.lock().unwrap_or_else(PoisonError::into_inner);
         if let Some(held) = queue.on.get_mut(&order) {
             *held += 1;
@@ -103,7 +103,7 @@ impl DeviceTurns {
 
 /// A step's turn on the device, given back when dropped.
 #[derive(Debug)]
-pub struct DeviceTurn {
+pub(crate) struct DeviceTurn {
     turns: Arc<DeviceTurns>,
     order: TurnOrder,
 }
@@ -134,7 +134,7 @@ thread_local! {
 
 /// Runs `stage` of the step at `order` on this thread with its work on the device in turns
 /// (where `turns` is given): a turn it holds at the end (or in a panic) is given back.
-pub fn on_device<R>(
+pub(crate) fn on_device<R>(
     turns: Option<&Arc<DeviceTurns>>,
     order: TurnOrder,
     stage: impl FnOnce() -> R,

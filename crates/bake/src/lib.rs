@@ -27,7 +27,7 @@ pub use bvh::{
     MAX_LEAF_ITEMS, PlocTree, TreeBuild, leaves as bvh_leaves, linear as linear_bvh, linear_order,
 };
 pub use claim::{BAKE_LOCK_NAME, Claim, claim, describe as describe_series};
-pub use device_turns::{DeviceTurn, DeviceTurns, TurnOrder, device_busy, device_idle, on_device};
+pub use device_turns::{DeviceTurns, TurnOrder, device_busy, device_idle};
 pub use ensight_source::{EnsightSource, canonical_label};
 pub use jobs::{available_memory, cores, default_jobs, viewer_jobs};
 pub use on_demand::OnDemand;

@@ -48,10 +48,7 @@ fn mostly_duplicated_particles_keep_their_spacing() {
     assert_every_ball_and_sphere_sized(&surface);
     let st = default_render_stats(&sc, &surface);
     eprintln!("70 % duplicated: {st:?}");
-    assert_eq!(st.non_finite, 0);
-    assert!(st.hits > 150, "{st:?}");
-    assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
-    assert!(st.disagree * 100 <= st.hits, "{st:?}");
+    assert_draws_the_scene(&st);
 }
 
 /// Every particle written twice: no nearest distance is other than 0, so the spacing comes
@@ -71,28 +68,22 @@ fn every_particle_written_twice_keeps_its_spacing() {
         "every particle twice: spacing {:.4e}, {st:?}",
         surface.spacing
     );
-    assert_eq!(st.non_finite, 0);
-    assert!(st.hits > 150, "{st:?}");
-    assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
-    assert!(st.disagree * 100 <= st.hits, "{st:?}");
+    assert_draws_the_scene(&st);
 }
 
 /// Every particle written eight times: each point's 6 nearest lie at its own place, so every
 /// radius, whose median sizes h, is 0, although each point's 16 nearest reach other places.
-/// Built, every ball and h were the floor of a half float and the whole sphere spray (2000
-/// of 2000 particles in 256 droplets); the build refuses it as piles. With fewer than half
+/// Built, every ball and h were the floor of a half float and the whole sphere spray (a
+/// 5000-particle sphere so written baked as 648 droplets and no fit); the build refuses it
+/// as piles. With fewer than half
 /// the particles so piled, the rest size h and the surface is built.
 #[test]
 fn piles_deeper_than_k_are_refused_where_most_particles_lie_in_them() {
     let params = SurfaceParams::default();
     let sphere = |n: usize| -> Vec<[f64; 3]> {
-        (0..n)
-            .map(|i| {
-                // A Fibonacci sphere.
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let (r, phi) = ((1.0 - z * z).sqrt(), i as f64 * 2.399_963_229_728_653);
-                [r * phi.cos(), r * phi.sin(), z]
-            })
+        slosh_scenes::fibonacci_sphere(n)
+            .iter()
+            .map(|p| p.to_array())
             .collect()
     };
     let distinct = sphere(250);
@@ -153,6 +144,15 @@ fn piles_alone_are_refused_with_their_count() {
         }) => {}
         other => panic!("expected piles refused, got {:?}", other.map(|_| ())),
     }
+}
+
+/// A 32×32 render of a duplicated scene: finite, hitting it, within 0.05 spacings of the
+/// truth (RMS), and disagreeing with it on at most 1 % of the hits.
+fn assert_draws_the_scene(st: &Stats) {
+    assert_eq!(st.non_finite, 0);
+    assert!(st.hits > 150, "{st:?}");
+    assert!(st.rms < 0.05, "RMS {} spacings", st.rms);
+    assert!(st.disagree * 100 <= st.hits, "{st:?}");
 }
 
 /// Every ball and every droplet sphere has a positive radius.
