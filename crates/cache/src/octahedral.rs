@@ -79,30 +79,33 @@ pub fn encode(n: [f64; 3]) -> u32 {
     if !(l1.is_finite() && l1 > 0.0) {
         return NO_NORMAL;
     }
-    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
-    if n[2] < 0.0 {
+    // On the unit octahedron: no product below can overflow, whatever `n`'s length.
+    let m = n.map(|c| c / l1);
+    let (mut x, mut y) = (m[0], m[1]);
+    if m[2] < 0.0 {
         let sx = if x >= 0.0 { 1.0 } else { -1.0 };
         let sy = if y >= 0.0 { 1.0 } else { -1.0 };
         (x, y) = ((1.0 - y.abs()) * sx, (1.0 - x.abs()) * sy);
     }
-    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    let unit = n.map(|c| c / len);
     let step = |v: f64| v.clamp(-32767.0, 32767.0) as i16;
     let (fa, ca) = floor_and_ceiling(x * 32767.0);
     let (fb, cb) = floor_and_ceiling(y * 32767.0);
-    // The four codes around the projection, each measured on its own.
+    // The four codes around the projection, each measured on its own, in f64 (the f32
+    // normalisation's rounding would outweigh the codes' differences): the nearest has the
+    // largest cosine to `m`, d·m / |d| (|m| is the same for all four), compared as
+    // (d·m)|d·m| / |d|², which orders as the cosine does: no square roots (a million normals
+    // and a million balls' normals every step).
     let a = [fa, fa, ca, ca].map(step);
     let b = [fb, cb, fb, cb].map(step);
-    let cos: [f64; 4] = std::array::from_fn(|k| {
-        // In f64: the f32 normalisation's rounding would outweigh the codes' differences.
+    let closeness: [f64; 4] = std::array::from_fn(|k| {
         let d = on_octahedron(a[k], b[k]).map(f64::from);
-        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        (d[0] * unit[0] + d[1] * unit[1] + d[2] * unit[2]) / len
+        let dot = d[0] * m[0] + d[1] * m[1] + d[2] * m[2];
+        dot * dot.abs() / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     });
     let mut best = (f64::NEG_INFINITY, NO_NORMAL);
     for k in 0..4 {
-        if cos[k] > best.0 {
-            best = (cos[k], word(a[k], b[k]));
+        if closeness[k] > best.0 {
+            best = (closeness[k], word(a[k], b[k]));
         }
     }
     best.1
