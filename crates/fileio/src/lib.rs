@@ -129,34 +129,68 @@ static TEMP_SERIAL: AtomicU64 = AtomicU64::new(0);
 /// Writes to a temporary name in the same directory, flushes it to disk, then renames it over
 /// the target: a reader sees the old file or the whole new one, even after a crash or kill.
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    let file_name = path
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    // The temporary file is created exclusively (O_EXCL: never an existing file, never
-    // through a link someone planted under its name); a name that is taken gets the next
-    // serial. Errors name the file asked for, not the temporary one.
-    let (tmp, mut file) = loop {
-        let serial = TEMP_SERIAL.fetch_add(1, Ordering::Relaxed);
-        let tmp = path.with_file_name(format!(".{file_name}.tmp-{}-{serial}", std::process::id()));
-        match OpenOptions::new().write(true).create_new(true).open(&tmp) {
-            Ok(file) => break (tmp, file),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && serial < 1 << 20 => {
-                continue;
+    StagedFile::write(path, bytes)?.publish()
+}
+
+/// A file written and flushed to disk under a temporary name beside its target, not yet in
+/// place: [`StagedFile::publish`] renames it over the target, and dropped unpublished it is
+/// removed. A caller can so write a file while it still checks what it writes, and put it in
+/// place only if the check passes.
+#[derive(Debug)]
+pub struct StagedFile {
+    path: PathBuf,
+    tmp: PathBuf,
+    published: bool,
+}
+
+impl StagedFile {
+    /// Writes `bytes` under a fresh temporary name beside `path` and flushes them to disk.
+    pub fn write(path: &Path, bytes: &[u8]) -> Result<StagedFile, IoError> {
+        let file_name = path
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        // The temporary file is created exclusively (O_EXCL: never an existing file, never
+        // through a link someone planted under its name); a name that is taken gets the next
+        // serial. Errors name the file asked for, not the temporary one.
+        let (tmp, mut file) = loop {
+            let serial = TEMP_SERIAL.fetch_add(1, Ordering::Relaxed);
+            let tmp =
+                path.with_file_name(format!(".{file_name}.tmp-{}-{serial}", std::process::id()));
+            match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+                Ok(file) => break (tmp, file),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && serial < 1 << 20 => {
+                    continue;
+                }
+                Err(e) => return Err(IoError::new(path, e)),
             }
-            Err(e) => return Err(IoError::new(path, e)),
-        }
-    };
-    let written = file.write_all(bytes).and_then(|()| file.sync_data());
-    drop(file);
-    if let Err(e) = written {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(IoError::new(path, e));
+        };
+        let staged = StagedFile {
+            path: path.to_path_buf(),
+            tmp,
+            published: false,
+        };
+        // On an error the staged file is dropped, and so removed.
+        file.write_all(bytes)
+            .and_then(|()| file.sync_data())
+            .map_err(|e| IoError::new(path, e))?;
+        Ok(staged)
     }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        IoError::new(path, e)
-    })
+
+    /// Renames the file over its target.
+    pub fn publish(mut self) -> Result<(), IoError> {
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| IoError::new(&self.path, e))?;
+        self.published = true;
+        Ok(())
+    }
+}
+
+impl Drop for StagedFile {
+    fn drop(&mut self) {
+        if !self.published {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
 }
 
 /// True for the temporary files `atomic_write` leaves behind when it is killed mid-write.
@@ -222,6 +256,39 @@ mod tests {
         let second = FileBytes::open(&other).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(second.iter().map(|&b| u64::from(b)).sum::<u64>(), 8192);
         assert!(!second.changed());
+    }
+
+    /// A staged file is in place only once published: dropped unpublished, it is removed
+    /// and the target keeps its old bytes.
+    #[test]
+    fn a_staged_file_replaces_its_target_only_when_published() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let target = dir.path().join("step.slc");
+        std::fs::write(&target, b"old").unwrap_or_else(|e| panic!("{e}"));
+        let names = || -> Vec<String> {
+            let mut names: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap_or_else(|e| panic!("{e}"))
+                .map(|e| {
+                    e.unwrap_or_else(|e| panic!("{e}"))
+                        .file_name()
+                        .to_string_lossy()
+                        .into_owned()
+                })
+                .collect();
+            names.sort();
+            names
+        };
+        let staged = StagedFile::write(&target, b"rejected").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(names().len(), 2, "the staged file lies beside its target");
+        assert!(names().iter().any(|n| is_atomic_temp(n)));
+        drop(staged);
+        assert_eq!(names(), ["step.slc"]);
+        assert_eq!(std::fs::read(&target).ok().as_deref(), Some(&b"old"[..]));
+        StagedFile::write(&target, b"new")
+            .and_then(StagedFile::publish)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(names(), ["step.slc"]);
+        assert_eq!(std::fs::read(&target).ok().as_deref(), Some(&b"new"[..]));
     }
 
     #[test]
