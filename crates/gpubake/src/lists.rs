@@ -452,9 +452,9 @@ pub(crate) fn lists(
             // Each point's near members (CSR in the caller's order, each point's in index
             // order: they came in the order the GPU's threads appended them); reaches in
             // sorted order.
-            near.par_sort_unstable_by_key(|&[i, w]| (i, w & ID_MASK));
-            let near_start = crate::csr::sorted_starts(near.len(), n, |k| near[k][0] as usize);
-            let mut ids: Vec<u32> = near.par_iter().map(|p| p[1]).collect();
+            let (near_start, mut ids) = crate::csr::grouped(&near, n, |w| w & ID_MASK)
+                .ok_or_else(|| gpu_error("a member near its list's reach names no point"))?;
+            drop(near);
             let of = |i: usize| &ids[near_start[i] as usize..near_start[i + 1] as usize];
             let by_sorted: Vec<f64> = (0..n)
                 .into_par_iter()
