@@ -17,6 +17,11 @@ use crate::pass_clock::PassClock;
 /// never sit on the GPU whole.
 pub(crate) const OUTPUT_BATCH_BYTES: u64 = 256 << 20;
 
+/// Steps with work queued on the device at once ([`slosh_bake::DeviceTurns`]). A 64 × 1M
+/// series on an H100 host had its first step 0.3-1.8 s sooner with 2, 4 or 8 than with no
+/// limit, and baked soonest with 4 (`docs/results-bake.md`, stop 68).
+const STEPS_ON_DEVICE: usize = 4;
+
 /// The bake's stages on a GPU: a [`slosh_mls::NeighbourSearch`] (with the initial fits) and a
 /// [`slosh_bake::TreeBuild`], their passes built once and shared by every step in flight.
 #[derive(Debug)]
@@ -56,6 +61,8 @@ pub struct GpuStages {
     /// The passes' inputs and outputs, kept from step to step (`dispatch::Pooled`), and the
     /// staging memory their inputs arrive through.
     pub(crate) memory: PassMemory,
+    /// The steps' turns on this device: one queue for every bake that shares it.
+    pub(crate) turns: Arc<slosh_bake::DeviceTurns>,
 }
 
 /// What [`GpuStages`] keeps between steps.
@@ -367,6 +374,7 @@ impl GpuStages {
                 planned: AtomicUsize::new(1),
                 staging: slosh_render::StagingPool::new(STAGING_BUFFERS_KEPT).within(kept_host),
             },
+            turns: Arc::new(slosh_bake::DeviceTurns::new(STEPS_ON_DEVICE)),
             gpu,
         })
     }

@@ -15,11 +15,6 @@ use crate::dispatch::{bind, groups, guarded, output, storage, uniform};
 use crate::layout::{TREE_MAX_DEPTH, TreeNode, TreeParams};
 use crate::passes::GpuStages;
 
-/// Steps with work queued on the device at once ([`slosh_bake::DeviceTurns`]). A 64 × 1M
-/// series on an H100 host had its first step 0.3-1.8 s sooner with 2, 4 or 8 than with no
-/// limit, and baked soonest with 4 (`docs/results-bake.md`, stop 68).
-const STEPS_ON_DEVICE: usize = 4;
-
 /// Bytes of one node.
 const NODE_BYTES: u64 = size_of::<TreeNode>() as u64;
 
@@ -30,7 +25,7 @@ impl GpuStages {
             device_memory: self.gpu.device_memory(),
             search: self.clone(),
             in_flight: Some(self.clone()),
-            turns: Some(Arc::new(slosh_bake::DeviceTurns::new(STEPS_ON_DEVICE))),
+            turns: Some(self.turns.clone()),
             tree: self,
         }
     }
