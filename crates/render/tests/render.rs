@@ -706,6 +706,9 @@ fn read_texture(gpu: &Gpu, texture: &wgpu::Texture) -> Vec<u32> {
 #[test]
 fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     let Some(dev) = device() else { return };
+    // A tracer of its own: this test submits encoders it records into, which other tests'
+    // frames on the shared tracer must not come between (see `Tracer::record`).
+    let tracer = Tracer::new(&dev.gpu).unwrap();
     let mut input = input_of(&SceneSpec::new(SceneKind::Tank, 6000, 7));
     let pressure: Vec<f32> = input.positions.iter().map(|p| p[2] as f32).collect();
     let height: Vec<f32> = input.positions.iter().map(|p| p[0] as f32).collect();
@@ -727,8 +730,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
         let reference_step = GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap();
         let mut trace = TraceParams::for_step(&reference_step, 3);
         trace.mode = mode;
-        let reference = dev
-            .tracer
+        let reference = tracer
             .render(&dev.gpu, &reference_step, &camera, &trace)
             .unwrap();
         // Host half elsewhere, GPU half and frame in the caller's encoder.
@@ -738,17 +740,17 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
                 .unwrap()
         });
         assert_eq!(host.gpu_bytes(), reference_step.gpu_bytes());
-        let targets = dev.tracer.targets(&dev.gpu, 64, 48).unwrap();
+        let targets = tracer.targets(&dev.gpu, 64, 48).unwrap();
         let mut encoder = dev
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let step = GpuStep::create(&dev.gpu, &host, &mut encoder).unwrap();
-        dev.tracer
+        tracer
             .record(&dev.gpu, &step, &targets, &camera, &trace, &mut encoder)
             .unwrap();
         dev.gpu.queue.submit([encoder.finish()]);
-        let frame = dev.tracer.read_frame(&dev.gpu, &targets).unwrap();
+        let frame = tracer.read_frame(&dev.gpu, &targets).unwrap();
         let lit = reference
             .hits
             .iter()
@@ -764,7 +766,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
         // Set of rows by set, one set a submission (every 4th row from 1, every 2nd from 0,
         // every 4th from 3): the same pixels, and the texture shows none of them before the
         // last set.
-        let banded = dev.tracer.targets(&dev.gpu, 64, 48).unwrap();
+        let banded = tracer.targets(&dev.gpu, 64, 48).unwrap();
         let sets = [
             RowSet {
                 first: 1,
@@ -786,7 +788,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             let last = i == sets.len() - 1;
-            dev.tracer
+            tracer
                 .record_rows(
                     &dev.gpu,
                     &step,
@@ -803,7 +805,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
                 assert!(read_texture(&dev.gpu, banded.texture()) == before);
             }
         }
-        let bands = dev.tracer.read_frame(&dev.gpu, &banded).unwrap();
+        let bands = tracer.read_frame(&dev.gpu, &banded).unwrap();
         assert!(
             reference.hits == bands.hits,
             "{mode:?}: hits by row sets differ"
@@ -827,8 +829,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
                 stride: 0,
             },
         ] {
-            let refused = dev
-                .tracer
+            let refused = tracer
                 .record_rows(
                     &dev.gpu,
                     &step,
@@ -855,16 +856,13 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     let direct = GpuStep::upload(&dev.gpu, &file, Some("x")).unwrap();
     assert_eq!(step.field, direct.field);
     let trace = TraceParams::for_step(&step, 2);
-    let switched = dev.tracer.render(&dev.gpu, &step, &camera, &trace).unwrap();
-    let uploaded = dev
-        .tracer
-        .render(&dev.gpu, &direct, &camera, &trace)
-        .unwrap();
+    let switched = tracer.render(&dev.gpu, &step, &camera, &trace).unwrap();
+    let uploaded = tracer.render(&dev.gpu, &direct, &camera, &trace).unwrap();
     assert!(
         switched.rgba == uploaded.rgba,
         "field switch changes the picture"
     );
-    let before = dev.tracer.render(
+    let before = tracer.render(
         &dev.gpu,
         &GpuStep::upload(&dev.gpu, &file, Some("pressure")).unwrap(),
         &camera,
@@ -1089,6 +1087,47 @@ fn frames_alone(
                 .unwrap()
         })
         .collect()
+}
+
+/// Threads that share a tracer each draw what a tracer of their own draws: a frame that
+/// found its step's tree and masks held must not be submitted after another thread's frame
+/// rewrote them (a CI run once drew 4 of 1734 hits so).
+#[test]
+fn threads_sharing_a_tracer_draw_what_a_tracer_of_their_own_draws() {
+    let Some(dev) = device() else { return };
+    let steps = uploaded_scenes(
+        dev,
+        &[
+            (SceneKind::Sphere, 3000, 5),
+            (SceneKind::Torus, 4000, 9),
+            (SceneKind::Sphere, 2000, 3),
+        ],
+    );
+    let params = |step: &GpuStep, iterations| TraceParams::for_step(step, iterations);
+    let alone: Vec<_> = [1, 3]
+        .map(|iterations| frames_alone(dev, &steps, |s| params(s, iterations)))
+        .into();
+    let shared = Tracer::new(&dev.gpu).unwrap();
+    std::thread::scope(|s| {
+        for (k, (camera, step)) in steps.iter().enumerate() {
+            let (shared, alone) = (&shared, &alone);
+            s.spawn(move || {
+                for round in 0..30 {
+                    for (i, iterations) in [1, 3].into_iter().enumerate() {
+                        let frame = shared
+                            .render(&dev.gpu, step, camera, &params(step, iterations))
+                            .unwrap();
+                        assert!(
+                            frame.hits == alone[i][k].hits && frame.rgba == alone[i][k].rgba,
+                            "round {round}, step {k}, {iterations} iterations: {} hits, {} alone",
+                            hit_pixels(&frame),
+                            hit_pixels(&alone[i][k])
+                        );
+                    }
+                }
+            });
+        }
+    });
 }
 
 /// The tracer holds the 4-wide tree of one step, the one it last drew: one-iteration frames

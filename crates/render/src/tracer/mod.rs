@@ -26,7 +26,7 @@
 //! group 2; a frame of one iteration binds an empty group there) and the 4-wide tree of the
 //! step it last drew (`widen.rs`, group 3).
 
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock, PoisonError};
 
 use slosh_mls::Camera;
 
@@ -136,6 +136,11 @@ pub struct Tracer {
     frame_layout: wgpu::BindGroupLayout,
     masks: NeighbourMasks,
     widening: Widening,
+    /// Held from a frame's recording to its submission in [`Tracer::run`]: which step's tree
+    /// and masks are held changes when a frame is recorded, and what the held buffers hold
+    /// changes when it is submitted, so another thread's frame between the two would find
+    /// its step held and draw with what this frame wrote.
+    frames: Mutex<()>,
     /// The binding limit the modules and bind groups are made for (`Gpu::max_binding` when
     /// the tracer was built).
     limit: u64,
@@ -288,6 +293,7 @@ impl Tracer {
             frame_layout,
             masks,
             widening,
+            frames: Mutex::new(()),
             limit: gpu.max_binding(),
         };
         // The shade pass is built now: a device that cannot take the layout fails here.
@@ -584,6 +590,11 @@ impl Tracer {
     /// neighbour-mask pass.
     /// The frame's uniforms go through `queue.write_buffer`, so they are in place for the
     /// next submission; one frame per targets per submission.
+    ///
+    /// The held tree and masks are written in the encoders of the frames that found them
+    /// another step's, and read by later frames as held: submit every encoder recorded into,
+    /// in the order recorded, before another thread records with this tracer (as
+    /// [`Tracer::run`] does under the tracer's lock).
     pub fn record(
         &self,
         gpu: &Gpu,
@@ -703,6 +714,7 @@ impl Tracer {
     /// Derives up to `clusters` more clusters of the neighbour masks of `step` into
     /// `encoder`, ahead of its first refined frame: a slow adapter spreads the pass over
     /// several submissions, where a refined frame would derive all that is missing at once.
+    /// Submit `encoder` as [`Tracer::record`] says.
     pub fn derive_masks(
         &self,
         gpu: &Gpu,
@@ -746,8 +758,10 @@ impl Tracer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
+        let frames = self.frames.lock().unwrap_or_else(PoisonError::into_inner);
         self.record(gpu, step, targets, camera, params, &mut encoder)?;
         let submitted = gpu.queue.submit([encoder.finish()]);
+        drop(frames);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Validation(e.to_string()));
         }
