@@ -7,7 +7,7 @@
 //! last refined, and derives it again, in the same submission as the frame, when a refined
 //! frame asks for another step. One-iteration frames (scrubbing) never run the pass.
 
-use std::sync::Mutex;
+use std::sync::{Mutex, PoisonError};
 
 use crate::bindings::bind_entries;
 use crate::context::Gpu;
@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 use crate::layout::ExpandSettings;
 use crate::pass::{PassLayouts, StepPass, held_storage, storage_buffer, uniform_buffer};
 use crate::shaders::{EXPAND_ARRAYS, MASK_ARRAYS, expand_wgsl};
-use crate::upload::{EMPTY_BINDING, GpuStep};
+use crate::upload::{EMPTY_BINDING, GpuStep, NO_STEP};
 
 /// The masks the tracer holds: whose, how many of its clusters are derived, and the trace
 /// passes' group over them.
@@ -189,6 +189,16 @@ impl NeighbourMasks {
         self.held
             .lock()
             .map_err(|_| Error::Validation("the neighbour masks' lock was poisoned".into()))
+    }
+
+    /// Forgets whose masks the held buffers hold, keeping the buffers: the next refined
+    /// frame derives its step's again.
+    pub(crate) fn forget(&self) {
+        let mut held = self.held.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(h) = held.as_mut() {
+            h.step = NO_STEP;
+            h.derived = 0;
+        }
     }
 
     /// Bytes of the masks held now (0 before the first refined frame).

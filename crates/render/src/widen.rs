@@ -7,7 +7,7 @@
 //! step. The pass is one thread per node, so a new step costs microseconds of GPU time
 //! where the host half's serial widening cost milliseconds of every load.
 
-use std::sync::Mutex;
+use std::sync::{Mutex, PoisonError};
 
 use crate::bindings::bind_entries;
 use crate::context::Gpu;
@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 use crate::layout::WidenSettings;
 use crate::pass::{PassLayouts, StepPass, held_storage, uniform_buffer};
 use crate::shaders::{TREE_ARRAYS, WIDEN_ARRAYS, WIDEN_GROUP, widen_wgsl};
-use crate::upload::GpuStep;
+use crate::upload::{GpuStep, NO_STEP};
 
 /// The wide tree the tracer holds: whose, and the trace passes' group over it.
 #[derive(Debug)]
@@ -76,6 +76,15 @@ impl Widening {
             group: group.clone(),
         });
         Ok(group)
+    }
+
+    /// Forgets whose tree the held buffer holds, keeping the buffer: the next frame widens
+    /// its step's again.
+    pub(crate) fn forget(&self) {
+        let mut held = self.held.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(h) = held.as_mut() {
+            h.step = NO_STEP;
+        }
     }
 
     /// Bytes of the wide tree held now (0 before the first frame).

@@ -1072,6 +1072,22 @@ fn uploaded_scenes(dev: &Device, scenes: &[(SceneKind, usize, u64)]) -> Vec<(Cam
         .collect()
 }
 
+/// A sphere's and a torus's steps, each's refined frame (3 iterations) from a tracer of its
+/// own, and a new tracer to share between them.
+fn sphere_and_torus_refined(dev: &Device) -> (Vec<(Camera, GpuStep)>, Vec<Frame>, Tracer) {
+    let steps = uploaded_scenes(
+        dev,
+        &[(SceneKind::Sphere, 3000, 5), (SceneKind::Torus, 4000, 9)],
+    );
+    let alone = frames_alone(dev, &steps, refined);
+    (steps, alone, Tracer::new(&dev.gpu).unwrap())
+}
+
+/// A frame of 3 iterations: refined, so it reads the neighbour masks.
+fn refined(step: &GpuStep) -> TraceParams {
+    TraceParams::for_step(step, 3)
+}
+
 /// Each step's frame from a tracer of its own (one that has drawn no other step).
 fn frames_alone(
     dev: &Device,
@@ -1130,6 +1146,36 @@ fn threads_sharing_a_tracer_draw_what_a_tracer_of_their_own_draws() {
     });
 }
 
+/// A frame recorded and then dropped unsubmitted (the player's, when its frame fails further
+/// on) leaves the tracer taking another step's tree and masks for its step's; once told to
+/// forget them, the next frame of that step derives and draws what a tracer of its own does.
+#[test]
+fn a_tracer_told_to_forget_redraws_after_a_dropped_frame() {
+    let Some(dev) = device() else { return };
+    let (steps, alone, shared) = sphere_and_torus_refined(dev);
+    let ((camera_a, a), (camera_b, b)) = (&steps[0], &steps[1]);
+    shared.render(&dev.gpu, a, camera_a, &refined(a)).unwrap();
+    let targets = shared.targets(&dev.gpu, 64, 64).unwrap();
+    let mut encoder = dev
+        .gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    shared
+        .record(&dev.gpu, b, &targets, camera_b, &refined(b), &mut encoder)
+        .unwrap();
+    assert!(shared.mask_progress(b).finished());
+    drop(encoder);
+    shared.forget_held();
+    assert_eq!(shared.mask_progress(b).derived, 0);
+    let frame = shared.render(&dev.gpu, b, camera_b, &refined(b)).unwrap();
+    assert!(
+        hit_pixels(&frame) > 500,
+        "{} hit pixels",
+        hit_pixels(&frame)
+    );
+    assert!(frame.hits == alone[1].hits && frame.rgba == alone[1].rgba);
+}
+
 /// The tracer holds the 4-wide tree of one step, the one it last drew: one-iteration frames
 /// of three steps taken in turn (the largest last, so the held buffer is reused by the
 /// smaller and replaced by the larger) equal those of a tracer that saw only one of them; a
@@ -1177,13 +1223,7 @@ fn the_tracer_widens_the_tree_of_the_step_it_draws() {
 #[test]
 fn the_tracer_derives_the_masks_of_the_step_it_refines() {
     let Some(dev) = device() else { return };
-    let steps = uploaded_scenes(
-        dev,
-        &[(SceneKind::Sphere, 3000, 5), (SceneKind::Torus, 4000, 9)],
-    );
-    let refined = |step: &GpuStep| TraceParams::for_step(step, 3);
-    let alone = frames_alone(dev, &steps, refined);
-    let shared = Tracer::new(&dev.gpu).unwrap();
+    let (steps, alone, shared) = sphere_and_torus_refined(dev);
     let (camera, step) = &steps[0];
     shared
         .render(&dev.gpu, step, camera, &TraceParams::for_step(step, 1))
@@ -1321,7 +1361,6 @@ fn steps_in_reused_section_buffers_draw_as_in_new_ones() {
         dev,
         &[(SceneKind::Sphere, 3000, 5), (SceneKind::Sphere, 3000, 6)],
     );
-    let refined = |step: &GpuStep| TraceParams::for_step(step, 3);
     let alone = frames_alone(dev, &steps, refined);
     let files: Vec<CacheFile> = [5, 6]
         .iter()

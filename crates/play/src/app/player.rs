@@ -251,6 +251,9 @@ impl Player {
                 self.last = report;
             }
             Err(e) => {
+                // The encoder is dropped unsubmitted: what the frame recorded before it
+                // failed never runs, so the tracer must not take its tree or masks as held.
+                self.engine.tracer().forget_held();
                 if self.log_frames {
                     say!("frame error: {e}");
                 }

@@ -594,7 +594,8 @@ impl Tracer {
     /// The held tree and masks are written in the encoders of the frames that found them
     /// another step's, and read by later frames as held: submit every encoder recorded into,
     /// in the order recorded, before another thread records with this tracer (as
-    /// [`Tracer::run`] does under the tracer's lock).
+    /// [`Tracer::run`] does under the tracer's lock). An encoder dropped unsubmitted after
+    /// a record (its frame failed further on) calls for [`Tracer::forget_held`].
     pub fn record(
         &self,
         gpu: &Gpu,
@@ -673,6 +674,14 @@ impl Tracer {
             encoder,
         );
         Ok(())
+    }
+
+    /// Forgets whose tree and masks the held buffers hold, keeping the buffers, so that the
+    /// next frame writes its step's again: for a caller that dropped an encoder it had
+    /// recorded into, whose writes never ran.
+    pub fn forget_held(&self) {
+        self.masks.forget();
+        self.widening.forget();
     }
 
     /// Bytes of the neighbour masks the tracer holds (one step's, once a frame refined).
@@ -759,7 +768,11 @@ impl Tracer {
                 label: Some("frame"),
             });
         let frames = self.frames.lock().unwrap_or_else(PoisonError::into_inner);
-        self.record(gpu, step, targets, camera, params, &mut encoder)?;
+        if let Err(e) = self.record(gpu, step, targets, camera, params, &mut encoder) {
+            // The encoder is dropped with what the frame recorded before it failed.
+            self.forget_held();
+            return Err(e);
+        }
         let submitted = gpu.queue.submit([encoder.finish()]);
         drop(frames);
         if let Some(e) = pollster::block_on(scope.pop()) {

@@ -214,6 +214,9 @@ fn no_field(gpu: &Gpu) -> wgpu::Buffer {
     })
 }
 
+/// An id no step has (ids count up from 0): what held per-step buffers say once forgotten.
+pub(crate) const NO_STEP: u64 = u64::MAX;
+
 /// The next step id.
 fn next_id() -> u64 {
     static NEXT: AtomicU64 = AtomicU64::new(0);

@@ -23,6 +23,7 @@ use slosh_cache::{CacheFile, names};
 use crate::error::Error;
 
 pub use checks::{MAX_BVH_DEPTH, MAX_LEAF_LINK_COUNT, MAX_LINK_FIRST, mask_row};
+pub(crate) use gpu_step::NO_STEP;
 pub use gpu_step::{GpuStep, StepBuffers, UploadOptions, UploadStats};
 pub use host::{HostField, HostStep, StepInfo};
 
