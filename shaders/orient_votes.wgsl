@@ -2,7 +2,8 @@
 // of every point on the GPU (crates/gpubake/src/orient.rs): each neighbour with a normal
 // counts its tangent weight w = 1 − (n·d)²/|d|² to the 4th power, for or against the point's
 // normal by the sign of their normals' dot product; a neighbour within 60° of the tangent plane is a patch edge.
-// A neighbour at the place of one before it makes no edge. In f32, so every test that rounding
+// A neighbour at the place of one before it makes no edge, nor one farther than EDGE_REACH
+// times the point's EDGE_RANK-th nearest place (none where it has fewer). In f32, so every test that rounding
 // could have decided (a weight near 0 or the patch weight, a dot product near 0, a vote near
 // the threshold, a neighbour at the point's place or at an earlier neighbour's) marks the
 // point VOTE_RECAST, and the host casts its votes in f64. The constants are prepended from
@@ -43,6 +44,12 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
     var vote = 0.0;
     var total = 0.0;
     var word = 0u;
+    // Places (neighbours not at the point's) met so far, and once the EDGE_RANK-th is met,
+    // how far its edges reach, squared; nearest first, the places before it lie within.
+    // (Twins count here each, where the host counts one place once; but a twin, like a
+    // neighbour at the point's place, makes the point VOTE_RECAST.)
+    var places = 0u;
+    var reach2 = 0.0;
     // Each slot's neighbour and squared distance, for the twins below.
     var slot_ids: array<u32, ORIENT_NEIGHBOURS>;
     var slot_distance2: array<f32, ORIENT_NEIGHBOURS>;
@@ -73,6 +80,12 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
                 word |= VOTE_RECAST;
             }
         }
+        if dd > 0.0 {
+            places += 1u;
+            if places == EDGE_RANK {
+                reach2 = EDGE_REACH * EDGE_REACH * dd;
+            }
+        }
         let other = normals[j];
         if other.w == 0.0 {
             continue;
@@ -81,6 +94,14 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
         if dd <= 0.0 {
             word |= VOTE_RECAST;
             continue;
+        }
+        if places > EDGE_RANK {
+            if abs(dd - reach2) <= WEIGHT_MARGIN * reach2 {
+                word |= VOTE_RECAST;
+            }
+            if dd > reach2 {
+                continue;
+            }
         }
         let along = dot(own.xyz, d);
         let w = 1.0 - along * along / dd;
@@ -111,6 +132,11 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         vote += weight * sign(agreement);
         total += weight;
+    }
+    // Fewer places than EDGE_RANK: no stretch of surface, no edges.
+    if places < EDGE_RANK {
+        word &= VOTE_RECAST;
+        total = 0.0;
     }
     if total > 0.0 {
         if vote < -REVERSE_BELOW * total {

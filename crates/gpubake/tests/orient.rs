@@ -98,6 +98,27 @@ fn cases() -> Vec<(&'static str, Vec<[f64; 3]>, Normals)> {
         far_normals.push(Some(unit([1.0, random.next(), (k % 3) as f64 - 1.0])));
     }
     out.push(("sphere and far stragglers", far_points, far_normals));
+    // Droplets of 8 particles on unit spheres 5 apart: a point's edges reach twice its 6th
+    // nearest place, short of the next droplets' particles, whose normals face it; with
+    // those, the votes reversed 584 of the 2400 normals (as a shader that left the reach out
+    // cast them), without them 16.
+    let (mut drop_points, mut drop_normals) = (Vec::new(), Vec::new());
+    for d in 0..300 {
+        let centre = [
+            5.0 * (d % 2) as f64,
+            5.0 * (d / 2 % 10) as f64,
+            5.0 * (d / 20) as f64,
+        ];
+        let (points, normals) = sphere(8, &mut random);
+        let turn = random.next() * std::f64::consts::TAU;
+        let (c, s) = (turn.cos(), turn.sin());
+        for (p, n) in points.iter().zip(normals) {
+            let p = [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]];
+            drop_points.push([centre[0] + p[0], centre[1] + p[1], centre[2] + p[2]]);
+            drop_normals.push(n.map(|n| [c * n[0] - s * n[1], s * n[0] + c * n[1], n[2]]));
+        }
+    }
+    out.push(("droplets apart", drop_points, drop_normals));
     out.into_iter()
         .map(|(name, points, normals)| {
             let order = morton_order(&points);

@@ -24,6 +24,16 @@ const REVERSE_BELOW: f64 = 0.2;
 /// which allows 1); leaving out neighbours beyond 1.5 to 3 times the sixth one's distance
 /// did not bring it back, and why is not known.
 pub const VOTE_SQUARINGS: u32 = 2;
+/// The edges of a point reach no farther than [`EDGE_REACH`] times its distance to its
+/// `EDGE_RANK`-th nearest place (other points at its own place, or at one nearer, not
+/// counted): the neighbours of its own stretch of surface. Past
+/// that, its [`ORIENT_NEIGHBOURS`] nearest may lie on another body across a gap (a droplet of
+/// a few particles has no 16 of its own), whose normals face it and contradict its own.
+pub const EDGE_RANK: usize = 6;
+/// See [`EDGE_RANK`]: on a surface sampled evenly the 16th nearest lies about 1.6 times as
+/// far as the 6th, within twice; droplets of the `droplets` scene lie 5 spacings apart and
+/// more, their 6th nearest within 1.7.
+pub const EDGE_REACH: f64 = 2.0;
 /// Voting passes: each sees the repairs of the pass before (a reversed point among reversed
 /// neighbours is outvoted once they are repaired).
 const PASSES: usize = 3;
@@ -66,7 +76,8 @@ pub fn vote_word_wgsl() -> String {
          const PATCH_WEIGHT: f32 = {PATCH_WEIGHT:?};\nconst REVERSE_BELOW: f32 = {REVERSE_BELOW:?};\n\
          const VOTE_REVERSE: u32 = {}u;\nconst VOTE_CONTRADICTED: u32 = {}u;\n\
          const VOTE_RECAST: u32 = {}u;\nconst WEIGHT_MARGIN: f32 = {:e};\n\
-         const VOTE_MARGIN: f32 = {:e};\nconst VOTE_SQUARINGS: u32 = {VOTE_SQUARINGS}u;\n",
+         const VOTE_MARGIN: f32 = {:e};\nconst VOTE_SQUARINGS: u32 = {VOTE_SQUARINGS}u;\n\
+         const EDGE_RANK: u32 = {EDGE_RANK}u;\nconst EDGE_REACH: f32 = {EDGE_REACH:?};\n",
         vote_word::REVERSE,
         vote_word::CONTRADICTED,
         vote_word::RECAST,
@@ -186,43 +197,49 @@ impl Edges<'_> {
         let own = self.original[i];
         let around = self.nearest.around(i);
         let p = self.points[i];
-        // Each slot's squared distance. Points at one place are at one distance, and the
-        // nearest come nearest first, so a twin lies among the slots just before it at its
-        // distance (where the order came from f32 distances, an f32 tie between two places
-        // could stand between them, and then both count).
+        // Each slot's offset, squared distance, and whether it lies at the place of one before
+        // it (a twin). Points at one place are at one distance, and the nearest come nearest
+        // first, so a twin lies among the slots just before it at its distance (where the
+        // order came from f32 distances, an f32 tie between two places could stand between
+        // them, and then both count).
+        let mut offset = [[0.0; 3]; ORIENT_NEIGHBOURS];
         let mut distance2 = [f64::NAN; ORIENT_NEIGHBOURS];
-        let mut next = 0;
-        std::iter::from_fn(move || {
-            let own = own?;
-            while next < ORIENT_NEIGHBOURS {
-                let k = next;
-                next += 1;
-                let j = around[k];
+        let mut twin = [false; ORIENT_NEIGHBOURS];
+        if own.is_some() {
+            for (k, &j) in around.iter().enumerate() {
                 if j == NO_POINT {
                     continue;
                 }
                 let q = self.points[j as usize];
                 let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
                 let dd = dot(d, d);
-                distance2[k] = dd;
-                let mut m = k;
-                let mut twin = false;
-                while m > 0 && distance2[m - 1] == dd {
-                    m -= 1;
-                    if self.points[around[m] as usize] == q {
-                        twin = true;
-                        break;
-                    }
-                }
-                if twin || self.original[j as usize].is_none() {
-                    continue;
-                }
-                let w = tangent_weight(own, d);
-                if w > 0.0 {
-                    return Some((k, j, w));
-                }
+                (offset[k], distance2[k]) = (d, dd);
+                twin[k] = (0..k)
+                    .rev()
+                    .take_while(|&m| distance2[m] == dd)
+                    .any(|m| self.points[around[m] as usize] == q);
             }
-            None
+        }
+        // The reach of its edges, from the EDGE_RANK-th slot at a place of its own, not the
+        // point's; fewer such (a step of a few points): no stretch of surface, no edges.
+        let reach2 = (0..ORIENT_NEIGHBOURS)
+            .filter(|&k| distance2[k] > 0.0 && !twin[k])
+            .nth(EDGE_RANK - 1)
+            .map_or(f64::NEG_INFINITY, |k| {
+                EDGE_REACH * EDGE_REACH * distance2[k]
+            });
+        (0..ORIENT_NEIGHBOURS).filter_map(move |k| {
+            let own = own?;
+            let j = around[k];
+            if j == NO_POINT
+                || twin[k]
+                || distance2[k] > reach2
+                || self.original[j as usize].is_none()
+            {
+                return None;
+            }
+            let w = tangent_weight(own, offset[k]);
+            (w > 0.0).then_some((k, j, w))
         })
     }
 }
@@ -526,16 +543,16 @@ mod tests {
             .collect()
     }
 
-    /// A point with four neighbours that agree with its normal and one, nearer, that
+    /// A point with five neighbours that agree with its normal and one, nearer, that
     /// contradicts it but was written eight times: the eight are one neighbour and vote
-    /// once, so the point keeps its normal (counted eight times, they reversed it: 4 for,
+    /// once, so the point keeps its normal (counted eight times, they reversed it: 5 for,
     /// 8 against). The eight, whose other neighbours all contradict them, are reversed.
     #[test]
     fn a_neighbour_written_twice_votes_once() {
         let mut points = vec![[0.0, 0.0, 0.0]];
         let mut normals = vec![Some([0.0, 0.0, 1.0])];
-        for a in 0..4 {
-            let t = f64::from(a) * std::f64::consts::FRAC_PI_2;
+        for a in 0..5 {
+            let t = f64::from(a) * std::f64::consts::TAU / 5.0;
             points.push([t.cos(), t.sin(), 0.0]);
             normals.push(Some([0.0, 0.0, 1.0]));
         }
@@ -549,13 +566,13 @@ mod tests {
             original: &normals,
             nearest: view(&ids),
         };
-        assert_eq!(edges.slots(0).count(), 5, "the eight make one edge");
+        assert_eq!(edges.slots(0).count(), 6, "the eight make one edge");
         // A copy's twins lie at its own place: no edge either.
-        assert_eq!(edges.slots(5).count(), 5);
+        assert_eq!(edges.slots(6).count(), 6);
         let (reverse, _, _) = cast_pass(&edges, &normals, None);
-        assert!(!reverse[0], "the point's vote: 4 for, 1 against");
-        assert!(reverse[5..].iter().all(|&r| r), "{reverse:?}");
-        assert!(!reverse[1..5].iter().any(|&r| r), "{reverse:?}");
+        assert!(!reverse[0], "the point's vote: 5 for, 1 against");
+        assert!(reverse[6..].iter().all(|&r| r), "{reverse:?}");
+        assert!(!reverse[1..6].iter().any(|&r| r), "{reverse:?}");
     }
 
     /// A plane grid with normals +z, some reversed singly and one 5×5 patch reversed.

@@ -307,3 +307,31 @@ fn a_reversed_patch_is_turned_back_whole() {
             .all(|(a, b)| a.dot(*b) > 0.0)
     );
 }
+
+/// A clean droplets scene (every normal the truth's): no more than 2.5 % of its normals end
+/// reversed, and no patch is reversed whole. A droplet of a few particles has no 16 nearest
+/// of its own; voting with others across the gap to the next droplet, whose normals face it,
+/// reversed 164 of these 1663 normals (9.9 %), 169 in one patch. Now 34, where droplets touch.
+#[test]
+fn a_clean_droplets_scene_keeps_its_normals() {
+    let mut s = SceneSpec::new(SceneKind::Droplets, 20_000, 1);
+    s.droplets = 200;
+    let sc = scene(s);
+    let (points, given) = sc.particles(0).surface_arrays();
+    let surface = surface_of::<f64>(&sc, 0, &SurfaceParams::default(), true);
+    let repaired = surface.normals.as_ref().unwrap();
+    let reversed = (0..points.len())
+        .filter(|&i| {
+            let (g, r) = (given[i], repaired[i]);
+            g[0] * r.x + g[1] * r.y + g[2] * r.z < 0.0
+        })
+        .count();
+    eprintln!(
+        "{} points, {reversed} reversed: {:?}",
+        points.len(),
+        surface.orientation
+    );
+    assert!(points.len() > 1500, "{} points", points.len());
+    assert!(reversed * 40 <= points.len(), "{reversed} reversed");
+    assert_eq!(surface.orientation.flipped_patches, 0);
+}
