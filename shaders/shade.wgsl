@@ -11,7 +11,9 @@
 // for the shader and legends) and prepended to this file by shaders.rs.
 
 // The field at a hit: the MLS-weighted mean over the hit ball's neighbours (θ with the ball's
-// h), or the ball's own value where no weight reaches.
+// h), or the ball's own value where no weight reaches; missing values (FIELD_MISSING, which
+// the upload wrote over every value that is not finite) left out, FIELD_MISSING where there
+// is none but those.
 fn field_value_at(hit: Hit) -> f32 {
     let nb = neighbourhood(hit.item);
     let h = ball_h(hit.item) * settings.h_factor;
@@ -24,8 +26,12 @@ fn field_value_at(hit: Hit) -> f32 {
         if j == NO_NEIGHBOUR {
             break;
         }
+        let v = field_at(j);
+        if v >= FIELD_MISSING {
+            continue;
+        }
         let w = weight(length_squared(points_at(j).position - hit.position), h2);
-        sum += w * field_at(j);
+        sum += w * v;
         wsum += w;
     }
     return select(field_at(hit.item), sum / wsum, wsum > MIN_WEIGHT);
@@ -83,6 +89,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let span = settings.field_max - settings.field_min;
                 let v = field_value_at(hit);
                 base = colormap(settings.colormap, select(0.5, (v - settings.field_min) / span, span > 0.0));
+                if v >= FIELD_MISSING {
+                    base = MISSING_FIELD_COLOUR;
+                }
             }
             colour = blinn_phong(hit.normal, dir, base);
         }

@@ -688,7 +688,8 @@ pub struct RenderArgs {
     /// Support normals from the weighted covariance instead of the data normals.
     #[arg(long)]
     pub covariance: bool,
-    /// Colour the surface by this baked field (GPU only).
+    /// Colour the surface by this baked field (GPU only). Values that are not finite are
+    /// left out of the colour; a hit with no finite value near it is drawn magenta.
     #[arg(long)]
     pub field: Option<String>,
     /// The field's colour map.

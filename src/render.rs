@@ -280,6 +280,17 @@ pub fn run(config: &RenderConfig) -> Result<()> {
                 seconds * 1e3,
                 gpu.info.name
             );
+            if let Some((name, _, _)) = gpu_step
+                .field
+                .as_ref()
+                .filter(|_| gpu_step.field_missing > 0)
+            {
+                say!(
+                    "step {step}: {} of {} points have no finite value of '{name}'; drawn magenta where no neighbour has one",
+                    gpu_step.field_missing,
+                    h.points
+                );
+            }
             Ok(())
         };
         go_on(draw(), step, making_movie, &mut failed)?;

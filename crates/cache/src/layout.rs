@@ -3,6 +3,18 @@
 
 use bytemuck::{Pod, Zeroable};
 
+/// A field value the GPU's field buffer holds for a point whose value is missing: one that is
+/// not finite (NaN or infinite) in the cache, or this value itself. WGSL may assume that no
+/// value is NaN or infinite, so the shade pass tests for this finite one instead: it leaves
+/// such values out of its weighted mean, and draws a hit with none in `MISSING_FIELD_COLOUR`
+/// (`slosh_render`). The host's readings leave them out alike.
+pub const FIELD_MISSING: f32 = f32::MAX;
+
+/// Whether a field value is missing ([`FIELD_MISSING`]).
+pub fn field_missing(v: f32) -> bool {
+    !v.is_finite() || v >= FIELD_MISSING
+}
+
 /// `struct Point { position: vec3<f32>, radii: u32 }` (format 7): a point, and its radius of
 /// trust (low half) and its neighbour list's reach (high half) as half floats, each the
 /// smallest normal half float at or above the value the bake computed. Both are bounds (a

@@ -39,7 +39,8 @@ pub use format::{
     Source, StepStats, Transform, hex64,
 };
 pub use layout::{
-    BallState, CubicWords, Element, GpuBall, GpuPoint, GpuSphere, MAX_SPHERES, stored_radius,
+    BallState, CubicWords, Element, FIELD_MISSING, GpuBall, GpuPoint, GpuSphere, MAX_SPHERES,
+    field_missing, stored_radius,
 };
 pub use manifest::{
     MANIFEST_LOCK_NAME, MANIFEST_NAME, Manifest, ManifestStep, SeriesKey, parse_step_file_name,

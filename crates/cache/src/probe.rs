@@ -6,6 +6,7 @@ use slosh_mls::{MIN_WEIGHT, V3, expand_one, weight};
 
 use crate::error::{Error, Result};
 use crate::format::Transform;
+use crate::layout::field_missing;
 use crate::names;
 use crate::nearest_point::NearestPoints;
 use crate::reader::CacheFile;
@@ -38,7 +39,8 @@ pub struct ProbeReading {
     pub nearest_distance: f64,
     /// The field's value there: the weighted mean over the hit ball's neighbours (`θ` with
     /// the ball's `h`), as the shade pass colours it; the ball's own value where no weight
-    /// reaches, the nearest particle's where the hit is a droplet.
+    /// reaches, the nearest particle's where the hit is a droplet. Missing values
+    /// ([`crate::field_missing`]) are left out; `None` where there is none but those.
     pub field: Option<f32>,
 }
 
@@ -99,12 +101,13 @@ impl SurfaceProbe {
         let x = V3::new(local[0], local[1], local[2]);
         let nearest = self.nearest.nearest(local)?;
         let d2 = (self.positions[nearest] - x).length_squared();
-        let field = field.filter(|f| f.len() == self.positions.len()).map(|f| {
-            match ball.filter(|&i| i < self.positions.len()) {
-                Some(i) => self.weighted_mean(i, x, h_factor, f).unwrap_or(f[i]),
-                None => f[nearest],
-            }
-        });
+        let own = |i: usize, f: &[f32]| Some(f[i]).filter(|&v| !field_missing(v));
+        let field = field
+            .filter(|f| f.len() == self.positions.len())
+            .and_then(|f| match ball.filter(|&i| i < self.positions.len()) {
+                Some(i) => self.weighted_mean(i, x, h_factor, f).or_else(|| own(i, f)),
+                None => own(nearest, f),
+            });
         Some(ProbeReading {
             world: self.to_world(local),
             nearest,
@@ -136,8 +139,12 @@ impl SurfaceProbe {
         let h2 = h * h;
         let (mut sum, mut wsum) = (0.0f32, 0.0f32);
         for &j in &list {
+            let v = field[j as usize];
+            if field_missing(v) {
+                continue;
+            }
             let w = weight((self.positions[j as usize] - x).length_squared(), h2);
-            sum += w * field[j as usize];
+            sum += w * v;
             wsum += w;
         }
         // Below the fits' least summed weight the shade pass takes the ball's own value.

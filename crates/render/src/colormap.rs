@@ -6,6 +6,10 @@
 //! so a legend that matches the frame applies that same encoding. `shade.wgsl` gets its
 //! `colormap` function generated from these definitions.
 
+/// The colour of a hit whose field value is missing (no finite value among its neighbours':
+/// `slosh_cache::FIELD_MISSING`), before lighting: magenta, which none of the maps holds.
+pub const MISSING_FIELD_COLOUR: [f32; 3] = [0.85, 0.0, 0.85];
+
 /// A field colour map, as the shade pass's `colormap` uniform selects it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(u32)]
@@ -72,6 +76,11 @@ pub fn colormap_wgsl() -> String {
     let table = crate::diverging::cool_warm_table();
     let n = table.len();
     let mut out = viridis_wgsl();
+    out += &format!(
+        "const FIELD_MISSING: f32 = {:e};\nconst MISSING_FIELD_COLOUR: vec3<f32> = {};\n",
+        slosh_cache::FIELD_MISSING,
+        vec3_literal(&MISSING_FIELD_COLOUR)
+    );
     out += &format!("const COOL_WARM: array<vec3<f32>, {n}> = array<vec3<f32>, {n}>(\n");
     for c in table {
         out += &format!("    {},\n", vec3_literal(c));

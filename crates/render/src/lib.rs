@@ -28,7 +28,7 @@ mod widen;
 
 pub use background::{spawn as spawn_background, wait_for_background};
 pub use buffer_shelf::BufferShelf;
-pub use colormap::Colormap;
+pub use colormap::{Colormap, MISSING_FIELD_COLOUR};
 pub use context::{Adapters, Gpu, MIN_BINDING_LIMIT, STORAGE_BUFFERS_NEEDED};
 pub use error::{Error, Result};
 pub use layout::{DEFAULT_KEY_LIGHT, ExpandSettings, GpuHit, GpuSettings, WidenSettings, status};

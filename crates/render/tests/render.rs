@@ -875,6 +875,96 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
     assert!(missing.contains("baked fields: pressure, x"), "{missing}");
 }
 
+/// A field's values that are not finite never reach a pixel: with 4 in 9 of a constant
+/// field's values NaN or infinite, every pixel of a refined frame (whose hits take the
+/// weighted mean over their ball's neighbours) is the constant field's (the mean leaves them
+/// out; without that, NaN coloured most hits as the map's end), the range is
+/// the finite values', and the host's probe reads the constant; a field with no finite
+/// value draws every hit magenta, and the probe reads none.
+#[test]
+fn field_values_that_are_not_finite_are_left_out_of_the_colour() {
+    let Some(dev) = device() else { return };
+    let mut input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 7));
+    let n = input.positions.len();
+    let constant = vec![1.0f32; n];
+    let holed: Vec<f32> = (0..n)
+        .map(|i| match i % 9 {
+            0 | 4 => f32::NAN,
+            2 => f32::INFINITY,
+            6 => f32::NEG_INFINITY,
+            _ => 1.0,
+        })
+        .collect();
+    let none = vec![f32::NAN; n];
+    input.fields = [("constant", constant), ("holed", holed), ("none", none)]
+        .into_iter()
+        .map(|(name, v)| (name.to_string(), slosh_ensight::FieldValues::Scalar(v)))
+        .collect();
+    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    params.fields = vec!["constant".into(), "holed".into(), "none".into()];
+    let baked = bake_step(&input, &params).unwrap();
+    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
+    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
+    let camera = slosh_testkit::framing_camera(&input.positions, 64);
+    let frame = |field: &str| {
+        let step = GpuStep::upload(&dev.gpu, &file, Some(field)).unwrap();
+        let frame = dev
+            .tracer
+            .render(&dev.gpu, &step, &camera, &TraceParams::for_step(&step, 3))
+            .unwrap();
+        (step, frame)
+    };
+    let (constant_step, constant) = frame("constant");
+    let (holed_step, holed) = frame("holed");
+    let holed_field = slosh_render::HostField::read(&file, "holed").unwrap();
+    assert_eq!(holed_field.missing, holed_step.field_missing);
+    assert!(
+        holed_field.missing * 3 > n,
+        "{} missing",
+        holed_field.missing
+    );
+    assert_eq!(constant_step.field_missing, 0);
+    assert_eq!(holed_step.field, Some(("holed".into(), 1.0, 1.0)));
+    assert!(hit_pixels(&constant) > 500);
+    let differ = (0..constant.rgba.len())
+        .filter(|&i| constant.rgba[i] != holed.rgba[i])
+        .count();
+    assert_eq!(
+        differ, 0,
+        "{differ} pixels differ from the constant field's"
+    );
+    // No finite value: magenta, lit (red and blue above green), at every hit.
+    let (_, none) = frame("none");
+    let hits: Vec<usize> = (0..none.hits.len())
+        .filter(|&i| none.hits[i].status != status::MISS)
+        .collect();
+    assert_eq!(hits.len(), hit_pixels(&constant));
+    for &i in &hits {
+        let [r, g, b, _] = none.rgba[i].to_le_bytes();
+        assert!(r > g && b > g, "pixel {i}: {r} {g} {b}");
+    }
+    // The probe, at a hit, as the shade pass colours it.
+    let probe = slosh_cache::SurfaceProbe::open(&file).unwrap();
+    let values = |name: &str| -> Vec<f32> {
+        slosh_render::HostField::read(&file, name)
+            .unwrap()
+            .bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect()
+    };
+    let hit = constant.hits[hits[hits.len() / 2]];
+    let ball = Some(hit.item as usize);
+    let read = |name: &str| {
+        probe
+            .read(hit.position, ball, 1.0, Some(&values(name)))
+            .unwrap()
+            .field
+    };
+    assert_eq!(read("holed"), Some(1.0));
+    assert_eq!(read("none"), None);
+}
+
 /// Reads a GPU buffer back as `T`s.
 fn read_buffer<T: bytemuck::Pod>(gpu: &Gpu, source: &wgpu::Buffer) -> Vec<T> {
     let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {

@@ -107,12 +107,26 @@ pub(super) fn mask_layout(
     Ok((most.div_ceil(32) as u32, rows, candidates))
 }
 
-/// Finite minimum and maximum of little-endian f32s (0, 0 when there are none).
+/// Writes [`slosh_cache::FIELD_MISSING`] over every missing value of `bytes` (little-endian
+/// f32s), which the shade pass can test for where it cannot test for NaN; how many there were.
+pub(super) fn mark_missing(bytes: &mut [u8]) -> usize {
+    let mut missing = 0;
+    for c in bytes.chunks_exact_mut(4) {
+        if slosh_cache::field_missing(f32::from_le_bytes([c[0], c[1], c[2], c[3]])) {
+            c.copy_from_slice(&slosh_cache::FIELD_MISSING.to_le_bytes());
+            missing += 1;
+        }
+    }
+    missing
+}
+
+/// Minimum and maximum of little-endian f32s, missing values left out (0, 0 when there are
+/// none).
 pub(super) fn finite_range(bytes: &[u8]) -> (f32, f32) {
     let (lo, hi) = bytes
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .filter(|v| v.is_finite())
+        .filter(|&v| !slosh_cache::field_missing(v))
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
             (lo.min(v), hi.max(v))
         });

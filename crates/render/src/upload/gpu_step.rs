@@ -135,6 +135,8 @@ pub struct GpuStep {
     pub split: bool,
     /// The shaded field's name and its finite range.
     pub field: Option<(String, f32, f32)>,
+    /// Points whose value of the shaded field is missing (`HostField::missing`).
+    pub field_missing: usize,
     pub upload: UploadStats,
     /// The trace and shade passes' group 0, made for `binding_limit`.
     bind_group: wgpu::BindGroup,
@@ -350,6 +352,7 @@ impl GpuStep {
             info,
             split,
             field: host.field.as_ref().map(|f| (f.name.clone(), f.min, f.max)),
+            field_missing: host.field.as_ref().map_or(0, |f| f.missing),
             upload: stats,
             bind_group,
             binding_limit,
@@ -400,6 +403,7 @@ impl GpuStep {
         };
         self.buffers.field = buffer;
         self.field = field.map(|f| (f.name.clone(), f.min, f.max));
+        self.field_missing = field.map_or(0, |f| f.missing);
         self.bind_group = step_group(gpu, &self.buffers, self.binding_limit);
         Ok(())
     }

@@ -7,7 +7,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use slosh_cache::{BvhGrid, CacheFile, Encoding, SectionEntry, Transform, names};
 
-use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mask_layout};
+use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mark_missing, mask_layout};
 use super::{
     EMPTY_BINDING, HOST_READS, SECTIONS, WIDE_NODE_BYTES, field_buffer_size, invalid, slot_of,
 };
@@ -81,10 +81,13 @@ impl StepInfo {
 #[derive(Debug, Clone, PartialEq)]
 pub struct HostField {
     pub name: String,
-    /// Little-endian f32s, one per point.
+    /// Little-endian f32s, one per point; [`slosh_cache::FIELD_MISSING`] where the cache's
+    /// value is missing (not finite).
     pub bytes: Vec<u8>,
     pub min: f32,
     pub max: f32,
+    /// Points whose value is missing: drawn in [`crate::MISSING_FIELD_COLOUR`].
+    pub missing: usize,
 }
 
 impl HostField {
@@ -122,12 +125,14 @@ impl HostField {
         }
         let mut bytes = vec![0u8; entry.raw as usize];
         file.decode_into(entry, &mut bytes, &mut Vec::new())?;
+        let missing = mark_missing(&mut bytes);
         let (min, max) = finite_range(&bytes);
         Ok(HostField {
             name: name.to_string(),
             bytes,
             min,
             max,
+            missing,
         })
     }
 }
