@@ -689,7 +689,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub covariance: bool,
     /// Colour the surface by this baked field (GPU only). Values that are not finite are
-    /// left out of the colour; a hit with no finite value near it is drawn magenta.
+    /// left out of the colour; a hit that finds none is drawn magenta (a refined frame
+    /// weighs its ball's neighbours' values, a one-iteration frame reads the ball's own).
     #[arg(long)]
     pub field: Option<String>,
     /// The field's colour map.

@@ -286,7 +286,7 @@ pub fn run(config: &RenderConfig) -> Result<()> {
                 .filter(|_| gpu_step.field_missing > 0)
             {
                 say!(
-                    "step {step}: {} of {} points have no finite value of '{name}'; drawn magenta where no neighbour has one",
+                    "step {step}: {} of {} points have no finite value of '{name}'; a hit that finds none (a one-iteration frame reads its ball's own) is drawn magenta",
                     gpu_step.field_missing,
                     h.points
                 );
