@@ -86,13 +86,14 @@ fn orient_votes(@builtin(global_invocation_id) gid: vec3<u32>) {
                 reach2 = EDGE_REACH * EDGE_REACH * dd;
             }
         }
-        let other = normals[j];
-        if other.w == 0.0 {
-            continue;
-        }
-        // Points that coincide in f32 may not in f64.
+        // Points that coincide in f32 may not in f64, where the host counts a place that
+        // this pass does not (with a normal or without).
         if dd <= 0.0 {
             word |= VOTE_RECAST;
+            continue;
+        }
+        let other = normals[j];
+        if other.w == 0.0 {
             continue;
         }
         if places > EDGE_RANK {
