@@ -625,8 +625,10 @@ fn probe_label(probe: &Probe) -> String {
     let r = &probe.reading;
     let [x, y, z] = r.world;
     let mut text = format!("x {x:.5}  y {y:.5}  z {z:.5}");
-    if let (Some(name), Some(value)) = (&probe.field, r.field) {
-        text += &format!("\n{name} {value:.5e}");
+    match (&probe.field, r.field) {
+        (Some(name), Some(value)) => text += &format!("\n{name} {value:.5e}"),
+        (Some(name), None) => text += &format!("\n{name}: no finite value here"),
+        _ => {}
     }
     text += &match &probe.input {
         Ok((input, _)) => format!("\nparticle {input} at {:.3e}", r.nearest_distance),
@@ -647,6 +649,7 @@ fn probe_line(probe: &Probe, pixel: (u32, u32)) -> String {
     let [x, y, z] = r.world;
     let field = match (&probe.field, r.field) {
         (Some(name), Some(value)) => format!(" {name} {value:e}"),
+        (Some(name), None) => format!(" {name} none"),
         _ => String::new(),
     };
     let input = match &probe.input {

@@ -236,5 +236,18 @@ impl ViewSettings {
                 });
             });
         }
+        // Values that are not finite: left out of the colour; a hit that finds none is
+        // drawn in the missing colour.
+        if let Some((_, step)) = engine.shown_step().filter(|(_, s)| s.field_missing > 0) {
+            let [r, g, b] = slosh_render::MISSING_FIELD_COLOUR;
+            let colour: egui::Color32 = egui::Rgba::from_rgb(r, g, b).into();
+            ui.colored_label(
+                colour,
+                format!(
+                    "{} of {} points have no finite value",
+                    step.field_missing, step.info.point_count
+                ),
+            );
+        }
     }
 }
