@@ -41,7 +41,7 @@ pub struct BakeParams {
 }
 
 /// Bumped whenever the bake's output for the same input and parameters changes.
-pub const BAKE_REVISION: u32 = 22;
+pub const BAKE_REVISION: u32 = 23;
 
 /// The surface's default offset, in particle radii, where the surface is estimated from
 /// particles that fill the fluid's volume (SPH): ¾ of a radius outside the outer centres,

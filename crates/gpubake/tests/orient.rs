@@ -98,10 +98,10 @@ fn cases() -> Vec<(&'static str, Vec<[f64; 3]>, Normals)> {
         far_normals.push(Some(unit([1.0, random.next(), (k % 3) as f64 - 1.0])));
     }
     out.push(("sphere and far stragglers", far_points, far_normals));
-    // Droplets of 8 particles on unit spheres 5 apart: a point's edges reach twice its 6th
-    // nearest place, short of the next droplets' particles, whose normals face it; with
+    // Droplets of 8 particles on unit spheres 5 apart: a point's edges reach 1.75 times its
+    // 6th nearest place, short of the next droplets' particles, whose normals face it; with
     // those, the votes reversed 584 of the 2400 normals (as a shader that left the reach out
-    // cast them), without them 16.
+    // cast them), without them none.
     let (mut drop_points, mut drop_normals) = (Vec::new(), Vec::new());
     for d in 0..300 {
         let centre = [

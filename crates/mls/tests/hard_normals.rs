@@ -313,7 +313,7 @@ fn a_reversed_patch_is_turned_back_whole() {
 /// iterations) turn their normal away from the true surface's. A droplet of a few particles
 /// has no 16 nearest of its own; voting with others across the gap to the next droplet,
 /// whose normals face it, reversed 164 of these 1663 normals (9.9 %), 169 in one patch, and
-/// 109 of 3408 hits (3.2 %) faced away. Now 34 (where droplets touch) and 66 of 3399.
+/// 109 of 3408 hits (3.2 %) faced away. Now 35 (where droplets touch) and 67 of 3405.
 #[test]
 fn a_clean_droplets_scene_keeps_its_normals() {
     let mut s = SceneSpec::new(SceneKind::Droplets, 20_000, 1);
