@@ -108,29 +108,21 @@ pub(super) fn mask_layout(
 }
 
 /// Writes [`slosh_cache::FIELD_MISSING`] over every missing value of `bytes` (little-endian
-/// f32s), which the shade pass can test for where it cannot test for NaN; how many there were.
-pub(super) fn mark_missing(bytes: &mut [u8]) -> usize {
-    let mut missing = 0;
+/// f32s), which the shade pass can test for where it cannot test for NaN, in the same pass
+/// that finds the other values' range: how many were missing, and the others' minimum and
+/// maximum (0, 0 when there are none).
+pub(super) fn mark_missing(bytes: &mut [u8]) -> (usize, (f32, f32)) {
+    let (mut missing, mut lo, mut hi) = (0, f32::INFINITY, f32::NEG_INFINITY);
     for c in bytes.chunks_exact_mut(4) {
-        if slosh_cache::field_missing(f32::from_le_bytes([c[0], c[1], c[2], c[3]])) {
+        let v = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        if slosh_cache::field_missing(v) {
             c.copy_from_slice(&slosh_cache::FIELD_MISSING.to_le_bytes());
             missing += 1;
+        } else {
+            (lo, hi) = (lo.min(v), hi.max(v));
         }
     }
-    missing
-}
-
-/// Minimum and maximum of little-endian f32s, missing values left out (0, 0 when there are
-/// none).
-pub(super) fn finite_range(bytes: &[u8]) -> (f32, f32) {
-    let (lo, hi) = bytes
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .filter(|&v| !slosh_cache::field_missing(v))
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(v), hi.max(v))
-        });
-    if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
+    (missing, if lo <= hi { (lo, hi) } else { (0.0, 0.0) })
 }
 
 #[cfg(test)]

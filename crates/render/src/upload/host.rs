@@ -7,7 +7,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use slosh_cache::{BvhGrid, CacheFile, Encoding, SectionEntry, Transform, names};
 
-use super::checks::{MAX_BVH_DEPTH, check_tree, finite_range, mark_missing, mask_layout};
+use super::checks::{MAX_BVH_DEPTH, check_tree, mark_missing, mask_layout};
 use super::{
     EMPTY_BINDING, HOST_READS, SECTIONS, WIDE_NODE_BYTES, field_buffer_size, invalid, slot_of,
 };
@@ -125,8 +125,7 @@ impl HostField {
         }
         let mut bytes = vec![0u8; entry.raw as usize];
         file.decode_into(entry, &mut bytes, &mut Vec::new())?;
-        let missing = mark_missing(&mut bytes);
-        let (min, max) = finite_range(&bytes);
+        let (missing, (min, max)) = mark_missing(&mut bytes);
         Ok(HostField {
             name: name.to_string(),
             bytes,
