@@ -108,8 +108,10 @@ struct Settings {
     sphere_count: u32,
     cluster_size: u32,
     mode: u32,
-    field_min: f32,
-    field_max: f32,
+    // The shown field range's minimum and 1 / span, scaled by 2^field_exponent
+    // (field_map.rs: FieldMap).
+    field_low: f32,
+    field_inverse_span: f32,
     has_field: u32,
     // Words of neighbour mask of the largest cluster.
     mask_words: u32,
@@ -133,6 +135,11 @@ struct Settings {
     per_point_h: u32,
     // The degree every ball was fitted at, or 4 where some are degraded (layout.rs).
     ball_degree: u32,
+    // The rest of the field map: the power of two that brings the shown range within
+    // [-1, 1], and the values beyond which a field value counts as lying there.
+    field_exponent: i32,
+    field_clamp_low: f32,
+    field_clamp_high: f32,
 }
 
 // The step's arrays are read through accessors (`points_at(i)`, …) that crates/render's

@@ -10,11 +10,21 @@
 // fn colormap(which: u32, t: f32) -> vec3<f32>: generated from crates/render's colormap.rs (one source
 // for the shader and legends) and prepended to this file by shaders.rs.
 
-// The field at a hit: the MLS-weighted mean over the hit ball's neighbours (θ with the ball's
-// h), or the ball's own value where no weight reaches; missing values (FIELD_MISSING, which
-// the upload wrote over every value that is not finite) left out, FIELD_MISSING where there
-// is none but those.
-fn field_value_at(hit: Hit) -> f32 {
+// Where field value v (not missing) falls on the colour map: (v - min) / (max - min) of the
+// shown range, formed so that no finite v overflows (field_map.rs: FieldMap): clamped to
+// within FIELD_T_LIMIT spans of the range, then scaled by the power of two that brings the
+// range within [-1, 1], which changes none of its digits. An empty range maps to 0 here and
+// to the map's middle in `shade`.
+fn field_t(v: f32) -> f32 {
+    let c = clamp(v, settings.field_clamp_low, settings.field_clamp_high);
+    return (ldexp(c, settings.field_exponent) - settings.field_low) * settings.field_inverse_span;
+}
+
+// The field at a hit, as its place on the colour map: the MLS-weighted mean over the hit
+// ball's neighbours (θ with the ball's h), or the ball's own value where no weight reaches;
+// missing values (FIELD_MISSING, which the upload wrote over every value that is not finite)
+// left out, FIELD_MISSING where there is none but those.
+fn field_t_at(hit: Hit) -> f32 {
     let nb = neighbourhood(hit.item);
     let h = ball_h(hit.item) * settings.h_factor;
     let h2 = h * h;
@@ -31,10 +41,14 @@ fn field_value_at(hit: Hit) -> f32 {
             continue;
         }
         let w = weight(length_squared(points_at(j).position - hit.position), h2);
-        sum += w * v;
+        sum += w * field_t(v);
         wsum += w;
     }
-    return select(field_at(hit.item), sum / wsum, wsum > MIN_WEIGHT);
+    if wsum > MIN_WEIGHT {
+        return sum / wsum;
+    }
+    let own = field_at(hit.item);
+    return select(field_t(own), FIELD_MISSING, own >= FIELD_MISSING);
 }
 
 fn status_colour(hit: Hit) -> vec3<f32> {
@@ -86,10 +100,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         default: {
             var base = vec3<f32>(0.16, 0.42, 0.72);
             if settings.has_field != 0u && hit.item < settings.point_count {
-                let span = settings.field_max - settings.field_min;
-                let v = field_value_at(hit);
-                base = colormap(settings.colormap, select(0.5, (v - settings.field_min) / span, span > 0.0));
-                if v >= FIELD_MISSING {
+                let t = field_t_at(hit);
+                base = colormap(settings.colormap, select(0.5, t, settings.field_inverse_span > 0.0));
+                if t >= FIELD_MISSING {
                     base = MISSING_FIELD_COLOUR;
                 }
             }

@@ -137,17 +137,20 @@ impl SurfaceProbe {
         );
         let h = self.h[i] * h_factor;
         let h2 = h * h;
-        let (mut sum, mut wsum) = (0.0f32, 0.0f32);
+        // The sums in f64: f32 overflows where values lie near its limits (the mean of finite
+        // f32s is one); the weights' also in f32, as the shade pass tests them.
+        let (mut sum, mut wsum, mut wsum32) = (0.0f64, 0.0f64, 0.0f32);
         for &j in &list {
             let v = field[j as usize];
             if field_missing(v) {
                 continue;
             }
             let w = weight((self.positions[j as usize] - x).length_squared(), h2);
-            sum += w * v;
-            wsum += w;
+            sum += f64::from(w) * f64::from(v);
+            wsum += f64::from(w);
+            wsum32 += w;
         }
         // Below the fits' least summed weight the shade pass takes the ball's own value.
-        (wsum > MIN_WEIGHT as f32).then(|| sum / wsum)
+        (wsum32 > MIN_WEIGHT as f32).then(|| (sum / wsum) as f32)
     }
 }

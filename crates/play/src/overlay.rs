@@ -10,8 +10,8 @@ use slosh_render::{Colormap, Frame, GpuStep, TraceParams, cpu_shade};
 #[derive(Debug, Clone, PartialEq)]
 pub struct Legend {
     pub field: String,
-    pub min: f32,
-    pub max: f32,
+    /// The range the map spans; `None` where the field has no finite value to span.
+    pub range: Option<(f32, f32)>,
     pub colormap: Colormap,
 }
 
@@ -90,14 +90,10 @@ impl Overlay {
     pub fn for_step(time: f64, index: usize, step: &GpuStep, params: &TraceParams) -> Overlay {
         Overlay {
             time: Some((time, index)),
-            legend: step.field.as_ref().map(|(name, lo, hi)| {
-                let (min, max) = params.field_range.unwrap_or((*lo, *hi));
-                Legend {
-                    field: name.clone(),
-                    min,
-                    max,
-                    colormap: params.colormap,
-                }
+            legend: step.field.as_ref().map(|(name, _, _)| Legend {
+                field: name.clone(),
+                range: params.field_range.or(step.field_range()),
+                colormap: params.colormap,
             }),
         }
     }
@@ -156,9 +152,11 @@ pub fn draw(rgb: &mut [u8], width: u32, height: u32, overlay: &Overlay) {
             }
         }
         let labels_y = y0 + bar_h + size * 0.2;
-        let low = format!("{:.4e}", legend.min);
+        let (low, high) = match legend.range {
+            Some((min, max)) => (format!("{min:.4e}"), format!("{max:.4e}")),
+            None => ("no finite value".to_string(), String::new()),
+        };
         canvas.text(&low, x0, labels_y, size * 0.8, white);
-        let high = format!("{:.4e}", legend.max);
         let font = FontRef::try_from_slice(epaint_default_fonts::UBUNTU_LIGHT);
         let high_w = font.map_or(0.0, |f| scaled_width(&f, &high, size * 0.8));
         canvas.text(&high, x0 + bar_w - high_w, labels_y, size * 0.8, white);
@@ -180,8 +178,7 @@ mod tests {
             time: Some((0.15, 12)),
             legend: Some(Legend {
                 field: "pressure".into(),
-                min: -1.0,
-                max: 2.5,
+                range: Some((-1.0, 2.5)),
                 colormap: Colormap::CoolWarm,
             }),
         };

@@ -28,8 +28,10 @@ pub struct GpuSettings {
     pub sphere_count: u32,
     pub cluster_size: u32,
     pub mode: u32,
-    pub field_min: f32,
-    pub field_max: f32,
+    /// The shown field range's minimum and 1 / span, scaled by 2^`field_exponent`
+    /// ([`crate::FieldMap`]).
+    pub field_low: f32,
+    pub field_inverse_span: f32,
     pub has_field: u32,
     /// Words of neighbour mask of the largest cluster.
     pub mask_words: u32,
@@ -55,6 +57,12 @@ pub struct GpuSettings {
     /// The degree every ball was fitted at (0–3) where the step has no degraded fits, so the
     /// trace reads no ball's state; 4 where it has.
     pub ball_degree: u32,
+    /// The rest of [`crate::FieldMap`]: the power of two that brings the shown range within
+    /// [−1, 1], and the values beyond which a field value counts as lying there.
+    pub field_exponent: i32,
+    pub field_clamp_low: f32,
+    pub field_clamp_high: f32,
+    pub pad: u32,
 }
 
 /// The key light's direction by default, normalize(0.4, −0.3, 0.85): from the front left,

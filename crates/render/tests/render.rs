@@ -328,8 +328,8 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 sphere_count,
                 cluster_size,
                 mode,
-                field_min,
-                field_max,
+                field_low,
+                field_inverse_span,
                 has_field,
                 mask_words,
                 node_count,
@@ -341,7 +341,10 @@ fn pod_structs_mirror_the_wgsl_layouts() {
                 surface_offset,
                 h,
                 per_point_h,
-                ball_degree
+                ball_degree,
+                field_exponent,
+                field_clamp_low,
+                field_clamp_high
             ]
         );
     }
@@ -933,8 +936,10 @@ fn field_values_that_are_not_finite_are_left_out_of_the_colour() {
         differ, 0,
         "{differ} pixels differ from the constant field's"
     );
-    // No finite value: magenta, lit (red and blue above green), at every hit.
-    let (_, none) = frame("none");
+    assert_eq!(holed_step.field_range(), Some((1.0, 1.0)));
+    // No finite value: magenta, lit (red and blue above green), at every hit; no range.
+    let (none_step, none) = frame("none");
+    assert_eq!(none_step.field_range(), None);
     let hits: Vec<usize> = (0..none.hits.len())
         .filter(|&i| none.hits[i].status != status::MISS)
         .collect();
@@ -945,24 +950,115 @@ fn field_values_that_are_not_finite_are_left_out_of_the_colour() {
     }
     // The probe, at a hit, as the shade pass colours it.
     let probe = slosh_cache::SurfaceProbe::open(&file).unwrap();
-    let values = |name: &str| -> Vec<f32> {
-        slosh_render::HostField::read(&file, name)
-            .unwrap()
-            .bytes
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect()
-    };
     let hit = constant.hits[hits[hits.len() / 2]];
     let ball = Some(hit.item as usize);
     let read = |name: &str| {
         probe
-            .read(hit.position, ball, 1.0, Some(&values(name)))
+            .read(hit.position, ball, 1.0, Some(&field_values(&file, name)))
             .unwrap()
             .field
     };
     assert_eq!(read("holed"), Some(1.0));
     assert_eq!(read("none"), None);
+}
+
+/// Field values near f32's limits colour as they would scaled down by a power of two, which
+/// moves no value's place in its range: a field of values up to ±3e38 (whose span and
+/// weighted sums overflow f32) draws the same pixels, bit for bit, as the same values times
+/// 2^-100, with the step's range and with a shown range 3e28 times narrower than the values,
+/// and the host's probe reads the same mean scaled back. Before the shade pass scaled the
+/// range, most hits of the large field were drawn in the missing colour.
+#[test]
+fn field_values_near_the_limits_of_f32_colour_as_the_same_values_scaled_down() {
+    let Some(dev) = device() else { return };
+    let mut input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 7));
+    let n = input.positions.len();
+    let x_span = {
+        let xs = input.positions.iter().map(|p| p[0]);
+        let (lo, hi) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
+        (lo, hi - lo)
+    };
+    // A gradient across the sphere with every third value's sign turned, so that the
+    // weighted sums mix values near +3e38 with values near -3e38.
+    let huge: Vec<f32> = (0..n)
+        .map(|i| {
+            let s = ((input.positions[i][0] - x_span.0) / x_span.1 * 2.0 - 1.0) as f32;
+            let s = if i % 3 == 0 { -s } else { s };
+            3e38 * s
+        })
+        .collect();
+    let down = 2f32.powi(-100);
+    let scaled: Vec<f32> = huge.iter().map(|v| v * down).collect();
+    assert!(huge.iter().zip(&scaled).all(|(h, s)| s / down == *h));
+    input.fields = [("huge", huge), ("scaled", scaled)]
+        .into_iter()
+        .map(|(name, v)| (name.to_string(), slosh_ensight::FieldValues::Scalar(v)))
+        .collect();
+    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    params.fields = vec!["huge".into(), "scaled".into()];
+    let baked = bake_step(&input, &params).unwrap();
+    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
+    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
+    let camera = slosh_testkit::framing_camera(&input.positions, 64);
+    let frame = |field: &str, range: Option<(f32, f32)>| {
+        let step = GpuStep::upload(&dev.gpu, &file, Some(field)).unwrap();
+        let params = TraceParams {
+            field_range: range,
+            ..TraceParams::for_step(&step, 3)
+        };
+        dev.tracer
+            .render(&dev.gpu, &step, &camera, &params)
+            .unwrap()
+    };
+    for (range, narrow) in [
+        (None, None),
+        (Some((-1e10, 1e10)), Some((-1e10 * down, 1e10 * down))),
+    ] {
+        let (huge, scaled) = (frame("huge", range), frame("scaled", narrow));
+        assert!(hit_pixels(&huge) > 500);
+        let differ = (0..huge.rgba.len())
+            .filter(|&i| huge.rgba[i] != scaled.rgba[i])
+            .count();
+        assert_eq!(
+            differ, 0,
+            "shown range {range:?}: {differ} pixels differ from the field scaled down"
+        );
+    }
+    // The probe, at a hit: the same mean, scaled back.
+    let frame = frame("huge", None);
+    let hit = frame.hits[(0..frame.hits.len())
+        .find(|&i| frame.hits[i].status != status::MISS)
+        .unwrap()];
+    let probe = slosh_cache::SurfaceProbe::open(&file).unwrap();
+    let read = |name: &str| {
+        probe
+            .read(
+                hit.position,
+                Some(hit.item as usize),
+                1.0,
+                Some(&field_values(&file, name)),
+            )
+            .unwrap()
+            .field
+            .unwrap()
+    };
+    let (huge, scaled) = (read("huge"), read("scaled"));
+    assert!(huge.is_finite(), "the probe read {huge}");
+    assert!(
+        (f64::from(huge) * f64::from(down) - f64::from(scaled)).abs()
+            <= 1e-5 * f64::from(scaled.abs()).max(1e-30 * f64::from(down)),
+        "the probe read {huge:e} and, scaled down, {scaled:e}"
+    );
+}
+
+/// Field `name` of `file` as the GPU's buffer holds it (missing values marked).
+fn field_values(file: &CacheFile, name: &str) -> Vec<f32> {
+    slosh_render::HostField::read(file, name)
+        .unwrap()
+        .bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect()
 }
 
 /// Reads a GPU buffer back as `T`s.

@@ -100,12 +100,13 @@ impl ViewSettings {
 
     /// Widens the series range by the shown step's field range.
     pub fn track_field_range(&mut self, engine: &Engine) {
+        // A step whose every value is missing leaves it as it was.
         if let Some((_, step)) = engine.shown_step()
-            && let Some((_, lo, hi)) = &step.field
+            && let Some((lo, hi)) = step.field_range()
         {
             self.series_range = Some(match self.series_range {
-                Some((a, b)) => (a.min(*lo), b.max(*hi)),
-                None => (*lo, *hi),
+                Some((a, b)) => (a.min(lo), b.max(hi)),
+                None => (lo, hi),
             });
         }
     }
@@ -224,9 +225,8 @@ impl ViewSettings {
         let range = match self.range_mode {
             RangeMode::Fixed(lo, hi) => Some((lo, hi)),
             RangeMode::Series => self.series_range,
-            RangeMode::Step => engine
-                .shown_step()
-                .and_then(|(_, s)| s.field.as_ref().map(|f| (f.1, f.2))),
+            // A step whose every value is missing has none (the line below says so).
+            RangeMode::Step => engine.shown_step().and_then(|(_, s)| s.field_range()),
         };
         if let Some((lo, hi)) = range {
             ui.horizontal(|ui| {

@@ -4,6 +4,7 @@
 use slosh_mls::Camera;
 
 use crate::colormap::Colormap;
+use crate::field_map::FieldMap;
 use crate::layout::{DEFAULT_KEY_LIGHT, GpuSettings};
 use crate::upload::GpuStep;
 
@@ -87,8 +88,9 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
     let eye = info.transform.to_local(camera.eye);
     let (field_min, field_max) = params
         .field_range
-        .or(step.field.as_ref().map(|f| (f.1, f.2)))
+        .or(step.field_range())
         .unwrap_or((0.0, 0.0));
+    let field_map = FieldMap::new(field_min, field_max);
     GpuSettings {
         eye: to_f32(eye),
         width: camera.width,
@@ -106,8 +108,8 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         sphere_count: info.sphere_count,
         cluster_size: info.cluster_size,
         mode: params.mode as u32,
-        field_min,
-        field_max,
+        field_low: field_map.low,
+        field_inverse_span: field_map.inverse_span,
         has_field: u32::from(step.field.is_some()),
         mask_words: info.mask_words,
         node_count: info.node_count,
@@ -120,6 +122,10 @@ pub fn settings(step: &GpuStep, camera: &Camera, params: &TraceParams) -> GpuSet
         h: info.h,
         per_point_h: u32::from(info.per_point_h),
         ball_degree: info.ball_degree.map_or(4, u32::from),
+        field_exponent: field_map.exponent,
+        field_clamp_low: field_map.clamp.0,
+        field_clamp_high: field_map.clamp.1,
+        pad: 0,
     }
 }
 

@@ -226,6 +226,17 @@ fn next_id() -> u64 {
 }
 
 impl GpuStep {
+    /// The shaded field's finite range; `None` where no field is shaded or none of its
+    /// values is finite (whose range reads (0, 0)).
+    pub fn field_range(&self) -> Option<(f32, f32)> {
+        let none_finite =
+            self.field_missing > 0 && self.field_missing as u64 >= u64::from(self.info.point_count);
+        self.field
+            .as_ref()
+            .filter(|_| !none_finite)
+            .map(|f| (f.1, f.2))
+    }
+
     /// Opens, uploads and waits: both halves in one call, `file`'s GPU sections and `field`'s
     /// values, if named.
     pub fn upload(gpu: &Gpu, file: &CacheFile, field: Option<&str>) -> Result<GpuStep> {
