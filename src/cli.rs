@@ -65,7 +65,8 @@ pub struct PlayArgs {
     /// GPU memory for resident steps, in GiB (default: half the adapter's memory).
     #[arg(long)]
     pub budget: Option<f64>,
-    /// Field to colour by.
+    /// Field to colour by: a scalar field, or a vector field's magnitude (its name) or
+    /// component (`velocity.x`, `.y`, `.z`).
     #[arg(long)]
     pub field: Option<String>,
     /// Colour range: `series` (widest seen over the steps shown) or `step` (each step's own,
@@ -475,7 +476,8 @@ pub struct SelectSettings {
     /// `normal` or `normals` if present, else estimate with --surface estimate, else pca.
     #[arg(long)]
     pub normals: Option<String>,
-    /// Variables to store per point, comma separated.
+    /// Variables to store per point, comma separated (scalars, and vectors, which the
+    /// renderers colour by magnitude or component).
     #[arg(long, value_delimiter = ',')]
     pub fields: Vec<String>,
     /// zstd level (-7 to 22; negative levels are zstd's fast ones) or `none`. The default,
@@ -688,7 +690,8 @@ pub struct RenderArgs {
     /// Support normals from the weighted covariance instead of the data normals.
     #[arg(long)]
     pub covariance: bool,
-    /// Colour the surface by this baked field (GPU only). Values that are not finite are
+    /// Colour the surface by this baked field (GPU only): a scalar field, or a vector
+    /// field's magnitude (its name) or component (`velocity.x`, `.y`, `.z`). Values that are not finite are
     /// left out of the colour; a hit that finds none is drawn magenta (a refined frame
     /// weighs its ball's neighbours' values, a one-iteration frame reads the ball's own).
     #[arg(long)]

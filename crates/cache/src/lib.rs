@@ -9,6 +9,7 @@ mod bvh_grid;
 pub mod candidates;
 mod codec;
 mod error;
+mod field_view;
 mod format;
 #[doc(hidden)]
 pub mod fuzzing;
@@ -33,6 +34,7 @@ pub use codec::{
     DecodeError, decode_into as decode_bytes, encode as encode_bytes, shuffle, shuffle4,
 };
 pub use error::{Error, Result};
+pub use field_view::{FieldView, VectorPart, field_views, find_field_view, vector_values};
 pub use format::{
     ALIGN, CHUNK_ALIGN, CHUNK_RAW, CHUNK_RAW_MIN, CHUNKS_PER_SECTION, ChunkEntry, Encoding,
     FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings, PREAMBLE_LEN, SectionEntry, SeriesRecord,

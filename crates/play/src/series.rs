@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
-use slosh_cache::{CacheFile, Manifest, SeriesKey, names, parse_step_file_name, step_file_name};
+use slosh_cache::{CacheFile, Manifest, SeriesKey, parse_step_file_name, step_file_name};
 
 use crate::error::{Error, Result};
 
@@ -162,17 +162,11 @@ impl Series {
             .map(|f| f.header().bounds)
     }
 
-    /// The scalar fields baked into the series (its first step's).
+    /// The fields the series can be coloured by (its first step's): each scalar field, and
+    /// each vector field's magnitude and components (`slosh_cache::field_views`).
     pub fn fields(&self) -> Vec<String> {
         self.first_file()
-            .map(|f| {
-                f.header()
-                    .sections
-                    .iter()
-                    .filter_map(|s| s.name.strip_prefix(names::FIELD_PREFIX))
-                    .map(str::to_string)
-                    .collect()
-            })
+            .map(|f| slosh_cache::field_views(f.header()))
             .unwrap_or_default()
     }
 

@@ -722,11 +722,7 @@ fn frames_recorded_into_a_callers_encoder_match_the_render_path() {
         ),
         ("x".into(), slosh_ensight::FieldValues::Scalar(height)),
     ];
-    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
-    params.fields = vec!["pressure".into(), "x".into()];
-    let baked = bake_step(&input, &params).unwrap();
-    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
-    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
+    let file = baked_with_fields(&input);
     let mut camera = slosh_testkit::framing_camera(&input.positions, 64);
     camera.height = 48;
     for mode in [ShadeMode::Shade, ShadeMode::Water] {
@@ -903,20 +899,9 @@ fn field_values_that_are_not_finite_are_left_out_of_the_colour() {
         .into_iter()
         .map(|(name, v)| (name.to_string(), slosh_ensight::FieldValues::Scalar(v)))
         .collect();
-    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
-    params.fields = vec!["constant".into(), "holed".into(), "none".into()];
-    let baked = bake_step(&input, &params).unwrap();
-    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
-    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
+    let file = baked_with_fields(&input);
     let camera = slosh_testkit::framing_camera(&input.positions, 64);
-    let frame = |field: &str| {
-        let step = GpuStep::upload(&dev.gpu, &file, Some(field)).unwrap();
-        let frame = dev
-            .tracer
-            .render(&dev.gpu, &step, &camera, &TraceParams::for_step(&step, 3))
-            .unwrap();
-        (step, frame)
-    };
+    let frame = |field: &str| field_frame(dev, &file, &camera, field, None);
     let (constant_step, constant) = frame("constant");
     let (holed_step, holed) = frame("holed");
     let holed_field = slosh_render::HostField::read(&file, "holed").unwrap();
@@ -994,22 +979,10 @@ fn field_values_near_the_limits_of_f32_colour_as_the_same_values_scaled_down() {
         .into_iter()
         .map(|(name, v)| (name.to_string(), slosh_ensight::FieldValues::Scalar(v)))
         .collect();
-    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
-    params.fields = vec!["huge".into(), "scaled".into()];
-    let baked = bake_step(&input, &params).unwrap();
-    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
-    let file = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap();
+    let file = baked_with_fields(&input);
     let camera = slosh_testkit::framing_camera(&input.positions, 64);
-    let frame = |field: &str, range: Option<(f32, f32)>| {
-        let step = GpuStep::upload(&dev.gpu, &file, Some(field)).unwrap();
-        let params = TraceParams {
-            field_range: range,
-            ..TraceParams::for_step(&step, 3)
-        };
-        dev.tracer
-            .render(&dev.gpu, &step, &camera, &params)
-            .unwrap()
-    };
+    let frame =
+        |field: &str, range: Option<(f32, f32)>| field_frame(dev, &file, &camera, field, range).1;
     for (range, narrow) in [
         (None, None),
         (Some((-1e10, 1e10)), Some((-1e10 * down, 1e10 * down))),
@@ -1049,6 +1022,98 @@ fn field_values_near_the_limits_of_f32_colour_as_the_same_values_scaled_down() {
             <= 1e-5 * f64::from(scaled.abs()).max(1e-30 * f64::from(down)),
         "the probe read {huge:e} and, scaled down, {scaled:e}"
     );
+}
+
+/// A vector field colours by its magnitude (by its own name) or a component (`v.y`): the
+/// values, the frames and the range are those of scalar fields baked with the magnitudes
+/// (in f64) and the component; a vector with a part that is not finite has no magnitude
+/// (missing), and a name the cache cannot view is refused with the views it can.
+#[test]
+fn a_vector_field_colours_by_its_magnitude_or_a_component() {
+    let Some(dev) = device() else { return };
+    let mut input = input_of(&SceneSpec::new(SceneKind::Sphere, 3000, 7));
+    let n = input.positions.len();
+    let vectors: Vec<[f32; 3]> = (0..n)
+        .map(|i| {
+            let p = input.positions[i];
+            let v = [p[0] as f32, 2.0 * p[1] as f32, -0.5 * p[2] as f32 + 0.3];
+            if i == 17 { [v[0], f32::NAN, v[2]] } else { v }
+        })
+        .collect();
+    let magnitude: Vec<f32> = vectors
+        .iter()
+        .map(|v| (v.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt()) as f32)
+        .collect();
+    let y: Vec<f32> = vectors.iter().map(|v| v[1]).collect();
+    input.fields = vec![
+        ("v".to_string(), slosh_ensight::FieldValues::Vector(vectors)),
+        (
+            "m".to_string(),
+            slosh_ensight::FieldValues::Scalar(magnitude),
+        ),
+        ("vy".to_string(), slosh_ensight::FieldValues::Scalar(y)),
+    ];
+    let file = baked_with_fields(&input);
+    assert_eq!(
+        slosh_cache::field_views(file.header()),
+        ["v", "v.x", "v.y", "v.z", "m", "vy"]
+    );
+    let camera = slosh_testkit::framing_camera(&input.positions, 64);
+    let frame = |field: &str| {
+        let (step, frame) = field_frame(dev, &file, &camera, field, None);
+        (step.field.clone(), step.field_missing, frame)
+    };
+    for (view, scalar) in [("v", "m"), ("v.y", "vy")] {
+        assert_eq!(
+            field_values(&file, view),
+            field_values(&file, scalar),
+            "{view} against {scalar}"
+        );
+        let (field, missing, shown) = frame(view);
+        let (scalar_field, scalar_missing, scalar_shown) = frame(scalar);
+        assert_eq!(missing, 1, "{view}");
+        assert_eq!(missing, scalar_missing);
+        let range = |f: Option<(String, f32, f32)>| f.map(|(_, lo, hi)| (lo, hi));
+        assert_eq!(range(field), range(scalar_field));
+        assert!(hit_pixels(&shown) > 500);
+        assert!(shown.rgba == scalar_shown.rgba, "{view}: the frames differ");
+    }
+    for wrong in ["v.w", "m.x", "w"] {
+        let refused = slosh_render::HostField::read(&file, wrong)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            refused.contains("baked fields: v, v.x, v.y, v.z, m, vy"),
+            "{wrong}: {refused}"
+        );
+    }
+}
+
+/// `input`'s step baked with every field it holds, as a cache in memory.
+fn baked_with_fields(input: &StepInput) -> CacheFile {
+    let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
+    params.fields = input.fields.iter().map(|(name, _)| name.clone()).collect();
+    let baked = bake_step(input, &params).unwrap();
+    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
+    CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap()
+}
+
+/// `file`'s step uploaded with field `field` and drawn refined (3 iterations), its colours
+/// spanning `range` (the step's own where `None`).
+fn field_frame(
+    dev: &Device,
+    file: &CacheFile,
+    camera: &Camera,
+    field: &str,
+    range: Option<(f32, f32)>,
+) -> (GpuStep, Frame) {
+    let step = GpuStep::upload(&dev.gpu, file, Some(field)).unwrap();
+    let params = TraceParams {
+        field_range: range,
+        ..TraceParams::for_step(&step, 3)
+    };
+    let frame = dev.tracer.render(&dev.gpu, &step, camera, &params).unwrap();
+    (step, frame)
 }
 
 /// Field `name` of `file` as the GPU's buffer holds it (missing values marked).

@@ -91,16 +91,13 @@ pub struct HostField {
 }
 
 impl HostField {
-    /// Decodes field `name` of `file`; an error listing the baked fields where it has none.
+    /// Decodes field view `name` of `file` (a scalar field, or a vector field's magnitude or
+    /// component: `slosh_cache::find_field_view`); an error listing the views where it has
+    /// none.
     pub fn read(file: &CacheFile, name: &str) -> Result<HostField> {
-        let section = format!("{}{name}", names::FIELD_PREFIX);
-        let Some(entry) = file.section(&section) else {
-            let available: Vec<&str> = file
-                .header()
-                .sections
-                .iter()
-                .filter_map(|s| s.name.strip_prefix(names::FIELD_PREFIX))
-                .collect();
+        let header = file.header();
+        let Some(view) = slosh_cache::find_field_view(header, name) else {
+            let available = slosh_cache::field_views(header);
             return Err(invalid(
                 file,
                 format!(
@@ -113,18 +110,28 @@ impl HostField {
                 ),
             ));
         };
-        let points = file.header().points;
-        if entry.raw != points * 4 {
+        let entry = view.section;
+        let points = header.points;
+        let width = if view.part.is_some() { 16 } else { 4 };
+        if entry.raw != points * width {
             return Err(invalid(
                 file,
                 format!(
-                    "field '{name}' holds {} bytes for {points} points (4 bytes each expected)",
+                    "field '{name}' holds {} bytes for {points} points ({width} bytes each expected)",
                     entry.raw
                 ),
             ));
         }
-        let mut bytes = vec![0u8; entry.raw as usize];
-        file.decode_into(entry, &mut bytes, &mut Vec::new())?;
+        let mut decoded = vec![0u8; entry.raw as usize];
+        file.decode_into(entry, &mut decoded, &mut Vec::new())?;
+        let mut bytes = match view.part {
+            None => decoded,
+            Some(part) => {
+                let mut values = Vec::new();
+                slosh_cache::vector_values(&decoded, part, &mut values);
+                values
+            }
+        };
         let (missing, (min, max)) = mark_missing(&mut bytes);
         Ok(HostField {
             name: name.to_string(),

@@ -1,0 +1,131 @@
+//! A baked field as one value per point, which a colour map and a probe take: a scalar
+//! field's own values; a vector field's magnitude (by its own name, `velocity`) or one of its
+//! components (`velocity.x`, `.y`, `.z`), as ParaView offers them.
+
+use crate::format::{Header, SectionEntry};
+use crate::layout::{Element, FIELD_MISSING};
+use crate::names::FIELD_PREFIX;
+
+/// Which value of a point's vector a view takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VectorPart {
+    Magnitude,
+    Component(usize),
+}
+
+/// Suffixes of the component views, in order.
+const COMPONENTS: [&str; 3] = ["x", "y", "z"];
+
+/// A field view: the section it reads, and for a vector field, which part.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldView<'h> {
+    pub section: &'h SectionEntry,
+    /// `None` for a scalar field.
+    pub part: Option<VectorPart>,
+}
+
+fn element(section: &SectionEntry) -> Option<Element> {
+    Element::from_name(&section.element)
+}
+
+/// The views a step's baked fields offer, by name: each scalar field, and each vector field's
+/// magnitude and components.
+pub fn field_views(header: &Header) -> Vec<String> {
+    let mut views = Vec::new();
+    for section in &header.sections {
+        let Some(name) = section.name.strip_prefix(FIELD_PREFIX) else {
+            continue;
+        };
+        views.push(name.to_string());
+        if element(section) == Some(Element::Vec4) {
+            views.extend(COMPONENTS.iter().map(|c| format!("{name}.{c}")));
+        }
+    }
+    views
+}
+
+/// The view named `name`: a field of that name (a scalar's values, a vector's magnitude),
+/// else a component of the vector field `name` ends it with (`velocity.x`).
+pub fn find_field_view<'h>(header: &'h Header, name: &str) -> Option<FieldView<'h>> {
+    let field = |name: &str| {
+        let section_name = format!("{FIELD_PREFIX}{name}");
+        header.sections.iter().find(|s| s.name == section_name)
+    };
+    if let Some(section) = field(name) {
+        let part = (element(section) == Some(Element::Vec4)).then_some(VectorPart::Magnitude);
+        return Some(FieldView { section, part });
+    }
+    let (base, suffix) = name.rsplit_once('.')?;
+    let axis = COMPONENTS.iter().position(|c| *c == suffix)?;
+    let section = field(base).filter(|s| element(s) == Some(Element::Vec4))?;
+    Some(FieldView {
+        section,
+        part: Some(VectorPart::Component(axis)),
+    })
+}
+
+/// One value per point from a vector field's decoded bytes (little-endian `vec4<f32>`s):
+/// its magnitude or a component, little-endian f32s appended to `out`. A magnitude is
+/// measured in f64, and one beyond f32's range is the largest value below
+/// [`FIELD_MISSING`]; a vector with a part that is not finite has no magnitude (NaN, which
+/// the caller marks missing).
+pub fn vector_values(vectors: &[u8], part: VectorPart, out: &mut Vec<u8>) {
+    out.reserve(vectors.len() / 4);
+    for v in vectors.chunks_exact(16) {
+        let c = |k: usize| f32::from_le_bytes([v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]]);
+        let value = match part {
+            VectorPart::Component(k) => c(k),
+            VectorPart::Magnitude => {
+                let m = (0..3).map(|k| f64::from(c(k)).powi(2)).sum::<f64>().sqrt();
+                if m.is_finite() {
+                    (m as f32).min(FIELD_MISSING.next_down())
+                } else {
+                    f32::NAN
+                }
+            }
+        };
+        out.extend_from_slice(&value.to_le_bytes());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn vec4s(vs: &[[f32; 4]]) -> Vec<u8> {
+        vs.iter().flatten().flat_map(|c| c.to_le_bytes()).collect()
+    }
+
+    fn floats(bytes: &[u8]) -> Vec<f32> {
+        bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect()
+    }
+
+    #[test]
+    fn vectors_give_their_magnitude_and_components() {
+        let bytes = vec4s(&[
+            [3.0, 4.0, 12.0, 0.0],
+            [-1.0, 0.0, 0.0, 7.0],
+            [3e38, 3e38, 0.0, 0.0],
+            [1.0, f32::NAN, 0.0, 0.0],
+            [f32::INFINITY, 0.0, 0.0, 0.0],
+        ]);
+        let values = |part| {
+            let mut out = Vec::new();
+            vector_values(&bytes, part, &mut out);
+            floats(&out)
+        };
+        let m = values(VectorPart::Magnitude);
+        assert_eq!(&m[..2], &[13.0, 1.0]);
+        // Beyond f32: the largest value that is not the missing mark.
+        assert_eq!(m[2], FIELD_MISSING.next_down());
+        assert!(m[3].is_nan() && m[4].is_nan());
+        assert_eq!(values(VectorPart::Component(0))[..3], [3.0, -1.0, 3e38]);
+        let y = values(VectorPart::Component(1));
+        assert_eq!((y[0], y[1]), (4.0, 0.0));
+        assert!(y[3].is_nan());
+        assert_eq!(values(VectorPart::Component(2))[0], 12.0);
+    }
+}
