@@ -69,9 +69,9 @@ pub struct PlayArgs {
     /// component (`velocity.x`, `.y`, `.z`).
     #[arg(long)]
     pub field: Option<String>,
-    /// Colour range: `series` (widest seen over the steps shown) or `step` (each step's own,
-    /// as `slosh render` does).
-    #[arg(long, default_value = "series")]
+    /// Colour range: `series` (widest seen over the steps shown), `step` (each step's own)
+    /// or `LO,HI` (fixed).
+    #[arg(long, default_value = "series", allow_hyphen_values = true)]
     pub field_range: String,
     /// The field's colour map (also in the Colour panel).
     #[arg(long, value_enum, default_value_t = ColormapArg::Viridis)]
@@ -696,6 +696,10 @@ pub struct RenderArgs {
     /// weighs its ball's neighbours' values, a one-iteration frame reads the ball's own).
     #[arg(long)]
     pub field: Option<String>,
+    /// The field's colour range: `series` (the widest over the steps drawn, so that a colour
+    /// means one value through a movie), `step` (each step's own) or `LO,HI` (fixed).
+    #[arg(long, default_value = "series", allow_hyphen_values = true)]
+    pub field_range: String,
     /// The field's colour map.
     #[arg(long, value_enum, default_value_t = ColormapArg::Viridis)]
     pub colormap: ColormapArg,

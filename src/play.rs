@@ -184,6 +184,7 @@ fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
         h_scale: None,
         covariance: false,
         field: (!cpu).then(|| "pressure".to_string()),
+        field_range: slosh_play::RangeMode::Series,
         colormap: slosh_render::Colormap::Viridis,
         labels: false,
         adapter: None,

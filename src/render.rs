@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use slosh_cache::{CacheFile, LoadedStep, step_file_name};
 use slosh_mls::{Camera, NormalsMode, Params};
+use slosh_play::RangeMode;
 use slosh_play::export::{check_belongs, step_pattern};
 use slosh_play::overlay::Overlay;
 use slosh_render::{TraceParams, Tracer, cpu_shade};
@@ -81,6 +82,32 @@ pub fn with_unbaked(rendered: Result<()>, unbaked: &[usize], asked: usize) -> Re
         Ok(()) => bail!("{did_not_bake}; the others were rendered"),
         Err(e) => Err(e.context(did_not_bake)),
     }
+}
+
+/// The widest range of `field`'s finite values over the steps `config` draws, so that a
+/// colour means one value through a sequence: a step that cannot be read, or has no such
+/// field or no finite value of it, adds nothing (the frame loop reports the first two).
+fn series_field_range(config: &RenderConfig, field: &str) -> Option<(f32, f32)> {
+    let ranges: Vec<(f32, f32)> = config
+        .steps
+        .iter()
+        .filter_map(|&step| {
+            let file = CacheFile::open(&step_path(&config.path, step)).ok()?;
+            let values = slosh_render::HostField::read(&file, field).ok()?;
+            let points = file.header().points;
+            ((values.missing as u64) < points).then_some((values.min, values.max))
+        })
+        .collect();
+    let range = ranges
+        .into_iter()
+        .reduce(|(a, b), (lo, hi)| (a.min(lo), b.max(hi)));
+    if let Some((lo, hi)) = range {
+        say!(
+            "colours of '{field}' span {lo:e} to {hi:e}, its range over the {} steps",
+            config.steps.len()
+        );
+    }
+    range
 }
 
 fn step_path(path: &Path, step: usize) -> PathBuf {
@@ -210,6 +237,13 @@ pub fn run(config: &RenderConfig) -> Result<()> {
     }
     let gpu = slosh_render::Gpu::new(config.adapter.as_deref())?;
     let tracer = Tracer::new(&gpu)?;
+    let field_range = match (config.field.as_deref(), config.field_range) {
+        (_, RangeMode::Fixed(lo, hi)) => Some((lo, hi)),
+        (Some(field), RangeMode::Series) if config.steps.len() > 1 => {
+            series_field_range(config, field)
+        }
+        _ => None,
+    };
     if config.sequence {
         say!(
             "rendering {} steps on {}",
@@ -232,7 +266,7 @@ pub fn run(config: &RenderConfig) -> Result<()> {
                 covariance: config.covariance || h.mls.normals == "covariance",
                 epsilon: 1e-4,
                 mode: config.mode,
-                field_range: None,
+                field_range,
                 colormap: config.colormap,
                 key_light: slosh_render::DEFAULT_KEY_LIGHT,
             };

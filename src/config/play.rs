@@ -92,11 +92,8 @@ pub fn play_options(args: &PlayArgs) -> Result<PlayOptions> {
         window: window(&args.window)?,
         output: args.output.clone(),
         log_frames: args.log_frames,
-        step_range: match args.field_range.as_str() {
-            "series" => false,
-            "step" => true,
-            other => bail!("--field-range {other}: expected series or step"),
-        },
+        range_mode: slosh_play::RangeMode::parse(&args.field_range)
+            .map_err(|why| anyhow::anyhow!("--field-range {why}"))?,
         colormap: args.colormap.into(),
     })
 }

@@ -79,6 +79,8 @@ pub struct RenderConfig {
     pub h_scale: Option<f64>,
     pub covariance: bool,
     pub field: Option<String>,
+    /// How the field's values span the colour map (`--field-range`).
+    pub field_range: slosh_play::RangeMode,
     pub colormap: slosh_render::Colormap,
     /// The time label and legend drawn into each frame.
     pub labels: bool,
@@ -209,6 +211,8 @@ impl RenderConfig {
             h_scale: args.h_scale,
             covariance: args.covariance,
             field: args.field.clone(),
+            field_range: slosh_play::RangeMode::parse(&args.field_range)
+                .map_err(|why| anyhow::anyhow!("--field-range {why}"))?,
             colormap: args.colormap.into(),
             labels: args.labels,
             adapter: args.adapter.clone(),

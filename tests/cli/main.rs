@@ -8,6 +8,7 @@ mod util;
 
 mod bake;
 mod bench;
+mod field_colours;
 mod hard_inputs;
 mod movie;
 mod read;

@@ -29,9 +29,8 @@ pub struct PlayOptions {
     pub output: PathBuf,
     /// Print a line per UI frame and per failure (for tests driving the window).
     pub log_frames: bool,
-    /// Map each step's own field range to the colour map, instead of the range seen over
-    /// the series.
-    pub step_range: bool,
+    /// How the field's values span the colour map to start with.
+    pub range_mode: crate::RangeMode,
     /// The field's colour map to start with.
     pub colormap: slosh_render::Colormap,
 }

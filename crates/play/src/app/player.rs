@@ -16,7 +16,7 @@ use super::fit::fit_texture;
 use super::frame_stats::FrameStats;
 use super::options::PlayOptions;
 use super::timeline_panel;
-use super::view::{RangeMode, ViewSettings, axis_vector, default_light};
+use super::view::{ViewSettings, axis_vector, default_light};
 use crate::engine::{Engine, FrameReport, FrameRequest, Probe};
 use crate::refine::Draw;
 use slosh_mls::dominant_axis;
@@ -90,11 +90,7 @@ impl Player {
             up_axis,
             light: default_light(),
             field: engine.field().map(str::to_string),
-            range_mode: if options.step_range {
-                RangeMode::Step
-            } else {
-                RangeMode::Series
-            },
+            range_mode: options.range_mode,
             colormap: options.colormap,
             series_range: None,
         };

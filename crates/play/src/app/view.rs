@@ -4,17 +4,8 @@
 use eframe::egui;
 use slosh_render::{Colormap, ShadeMode, TraceParams};
 
+use crate::RangeMode;
 use crate::engine::Engine;
-
-/// Field range on the colour map.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum RangeMode {
-    /// Each step's own range.
-    Step,
-    /// The widest range seen over the steps shown so far.
-    Series,
-    Fixed(f32, f32),
-}
 
 /// The view's settings, as the controls edit them.
 #[derive(Debug, Clone)]

@@ -1,0 +1,130 @@
+//! `slosh render --field` over a sequence: every frame's colours span the series' range (read
+//! from the caches' own values), or a fixed one, or each step's; and a vector field colours
+//! by a component, where a view the cache lacks is refused with those it has.
+
+use std::path::Path;
+
+use slosh_cache::CacheFile;
+
+use crate::util::{bake_case, generate, in_ci, slosh};
+
+/// The finite range of field `name` (an `f32` section) of a cache step, decoded here.
+fn step_range(path: &Path, name: &str) -> (f32, f32) {
+    let file = CacheFile::open(path).unwrap();
+    let entry = file.section(&format!("field.{name}")).unwrap();
+    let mut bytes = vec![0u8; entry.raw as usize];
+    file.decode_into(entry, &mut bytes, &mut Vec::new())
+        .unwrap();
+    bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        })
+}
+
+#[test]
+fn a_sequence_colours_every_step_on_one_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("tank");
+    generate(&case_dir, &["tank", "--points", "6000", "--steps", "3"]);
+    let cache = dir.path().join("cache");
+    let (ok, _, err) = bake_case(
+        &case_dir.join("tank.case"),
+        &cache,
+        &["--fields", "pressure,normal", "--quiet"],
+    );
+    assert!(ok, "bake failed: {err}");
+    let ranges: Vec<(f32, f32)> = (0..3)
+        .map(|s| step_range(&cache.join(format!("step-{s:05}.slc")), "pressure"))
+        .collect();
+    assert!(
+        ranges.windows(2).any(|w| w[0] != w[1]),
+        "the steps' ranges are alike, so the test could not fail: {ranges:?}"
+    );
+    let (lo, hi) = ranges
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), r| {
+            (a.min(r.0), b.max(r.1))
+        });
+    let render_field = |field: &str, out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            cache.to_str().unwrap(),
+            "--field",
+            field,
+            "--size",
+            "96x64",
+            // One camera for a step alone and in a sequence (which frames its first step).
+            "--eye",
+            "1,-3,2",
+            "--target",
+            "0.5,0.25,0.2",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        slosh(&args)
+    };
+    let render = |out: &Path, extra: &[&str]| render_field("pressure", out, extra);
+    let series = dir.path().join("series");
+    std::fs::create_dir_all(&series).unwrap();
+    let (ok, out, err) = render(&series.join("{:05}.png"), &["--steps", "0..3"]);
+    if !ok && !in_ci() && err.contains("adapter") {
+        eprintln!("skipping: {err}");
+        return;
+    }
+    assert!(ok, "render failed: {out}{err}");
+    assert!(
+        out.contains(&format!(
+            "span {lo:e} to {hi:e}, its range over the 3 steps"
+        )),
+        "{out}"
+    );
+    // Each step alone, fixed at that range: the same frames, byte for byte.
+    let fixed = format!("{lo:e},{hi:e}");
+    for s in 0..3 {
+        let alone = dir.path().join(format!("alone-{s}.png"));
+        let (ok, out, err) = render(&alone, &["--step", &s.to_string(), "--field-range", &fixed]);
+        assert!(ok, "render failed: {out}{err}");
+        assert!(
+            std::fs::read(&alone).unwrap()
+                == std::fs::read(series.join(format!("{s:05}.png"))).unwrap(),
+            "step {s} alone on the series' range differs from the sequence's frame"
+        );
+    }
+    // Each step's own range: some frame differs.
+    let own = dir.path().join("own");
+    std::fs::create_dir_all(&own).unwrap();
+    let (ok, out, err) = render(
+        &own.join("{:05}.png"),
+        &["--steps", "0..3", "--field-range", "step"],
+    );
+    assert!(ok, "render failed: {out}{err}");
+    assert!(!out.contains("its range over"), "{out}");
+    let differ = (0..3)
+        .filter(|s| {
+            let name = format!("{s:05}.png");
+            std::fs::read(own.join(&name)).unwrap() != std::fs::read(series.join(&name)).unwrap()
+        })
+        .count();
+    assert!(differ > 0, "no frame changed with each step's own range");
+    // A range that is not one.
+    let (ok, _, err) = render(&own.join("x.png"), &["--field-range", "2,1"]);
+    assert!(
+        !ok && err.contains("--field-range 2,1: LO must lie below HI"),
+        "{err}"
+    );
+
+    // A vector field, by component; a view the cache lacks is refused with those it has.
+    let (ok, out, err) = render_field("normal.y", &own.join("normal-y.png"), &[]);
+    assert!(ok, "render failed: {out}{err}");
+    let (ok, out, err) = render_field("normal.w", &own.join("normal-w.png"), &[]);
+    assert!(!ok, "{out}");
+    assert!(
+        err.contains("no field 'normal.w' in this cache; baked fields: pressure, normal, normal.x, normal.y, normal.z")
+            || err.contains("no field 'normal.w' in this cache; baked fields: normal, normal.x, normal.y, normal.z, pressure"),
+        "{err}"
+    );
+}
