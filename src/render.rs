@@ -110,6 +110,38 @@ fn series_field_range(config: &RenderConfig, field: &str) -> Option<(f32, f32)> 
     range
 }
 
+/// What a camera frames: a box, and the data's up where a step recorded one.
+struct Framing {
+    bounds: [[f64; 3]; 2],
+    up: Option<[f64; 3]>,
+}
+
+/// The framing of the steps `config` draws: the union of the bounds of those that open and
+/// hold particles (a dam break spreads far beyond its first step's column; a Lagrangian
+/// run's first steps may hold none, and an empty step has no extent), with the data's up
+/// (the first such step's); `None` where there is no such step.
+fn sequence_framing(config: &RenderConfig) -> Option<Framing> {
+    config
+        .steps
+        .iter()
+        .filter_map(|&s| CacheFile::open(&step_path(&config.path, s)).ok())
+        .filter(|f| f.header().points > 0)
+        .map(|f| Framing {
+            bounds: f.header().bounds,
+            up: f.header().up,
+        })
+        .reduce(|union, next| {
+            let (a, b) = (union.bounds, next.bounds);
+            Framing {
+                bounds: [
+                    std::array::from_fn(|k| a[0][k].min(b[0][k])),
+                    std::array::from_fn(|k| a[1][k].max(b[1][k])),
+                ],
+                up: union.up,
+            }
+        })
+}
+
 fn step_path(path: &Path, step: usize) -> PathBuf {
     if path.is_dir() {
         path.join(step_file_name(step))
@@ -118,11 +150,15 @@ fn step_path(path: &Path, step: usize) -> PathBuf {
     }
 }
 
-/// The framing camera of the step, up from `--up`, else from the data (the header's `up`),
+/// The camera framing `bounds`, up from `--up`, else from the data (`data_up`, a header's),
 /// else z; `--eye` and `--target` replace the framing's.
-fn camera_for(cfg: &RenderConfig, header: &slosh_cache::Header) -> Result<Camera> {
-    let up = cfg.view.up.or(header.up).unwrap_or([0.0, 0.0, 1.0]);
-    let mut camera = Camera::framing(&header.bounds, cfg.view.fov, cfg.width, cfg.height, up);
+fn camera_for(
+    cfg: &RenderConfig,
+    bounds: &[[f64; 3]; 2],
+    data_up: Option<[f64; 3]>,
+) -> Result<Camera> {
+    let up = cfg.view.up.or(data_up).unwrap_or([0.0, 0.0, 1.0]);
+    let mut camera = Camera::framing(bounds, cfg.view.fov, cfg.width, cfg.height, up);
     // An explicit up is taken as given (the framing snapped it to an axis).
     camera.up = up;
     if let Some(eye) = cfg.view.eye {
@@ -163,20 +199,12 @@ pub fn run(config: &RenderConfig) -> Result<()> {
         None => CacheFile::open(&step_path(&config.path, config.steps[0]))
             .with_context(|| format!("opening step {}", config.steps[0]))?,
     };
-    // The first step of the range with particles frames it (a Lagrangian run's first steps
-    // may hold none, and an empty step has no extent).
-    let framing = match first.header().points {
-        0 => config
-            .steps
-            .iter()
-            .skip(1)
-            .filter_map(|&s| CacheFile::open(&step_path(&config.path, s)).ok())
-            .find(|f| f.header().points > 0)
-            .unwrap_or(first),
-        _ => first,
-    };
-    let camera = camera_for(config, framing.header())?;
-    drop(framing);
+    let framing = sequence_framing(config).unwrap_or(Framing {
+        bounds: first.header().bounds,
+        up: first.header().up,
+    });
+    let camera = camera_for(config, &framing.bounds, framing.up)?;
+    drop(first);
     let manifest = if config.path.is_dir() {
         slosh_cache::Manifest::read(&config.path).ok()
     } else {

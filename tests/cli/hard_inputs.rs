@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::util::{bake_case, slosh};
+use crate::util::{aov_hits, bake_case, slosh};
 
 /// A unit sphere of `n` points (a Fibonacci lattice) with outward normals, scaled by
 /// `scale`, as an ASCII PLY of doubles.
@@ -311,7 +311,7 @@ fn empty_steps_are_valid_steps() {
         out.contains("no points:") && !out.contains("bytes per point"),
         "{out}"
     );
-    // Rendered: step 0 is background; the others are framed by their own extent.
+    // Rendered: step 0 is background; the others are framed by their extents together.
     let (ok, out, err) = slosh(&[
         "render",
         cache.to_str().unwrap(),
@@ -324,11 +324,7 @@ fn empty_steps_are_valid_steps() {
         dir.path().join("h{:05}.npy").to_str().unwrap(),
     ]);
     assert!(ok, "{out}{err}");
-    let hits = |i: usize| {
-        let bytes = std::fs::read(dir.path().join(format!("h{i:05}.npy"))).unwrap();
-        let values: &[f32] = bytemuck::cast_slice(&bytes[128..]);
-        values.chunks_exact(8).filter(|p| p[7] != 0.0).count()
-    };
+    let hits = |i: usize| aov_hits(&dir.path().join(format!("h{i:05}.npy")), 48).len();
     assert_eq!(hits(0), 0);
     for i in [1, 2] {
         let n = hits(i);

@@ -13,4 +13,5 @@ mod hard_inputs;
 mod movie;
 mod read;
 mod refusals;
+mod sequence_framing;
 mod series_integrity;

@@ -10,6 +10,10 @@ use serde_json::Value;
 
 use crate::util::{bake_case, generate, have, in_ci, slosh};
 
+/// The camera of the movie and of its reference frames, over the generated tank.
+const EYE: &str = "1,-3,2";
+const TARGET: &str = "0.5,0.25,0.2";
+
 /// RGB8 pixels of a PNG.
 fn png_rgb(path: &Path) -> (u32, u32, Vec<u8>) {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
@@ -43,6 +47,12 @@ fn a_range_renders_into_an_mp4_that_ffmpeg_reads_back() {
         "0..6",
         "--size",
         "320x240",
+        // The reference frames below are drawn alone, which frames a step by its own
+        // extent, where a sequence is framed by all of its steps': one camera for both.
+        "--eye",
+        EYE,
+        "--target",
+        TARGET,
         "--slowdown",
         "10",
         "--out",
@@ -127,6 +137,10 @@ fn a_range_renders_into_an_mp4_that_ffmpeg_reads_back() {
             &step.to_string(),
             "--size",
             "320x240",
+            "--eye",
+            EYE,
+            "--target",
+            TARGET,
             "--out",
             reference.to_str().unwrap(),
         ]);

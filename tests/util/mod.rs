@@ -58,3 +58,16 @@ pub fn bake_case(case: &Path, out: &Path, extra: &[&str]) -> (bool, String, Stri
 
 #[allow(unused_imports)] // not every suite asks
 pub use slosh_testkit::in_ci;
+
+/// The hit pixels (x, y) of a hit buffer `slosh render --aov` wrote for a frame `width`
+/// pixels wide (8 f32s a pixel, the last one its status, 0 for a miss).
+pub fn aov_hits(path: &Path, width: usize) -> Vec<(usize, usize)> {
+    let bytes = std::fs::read(path).unwrap();
+    let values: &[f32] = bytemuck::cast_slice(&bytes[128..]);
+    values
+        .chunks_exact(8)
+        .enumerate()
+        .filter(|(_, p)| p[7] != 0.0)
+        .map(|(k, _)| (k % width, k / width))
+        .collect()
+}
