@@ -173,6 +173,9 @@ fn human_file(r: &FileReport) -> String {
         "bvh        {} nodes, {} leaves, depth {}",
         st.bvh_nodes, st.bvh_leaves, st.bvh_depth
     ));
+    for (view, [lo, hi]) in &h.field_ranges {
+        line(format!("field      {view}: {lo:e} to {hi:e}"));
+    }
     let stages: Vec<String> = h
         .stats
         .stage_seconds

@@ -85,17 +85,22 @@ pub fn with_unbaked(rendered: Result<()>, unbaked: &[usize], asked: usize) -> Re
 }
 
 /// The widest range of `field`'s finite values over the steps `config` draws, so that a
-/// colour means one value through a sequence: a step that cannot be read, or has no such
-/// field or no finite value of it, adds nothing (the frame loop reports the first two).
+/// colour means one value through a sequence: each step's header's (format 9.1), else its
+/// values' (decoded); a step that cannot be read, or has no such field or no finite value of
+/// it, adds nothing (the frame loop reports the first two).
 fn series_field_range(config: &RenderConfig, field: &str) -> Option<(f32, f32)> {
     let ranges: Vec<(f32, f32)> = config
         .steps
         .iter()
         .filter_map(|&step| {
             let file = CacheFile::open(&step_path(&config.path, step)).ok()?;
+            let header = file.header();
+            if !header.field_ranges.is_empty() {
+                let [lo, hi] = *header.field_ranges.get(field)?;
+                return Some((lo, hi));
+            }
             let values = slosh_render::HostField::read(&file, field).ok()?;
-            let points = file.header().points;
-            ((values.missing as u64) < points).then_some((values.min, values.max))
+            ((values.missing as u64) < header.points).then_some((values.min, values.max))
         })
         .collect();
     let range = ranges

@@ -48,6 +48,18 @@ fn a_sequence_colours_every_step_on_one_range() {
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), r| {
             (a.min(r.0), b.max(r.1))
         });
+    // The manifest records that range, which the player's colours span from the first frame.
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cache.join("manifest.json")).unwrap())
+            .unwrap();
+    let recorded = &manifest["field_ranges"]["pressure"];
+    // (f32s written as the shortest decimals that read back as them.)
+    let as_f32 = |v: &serde_json::Value| v.as_f64().map(|v| v as f32);
+    assert_eq!(
+        (as_f32(&recorded[0]), as_f32(&recorded[1])),
+        (Some(lo), Some(hi)),
+        "{manifest}"
+    );
     let render_field = |field: &str, out: &Path, extra: &[&str]| {
         let mut args = vec![
             "render",

@@ -3,9 +3,9 @@
 
 use rayon::prelude::*;
 use slosh_cache::{
-    BallBits, BallState, CubicWords, Element, Encoding, GpuBall, GpuPoint, GpuSphere, Header,
-    MAX_SPHERES, MlsSettings, SectionInput, Source, StepStats, Transform, candidates, exact_half,
-    names, octahedral, pack_h, stored_radius,
+    BallBits, BallState, CubicWords, Element, Encoding, FieldRange, GpuBall, GpuPoint, GpuSphere,
+    Header, MAX_SPHERES, MlsSettings, SectionInput, Source, StepStats, Transform, candidates,
+    exact_half, names, octahedral, pack_h, stored_radius,
 };
 use slosh_ensight::FieldValues;
 use slosh_mls::{
@@ -657,6 +657,7 @@ fn bake_parts(
     })?;
     // After the spheres, before the fields: the order every cache has had.
     sections.extend(bvh_sections(&stored_nodes));
+    let field_ranges = field_ranges(&fields);
     sections.extend(fields);
 
     let mut stats = StepStats {
@@ -701,6 +702,7 @@ fn bake_parts(
         bvh_grid,
         stats,
         up,
+        field_ranges,
         ..step_header(input, params)
     };
     Ok((BakedStep { header, sections }, surface))
@@ -733,7 +735,20 @@ fn step_header(input: &StepInput, params: &BakeParams) -> Header {
         stats: StepStats::default(),
         sections: Vec::new(),
         up: None,
+        field_ranges: Default::default(),
     }
+}
+
+/// Each field view's range, from the field sections as they will be stored
+/// (`slosh_cache::field_view_ranges`).
+fn field_ranges(fields: &[SectionInput]) -> std::collections::BTreeMap<String, FieldRange> {
+    fields
+        .iter()
+        .flat_map(|s| {
+            let name = s.name.strip_prefix(names::FIELD_PREFIX).unwrap_or(&s.name);
+            slosh_cache::field_view_ranges(name, s.element, &s.bytes)
+        })
+        .collect()
 }
 
 /// The BVH's section: its nodes on the header's grid (a leaf names its items as a range).

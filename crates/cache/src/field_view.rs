@@ -3,7 +3,7 @@
 //! components (`velocity.x`, `.y`, `.z`), as ParaView offers them.
 
 use crate::format::{Header, SectionEntry};
-use crate::layout::{Element, FIELD_MISSING};
+use crate::layout::{Element, FIELD_MISSING, field_missing};
 use crate::names::FIELD_PREFIX;
 
 /// Which value of a point's vector a view takes.
@@ -31,15 +31,19 @@ fn element(section: &SectionEntry) -> Option<Element> {
 /// The views a step's baked fields offer, by name: each scalar field, and each vector field's
 /// magnitude and components.
 pub fn field_views(header: &Header) -> Vec<String> {
-    let mut views = Vec::new();
-    for section in &header.sections {
-        let Some(name) = section.name.strip_prefix(FIELD_PREFIX) else {
-            continue;
-        };
-        views.push(name.to_string());
-        if element(section) == Some(Element::Vec4) {
-            views.extend(COMPONENTS.iter().map(|c| format!("{name}.{c}")));
-        }
+    header
+        .sections
+        .iter()
+        .filter_map(|s| Some(views_of(s.name.strip_prefix(FIELD_PREFIX)?, element(s)?)))
+        .flatten()
+        .collect()
+}
+
+/// The views of field `name` stored as `element`s: its own name, and a vector's components.
+pub fn views_of(name: &str, element: Element) -> Vec<String> {
+    let mut views = vec![name.to_string()];
+    if element == Element::Vec4 {
+        views.extend(COMPONENTS.iter().map(|c| format!("{name}.{c}")));
     }
     views
 }
@@ -72,20 +76,69 @@ pub fn find_field_view<'h>(header: &'h Header, name: &str) -> Option<FieldView<'
 pub fn vector_values(vectors: &[u8], part: VectorPart, out: &mut Vec<u8>) {
     out.reserve(vectors.len() / 4);
     for v in vectors.chunks_exact(16) {
-        let c = |k: usize| f32::from_le_bytes([v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]]);
-        let value = match part {
-            VectorPart::Component(k) => c(k),
-            VectorPart::Magnitude => {
-                let m = (0..3).map(|k| f64::from(c(k)).powi(2)).sum::<f64>().sqrt();
-                if m.is_finite() {
-                    (m as f32).min(FIELD_MISSING.next_down())
-                } else {
-                    f32::NAN
-                }
-            }
-        };
-        out.extend_from_slice(&value.to_le_bytes());
+        out.extend_from_slice(&vector_part(v, part).to_le_bytes());
     }
+}
+
+/// Part `part` of one little-endian `vec4<f32>` ([`vector_values`]).
+fn vector_part(v: &[u8], part: VectorPart) -> f32 {
+    let c = |k: usize| f32::from_le_bytes([v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]]);
+    match part {
+        VectorPart::Component(k) => c(k),
+        VectorPart::Magnitude => {
+            let m = (0..3).map(|k| f64::from(c(k)).powi(2)).sum::<f64>().sqrt();
+            if m.is_finite() {
+                (m as f32).min(FIELD_MISSING.next_down())
+            } else {
+                f32::NAN
+            }
+        }
+    }
+}
+
+/// The least and greatest of a view's values that are not missing ([`field_missing`]).
+pub type FieldRange = [f32; 2];
+
+/// The range of each view field `name` offers ([`field_views`]' names), from its raw bytes
+/// (`f32`s, or `vec4<f32>`s as [`vector_values`] reads them), missing values left out; a
+/// view with no value that is not missing has none. What a step's header records
+/// (`Header::field_ranges`), and what a renderer's colours span over a series.
+pub fn field_view_ranges(name: &str, element: Element, bytes: &[u8]) -> Vec<(String, FieldRange)> {
+    let widen = |range: &mut Option<FieldRange>, v: f32| {
+        if !field_missing(v) {
+            *range = Some(match *range {
+                Some([lo, hi]) => [lo.min(v), hi.max(v)],
+                None => [v, v],
+            });
+        }
+    };
+    // In the order of `views_of`.
+    let ranges: Vec<Option<FieldRange>> = if element == Element::Vec4 {
+        let parts = [
+            VectorPart::Magnitude,
+            VectorPart::Component(0),
+            VectorPart::Component(1),
+            VectorPart::Component(2),
+        ];
+        let mut ranges = vec![None; 4];
+        for v in bytes.chunks_exact(16) {
+            for (range, part) in ranges.iter_mut().zip(parts) {
+                widen(range, vector_part(v, part));
+            }
+        }
+        ranges
+    } else {
+        let mut range = None;
+        for b in bytes.chunks_exact(4) {
+            widen(&mut range, f32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        }
+        vec![range]
+    };
+    views_of(name, element)
+        .into_iter()
+        .zip(ranges)
+        .filter_map(|(view, range)| range.map(|r| (view, r)))
+        .collect()
 }
 
 #[cfg(test)]
@@ -127,5 +180,26 @@ mod tests {
         assert_eq!((y[0], y[1]), (4.0, 0.0));
         assert!(y[3].is_nan());
         assert_eq!(values(VectorPart::Component(2))[0], 12.0);
+        // Ranges: the magnitude's and each component's, missing values left out.
+        let ranges = field_view_ranges("v", Element::Vec4, &bytes);
+        assert_eq!(
+            ranges,
+            [
+                ("v".to_string(), [1.0, FIELD_MISSING.next_down()]),
+                ("v.x".to_string(), [-1.0, 3e38]),
+                ("v.y".to_string(), [0.0, 3e38]),
+                ("v.z".to_string(), [0.0, 12.0])
+            ]
+        );
+        let scalars: Vec<u8> = [f32::NAN, 2.0, -1.0, f32::MAX, f32::INFINITY]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert_eq!(
+            field_view_ranges("p", Element::F32, &scalars),
+            [("p".to_string(), [-1.0, 2.0])]
+        );
+        let none: Vec<u8> = f32::NAN.to_le_bytes().to_vec();
+        assert!(field_view_ranges("p", Element::F32, &none).is_empty());
     }
 }

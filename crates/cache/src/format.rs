@@ -11,7 +11,7 @@ pub const FOOTER_MAGIC: [u8; 8] = *b"SLC-END\n";
 /// Readers refuse files of another major version (older ones with the command that re-bakes
 /// them); minor versions only add.
 pub const MAJOR: u16 = 9;
-pub const MINOR: u16 = 0;
+pub const MINOR: u16 = 1;
 /// The most raw bytes per chunk of a section (the last chunk holds the rest): chunks decode
 /// independently, so a section decodes on as many cores as it has chunks. A multiple of every
 /// element size.
@@ -393,6 +393,10 @@ pub struct Header {
     /// says; renderers frame with it unless told otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub up: Option<[f64; 3]>,
+    /// Each field view's range, missing values left out (`field_view_ranges`; format 9.1): a
+    /// view with no value that is not missing has none, and a step of format 9.0 none at all.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub field_ranges: std::collections::BTreeMap<String, crate::FieldRange>,
 }
 
 pub fn hex64(v: u64) -> String {

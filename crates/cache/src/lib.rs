@@ -34,7 +34,10 @@ pub use codec::{
     DecodeError, decode_into as decode_bytes, encode as encode_bytes, shuffle, shuffle4,
 };
 pub use error::{Error, Result};
-pub use field_view::{FieldView, VectorPart, field_views, find_field_view, vector_values};
+pub use field_view::{
+    FieldRange, FieldView, VectorPart, field_view_ranges, field_views, find_field_view,
+    vector_values, views_of,
+};
 pub use format::{
     ALIGN, CHUNK_ALIGN, CHUNK_RAW, CHUNK_RAW_MIN, CHUNKS_PER_SECTION, ChunkEntry, Encoding,
     FOOTER_LEN, Header, MAJOR, MINOR, MlsSettings, PREAMBLE_LEN, SectionEntry, SeriesRecord,

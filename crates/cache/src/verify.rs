@@ -5,7 +5,8 @@ use rayon::prelude::*;
 
 use crate::ball_state::{BALLS_PER_STATE_WORD, exact_half};
 use crate::error::{Error, Result};
-use crate::layout::{BallState, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
+use crate::format::SectionEntry;
+use crate::layout::{BallState, Element, GpuPoint, GpuSphere, MIN_NORMAL_HALF};
 use crate::names;
 use crate::reader::CacheFile;
 
@@ -51,7 +52,11 @@ impl CacheFile {
             if !entry.chunks.is_empty() {
                 self.check_sum(entry, "section", 0, self.stored(entry), &entry.xxh3)?;
             }
-            if !STRUCTURAL.contains(&entry.name.as_str()) {
+            if let Some(field) = entry.name.strip_prefix(names::FIELD_PREFIX) {
+                // Decoded whole, for the ranges its header records.
+                self.check_field_ranges(entry, field)
+                    .map_err(|problem| invalid(format!("field '{field}': {problem}")))?;
+            } else if !STRUCTURAL.contains(&entry.name.as_str()) {
                 self.check_decodes(entry)?;
             }
         }
@@ -61,6 +66,31 @@ impl CacheFile {
             sections: self.header().sections.len(),
             raw_bytes: self.header().sections.iter().map(|s| s.raw).sum(),
         })
+    }
+
+    /// Field `field`'s section decodes, and each of its views' ranges is the header's (a step
+    /// of format 9.0, whose header records none for any field, is not asked).
+    fn check_field_ranges(&self, entry: &SectionEntry, field: &str) -> Result<(), String> {
+        let mut bytes = vec![0u8; entry.raw as usize];
+        self.decode_into(entry, &mut bytes, &mut Vec::new())
+            .map_err(|e| e.to_string())?;
+        let recorded = &self.header().field_ranges;
+        if recorded.is_empty() {
+            return Ok(());
+        }
+        let element = Element::from_name(&entry.element)
+            .ok_or_else(|| format!("an element '{}' no field has", entry.element))?;
+        let found = crate::field_view_ranges(field, element, &bytes);
+        for view in crate::views_of(field, element) {
+            let want = found.iter().find(|(v, _)| *v == view).map(|(_, r)| *r);
+            let have = recorded.get(&view).copied();
+            if want != have {
+                return Err(format!(
+                    "the header records the range of '{view}' as {have:?}, its values span {want:?}"
+                ));
+            }
+        }
+        Ok(())
     }
 
     fn check_invariants(&self) -> Result<(), String> {

@@ -144,6 +144,13 @@ impl Series {
         self.manifest.as_ref()
     }
 
+    /// The range of field view `view` over the series, where its manifest records one
+    /// (format 9.1): what a colour map spans from the first frame on.
+    pub fn field_range(&self, view: &str) -> Option<(f32, f32)> {
+        let [lo, hi] = *self.manifest.as_ref()?.field_ranges.get(view)?;
+        Some((lo, hi))
+    }
+
     /// What every step of the series shares, where it is known yet.
     pub fn key(&self) -> Option<&SeriesKey> {
         self.key.as_ref()

@@ -1078,6 +1078,29 @@ fn a_vector_field_colours_by_its_magnitude_or_a_component() {
         assert!(hit_pixels(&shown) > 500);
         assert!(shown.rgba == scalar_shown.rgba, "{view}: the frames differ");
     }
+    // Each view's range, as the header records it and the verifier checks it.
+    let ranges = &file.header().field_ranges;
+    for view in slosh_cache::field_views(file.header()) {
+        let values = slosh_render::HostField::read(&file, &view).unwrap();
+        assert_eq!(ranges.get(&view), Some(&[values.min, values.max]), "{view}");
+    }
+    file.verify().unwrap();
+    let mut tampered = baked_step_with_fields(&input);
+    tampered
+        .header
+        .field_ranges
+        .insert("v.y".into(), [0.0, 1.0]);
+    let compression = slosh_cache::Compression::None;
+    let bytes = encode_step(tampered.header, &tampered.sections, compression).unwrap();
+    let refused = CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes))
+        .unwrap()
+        .verify()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        refused.contains("field 'v': the header records the range of 'v.y' as Some([0.0, 1.0])"),
+        "{refused}"
+    );
     for wrong in ["v.w", "m.x", "w"] {
         let refused = slosh_render::HostField::read(&file, wrong)
             .unwrap_err()
@@ -1089,12 +1112,23 @@ fn a_vector_field_colours_by_its_magnitude_or_a_component() {
     }
 }
 
-/// `input`'s step baked with every field it holds, as a cache in memory.
-fn baked_with_fields(input: &StepInput) -> CacheFile {
+/// The bake's parameters that store every field `input` holds.
+fn fields_params(input: &StepInput) -> BakeParams {
     let mut params = BakeParams::new(SurfaceSelect::All, NormalSource::Variable("normal".into()));
     params.fields = input.fields.iter().map(|(name, _)| name.clone()).collect();
-    let baked = bake_step(input, &params).unwrap();
-    let bytes = encode_step(baked.header, &baked.sections, params.compression).unwrap();
+    params
+}
+
+/// `input`'s step baked with every field it holds.
+fn baked_step_with_fields(input: &StepInput) -> slosh_bake::BakedStep {
+    bake_step(input, &fields_params(input)).unwrap()
+}
+
+/// `input`'s step baked with every field it holds, as a cache in memory.
+fn baked_with_fields(input: &StepInput) -> CacheFile {
+    let baked = baked_step_with_fields(input);
+    let compression = fields_params(input).compression;
+    let bytes = encode_step(baked.header, &baked.sections, compression).unwrap();
     CacheFile::from_bytes(FileBytes::from_vec(Path::new("memory.slc"), bytes)).unwrap()
 }
 

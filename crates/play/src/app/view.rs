@@ -89,8 +89,15 @@ impl ViewSettings {
         }
     }
 
-    /// Widens the series range by the shown step's field range.
+    /// The series range: the manifest's for the field, where it records one, widened by the
+    /// shown step's field range (a bake still running, a cache of format 9.0).
     pub fn track_field_range(&mut self, engine: &Engine) {
+        if self.series_range.is_none() {
+            self.series_range = self
+                .field
+                .as_deref()
+                .and_then(|f| engine.series().field_range(f));
+        }
         // A step whose every value is missing leaves it as it was.
         if let Some((_, step)) = engine.shown_step()
             && let Some((lo, hi)) = step.field_range()
