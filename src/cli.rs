@@ -69,8 +69,8 @@ pub struct PlayArgs {
     /// component (`velocity.x`, `.y`, `.z`).
     #[arg(long)]
     pub field: Option<String>,
-    /// Colour range: `series` (widest seen over the steps shown), `step` (each step's own)
-    /// or `LO,HI` (fixed).
+    /// Colour range: `series` (the series' range where its manifest records one, else the
+    /// widest seen over the steps shown), `step` (each step's own) or `LO,HI` (fixed).
     #[arg(long, default_value = "series", allow_hyphen_values = true)]
     pub field_range: String,
     /// The field's colour map (also in the Colour panel).
@@ -644,7 +644,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 0)]
     pub step: usize,
     /// A range of steps, A..B (B excluded) or A..=B, for a video: --out and --aov then take
-    /// a pattern with {} or {:05} for the step number. The camera frames the first step.
+    /// a pattern with {} or {:05} for the step number. One camera frames every step of it.
     /// Not with --step.
     #[arg(long, conflicts_with = "step")]
     pub steps: Option<String>,

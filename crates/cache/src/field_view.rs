@@ -2,6 +2,8 @@
 //! field's own values; a vector field's magnitude (by its own name, `velocity`) or one of its
 //! components (`velocity.x`, `.y`, `.z`), as ParaView offers them.
 
+use rayon::prelude::*;
+
 use crate::format::{Header, SectionEntry};
 use crate::layout::{Element, FIELD_MISSING, field_missing};
 use crate::names::FIELD_PREFIX;
@@ -12,6 +14,9 @@ pub enum VectorPart {
     Magnitude,
     Component(usize),
 }
+
+/// Elements a task of [`field_view_ranges`] reads.
+const RANGE_BLOCK: usize = 1 << 16;
 
 /// Suffixes of the component views, in order.
 const COMPONENTS: [&str; 3] = ["x", "y", "z"];
@@ -104,36 +109,40 @@ pub type FieldRange = [f32; 2];
 /// view with no value that is not missing has none. What a step's header records
 /// (`Header::field_ranges`), and what a renderer's colours span over a series.
 pub fn field_view_ranges(name: &str, element: Element, bytes: &[u8]) -> Vec<(String, FieldRange)> {
-    let widen = |range: &mut Option<FieldRange>, v: f32| {
-        if !field_missing(v) {
-            *range = Some(match *range {
-                Some([lo, hi]) => [lo.min(v), hi.max(v)],
-                None => [v, v],
-            });
-        }
-    };
-    // In the order of `views_of`.
-    let ranges: Vec<Option<FieldRange>> = if element == Element::Vec4 {
-        let parts = [
-            VectorPart::Magnitude,
-            VectorPart::Component(0),
-            VectorPart::Component(1),
-            VectorPart::Component(2),
-        ];
-        let mut ranges = vec![None; 4];
-        for v in bytes.chunks_exact(16) {
-            for (range, part) in ranges.iter_mut().zip(parts) {
-                widen(range, vector_part(v, part));
-            }
-        }
-        ranges
+    // Each part of a vector (its magnitude first, in the order of `views_of`), or the scalar,
+    // over blocks of elements in parallel: a 4M-point vector field is 64 MB.
+    let (width, parts) = if element == Element::Vec4 {
+        (16, 4)
     } else {
-        let mut range = None;
-        for b in bytes.chunks_exact(4) {
-            widen(&mut range, f32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-        }
-        vec![range]
+        (4, 1)
     };
+    let value = |e: &[u8], k: usize| match (width, k) {
+        (4, _) => f32::from_le_bytes([e[0], e[1], e[2], e[3]]),
+        (_, 0) => vector_part(e, VectorPart::Magnitude),
+        _ => vector_part(e, VectorPart::Component(k - 1)),
+    };
+    let join = |a: Option<FieldRange>, b: Option<FieldRange>| match (a, b) {
+        (Some([a0, a1]), Some([b0, b1])) => Some([a0.min(b0), a1.max(b1)]),
+        (a, b) => a.or(b),
+    };
+    let ranges: Vec<Option<FieldRange>> = bytes
+        .par_chunks(width * RANGE_BLOCK)
+        .map(|block| {
+            let mut ranges = vec![None; parts];
+            for e in block.chunks_exact(width) {
+                for (k, range) in ranges.iter_mut().enumerate() {
+                    let v = value(e, k);
+                    if !field_missing(v) {
+                        *range = join(*range, Some([v, v]));
+                    }
+                }
+            }
+            ranges
+        })
+        .reduce(
+            || vec![None; parts],
+            |a, b| a.into_iter().zip(b).map(|(a, b)| join(a, b)).collect(),
+        );
     views_of(name, element)
         .into_iter()
         .zip(ranges)
@@ -201,5 +210,21 @@ mod tests {
         );
         let none: Vec<u8> = f32::NAN.to_le_bytes().to_vec();
         assert!(field_view_ranges("p", Element::F32, &none).is_empty());
+        // Over blocks read in parallel: a block of nothing but missing values, the least and
+        // the greatest in others.
+        let n = 3 * RANGE_BLOCK + 7;
+        let many: Vec<u8> = (0..n)
+            .map(|i| match i {
+                _ if i < RANGE_BLOCK => f32::NAN,
+                i if i == RANGE_BLOCK + 5 => -7.0,
+                i if i == n - 1 => 9.0,
+                i => (i % 5) as f32,
+            })
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert_eq!(
+            field_view_ranges("p", Element::F32, &many),
+            [("p".to_string(), [-7.0, 9.0])]
+        );
     }
 }

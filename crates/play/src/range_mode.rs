@@ -6,8 +6,9 @@
 pub enum RangeMode {
     /// Each step's own range.
     Step,
-    /// The series' range: in the player, the widest seen over the steps shown so far; in a
-    /// rendered sequence, the widest over its steps.
+    /// The series' range: in the player, the manifest's (format 9.1), widened by the steps
+    /// shown, or while a bake runs the widest seen over the steps shown so far; in a rendered
+    /// sequence, the widest over its steps.
     Series,
     /// From the first value to the second.
     Fixed(f32, f32),
