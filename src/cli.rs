@@ -690,7 +690,7 @@ pub struct RenderArgs {
     /// Support normals from the weighted covariance instead of the data normals.
     #[arg(long)]
     pub covariance: bool,
-    /// Colour the surface by this baked field (GPU only): a scalar field, or a vector
+    /// Colour the surface by this baked field: a scalar field, or a vector
     /// field's magnitude (its name) or component (`velocity.x`, `.y`, `.z`). Values that are not finite are
     /// left out of the colour; a hit that finds none is drawn magenta (a refined frame
     /// weighs its ball's neighbours' values, a one-iteration frame reads the ball's own).

@@ -183,7 +183,7 @@ fn headless(cache: &Path, frames: &Path, count: usize) -> Result<()> {
         degree: None,
         h_scale: None,
         covariance: false,
-        field: (!cpu).then(|| "pressure".to_string()),
+        field: Some("pressure".to_string()),
         field_range: slosh_play::RangeMode::Series,
         colormap: slosh_render::Colormap::Viridis,
         labels: false,

@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use slosh_cache::{CacheFile, LoadedStep, step_file_name};
-use slosh_mls::{Camera, NormalsMode, Params};
+use slosh_mls::{Camera, HitStatus, NormalsMode, Params};
 use slosh_play::RangeMode;
 use slosh_play::export::{check_belongs, step_pattern};
-use slosh_play::overlay::Overlay;
+use slosh_play::overlay::{Legend, Overlay};
 use slosh_render::{TraceParams, Tracer, cpu_shade};
 
 use crate::config::render::RenderConfig;
@@ -248,6 +248,13 @@ pub fn run(config: &RenderConfig) -> Result<()> {
             config.aov.as_ref().map(|p| step_pattern(p, step)),
         )
     };
+    let field_range = match (config.field.as_deref(), config.field_range) {
+        (_, RangeMode::Fixed(lo, hi)) => Some((lo, hi)),
+        (Some(field), RangeMode::Series) if config.steps.len() > 1 => {
+            series_field_range(config, field)
+        }
+        _ => None,
+    };
     // Steps that could not be drawn, each said when it failed; a sequence goes on past them.
     let mut failed = Vec::new();
     if config.cpu {
@@ -258,7 +265,7 @@ pub fn run(config: &RenderConfig) -> Result<()> {
             let drawn = render_cpu(
                 config,
                 manifest.as_ref(),
-                &camera,
+                (&camera, field_range),
                 step,
                 (out.as_deref(), frame),
                 aov.as_deref(),
@@ -270,13 +277,6 @@ pub fn run(config: &RenderConfig) -> Result<()> {
     }
     let gpu = slosh_render::Gpu::new(config.adapter.as_deref())?;
     let tracer = Tracer::new(&gpu)?;
-    let field_range = match (config.field.as_deref(), config.field_range) {
-        (_, RangeMode::Fixed(lo, hi)) => Some((lo, hi)),
-        (Some(field), RangeMode::Series) if config.steps.len() > 1 => {
-            series_field_range(config, field)
-        }
-        _ => None,
-    };
     if config.sequence {
         say!(
             "rendering {} steps on {}",
@@ -401,10 +401,66 @@ fn finish_movie(movie: Option<(slosh_movie::MovieWriter, Vec<f64>)>) -> Result<(
     Ok(())
 }
 
+/// Each hit's colour of field `name` before lighting, as the shade pass colours it: in a
+/// refined frame the MLS-weighted mean over the hit ball's neighbours (`SurfaceProbe`,
+/// missing values left out), in a one-iteration frame the ball's own value; placed on the
+/// colour map over `range` (the step's own where `None`);
+/// magenta where no value is found; a droplet keeps the surface's colour (`None`); and the
+/// range the colours span (`None` where the step has no value to span).
+fn field_colours(
+    file: &CacheFile,
+    name: &str,
+    hits: &[Option<slosh_mls::TraceHit>],
+    range: Option<(f32, f32)>,
+    (colormap, h_factor, iterations): (slosh_render::Colormap, f32, u32),
+) -> Result<FieldColours> {
+    let field = slosh_render::HostField::read(file, name)?;
+    let values: Vec<f32> = field
+        .bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let own = ((field.missing as u64) < file.header().points).then_some((field.min, field.max));
+    let range = range.or(own);
+    let (lo, hi) = range.unwrap_or((0.0, 0.0));
+    let map = slosh_render::FieldMap::new(lo, hi);
+    let probe = slosh_cache::SurfaceProbe::open(file)?;
+    let transform = file.header().transform;
+    let colours = hits
+        .iter()
+        .map(|hit| {
+            let hit = hit.as_ref().filter(|h| h.status != HitStatus::Droplet)?;
+            let ball = hit.ball as usize;
+            let value = if iterations > 1 {
+                let local = transform.to_local(hit.position).map(|c| c as f32);
+                let reading = probe.read(local, Some(ball), h_factor, Some(&values));
+                reading.and_then(|r| r.field)
+            } else {
+                values
+                    .get(ball)
+                    .copied()
+                    .filter(|&v| !slosh_cache::field_missing(v))
+            };
+            let colour = match value {
+                Some(v) => colormap.at(map.t(v)),
+                None => slosh_render::MISSING_FIELD_COLOUR,
+            };
+            Some(colour.map(f64::from))
+        })
+        .collect();
+    Ok(FieldColours { colours, range })
+}
+
+/// The colours of a field at a frame's hits ([`field_colours`]), and the range they span.
+struct FieldColours {
+    colours: Vec<Option<[f64; 3]>>,
+    range: Option<(f32, f32)>,
+}
+
 fn render_cpu(
     config: &RenderConfig,
     manifest: Option<&slosh_cache::Manifest>,
-    camera: &Camera,
+    (camera, field_range): (&Camera, Option<(f32, f32)>),
     step_index: usize,
     (out, movie): (Option<&Path>, Option<(&mut slosh_movie::MovieWriter, f64)>),
     aov: Option<&Path>,
@@ -431,10 +487,23 @@ fn render_cpu(
     let seconds = start.elapsed().as_secs_f64();
     let hit_count = hits.iter().filter(|h| h.is_some()).count();
     if out.is_some() || movie.is_some() {
-        let mut rgb = cpu_shade::cpu_frame_rgb(&hits, camera, config.mode);
+        let coloured = match config.field.as_deref() {
+            Some(name) => {
+                let how = (config.colormap, params.h_factor, params.iterations);
+                Some((name, field_colours(&file, name, &hits, field_range, how)?))
+            }
+            None => None,
+        };
+        let base = |i: usize| coloured.as_ref().and_then(|(_, c)| c.colours[i]);
+        let mut rgb = cpu_shade::cpu_frame_rgb_coloured(&hits, camera, config.mode, base);
         if config.labels {
             let time = Some((h.source.time, step_index));
-            let overlay = Overlay { time, legend: None };
+            let legend = coloured.as_ref().map(|(name, c)| Legend {
+                field: name.to_string(),
+                range: c.range,
+                colormap: config.colormap,
+            });
+            let overlay = Overlay { time, legend };
             slosh_play::overlay::draw(&mut rgb, width, height, &overlay);
         }
         if let Some(out) = out {

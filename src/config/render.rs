@@ -98,9 +98,6 @@ impl RenderConfig {
         if args.h_scale.is_some_and(|h| !(h.is_finite() && h > 0.0)) {
             bail!("--h-scale must be a positive number");
         }
-        if args.cpu && args.field.is_some() {
-            bail!("--field colours on the GPU path only; drop --cpu");
-        }
         if args.cpu && matches!(args.mode, ModeArg::Water) {
             bail!("--mode water traces secondary rays on the GPU only; drop --cpu");
         }

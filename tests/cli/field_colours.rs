@@ -1,12 +1,15 @@
 //! `slosh render --field` over a sequence: every frame's colours span the series' range (read
-//! from the caches' own values), or a fixed one, or each step's; and a vector field colours
-//! by a component, where a view the cache lacks is refused with those it has.
+//! from the caches' own values), or a fixed one, or each step's; a vector field colours by a
+//! component, where a view the cache lacks is refused with those it has; and the CPU tracer
+//! colours a field as the GPU does.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use slosh_cache::CacheFile;
 
-use crate::util::{bake_case, generate, in_ci, slosh};
+use slosh_testkit::psnr_db;
+
+use crate::util::{bake_case, generate, in_ci, png_rgb, slosh};
 
 /// The finite range of field `name` (an `f32` section) of a cache step, decoded here.
 fn step_range(path: &Path, name: &str) -> (f32, f32) {
@@ -24,18 +27,32 @@ fn step_range(path: &Path, name: &str) -> (f32, f32) {
         })
 }
 
-#[test]
-fn a_sequence_colours_every_step_on_one_range() {
-    let dir = tempfile::tempdir().unwrap();
-    let case_dir = dir.path().join("tank");
-    generate(&case_dir, &["tank", "--points", "6000", "--steps", "3"]);
-    let cache = dir.path().join("cache");
+/// A generated tank of `steps` steps under `dir`, baked with `fields` into `dir`/cache.
+fn tank_cache(dir: &Path, steps: &str, fields: &str) -> PathBuf {
+    let case_dir = dir.join("tank");
+    generate(&case_dir, &["tank", "--points", "6000", "--steps", steps]);
+    let cache = dir.join("cache");
     let (ok, _, err) = bake_case(
         &case_dir.join("tank.case"),
         &cache,
-        &["--fields", "pressure,normal", "--quiet"],
+        &["--fields", fields, "--quiet"],
     );
     assert!(ok, "bake failed: {err}");
+    cache
+}
+
+/// `slosh render` of the tank's `cache` into `out` with `args`, through one camera for every
+/// frame (a step drawn alone is framed by itself, a sequence by all of its steps).
+fn render_tank(cache: &Path, out: &Path, args: &[&str]) -> (bool, String, String) {
+    let camera = ["--eye", "1,-3,2", "--target", "0.5,0.25,0.2"];
+    let (cache, out) = (cache.to_str().unwrap(), out.to_str().unwrap());
+    slosh(&[&["render", cache, "--out", out][..], &camera, args].concat())
+}
+
+#[test]
+fn a_sequence_colours_every_step_on_one_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = tank_cache(dir.path(), "3", "pressure,normal");
     let ranges: Vec<(f32, f32)> = (0..3)
         .map(|s| step_range(&cache.join(format!("step-{s:05}.slc")), "pressure"))
         .collect();
@@ -61,23 +78,8 @@ fn a_sequence_colours_every_step_on_one_range() {
         "{manifest}"
     );
     let render_field = |field: &str, out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "render",
-            cache.to_str().unwrap(),
-            "--field",
-            field,
-            "--size",
-            "96x64",
-            // One camera for a step alone and in a sequence (which frames its first step).
-            "--eye",
-            "1,-3,2",
-            "--target",
-            "0.5,0.25,0.2",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        slosh(&args)
+        let args = [&["--field", field, "--size", "96x64"][..], extra].concat();
+        render_tank(&cache, out, &args)
     };
     let render = |out: &Path, extra: &[&str]| render_field("pressure", out, extra);
     let series = dir.path().join("series");
@@ -139,4 +141,43 @@ fn a_sequence_colours_every_step_on_one_range() {
             || err.contains("no field 'normal.w' in this cache; baked fields: normal, normal.x, normal.y, normal.z, pressure"),
         "{err}"
     );
+}
+
+/// `--cpu` colours a field as the GPU's shade pass does: a one-iteration frame by each hit
+/// ball's own value, a refined one by the weighted mean over its neighbours, both on the same
+/// range and map; the frames agree within 60 dB PSNR (they differ where the two tracers'
+/// f32 arithmetic puts a silhouette pixel's hit a little apart).
+#[test]
+fn the_cpu_tracer_colours_a_field_as_the_gpu_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = tank_cache(dir.path(), "2", "pressure");
+    let render = |out: &Path, extra: &[&str]| {
+        let args = [&["--step", "1", "--size", "192x128"][..], extra].concat();
+        let (ok, stdout, err) = render_tank(&cache, out, &args);
+        (ok, format!("{stdout}{err}"))
+    };
+    let plain = dir.path().join("plain.png");
+    let (ok, said) = render(&plain, &["--cpu", "--iterations", "3"]);
+    assert!(ok, "{said}");
+    for iterations in ["1", "3"] {
+        let field = ["--field", "pressure", "--iterations", iterations];
+        let (gpu, cpu) = (dir.path().join("gpu.png"), dir.path().join("cpu.png"));
+        let (ok, said) = render(&gpu, &field);
+        if !ok && !in_ci() && said.contains("adapter") {
+            eprintln!("skipping: {said}");
+            return;
+        }
+        assert!(ok, "{said}");
+        let (ok, said) = render(&cpu, &[&field[..], &["--cpu"]].concat());
+        assert!(ok, "{said}");
+        let db = psnr_db(&png_rgb(&gpu).2, &png_rgb(&cpu).2);
+        eprintln!("{iterations} iterations: the CPU's frame against the GPU's: {db:.1} dB PSNR");
+        assert!(db >= 60.0, "{iterations} iterations: {db:.1} dB");
+        // The colours show: the field's frame is not the plain one.
+        let apart = psnr_db(&png_rgb(&plain).2, &png_rgb(&cpu).2);
+        assert!(
+            apart < 30.0,
+            "{iterations} iterations: {apart:.1} dB from the plain frame"
+        );
+    }
 }

@@ -3,27 +3,15 @@
 //! series' times give (slowed down), and whose decoded frames are within 35 dB PSNR of the
 //! PNG `render` writes of the same step.
 
-use std::path::Path;
 use std::process::Command;
 
 use serde_json::Value;
 
-use crate::util::{bake_case, generate, have, in_ci, slosh};
+use crate::util::{bake_case, generate, have, in_ci, png_rgb, slosh};
 
 /// The camera of the movie and of its reference frames, over the generated tank.
 const EYE: &str = "1,-3,2";
 const TARGET: &str = "0.5,0.25,0.2";
-
-/// RGB8 pixels of a PNG.
-fn png_rgb(path: &Path) -> (u32, u32, Vec<u8>) {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    assert_eq!(info.color_type, png::ColorType::Rgb, "{}", path.display());
-    buf.truncate(info.buffer_size());
-    (info.width, info.height, buf)
-}
 
 #[test]
 fn a_range_renders_into_an_mp4_that_ffmpeg_reads_back() {

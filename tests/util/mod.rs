@@ -71,3 +71,14 @@ pub fn aov_hits(path: &Path, width: usize) -> Vec<(usize, usize)> {
         .map(|(k, _)| (k % width, k / width))
         .collect()
 }
+
+/// RGB8 pixels of a PNG.
+pub fn png_rgb(path: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb, "{}", path.display());
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}

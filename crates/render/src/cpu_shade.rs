@@ -37,6 +37,20 @@ pub fn srgb(v: f64) -> u8 {
 /// The CPU's colour of a hit seen along `dir`, as `shade.wgsl` colours it: Blinn–Phong under
 /// a key light and a fill, water-blue, back faces lit as front faces; or the diagnostic modes.
 pub fn shade(hit: &TraceHit, dir: [f64; 3], mode: ShadeMode) -> [f64; 3] {
+    shade_coloured(hit, dir, mode, None)
+}
+
+/// The colour a surface is shaded in where no field colours it, before lighting.
+const SURFACE_COLOUR: [f64; 3] = [0.16, 0.42, 0.72];
+
+/// [`shade`], the shaded modes lighting `base` (a field's colour) where given instead of the
+/// surface's own colour, as `shade.wgsl` lights a field's.
+pub fn shade_coloured(
+    hit: &TraceHit,
+    dir: [f64; 3],
+    mode: ShadeMode,
+    base: Option<[f64; 3]>,
+) -> [f64; 3] {
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     match mode {
         ShadeMode::Normals => hit.normal.map(|c| 0.5 + 0.5 * c),
@@ -69,7 +83,7 @@ pub fn shade(hit: &TraceHit, dir: [f64; 3], mode: ShadeMode) -> [f64; 3] {
             };
             let key = crate::layout::DEFAULT_KEY_LIGHT.map(f64::from);
             let fill = norm([-0.6, 0.5, 0.3]);
-            let base = [0.16, 0.42, 0.72];
+            let base = base.unwrap_or(SURFACE_COLOUR);
             let half = norm([key[0] + view[0], key[1] + view[1], key[2] + view[2]]);
             let diffuse = 0.85 * dot(n, key).max(0.0) + 0.25 * dot(n, fill).max(0.0);
             let spec = 0.6 * dot(n, half).max(0.0).powf(60.0);
@@ -85,12 +99,23 @@ pub fn shade(hit: &TraceHit, dir: [f64; 3], mode: ShadeMode) -> [f64; 3] {
 /// The CPU tracer's frame as sRGB bytes: each hit shaded as `shade.wgsl` shades it, the
 /// background elsewhere.
 pub fn cpu_frame_rgb(hits: &[Option<TraceHit>], camera: &Camera, mode: ShadeMode) -> Vec<u8> {
+    cpu_frame_rgb_coloured(hits, camera, mode, |_| None)
+}
+
+/// [`cpu_frame_rgb`], hit `i` lit in `base(i)` where that is given (a field's colour,
+/// [`shade_coloured`]).
+pub fn cpu_frame_rgb_coloured(
+    hits: &[Option<TraceHit>],
+    camera: &Camera,
+    mode: ShadeMode,
+    base: impl Fn(usize) -> Option<[f64; 3]>,
+) -> Vec<u8> {
     let (width, height) = (camera.width, camera.height);
     let mut rgb = Vec::with_capacity(hits.len() * 3);
     for (i, hit) in hits.iter().enumerate() {
         let (x, y) = (i as u32 % width, i as u32 / width);
         let colour = match hit {
-            Some(hit) => shade(hit, camera.ray(x, y).1, mode),
+            Some(hit) => shade_coloured(hit, camera.ray(x, y).1, mode, base(i)),
             None => background(y, height),
         };
         rgb.extend(colour.map(srgb));
