@@ -98,7 +98,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             colour *= 0.4 + 0.6 * abs(dot(hit.normal, dir));
         }
         default: {
-            var base = vec3<f32>(0.16, 0.42, 0.72);
+            var base = SURFACE_COLOUR;
             if settings.has_field != 0u && hit.item < settings.point_count {
                 let t = field_t_at(hit);
                 base = colormap(settings.colormap, select(0.5, t, settings.field_inverse_span > 0.0));

@@ -99,7 +99,7 @@ fn water_colour(p: vec3<f32>, n_in: vec3<f32>, dir: vec3<f32>, st: Stage) -> vec
     let bounce = next_surface(p + r * eps, r);
     var reflected = environment(p, r, st);
     if bounce.t >= 0.0 {
-        reflected = blinn_phong(bounce.normal, r, vec3<f32>(0.16, 0.42, 0.72));
+        reflected = blinn_phong(bounce.normal, r, SURFACE_COLOUR);
     }
     // Refraction into the fluid, out where the ray next meets the surface.
     var refracted = vec3<f32>(0.0);

@@ -40,9 +40,6 @@ pub fn shade(hit: &TraceHit, dir: [f64; 3], mode: ShadeMode) -> [f64; 3] {
     shade_coloured(hit, dir, mode, None)
 }
 
-/// The colour a surface is shaded in where no field colours it, before lighting.
-const SURFACE_COLOUR: [f64; 3] = [0.16, 0.42, 0.72];
-
 /// [`shade`], the shaded modes lighting `base` (a field's colour) where given instead of the
 /// surface's own colour, as `shade.wgsl` lights a field's.
 pub fn shade_coloured(
@@ -83,7 +80,7 @@ pub fn shade_coloured(
             };
             let key = crate::layout::DEFAULT_KEY_LIGHT.map(f64::from);
             let fill = norm([-0.6, 0.5, 0.3]);
-            let base = base.unwrap_or(SURFACE_COLOUR);
+            let base = base.unwrap_or(crate::colormap::SURFACE_COLOUR.map(f64::from));
             let half = norm([key[0] + view[0], key[1] + view[1], key[2] + view[2]]);
             let diffuse = 0.85 * dot(n, key).max(0.0) + 0.25 * dot(n, fill).max(0.0);
             let spec = 0.6 * dot(n, half).max(0.0).powf(60.0);

@@ -266,6 +266,10 @@ pub fn shared_constants_wgsl() -> String {
         constant(name, value);
     }
     out += &format!("const EMPTY_SLOT: f32 = {:e};\n", crate::layout::EMPTY_SLOT);
+    out += &format!(
+        "const SURFACE_COLOUR: vec3<f32> = {};\n",
+        crate::colormap::vec3_literal(&crate::colormap::SURFACE_COLOUR)
+    );
 
     out + &crate::water::water_wgsl()
 }
