@@ -18,6 +18,20 @@ pub fn default_cache(case: &Path) -> PathBuf {
     case.with_file_name(format!("{stem}.slosh"))
 }
 
+/// The variable of the case at `case` that field view `view` reads, which the bake must store:
+/// `view` where the case has a variable so named, else the vector of a component view
+/// (`velocity.x`: `velocity`); `view` where it names neither (the bake then says so).
+fn variable_of_view(case: &Path, view: &str) -> String {
+    let Ok(opened) = slosh_ensight::Case::open(case) else {
+        return view.to_string();
+    };
+    let named = |name: &str| opened.variables().iter().any(|v| v.name == name);
+    match slosh_cache::component_view(view) {
+        Some((vector, _)) if !named(view) && named(vector) => vector.to_string(),
+        _ => view.to_string(),
+    }
+}
+
 /// The case at `case`, held for baking into `cache` (default [`default_cache`]) with
 /// `settings` and the `shown` field (the one frames are coloured by is baked with them), on
 /// the adapter named `adapter` where the settings bake on the GPU, `jobs` steps at once
@@ -32,10 +46,10 @@ pub fn open(
 ) -> Result<OnDemand> {
     let out = cache.map_or_else(|| default_cache(case), Path::to_path_buf);
     let mut settings = settings.clone();
-    if let Some(field) = shown
-        && !settings.select.fields.iter().any(|f| f == field)
+    if let Some(field) = shown.map(|view| variable_of_view(case, view))
+        && !settings.select.fields.contains(&field)
     {
-        settings.select.fields.push(field.to_string());
+        settings.select.fields.push(field);
     }
     let args = BakeArgs {
         input: case.to_path_buf(),

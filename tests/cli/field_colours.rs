@@ -181,3 +181,39 @@ fn the_cpu_tracer_colours_a_field_as_the_gpu_does() {
         );
     }
 }
+
+/// A raw case drawn by a vector's component (`slosh render CASE.case --field normal.z`)
+/// bakes the vector it reads, where the bake was asked for a variable `normal.z` the case
+/// does not have; the cache then offers every view of it.
+#[test]
+fn a_raw_case_coloured_by_a_component_bakes_its_vector() {
+    let dir = tempfile::tempdir().unwrap();
+    let case_dir = dir.path().join("tank");
+    generate(&case_dir, &["tank", "--points", "6000", "--steps", "2"]);
+    let cache = dir.path().join("raw-cache");
+    let out = dir.path().join("z.png");
+    let (ok, stdout, err) = slosh(&[
+        "render",
+        case_dir.join("tank.case").to_str().unwrap(),
+        "--cache",
+        cache.to_str().unwrap(),
+        "--step",
+        "1",
+        "--field",
+        "normal.z",
+        "--size",
+        "96x64",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    if !ok && !in_ci() && err.contains("adapter") {
+        eprintln!("skipping: {err}");
+        return;
+    }
+    assert!(ok, "{stdout}{err}");
+    let file = CacheFile::open(&cache.join("step-00001.slc")).unwrap();
+    assert_eq!(
+        slosh_cache::field_views(file.header()),
+        ["normal", "normal.x", "normal.y", "normal.z"]
+    );
+}

@@ -64,13 +64,19 @@ pub fn find_field_view<'h>(header: &'h Header, name: &str) -> Option<FieldView<'
         let part = (element(section) == Some(Element::Vec4)).then_some(VectorPart::Magnitude);
         return Some(FieldView { section, part });
     }
-    let (base, suffix) = name.rsplit_once('.')?;
-    let axis = COMPONENTS.iter().position(|c| *c == suffix)?;
+    let (base, axis) = component_view(name)?;
     let section = field(base).filter(|s| element(s) == Some(Element::Vec4))?;
     Some(FieldView {
         section,
         part: Some(VectorPart::Component(axis)),
     })
+}
+
+/// The vector field and axis a component view names (`velocity.x`: `velocity`, 0), where
+/// its name ends so.
+pub fn component_view(view: &str) -> Option<(&str, usize)> {
+    let (base, suffix) = view.rsplit_once('.')?;
+    Some((base, COMPONENTS.iter().position(|c| *c == suffix)?))
 }
 
 /// One value per point from a vector field's decoded bytes (little-endian `vec4<f32>`s):

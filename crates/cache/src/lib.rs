@@ -35,8 +35,8 @@ pub use codec::{
 };
 pub use error::{Error, Result};
 pub use field_view::{
-    FieldRange, FieldView, VectorPart, field_view_ranges, field_views, find_field_view,
-    vector_values, views_of,
+    FieldRange, FieldView, VectorPart, component_view, field_view_ranges, field_views,
+    find_field_view, vector_values, views_of,
 };
 pub use format::{
     ALIGN, CHUNK_ALIGN, CHUNK_RAW, CHUNK_RAW_MIN, CHUNKS_PER_SECTION, ChunkEntry, Encoding,
