@@ -99,8 +99,7 @@ fn series_field_range(config: &RenderConfig, field: &str) -> Option<(f32, f32)> 
                 let [lo, hi] = *header.field_ranges.get(field)?;
                 return Some((lo, hi));
             }
-            let values = slosh_render::HostField::read(&file, field).ok()?;
-            ((values.missing as u64) < header.points).then_some((values.min, values.max))
+            slosh_render::HostField::read(&file, field).ok()?.range()
         })
         .collect();
     let range = ranges
@@ -420,26 +419,29 @@ fn field_colours(
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
-    let own = ((field.missing as u64) < file.header().points).then_some((field.min, field.max));
-    let range = range.or(own);
+    let range = range.or(field.range());
     let (lo, hi) = range.unwrap_or((0.0, 0.0));
     let map = slosh_render::FieldMap::new(lo, hi);
-    let probe = slosh_cache::SurfaceProbe::open(file)?;
+    // Only a refined frame weighs neighbours, and the probe builds a tree of the points.
+    let probe = (iterations > 1)
+        .then(|| slosh_cache::SurfaceProbe::open(file))
+        .transpose()?;
     let transform = file.header().transform;
     let colours = hits
         .iter()
         .map(|hit| {
             let hit = hit.as_ref().filter(|h| h.status != HitStatus::Droplet)?;
             let ball = hit.ball as usize;
-            let value = if iterations > 1 {
-                let local = transform.to_local(hit.position).map(|c| c as f32);
-                let reading = probe.read(local, Some(ball), h_factor, Some(&values));
-                reading.and_then(|r| r.field)
-            } else {
-                values
+            let value = match &probe {
+                Some(probe) => {
+                    let local = transform.to_local(hit.position).map(|c| c as f32);
+                    let reading = probe.read(local, Some(ball), h_factor, Some(&values));
+                    reading.and_then(|r| r.field)
+                }
+                None => values
                     .get(ball)
                     .copied()
-                    .filter(|&v| !slosh_cache::field_missing(v))
+                    .filter(|&v| !slosh_cache::field_missing(v)),
             };
             let colour = match value {
                 Some(v) => colormap.at(map.t(v)),

@@ -914,9 +914,7 @@ fn field_values_that_are_not_finite_are_left_out_of_the_colour() {
     assert_eq!(constant_step.field_missing, 0);
     assert_eq!(holed_step.field, Some(("holed".into(), 1.0, 1.0)));
     assert!(hit_pixels(&constant) > 500);
-    let differ = (0..constant.rgba.len())
-        .filter(|&i| constant.rgba[i] != holed.rgba[i])
-        .count();
+    let differ = pixels_differing(&constant, &holed);
     assert_eq!(
         differ, 0,
         "{differ} pixels differ from the constant field's"
@@ -989,9 +987,7 @@ fn field_values_near_the_limits_of_f32_colour_as_the_same_values_scaled_down() {
     ] {
         let (huge, scaled) = (frame("huge", range), frame("scaled", narrow));
         assert!(hit_pixels(&huge) > 500);
-        let differ = (0..huge.rgba.len())
-            .filter(|&i| huge.rgba[i] != scaled.rgba[i])
-            .count();
+        let differ = pixels_differing(&huge, &scaled);
         assert_eq!(
             differ, 0,
             "shown range {range:?}: {differ} pixels differ from the field scaled down"
@@ -1148,6 +1144,11 @@ fn field_frame(
     };
     let frame = dev.tracer.render(&dev.gpu, &step, camera, &params).unwrap();
     (step, frame)
+}
+
+/// Pixels whose colour differs between two frames of one size.
+fn pixels_differing(a: &Frame, b: &Frame) -> usize {
+    a.rgba.iter().zip(&b.rgba).filter(|(a, b)| a != b).count()
 }
 
 /// Field `name` of `file` as the GPU's buffer holds it (missing values marked).

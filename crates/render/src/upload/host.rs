@@ -91,6 +91,11 @@ pub struct HostField {
 }
 
 impl HostField {
+    /// The range of the values that are not missing; `None` where every value is.
+    pub fn range(&self) -> Option<(f32, f32)> {
+        (self.missing < self.bytes.len() / 4).then_some((self.min, self.max))
+    }
+
     /// Decodes field view `name` of `file` (a scalar field, or a vector field's magnitude or
     /// component: `slosh_cache::find_field_view`); an error listing the views where it has
     /// none.
